@@ -1,0 +1,133 @@
+"""What every controller shares: ports as data, parameter loading, input checks, a message log.
+
+A controller is plain Python: parameters and state are attributes, ``reset()`` returns it to its
+power-on state, ``step(t, dt, inputs) -> outputs`` advances it by ``dt`` seconds. Time enters only
+through ``dt`` (``t`` is for messages). Nothing here imports pythonfmu or fmpy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import ClassVar
+
+from ..errors import ConfigError, require
+from ..ports import Port
+
+
+class Controller:
+    """Base class of the controller logic behind every ncfmu FMU.
+
+    Subclasses declare ``PORTS`` (parameters, inputs and outputs, once, as data), implement
+    :meth:`configure` (read and check parameters), :meth:`reset` and :meth:`step`.
+    """
+
+    #: Model name of the FMU built from this controller.
+    MODEL_NAME: ClassVar[str] = ""
+    #: One-line description for the modelDescription.
+    DESCRIPTION: ClassVar[str] = ""
+    #: The document the behaviour comes from.
+    SEED: ClassVar[str] = ""
+    #: Default communication step (the controller period), s.
+    PERIOD: ClassVar[float] = 1e-3
+    #: Default stop time of a stand-alone run, s.
+    STOP_TIME: ClassVar[float] = 1.0
+    PORTS: ClassVar[tuple[Port, ...]] = ()
+
+    def __init__(self, **parameters: object) -> None:
+        self.messages: list[tuple[str, str]] = []
+        values = self.default_parameters()
+        unknown = sorted(set(parameters) - set(values))
+        if unknown:
+            raise ConfigError(unknown[0], parameters[unknown[0]],
+                              f"not a parameter of {type(self).__name__}")
+        values.update(parameters)
+        self.configure(values)
+        self.reset()
+
+    # -- ports ----------------------------------------------------------------------------------
+    @classmethod
+    def ports(cls, causality: str | None = None) -> tuple[Port, ...]:
+        return tuple(p for p in cls.PORTS if causality is None or p.causality == causality)
+
+    @classmethod
+    def default_parameters(cls) -> dict[str, object]:
+        return {p.name: p.start for p in cls.ports("parameter")}
+
+    @classmethod
+    def default_inputs(cls) -> dict[str, object]:
+        return {p.name: p.start for p in cls.ports("input")}
+
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, object]) -> "Controller":
+        """Build from flat FMI parameter names (``block[1].Xd``); unknown names are refused."""
+        return cls(**dict(values))
+
+    # -- to implement ---------------------------------------------------------------------------
+    def configure(self, values: Mapping[str, object]) -> None:
+        """Read and check the parameters; raise :class:`ConfigError` naming the bad one."""
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        raise NotImplementedError
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        """Advance by ``dt`` seconds; return the outputs (the same dict each time, updated in place)."""
+        raise NotImplementedError
+
+    def outputs(self) -> dict[str, object]:
+        """The present outputs (valid from ``reset()`` on)."""
+        return self._outputs  # type: ignore[attr-defined]
+
+    # -- helpers --------------------------------------------------------------------------------
+    def say(self, level: str, text: str) -> None:
+        """Queue a message for the FMU log (``level`` is ``info``, ``warning`` or ``error``)."""
+        self.messages.append((level, text))
+
+    def take_messages(self) -> list[tuple[str, str]]:
+        out, self.messages = self.messages, []
+        return out
+
+
+# -- parameter checks shared by the controllers ------------------------------------------------
+def real_param(values: Mapping[str, object], name: str, *, positive: bool = False,
+               nonnegative: bool = False, lo: float | None = None, hi: float | None = None) -> float:
+    value = values[name]
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ConfigError(name, value, "must be a number") from None
+    require(math.isfinite(x), name, value, "must be finite")
+    if positive:
+        require(x > 0, name, value, "must be > 0")
+    if nonnegative:
+        require(x >= 0, name, value, "must be >= 0")
+    if lo is not None:
+        require(x >= lo, name, value, f"must be >= {lo:g}")
+    if hi is not None:
+        require(x <= hi, name, value, f"must be <= {hi:g}")
+    return x
+
+
+def int_param(values: Mapping[str, object], name: str, lo: int | None = None, hi: int | None = None) -> int:
+    value = values[name]
+    if isinstance(value, float):
+        require(math.isfinite(value) and value == int(value), name, value, "must be a whole number")
+    try:
+        n = int(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ConfigError(name, value, "must be a whole number") from None
+    if lo is not None and hi is not None:
+        require(lo <= n <= hi, name, value, f"must be in {lo}..{hi}")
+    elif lo is not None:
+        require(n >= lo, name, value, f"must be >= {lo}")
+    return n
+
+
+def finite_inputs(inputs: Mapping[str, object], names: tuple[str, ...]) -> str | None:
+    """Return a message naming the first input that is NaN or infinite, else None."""
+    for name in names:
+        value = inputs[name]
+        if not math.isfinite(value):  # type: ignore[arg-type]
+            return f"input {name} = {value!r}: must be finite"
+    return None

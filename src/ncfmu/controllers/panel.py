@@ -1,0 +1,75 @@
+"""Operator panel and auxiliary devices, so that every system runs unchanged in any FMI tool.
+
+Push buttons are pressed at parameterised times (a pulse of ``pulse`` seconds); the M-function
+finish signal MFIN answers an active M word after ``mfin_delay`` seconds, as the auxiliary device
+would. A negative time means "never".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from ..ports import boolean, integer, real
+from .base import Controller, real_param
+
+
+class OperatorPanel(Controller):
+    MODEL_NAME = "OperatorPanel"
+    DESCRIPTION = "Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; MFIN after a delay"
+    SEED = "programmable-feed-JPS6043522.txt"
+    STOP_TIME = 10.0
+
+    PORTS = (
+        real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never"),
+        real("wear_start_at", "parameter", -1.0, "s", "time of the wear-compensation start push (START2); negative: never"),
+        real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never"),
+        real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never"),
+        real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never"),
+        real("pulse", "parameter", 0.01, "s", "length of a push-button pulse", min=0.0),
+        real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word", min=0.0),
+        real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5),
+        integer("m_active", "input", 0, "active M function number (0 none), from the controller"),
+        boolean("start", "output", None, "cycle start push button (START1)"),
+        boolean("wear_start", "output", None, "wear-compensation start push button (START2)"),
+        boolean("emergency", "output", None, "emergency push button (EMB)"),
+        boolean("feed_hold", "output", None, "feed hold switch"),
+        boolean("mfin", "output", None, "M-function finish from the auxiliary device"),
+        real("feed_override", "output", None, "1", "feed override dial"),
+    )
+
+    def configure(self, values: Mapping[str, object]) -> None:
+        self.start_at = real_param(values, "start_at")
+        self.wear_start_at = real_param(values, "wear_start_at")
+        self.emergency_at = real_param(values, "emergency_at")
+        self.hold_at = real_param(values, "hold_at")
+        self.release_at = real_param(values, "release_at")
+        self.pulse = real_param(values, "pulse", positive=True)
+        self.mfin_delay = real_param(values, "mfin_delay", nonnegative=True)
+        self.override = real_param(values, "override", lo=0.0, hi=1.5)
+
+    def reset(self) -> None:
+        self.clock = 0.0            # panel time, advanced only by dt
+        self.m_seen_for = 0.0       # how long the present M word has been active
+        self._outputs: dict[str, object] = {"feed_override": self.override}
+        self._publish(0)
+
+    def _pressed(self, at: float) -> bool:
+        # Half a step of slack so a press at k*dt is seen at that step whatever the rounding.
+        return at >= 0.0 and at - 1e-9 <= self.clock < at + self.pulse - 1e-9
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        self.clock += dt
+        m = int(inputs["m_active"])
+        self.m_seen_for = self.m_seen_for + dt if m else 0.0
+        return self._publish(m)
+
+    def _publish(self, m: int) -> dict[str, object]:
+        out = self._outputs
+        out["start"] = self._pressed(self.start_at)
+        out["wear_start"] = self._pressed(self.wear_start_at)
+        out["emergency"] = self._pressed(self.emergency_at)
+        held = self.hold_at >= 0.0 and self.clock >= self.hold_at - 1e-9
+        released = self.release_at >= 0.0 and self.release_at > self.hold_at and self.clock >= self.release_at - 1e-9
+        out["feed_hold"] = held and not released
+        out["mfin"] = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
+        return out

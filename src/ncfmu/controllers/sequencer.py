@@ -1,0 +1,271 @@
+"""Lathe repetitive-cut sequencer (seed: US 4,017,723).
+
+The seed's hardware, register for register:
+
+- tape registers per block: Xf (offset of the start point STP from the stock outline), Xd (depth
+  of cut per pass), Xp (X component of the cut, taper), Zp (cut length), N (passes);
+- the ΣX accumulator (register 18): loaded with Xf once per block, incremented by Xd at the
+  start of every pass, so pass n moves ΣX = Xf + n·Xd;
+- the four-stage shift register 46 (sub-cycles SC1..SC4) and the reversible pass counter 48, which
+  counts down at the SC3 -> SC4 shift;
+- the X/Z distance counters 52/54: a sub-cycle ends when its commanded motion is complete AND both
+  servos report in-position (the modern form of "the count reaches zero").
+
+Axis convention: X is the radius, infeed is -X; Z runs along the spindle, cutting is -Z.
+
+    SC1 infeed   X: x_start -> x_start - ΣX                      (rapid)
+    SC2 cut      Z: -Zp, X: -Xp at the same time (taper)        (feed, override applies)
+    SC3 retract  X: +ΣX                                          (rapid)
+    SC4 return   Z: +Zp, X: +Xp -> back at STP                  (rapid)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from ..errors import ConfigError, require
+from ..ports import boolean, integer, real
+from .base import Controller, finite_inputs, int_param, real_param
+from .motion import LinearMove
+
+MAX_BLOCKS = 8
+
+IDLE, SC1, SC2, SC3, SC4 = 0, 1, 2, 3, 4
+#: Phase before SC1 when the command is not at STP on start (reported as sub-cycle 0 while busy).
+APPROACH = -1
+
+
+@dataclass
+class Block:
+    """One tape block: the seed's registers Xf, Xd, Xp, Zp, N plus the block's rates."""
+
+    Xf: float = 1.0
+    Xd: float = 0.5
+    Xp: float = 0.0
+    Zp: float = 42.0
+    N: int = 6
+    feed: float = 4.0
+    rapid: float = 50.0
+
+
+#: The lathe_roughing program (SPEC 5): rough series then finish series.
+DEFAULT_BLOCKS = (
+    Block(Xf=1.0, Xd=0.5, Xp=0.0, Zp=42.0, N=6, feed=4.0, rapid=50.0),
+    Block(Xf=4.0, Xd=0.1, Xp=0.0, Zp=42.0, N=1, feed=2.0, rapid=50.0),
+)
+
+
+def _block_ports():
+    ports = []
+    for k in range(1, MAX_BLOCKS + 1):
+        b = DEFAULT_BLOCKS[k - 1] if k <= len(DEFAULT_BLOCKS) else Block()
+        p = f"block[{k}]"
+        ports += [
+            real(f"{p}.Xf", "parameter", b.Xf, "mm", f"block {k}: offset of STP from the stock outline (register Xf)", min=0.0),
+            real(f"{p}.Xd", "parameter", b.Xd, "mm", f"block {k}: depth of cut per pass (register Xd)", min=0.0),
+            real(f"{p}.Xp", "parameter", b.Xp, "mm", f"block {k}: X component of the cut, taper (register Xp; 0 = cylinder)"),
+            real(f"{p}.Zp", "parameter", b.Zp, "mm", f"block {k}: cut length (register Zp)", min=0.0),
+            integer(f"{p}.N", "parameter", b.N, f"block {k}: number of passes (pass counter preset)", min=1, max=10000),
+            real(f"{p}.feed", "parameter", b.feed, "mm/s", f"block {k}: cutting feed of SC2", min=0.0),
+            real(f"{p}.rapid", "parameter", b.rapid, "mm/s", f"block {k}: rapid rate of SC1, SC3, SC4", min=0.0),
+        ]
+    return tuple(ports)
+
+
+class CutSequencer(Controller):
+    """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
+
+    MODEL_NAME = "CutSequencer"
+    DESCRIPTION = "Lathe repetitive-cut sequencer: SC1 infeed, SC2 cut (taper), SC3 retract, SC4 return (US 4,017,723)"
+    SEED = "repetitive-cut-sequencer-US4017723.txt"
+    STOP_TIME = 100.0
+
+    PORTS = (
+        real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
+        real("z_start", "parameter", 2.0, "mm", "Z of the start point STP"),
+        integer("n_blocks", "parameter", 2, "number of blocks read in series", min=1, max=MAX_BLOCKS),
+        real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0),
+        real("max_following_error", "parameter", 2.0, "mm",
+             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
+        *_block_ports(),
+        boolean("start", "input", False, "cycle start (rising edge)"),
+        boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
+        real("feed_override", "input", 1.0, "1", "feed override of the cutting feed (SC2)", min=0.0, max=1.5),
+        real("x_pos", "input", 30.0, "mm", "actual X position from the X servo"),
+        real("z_pos", "input", 2.0, "mm", "actual Z position from the Z servo"),
+        boolean("x_in_position", "input", True, "X servo in-position"),
+        boolean("z_in_position", "input", True, "Z servo in-position"),
+        boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
+        real("x_cmd", "output", None, "mm", "X position command"),
+        real("z_cmd", "output", None, "mm", "Z position command"),
+        real("x_vff", "output", None, "mm/s", "X velocity feed-forward"),
+        real("z_vff", "output", None, "mm/s", "Z velocity feed-forward"),
+        integer("subcycle", "output", None, "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
+        integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
+        integer("passes_left", "output", None, "the seed's pass down-counter (counts down at SC3 -> SC4)"),
+        integer("block_no", "output", None, "block being run (0 idle)"),
+        real("sigma_x", "output", None, "mm", "ΣX accumulator: Xf + n·Xd"),
+        boolean("busy", "output", None, "a cycle is running"),
+        boolean("done", "output", None, "the last block has finished (until the next start)"),
+        boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
+    )
+
+    # -- parameters -----------------------------------------------------------------------------
+    def configure(self, values: Mapping[str, object]) -> None:
+        self.x_start = real_param(values, "x_start")
+        self.z_start = real_param(values, "z_start")
+        self.n_blocks = int_param(values, "n_blocks", 1, MAX_BLOCKS)
+        self.accel = real_param(values, "accel", positive=True)
+        self.max_following_error = real_param(values, "max_following_error", positive=True)
+        blocks = []
+        for k in range(1, self.n_blocks + 1):
+            p = f"block[{k}]"
+            blocks.append(Block(
+                Xf=real_param(values, f"{p}.Xf", nonnegative=True),
+                Xd=real_param(values, f"{p}.Xd", positive=True),
+                Xp=real_param(values, f"{p}.Xp"),
+                Zp=real_param(values, f"{p}.Zp", positive=True),
+                N=int_param(values, f"{p}.N", 1, 10000),
+                feed=real_param(values, f"{p}.feed", positive=True),
+                rapid=real_param(values, f"{p}.rapid", positive=True),
+            ))
+        self.blocks = blocks
+
+    @classmethod
+    def with_blocks(cls, blocks: list[Block] | tuple[Block, ...], **parameters: object) -> "CutSequencer":
+        """Build from :class:`Block` records instead of flat ``block[k].*`` names."""
+        flat: dict[str, object] = {"n_blocks": len(blocks)}
+        require(1 <= len(blocks) <= MAX_BLOCKS, "n_blocks", len(blocks), f"must be in 1..{MAX_BLOCKS}")
+        for k, b in enumerate(blocks, start=1):
+            for field in ("Xf", "Xd", "Xp", "Zp", "N", "feed", "rapid"):
+                flat[f"block[{k}].{field}"] = getattr(b, field)
+        flat.update(parameters)
+        return cls(**flat)
+
+    # -- state ----------------------------------------------------------------------------------
+    def reset(self) -> None:
+        self.phase = IDLE
+        self.block_index = 0          # 0-based index into self.blocks while busy
+        self.sigma_x = 0.0            # ΣX register
+        self.passes_left = 0          # reversible pass counter
+        self.pass_no = 0
+        self.busy = False
+        self.done = False
+        self.alarm = False
+        self.x_cmd, self.z_cmd = self.x_start, self.z_start
+        self.x_vff = self.z_vff = 0.0
+        self.move = LinearMove(self.accel)
+        self._start_was = False
+        self._steps_since_end = 0
+        self._outputs: dict[str, object] = {}
+        self._publish()
+
+    # -- the cycle ------------------------------------------------------------------------------
+    def _begin_phase(self, phase: int) -> None:
+        """Load the distance counters for ``phase`` (the seed's non-destructive transfers)."""
+        b = self.blocks[self.block_index]
+        here = (self.x_cmd, self.z_cmd)
+        stp = (self.x_start, self.z_start)
+        self.phase = phase
+        if phase == SC1:
+            self.sigma_x += b.Xd                   # ΣX <- ΣX + Xd at the start of every pass
+            self.pass_no += 1
+            self.move.begin(here, (self.x_start - self.sigma_x, self.z_start), b.rapid)
+        elif phase == SC2:
+            self.move.begin(here, (self.x_start - self.sigma_x - b.Xp, self.z_start - b.Zp), b.feed)
+        elif phase == SC3:
+            self.move.begin(here, (self.x_start - b.Xp, self.z_start - b.Zp), b.rapid)
+        elif phase == SC4:
+            self.passes_left -= 1                  # the SC3/4 shift pulse counts the pass down
+            self.move.begin(here, stp, b.rapid)
+        elif phase == APPROACH:
+            self.move.begin(here, stp, b.rapid)
+
+    def _begin_block(self, index: int) -> None:
+        self.block_index = index
+        b = self.blocks[index]
+        self.sigma_x = b.Xf                         # Xf is loaded once per block
+        self.passes_left = b.N
+        self.pass_no = 0
+        self._begin_phase(SC1)
+
+    def _start_cycle(self) -> None:
+        self.busy, self.done = True, False
+        self.block_index = 0
+        if abs(self.x_cmd - self.x_start) > 1e-9 or abs(self.z_cmd - self.z_start) > 1e-9:
+            self.sigma_x, self.passes_left, self.pass_no = 0.0, 0, 0
+            self._begin_phase(APPROACH)
+        else:
+            self._begin_block(0)
+
+    def _next_phase(self) -> None:
+        if self.phase == APPROACH:
+            self._begin_block(0)
+        elif self.phase in (SC1, SC2, SC3):
+            self._begin_phase(self.phase + 1)
+        elif self.passes_left > 0:
+            self._begin_phase(SC1)
+        elif self.block_index + 1 < self.n_blocks:
+            self._begin_block(self.block_index + 1)   # read the next block
+        else:
+            self.phase = IDLE
+            self.busy, self.done = False, True
+            self.pass_no = 0
+
+    def _raise_alarm(self, t: float, why: str) -> None:
+        if not self.alarm:
+            self.say("error", f"t = {t:.4f} s: {why}; motion stopped, commands held")
+        self.alarm = True
+        self.move.stop_now()
+        self.phase = IDLE
+        self.busy = False
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        bad = finite_inputs(inputs, ("x_pos", "z_pos", "feed_override"))
+        if bad:
+            self._raise_alarm(t, bad)
+        elif inputs["alarm_in"]:
+            self._raise_alarm(t, "alarm_in (area limiter) is set")
+        else:
+            err = max(abs(self.x_cmd - inputs["x_pos"]), abs(self.z_cmd - inputs["z_pos"]))
+            if err > self.max_following_error:
+                self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
+                                     f"{self.max_following_error:g} mm")
+
+        start = bool(inputs["start"])
+        if start and not self._start_was and not self.busy and not inputs["alarm_in"]:
+            if self.alarm:
+                self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+            self.alarm = False
+            self._start_cycle()
+        self._start_was = start
+
+        if self.busy:
+            override = min(max(float(inputs["feed_override"]), 0.0), 1.5)
+            scale = 0.0 if inputs["feed_hold"] else (override if self.phase == SC2 else 1.0)
+            self.move.advance(dt, scale)
+            # The servos' in-position answers the final command only after one round trip through
+            # the master (one step with Gauss-Seidel, two with Jacobi): trust it from the 2nd step on.
+            self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
+            if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]:
+                self._steps_since_end = 0
+                self._next_phase()
+            self.x_cmd, self.z_cmd = self.move.position()
+            self.x_vff, self.z_vff = self.move.velocity()
+        else:
+            self.x_vff = self.z_vff = 0.0
+        return self._publish()
+
+    def _publish(self) -> dict[str, object]:
+        out = self._outputs
+        out["x_cmd"], out["z_cmd"] = self.x_cmd, self.z_cmd
+        out["x_vff"], out["z_vff"] = self.x_vff, self.z_vff
+        out["subcycle"] = self.phase if self.phase > 0 else 0
+        out["pass_no"] = self.pass_no
+        out["passes_left"] = self.passes_left
+        out["block_no"] = self.block_index + 1 if self.busy else 0
+        out["sigma_x"] = self.sigma_x
+        out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
+        return out

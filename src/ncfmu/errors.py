@@ -1,0 +1,42 @@
+"""ncfmu's own exception classes.
+
+Every error a user can cause names the variable, the value and the rule it breaks.
+"""
+
+from __future__ import annotations
+
+
+class NcfmuError(Exception):
+    """Base class of every error ncfmu raises on purpose."""
+
+
+class ConfigError(NcfmuError, ValueError):
+    """A parameter (register, setting, table entry, program) breaks a rule.
+
+    Raised before a controller runs; the FMI adapter turns it into ``fmi2Error`` at
+    ``exitInitializationMode`` with the message in the FMU log.
+    """
+
+    def __init__(self, variable: str, value: object, rule: str):
+        self.variable = variable
+        self.value = value
+        self.rule = rule
+        super().__init__(f"{variable} = {value!r}: {rule}")
+
+
+class SystemDefinitionError(NcfmuError, ValueError):
+    """A system (SSP file, connection, instance or variable name) is malformed or unknown."""
+
+
+class SimulationError(NcfmuError, RuntimeError):
+    """An FMU refused a call during a simulation."""
+
+
+class BuildError(NcfmuError, RuntimeError):
+    """Building or post-processing an FMU failed."""
+
+
+def require(condition: bool, variable: str, value: object, rule: str) -> None:
+    """Raise :class:`ConfigError` unless ``condition`` holds."""
+    if not condition:
+        raise ConfigError(variable, value, rule)

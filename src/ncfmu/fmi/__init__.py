@@ -1,0 +1,1 @@
+"""FMI layer: the generic pythonfmu adapter, the builder, the modelDescription post-processing."""

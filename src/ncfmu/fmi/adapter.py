@@ -1,0 +1,97 @@
+"""One generic adapter from a :class:`~ncfmu.controllers.base.Controller` to ``pythonfmu.Fmi2Slave``.
+
+A model script in ``models/`` is three lines::
+
+    @fmu_slave(CutSequencerLogic)
+    class CutSequencer(Fmi2Slave):
+        \"\"\"Lathe repetitive-cut sequencer.\"\"\"
+
+The decorator returns a :class:`ControllerSlave` subclass that registers every port of the
+controller (declared once, as data), builds and checks the controller at
+``exitInitializationMode`` and steps it in ``doStep``. Messages the controller queues go to the FMU
+log with their level.
+"""
+
+from __future__ import annotations
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
+from pythonfmu.default_experiment import DefaultExperiment
+from pythonfmu.enums import Fmi2Status
+
+from ..controllers.base import Controller
+from ..errors import ConfigError
+from ..ports import Port
+
+_TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
+_CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input, "output": Fmi2Causality.output}
+_VARIABILITY = {"fixed": Fmi2Variability.fixed, "tunable": Fmi2Variability.tunable,
+                "discrete": Fmi2Variability.discrete, "continuous": Fmi2Variability.continuous}
+_LEVEL = {"info": Fmi2Status.ok, "warning": Fmi2Status.warning, "error": Fmi2Status.error}
+_CONVERT = {"Real": float, "Integer": int, "Boolean": bool, "String": str}
+
+
+class ControllerSlave(Fmi2Slave):
+    """pythonfmu slave around a controller class (set ``logic_class`` in a subclass)."""
+
+    logic_class: type[Controller]
+    author = "ncfmu"
+    license = "MIT"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        logic = self.logic_class
+        self.modelName = logic.MODEL_NAME
+        self.description = logic.DESCRIPTION
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=logic.STOP_TIME, step_size=logic.PERIOD)
+        self.parameters: dict[str, object] = logic.default_parameters()
+        self.inputs: dict[str, object] = logic.default_inputs()
+        self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
+        self.logic: Controller | None = None
+        for port in logic.PORTS:
+            self._register(port)
+
+    def _register(self, port: Port) -> None:
+        store = {"parameter": self.parameters, "input": self.inputs}.get(port.causality)
+        name, convert = port.name, _CONVERT[port.type]
+        if store is None:
+            getter = lambda: self.out[name]            # noqa: E731 -- looked up each call: self.out is rebound
+            setter = None
+        else:
+            getter = lambda: store[name]               # noqa: E731
+            def setter(value, store=store, name=name, convert=convert):
+                store[name] = convert(value)
+        var = _TYPES[port.type](name, causality=_CAUSALITY[port.causality],
+                                variability=_VARIABILITY[port.fmi_variability],
+                                description=port.description, getter=getter, setter=setter)
+        self.register_variable(var, nested=False)
+
+    # -- FMI life cycle -------------------------------------------------------------------------
+    def exit_initialization_mode(self) -> None:
+        try:
+            self.logic = self.logic_class.from_parameters(self.parameters)
+        except ConfigError as err:
+            self.log(f"{self.instance_name}: parameter refused: {err}", Fmi2Status.error)
+            raise
+        self.out = self.logic.outputs()
+        self._flush()
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        self.logic.step(current_time, step_size, self.inputs)   # type: ignore[union-attr]
+        if self.logic.messages:                                  # type: ignore[union-attr]
+            self._flush()
+        return True
+
+    def _flush(self) -> None:
+        for level, text in self.logic.take_messages():           # type: ignore[union-attr]
+            self.log(f"{self.instance_name}: {text}", _LEVEL[level])
+
+
+def fmu_slave(logic_class: type[Controller]):
+    """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``."""
+
+    def decorate(cls: type) -> type:
+        namespace = {k: v for k, v in vars(cls).items() if k not in ("__dict__", "__weakref__")}
+        namespace["logic_class"] = logic_class
+        return type(cls.__name__, (ControllerSlave,), namespace)
+
+    return decorate

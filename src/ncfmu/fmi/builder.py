@@ -1,0 +1,119 @@
+"""Build FMUs from the model scripts in ``models/`` with pythonfmu.
+
+An FMU must run the code it was built from, even in a process that has imported another ncfmu
+(pythonfmu FMUs share the host interpreter and ``sys.modules``). So the builder
+
+1. copies the ``ncfmu`` package into the FMU's resources under a content-addressed name,
+   ``ncfmu_<digest>`` (the package's imports are relative, so it runs under any name);
+2. rewrites the model script's ``ncfmu`` imports to that name and stores the script as the unique
+   module ``<Model>_<digest>``;
+3. post-processes the modelDescription (:mod:`.modeldesc`) and records the digest in its
+   ``version`` attribute, so a stale FMU is rebuilt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import re
+import shutil
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+from .. import __version__
+from ..errors import BuildError
+from .modeldesc import enrich
+
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+_IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
+
+
+def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
+    return sorted(p for p in package_dir.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
+    """Digest of the model script and every module of the package (12 hex digits)."""
+    h = hashlib.sha256()
+    for path in [script, *_package_files(package_dir)]:
+        h.update(str(path.relative_to(path.parents[0] if path == script else package_dir)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def fmu_version(fmu: Path) -> str | None:
+    """The ``version`` attribute the builder recorded in an FMU, or None."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            text = z.read("modelDescription.xml").decode()
+    except (OSError, KeyError, zipfile.BadZipFile):
+        return None
+    m = re.search(r'\bversion="([^"]*)"', text)
+    return m.group(1) if m else None
+
+
+def expected_version(script: Path) -> str:
+    return f"{__version__}+{source_digest(script)}"
+
+
+def build_fmu(script: Path, dest_dir: Path) -> Path:
+    """Build one FMU from a model script into ``dest_dir``; return the FMU's path."""
+    from pythonfmu.builder import FmuBuilder
+
+    script = Path(script).resolve()
+    model = script.stem
+    digest = source_digest(script)
+    vendored = f"ncfmu_{digest}"
+    module = f"{model}_{digest}"
+    dest_dir = Path(dest_dir)
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="ncfmu_build_") as tmp:
+        tmp = Path(tmp)
+        stage = tmp / "stage"
+        stage.mkdir()
+        shutil.copytree(PACKAGE_DIR, stage / vendored, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        text = script.read_text()
+        if not re.search(rf"^class {model}\(\s*Fmi2Slave\s*\)\s*:", text, re.MULTILINE):
+            raise BuildError(f"{script}: needs a line 'class {model}(Fmi2Slave):' (pythonfmu finds the class by it)")
+        (stage / f"{module}.py").write_text(_IMPORT.sub(rf"\g<1>{vendored}", text))
+        out = tmp / "out"
+        try:
+            built = FmuBuilder.build_FMU(stage / f"{module}.py", dest=out, project_files=[stage / vendored])
+        except Exception as err:  # pythonfmu raises plain exceptions; say which script failed
+            raise BuildError(f"pythonfmu could not build {script.name}: {err}") from err
+        finally:
+            if str(stage) in sys.path:
+                sys.path.remove(str(stage))
+        logic = getattr(importlib.import_module(module), model).logic_class
+        target = dest_dir / f"{logic.MODEL_NAME}.fmu"
+        _rewrite(built, target, logic, f"{__version__}+{digest}")
+    return target
+
+
+def _rewrite(src: Path, target: Path, logic, version: str) -> None:
+    partial = target.with_suffix(".fmu.part")
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = enrich(data, logic, version)
+            zout.writestr(item.filename, data)
+    partial.replace(target)
+
+
+def model_scripts(models_dir: Path) -> list[Path]:
+    return sorted(p for p in Path(models_dir).glob("*.py") if not p.name.startswith("_"))
+
+
+def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> list[Path]:
+    """Build every model script; with ``only_stale`` skip FMUs built from the same source."""
+    built = []
+    for script in model_scripts(models_dir):
+        target = Path(dest_dir) / f"{script.stem}.fmu"
+        if only_stale and target.exists() and fmu_version(target) == expected_version(script):
+            built.append(target)
+            continue
+        built.append(build_fmu(script, dest_dir))
+    return built

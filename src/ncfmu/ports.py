@@ -1,0 +1,107 @@
+"""Ports declared once, as data.
+
+A controller lists its parameters, inputs and outputs as :class:`Port` records. The FMI adapter
+registers them with pythonfmu, the builder writes their units, ranges and descriptions into the
+modelDescription, the SSP writer uses them for connectors -- nothing else restates them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+PortType = Literal["Real", "Integer", "Boolean", "String"]
+Causality = Literal["parameter", "input", "output"]
+
+#: Units used by the ports, as (name, SI base-unit exponents, factor) for ``UnitDefinitions``.
+UNITS: dict[str, dict] = {
+    "mm": {"m": 1, "factor": 1e-3},
+    "mm/s": {"m": 1, "s": -1, "factor": 1e-3},
+    "mm/s2": {"m": 1, "s": -2, "factor": 1e-3},
+    "s": {"s": 1},
+    "1/s": {"s": -1},
+    "rad/s": {"rad": 1, "s": -1},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "mm/rev": {"m": 1, "rad": -1, "factor": 1e-3 / (2 * math.pi)},
+    "rev/min": {"rad": 1, "s": -1, "factor": 2 * math.pi / 60},
+    "1": {},
+}
+
+#: Display units offered next to a unit (name, factor, offset) -- mm/min for feeds.
+DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
+    "mm/s": [("mm/min", 60.0)],
+}
+
+
+@dataclass(frozen=True)
+class Port:
+    """One FMI variable of a controller.
+
+    Parameters
+    ----------
+    name : str
+        FMI name, structured for indexed items (``block[1].Xd``).
+    causality : {"parameter", "input", "output"}
+    type : {"Real", "Integer", "Boolean", "String"}
+    start : object
+        Start value (required for parameters and inputs).
+    unit : str, optional
+        Unit of a Real (one of :data:`UNITS`).
+    description : str
+    min, max : float, optional
+        Range of legal values, written into the modelDescription.
+    variability : str, optional
+        ``fixed`` for parameters, ``discrete`` for non-Real ports, ``continuous`` for Real inputs/outputs
+        unless given.
+    """
+
+    name: str
+    causality: Causality
+    type: PortType = "Real"
+    start: object = None
+    unit: str | None = None
+    description: str = ""
+    min: float | None = None
+    max: float | None = None
+    variability: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.unit is not None and self.unit not in UNITS:
+            raise ValueError(f"port {self.name}: unit {self.unit!r} is not in ncfmu.ports.UNITS")
+        if self.causality in ("parameter", "input") and self.start is None:
+            raise ValueError(f"port {self.name}: a {self.causality} needs a start value")
+
+    @property
+    def fmi_variability(self) -> str:
+        if self.variability:
+            return self.variability
+        if self.causality == "parameter":
+            return "fixed"
+        return "continuous" if self.type == "Real" else "discrete"
+
+    def default(self) -> object:
+        """The start value, or the type's zero for an output without one."""
+        if self.start is not None:
+            return self.start
+        return {"Real": 0.0, "Integer": 0, "Boolean": False, "String": ""}[self.type]
+
+
+def real(name: str, causality: Causality, start: float | None = None, unit: str | None = None,
+         description: str = "", min: float | None = None, max: float | None = None, **kw) -> Port:
+    return Port(name, causality, "Real", start, unit, description, min, max, **kw)
+
+
+def integer(name: str, causality: Causality, start: int | None = None, description: str = "",
+            min: float | None = None, max: float | None = None, **kw) -> Port:
+    return Port(name, causality, "Integer", start, None, description, min, max, **kw)
+
+
+def boolean(name: str, causality: Causality, start: bool | None = None, description: str = "", **kw) -> Port:
+    return Port(name, causality, "Boolean", start, None, description, **kw)
+
+
+def string(name: str, causality: Causality, start: str | None = None, description: str = "", **kw) -> Port:
+    return Port(name, causality, "String", start, None, description, **kw)

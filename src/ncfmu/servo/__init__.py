@@ -1,0 +1,1 @@
+"""Servo axis: python-control models (:mod:`.model`) and the stepper inside the FMU (:mod:`.axis`)."""

@@ -1,0 +1,155 @@
+"""python-control models of a feed axis: position loop, PI velocity loop, current loop, mechanics.
+
+Factories return named :class:`control.StateSpace` systems whose signals connect by name; the
+closed loop is :func:`servo_axis`. Units: position mm, velocity mm/s, torque N·m.
+
+Signal flow::
+
+    pos_cmd, vel_ff, acc_ff --> position_controller --vel_cmd--> velocity_controller --torque_cmd-->
+        current_loop --torque--> mechanics --pos, vel--> (back to both controllers)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+
+
+@dataclass(frozen=True)
+class AxisParameters:
+    """Physical and control parameters of one feed axis (SPEC 4 defaults: a mid-size feed axis).
+
+    Attributes
+    ----------
+    Kv : float
+        Position-loop gain, 1/s.
+    kff : float
+        Velocity feed-forward factor (1.0: full feed-forward).
+    kaff : float
+        Acceleration (torque) feed-forward factor (1.0: the inertia torque of the commanded acceleration).
+    J : float
+        Motor + screw + load inertia referred to the motor, kg·m².
+    pitch : float
+        Ball-screw lead, mm/rev.
+    b_visc : float
+        Viscous friction, N·m·s/rad.
+    tau_current : float
+        Current (torque) loop time constant, s.
+    vel_bandwidth : float
+        Velocity-loop crossover, rad/s; the PI zero sits at a quarter of it.
+    """
+
+    Kv: float = 30.0
+    kff: float = 1.0
+    kaff: float = 1.0
+    J: float = 2.5e-3
+    pitch: float = 10.0
+    b_visc: float = 1e-3
+    tau_current: float = 0.5e-3
+    vel_bandwidth: float = 400.0
+
+    @property
+    def rad_per_mm(self) -> float:
+        """Motor angle per millimetre of travel, rad/mm."""
+        return 2.0 * math.pi / self.pitch
+
+    @property
+    def torque_per_acceleration(self) -> float:
+        """Inertia torque per mm/s² of axis acceleration, N·m/(mm/s²)."""
+        return self.J * self.rad_per_mm
+
+    @property
+    def velocity_gains(self) -> tuple[float, float]:
+        """PI gains (Kp in N·m/(mm/s), Ki in N·m/mm) for the crossover ``vel_bandwidth``."""
+        kp = self.J * self.rad_per_mm * self.vel_bandwidth
+        return kp, kp * self.vel_bandwidth / 4.0
+
+
+def _static(d, inputs, outputs, name):
+    d = np.atleast_2d(np.asarray(d, dtype=float))
+    return ct.ss(np.zeros((0, 0)), np.zeros((0, d.shape[1])), np.zeros((d.shape[0], 0)), d,
+                 inputs=inputs, outputs=outputs, name=name)
+
+
+def position_controller(Kv: float, kff: float, name: str = "position_controller") -> ct.StateSpace:
+    """Proportional position loop with velocity feed-forward.
+
+    ``vel_cmd = Kv * (pos_cmd - pos) + kff * vel_ff``
+    """
+    return _static([[Kv, kff, -Kv]], ["pos_cmd", "vel_ff", "pos"], ["vel_cmd"], name)
+
+
+def velocity_controller(Kp: float, Ki: float, Ka: float = 0.0, name: str = "velocity_controller") -> ct.StateSpace:
+    """PI velocity loop with torque feed-forward; its state is the integral of the velocity error (mm).
+
+    ``torque_cmd = Kp * (vel_cmd - vel) + Ki * ∫(vel_cmd - vel) dt + Ka * acc_ff``
+    """
+    return ct.ss([[0.0]], [[1.0, -1.0, 0.0]], [[Ki]], [[Kp, -Kp, Ka]], inputs=["vel_cmd", "vel", "acc_ff"],
+                 outputs=["torque_cmd"], states=["integral"], name=name)
+
+
+def current_loop(tau_current: float, name: str = "current_loop") -> ct.StateSpace:
+    """Closed current loop as a first-order lag from commanded to motor torque."""
+    return ct.ss([[-1.0 / tau_current]], [[1.0 / tau_current]], [[1.0]], [[0.0]],
+                 inputs=["torque_cmd"], outputs=["torque"], states=["torque"], name=name)
+
+
+def mechanics(J: float, pitch: float, b_visc: float, friction_input: bool = False,
+              name: str = "mechanics") -> ct.StateSpace:
+    """Motor + ball screw + load: torque (N·m) in, position (mm) and velocity (mm/s) out.
+
+    ``J * dω/dt = torque - torque_friction - b_visc * ω`` with ``ω = 2π/pitch * vel``; the
+    Coulomb friction torque is a second input when ``friction_input`` is true.
+    """
+    k = 2.0 * math.pi / pitch
+    A = [[0.0, 1.0], [0.0, -b_visc / J]]
+    B = [[0.0, 0.0], [1.0 / (J * k), -1.0 / (J * k)]]
+    inputs = ["torque", "torque_friction"]
+    if not friction_input:
+        B, inputs = [row[:1] for row in B], inputs[:1]
+    return ct.ss(A, B, np.eye(2), np.zeros((2, len(inputs))), inputs=inputs,
+                 outputs=["pos", "vel"], states=["pos", "vel"], name=name)
+
+
+def servo_axis(p: AxisParameters = AxisParameters(), name: str = "servo_axis") -> ct.StateSpace:
+    """The linear closed loop of one axis.
+
+    Parameters
+    ----------
+    p : AxisParameters
+
+    Returns
+    -------
+    control.StateSpace
+        Inputs ``pos_cmd, vel_ff, acc_ff`` (mm, mm/s, mm/s²); outputs ``pos, vel, following_error, torque``; states
+        ``integral, torque, pos, vel`` (in that order).
+    """
+    kp, ki = p.velocity_gains
+    error = ct.summing_junction(inputs=["pos_cmd", "-pos"], output="following_error", name="error")
+    sys = ct.interconnect(
+        [velocity_controller(kp, ki, p.kaff * p.torque_per_acceleration), current_loop(p.tau_current),
+         mechanics(p.J, p.pitch, p.b_visc), position_controller(p.Kv, p.kff), error],
+        inputs=["pos_cmd", "vel_ff", "acc_ff"], outputs=["pos", "vel", "following_error", "torque"], name=name)
+    # interconnect stacks the subsystems' states in list order; name them plainly.
+    assert [s.split("_", 2)[-1] for s in sys.state_labels] == ["integral", "torque", "pos", "vel"], sys.state_labels
+    return ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=sys.input_labels, outputs=sys.output_labels,
+                 states=["integral", "torque", "pos", "vel"], name=name)
+
+
+def drive_plant(p: AxisParameters = AxisParameters(), name: str = "drive_plant") -> ct.StateSpace:
+    """Current loop + mechanics: what a digital drive controls.
+
+    Inputs ``torque_cmd, torque_friction``; states and outputs ``torque, pos, vel``.
+    """
+    sys = ct.interconnect([current_loop(p.tau_current), mechanics(p.J, p.pitch, p.b_visc, friction_input=True)],
+                          inputs=["torque_cmd", "torque_friction"], outputs=["torque", "pos", "vel"], name=name)
+    return ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=sys.input_labels, outputs=sys.output_labels,
+                 states=["torque", "pos", "vel"], name=name)
+
+
+def discretize(sys: ct.StateSpace, h: float) -> ct.StateSpace:
+    """Exact zero-order-hold discretisation at step ``h`` (s)."""
+    return ct.c2d(sys, h, method="zoh")
