@@ -14,6 +14,8 @@ log with their level.
 
 from __future__ import annotations
 
+import sys
+
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
@@ -86,10 +88,25 @@ class ControllerSlave(Fmi2Slave):
             self.log(f"{self.instance_name}: {text}", _LEVEL[level])
 
 
+#: Spare references to a model module's globals (see :func:`fmu_slave`).
+INSTANTIATION_RESERVE = 100_000
+
+
 def fmu_slave(logic_class: type[Controller]):
-    """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``."""
+    """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``.
+
+    It also works around a defect of pythonfmu 0.7's native loader: on every ``fmi2Instantiate`` it
+    re-executes the model script and then releases one reference to the module's globals that it
+    never owned (``PyModule_GetDict`` returns a borrowed reference). After a few instantiations of
+    the same FMU in one process -- two servo axes, a sweep -- the module's namespace would be freed
+    under it (a crash, or "Failed to instantiate"). Holding spare references keeps it alive for
+    :data:`INSTANTIATION_RESERVE` instantiations per process.
+    """
 
     def decorate(cls: type) -> type:
+        module_globals = sys.modules[cls.__module__].__dict__
+        if "_pythonfmu_instantiation_reserve" not in module_globals:
+            module_globals["_pythonfmu_instantiation_reserve"] = [module_globals] * INSTANTIATION_RESERVE
         namespace = {k: v for k, v in vars(cls).items() if k not in ("__dict__", "__weakref__")}
         namespace["logic_class"] = logic_class
         return type(cls.__name__, (ControllerSlave,), namespace)

@@ -1,0 +1,191 @@
+"""The one module that talks to ``fmpy.fmi2``: an FMU as a :class:`~ncfmu.cosim.slave.Slave`.
+
+The loop calls go straight to the FMU's C functions with ctypes arrays that share memory with
+the master's numpy buffers: one ``fmi2SetXxx``/``fmi2GetXxx`` call per kind per step, nothing
+allocated per step.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+from fmpy import read_model_description
+from fmpy.fmi1 import calloc, free
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+from ..errors import SimulationError, SystemDefinitionError
+from .slave import Variable
+
+_STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
+
+
+def safe_extract(archive: Path, target: Path) -> Path:
+    """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths)."""
+    target = Path(target).resolve()
+    with zipfile.ZipFile(archive) as z:
+        for name in z.namelist():
+            dest = (target / name).resolve()
+            if name.startswith(("/", "\\")) or (dest != target and target not in dest.parents):
+                raise SystemDefinitionError(f"{archive}: entry {name!r} would be written outside the extraction folder")
+        z.extractall(target)
+    return target
+
+
+class UnpackedFmu:
+    """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
+
+    def __init__(self, path: Path, workdir: Path | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise SystemDefinitionError(f"FMU not found: {self.path}")
+        self._tmp = None
+        if workdir is None:
+            self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
+            workdir = Path(self._tmp)
+        self.directory = safe_extract(self.path, Path(workdir))
+        self.model_description = read_model_description(str(self.path))
+        md = self.model_description
+        self.variables: dict[str, Variable] = {}
+        for v in md.modelVariables:
+            start = v.start
+            if start is not None:
+                start = {"Real": float, "Integer": int, "Boolean": lambda s: str(s).lower() in ("true", "1"),
+                         "String": str, "Enumeration": int}[v.type](start)
+            self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
+                                              getattr(v, "unit", None), start, v.description or "")
+
+    def cleanup(self) -> None:
+        if self._tmp:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+
+
+class FmuSlave:
+    """One FMU instance driven through fmpy's :class:`fmpy.fmi2.FMU2Slave`."""
+
+    def __init__(self, unpacked: UnpackedFmu, instance_name: str, logging_on: bool = False) -> None:
+        self.name = instance_name
+        self.unpacked = unpacked
+        self.variables = unpacked.variables
+        self.messages: list[tuple[str, str]] = []
+        md = unpacked.model_description
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
+                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:
+            from fmpy.logging import addLoggerProxy   # formats the variadic message in C
+            addLoggerProxy(ctypes.byref(self._callbacks))
+        except Exception:  # pragma: no cover - older fmpy without the proxy: messages stay unformatted
+            pass
+        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        self._component = self.fmu.component
+        self._dll = self.fmu.dll
+        self._bound: list[tuple] = []
+        self._reads: list[tuple] = []
+        self._writes: list[tuple] = []
+        self._step = self._dll.fmi2DoStep
+        self._alive = True
+
+    # -- logging --------------------------------------------------------------------------------
+    def _log(self, env, instance, status, category, message) -> None:
+        self.messages.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
+
+    def _fail(self, what: str, status: int) -> SimulationError:
+        said = "; ".join(f"[{lvl}] {msg}" for lvl, msg in self.messages[-5:] if lvl in ("error", "fatal", "warning"))
+        return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, status).capitalize()}"
+                               + (f": {said}" if said else ""))
+
+    def _check(self, what: str, status: int) -> None:
+        if status > 1:
+            raise self._fail(what, status)
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def set_start(self, name: str, value: object) -> None:
+        v = self.variables.get(name)
+        if v is None:
+            raise SystemDefinitionError(f"{self.name} has no variable {name!r}")
+        vr = (ctypes.c_uint * 1)(v.vr)
+        if v.type == "Real":
+            status = self._dll.fmi2SetReal(self._component, vr, 1, (ctypes.c_double * 1)(float(value)))
+        elif v.type in ("Integer", "Enumeration"):
+            status = self._dll.fmi2SetInteger(self._component, vr, 1, (ctypes.c_int * 1)(int(value)))
+        elif v.type == "Boolean":
+            status = self._dll.fmi2SetBoolean(self._component, vr, 1, (ctypes.c_int * 1)(1 if value else 0))
+        else:
+            status = self._dll.fmi2SetString(self._component, vr, 1, (ctypes.c_char_p * 1)(str(value).encode()))
+        self._check(f"setting {name} = {value!r}", status)
+
+    def initialize(self, start_time: float, stop_time: float) -> None:
+        for what, call in (("fmi2SetupExperiment", lambda: self._dll.fmi2SetupExperiment(
+                                self._component, 0, 0.0, start_time, 1, stop_time)),
+                           ("fmi2EnterInitializationMode", lambda: self._dll.fmi2EnterInitializationMode(self._component)),
+                           ("fmi2ExitInitializationMode", lambda: self._dll.fmi2ExitInitializationMode(self._component))):
+            self._check(what, call())
+
+    def bind(self, kind: str, inputs: np.ndarray, input_vrs: list[int],
+             outputs: np.ndarray, output_vrs: list[int]) -> None:
+        setter = {"Real": self._dll.fmi2SetReal, "Integer": self._dll.fmi2SetInteger,
+                  "Boolean": self._dll.fmi2SetBoolean}[kind]
+        getter = {"Real": self._dll.fmi2GetReal, "Integer": self._dll.fmi2GetInteger,
+                  "Boolean": self._dll.fmi2GetBoolean}[kind]
+        ptr = ctypes.POINTER(ctypes.c_double if kind == "Real" else ctypes.c_int)
+        if input_vrs:
+            vrs = (ctypes.c_uint * len(input_vrs))(*input_vrs)
+            self._writes.append((setter, vrs, len(input_vrs), inputs.ctypes.data_as(ptr), kind, inputs))
+        if output_vrs:
+            vrs = (ctypes.c_uint * len(output_vrs))(*output_vrs)
+            self._reads.append((getter, vrs, len(output_vrs), outputs.ctypes.data_as(ptr), kind, outputs))
+
+    # -- the loop -------------------------------------------------------------------------------
+    def write_inputs(self) -> None:
+        component = self._component
+        for setter, vrs, n, data, kind, _keep in self._writes:
+            status = setter(component, vrs, n, data)
+            if status > 1:
+                raise self._fail(f"fmi2Set{kind}", status)
+
+    def do_step(self, t: float, h: float) -> None:
+        status = self._step(self._component, t, h, 1)
+        if status > 1:
+            raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
+
+    def read_outputs(self) -> None:
+        component = self._component
+        for getter, vrs, n, data, kind, _keep in self._reads:
+            status = getter(component, vrs, n, data)
+            if status > 1:
+                raise self._fail(f"fmi2Get{kind}", status)
+
+    def get(self, name: str) -> object:
+        """Read one variable (for checks outside the loop)."""
+        v = self.variables[name]
+        if v.type == "Real":
+            return self.fmu.getReal([v.vr])[0]
+        if v.type == "Integer":
+            return self.fmu.getInteger([v.vr])[0]
+        if v.type == "Boolean":
+            return self.fmu.getBoolean([v.vr])[0]
+        value = self.fmu.getString([v.vr])[0]
+        return value.decode() if isinstance(value, bytes) else value
+
+    def reset(self) -> None:
+        """fmi2Reset: back to the instantiated state (for batch runs); bindings are dropped."""
+        self._check("fmi2Reset", self._dll.fmi2Reset(self._component))
+        self._reads.clear()
+        self._writes.clear()
+
+    def terminate(self) -> None:
+        if self._alive:
+            self._alive = False
+            try:
+                self._dll.fmi2Terminate(self._component)
+            finally:
+                self.fmu.freeInstance()

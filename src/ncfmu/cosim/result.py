@@ -1,0 +1,57 @@
+"""Simulation results: a numpy structured array with ``time`` and one field per ``INSTANCE.VARIABLE``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+class Result:
+    """Trajectories of one run.
+
+    ``result["x_axis.pos"]`` is a numpy array over ``result.time``; ``result.data`` is the
+    structured array (fmpy's layout); :meth:`to_csv` writes fmpy's CSV layout.
+    """
+
+    def __init__(self, data: np.ndarray, system: str = "", wall_time: float = 0.0,
+                 messages: dict[str, list[tuple[str, str]]] | None = None) -> None:
+        self.data = data
+        self.system = system
+        self.wall_time = wall_time
+        self.messages = messages or {}
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.data["time"]
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.data.dtype.names[1:])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[name]
+        except (KeyError, ValueError):
+            raise KeyError(f"no recorded variable {name!r}; recorded: {', '.join(self.names[:12])}...") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.data.dtype.names
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        span = float(self.time[-1] - self.time[0])
+        return span / self.wall_time if self.wall_time > 0 else float("inf")
+
+    def to_csv(self, path: Path) -> Path:
+        from fmpy.util import write_csv
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_csv(str(path), self.data)
+        return path
+
+    @classmethod
+    def from_csv(cls, path: Path) -> "Result":
+        from fmpy.util import read_csv
+        return cls(read_csv(str(path)))

@@ -1,0 +1,54 @@
+"""The small slave interface the master depends on.
+
+Call order, for every slave (the master keeps to it; a fake slave can check it)::
+
+    s = make_slave(...)                # instantiated; s.variables known
+    s.set_start(name, value) ...       # parameters and start values (before initialisation)
+    s.initialize(start_time, stop)     # setupExperiment + enter/exit initialisation mode
+    s.bind(kind, inputs, outputs)      # once per kind ("Real", "Integer", "Boolean"): the master hands
+                                       #   numpy buffers: inputs to write, outputs to fill
+    loop:
+        s.write_inputs()               # push the bound input buffers into the slave
+        s.do_step(t, h)
+        s.read_outputs()               # fill the bound output buffers
+    s.terminate()                      # and free
+
+Buffers are float64 for Real and int32 for Integer and Boolean (FMI's fmi2Boolean is an int).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+KINDS = ("Real", "Integer", "Boolean")
+DTYPES = {"Real": np.float64, "Integer": np.int32, "Boolean": np.int32}
+
+
+@dataclass(frozen=True)
+class Variable:
+    """What the master needs to know of one FMU variable."""
+
+    name: str
+    type: str                 # Real, Integer, Boolean, String
+    causality: str            # parameter, input, output, local, ...
+    vr: int
+    unit: str | None = None
+    start: object = None
+    description: str = ""
+
+
+class Slave(Protocol):
+    name: str
+    variables: dict[str, Variable]
+
+    def set_start(self, name: str, value: object) -> None: ...
+    def initialize(self, start_time: float, stop_time: float) -> None: ...
+    def bind(self, kind: str, inputs: np.ndarray, input_vrs: list[int],
+             outputs: np.ndarray, output_vrs: list[int]) -> None: ...
+    def write_inputs(self) -> None: ...
+    def do_step(self, t: float, h: float) -> None: ...
+    def read_outputs(self) -> None: ...
+    def terminate(self) -> None: ...

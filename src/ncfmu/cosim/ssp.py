@@ -1,0 +1,285 @@
+"""SSP 1.0 systems: write (.ssd / .ssv, flat, literal ``ssd:``/``ssc:``/``ssv:`` prefixes), read, pack.
+
+Layout of a system source folder and of the packed archive (what libcosim and fmpy expect)::
+
+    SystemStructure.ssd
+    resources/<Model>.fmu            (archive only: added by ``pack``)
+    resources/<instance>.ssv         one parameter set per component, plain variable names
+
+Each component binds its own .ssv (``ssd:ParameterBinding source=...``): libcosim applies a
+binding's parameters by plain name and ignores ``prefix``, so one set per component is what both
+tools read the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import SystemDefinitionError
+from ..ports import UNITS
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+}
+for _prefix, _uri in NS.items():
+    ET.register_namespace(_prefix, _uri)
+
+SSD_NAME = "SystemStructure.ssd"
+
+
+def _q(tag: str) -> str:
+    prefix, local = tag.split(":")
+    return f"{{{NS[prefix]}}}{local}"
+
+
+@dataclass
+class Component:
+    """One FMU instance of a system."""
+
+    name: str
+    model: str                                   # FMU model name; source resources/<model>.fmu
+    parameters: dict[str, object] = field(default_factory=dict)
+    connectors: list[tuple[str, str, str, str | None]] = field(default_factory=list)  # name, kind, type, unit
+
+    @property
+    def source(self) -> str:
+        return f"resources/{self.model}.fmu"
+
+
+@dataclass
+class Connection:
+    start_element: str
+    start_connector: str
+    end_element: str
+    end_connector: str
+
+    def __str__(self) -> str:
+        return f"{self.start_element}.{self.start_connector} -> {self.end_element}.{self.end_connector}"
+
+
+@dataclass
+class System:
+    """A system: components in stepping order (Gauss-Seidel), connections, default experiment."""
+
+    name: str
+    components: list[Component]
+    connections: list[Connection]
+    stop_time: float
+    step_size: float = 1e-3
+    description: str = ""
+
+    def component(self, name: str) -> Component:
+        for c in self.components:
+            if c.name == name:
+                return c
+        raise SystemDefinitionError(f"system {self.name} has no instance {name!r} "
+                                    f"(instances: {', '.join(c.name for c in self.components)})")
+
+
+# -- writing --------------------------------------------------------------------------------------
+def _value_element(parent: ET.Element, ns: str, value: object) -> None:
+    if isinstance(value, bool):
+        ET.SubElement(parent, _q(f"{ns}:Boolean"), value="true" if value else "false")
+    elif isinstance(value, int):
+        ET.SubElement(parent, _q(f"{ns}:Integer"), value=str(value))
+    elif isinstance(value, float):
+        ET.SubElement(parent, _q(f"{ns}:Real"), value=repr(value))
+    else:
+        ET.SubElement(parent, _q(f"{ns}:String"), value=str(value))
+
+
+def ssv_document(name: str, parameters: dict[str, object]) -> bytes:
+    root = ET.Element(_q("ssv:ParameterSet"), version="1.0", name=name)
+    params = ET.SubElement(root, _q("ssv:Parameters"))
+    for pname, value in parameters.items():
+        p = ET.SubElement(params, _q("ssv:Parameter"), name=pname)
+        _value_element(p, "ssv", value)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def ssd_document(system: System) -> bytes:
+    root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=system.name)
+    sys_el = ET.SubElement(root, _q("ssd:System"), name=system.name, description=system.description)
+    elements = ET.SubElement(sys_el, _q("ssd:Elements"))
+    units = set()
+    for comp in system.components:
+        c = ET.SubElement(elements, _q("ssd:Component"), name=comp.name,
+                          type="application/x-fmu-sharedlibrary", source=comp.source)
+        if comp.connectors:
+            cons = ET.SubElement(c, _q("ssd:Connectors"))
+            for name, kind, typ, unit in comp.connectors:
+                con = ET.SubElement(cons, _q("ssd:Connector"), name=name, kind=kind)
+                t = ET.SubElement(con, _q(f"ssc:{typ}"))
+                if unit:
+                    t.set("unit", unit)
+                    units.add(unit)
+        if comp.parameters:
+            bindings = ET.SubElement(c, _q("ssd:ParameterBindings"))
+            ET.SubElement(bindings, _q("ssd:ParameterBinding"), source=f"resources/{comp.name}.ssv")
+    cons = ET.SubElement(sys_el, _q("ssd:Connections"))
+    for k in system.connections:
+        ET.SubElement(cons, _q("ssd:Connection"), startElement=k.start_element, startConnector=k.start_connector,
+                      endElement=k.end_element, endConnector=k.end_connector)
+    if units:
+        units_el = ET.SubElement(root, _q("ssd:Units"))
+        for name in sorted(units):
+            u = ET.SubElement(units_el, _q("ssc:Unit"), name=name)
+            spec = dict(UNITS[name])
+            base = {k: str(v) for k, v in spec.items() if k != "factor"}
+            if "factor" in spec:
+                base["factor"] = repr(spec["factor"])
+            ET.SubElement(u, _q("ssc:BaseUnit"), base)
+    exp = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(float(system.stop_time)))
+    ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"), type="com.opensimulationplatform")
+    algo = ET.SubElement(ann, _q("osp:Algorithm"))
+    ET.SubElement(algo, _q("osp:FixedStepAlgorithm"), baseStepSize=repr(float(system.step_size)))
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def write_system(system: System, folder: Path) -> Path:
+    """Write ``folder/<system>/SystemStructure.ssd`` and its .ssv files; return the system folder."""
+    out = Path(folder) / system.name
+    (out / "resources").mkdir(parents=True, exist_ok=True)
+    for old in (out / "resources").glob("*.ssv"):
+        old.unlink()
+    (out / SSD_NAME).write_bytes(ssd_document(system))
+    for comp in system.components:
+        if comp.parameters:
+            (out / "resources" / f"{comp.name}.ssv").write_bytes(ssv_document(comp.name, comp.parameters))
+    return out
+
+
+def pack(system_folder: Path, fmus_dir: Path, archive: Path) -> Path:
+    """Pack a system folder and the FMUs it uses into an .ssp archive."""
+    system_folder, archive = Path(system_folder), Path(archive)
+    system = read_ssd(system_folder / SSD_NAME)
+    partial = archive.with_suffix(".ssp.part")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+        z.write(system_folder / SSD_NAME, SSD_NAME)
+        for ssv in sorted((system_folder / "resources").glob("*.ssv")):
+            z.write(ssv, f"resources/{ssv.name}")
+        for model in sorted({c.model for c in system.components}):
+            fmu = Path(fmus_dir) / f"{model}.fmu"
+            if not fmu.is_file():
+                raise SystemDefinitionError(f"{system.name}: FMU {fmu} is missing (run 'ncfmu build')")
+            z.write(fmu, f"resources/{model}.fmu", compress_type=zipfile.ZIP_STORED)
+    partial.replace(archive)
+    return archive
+
+
+# -- reading --------------------------------------------------------------------------------------
+def _parse_value(el: ET.Element, where: str) -> object:
+    tag = el.tag.split("}")[-1]
+    raw = el.get("value")
+    if raw is None:
+        raise SystemDefinitionError(f"{where}: {tag} has no value")
+    try:
+        if tag == "Real":
+            return float(raw)
+        if tag in ("Integer", "Enumeration"):
+            return int(raw)
+        if tag == "Boolean":
+            if raw not in ("true", "false", "1", "0"):
+                raise ValueError(raw)
+            return raw in ("true", "1")
+        return raw
+    except ValueError:
+        raise SystemDefinitionError(f"{where}: {raw!r} is not a valid {tag}") from None
+
+
+def _parameter_set(root: ET.Element, where: str) -> dict[str, object]:
+    values = {}
+    for p in root.iter(_q("ssv:Parameter")):
+        typed = [child for child in p if child.tag.startswith("{" + NS["ssv"])]
+        if not typed:
+            raise SystemDefinitionError(f"{where}: parameter {p.get('name')!r} has no value element")
+        values[p.get("name")] = _parse_value(typed[0], f"{where}: parameter {p.get('name')}")
+    return values
+
+
+def read_ssd(path: Path, read_file=None) -> System:
+    """Read a system from an .ssd file (or, with ``read_file``, from inside an archive).
+
+    ``read_file(relative_path) -> bytes`` reads files the .ssd refers to; by default they are read
+    next to the .ssd on disk.
+    """
+    path = Path(path)
+    if read_file is None:
+        base = path.parent
+
+        def read_file(rel: str) -> bytes:
+            target = (base / rel).resolve()
+            if base.resolve() not in target.parents:
+                raise SystemDefinitionError(f"{path}: {rel!r} points outside the system folder")
+            if not target.is_file():
+                raise SystemDefinitionError(f"{path}: parameter file {rel!r} is missing")
+            return target.read_bytes()
+        text = path.read_bytes()
+    else:
+        text = read_file(SSD_NAME)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as err:
+        raise SystemDefinitionError(f"{path}: not well-formed XML: {err}") from None
+    if root.tag != _q("ssd:SystemStructureDescription"):
+        raise SystemDefinitionError(f"{path}: root element is {root.tag}, expected ssd:SystemStructureDescription")
+    sys_el = root.find(_q("ssd:System"))
+    components = []
+    for comp in sys_el.find(_q("ssd:Elements")).findall(_q("ssd:Component")):
+        name, source = comp.get("name"), comp.get("source", "")
+        if not source.startswith("resources/") or not source.endswith(".fmu"):
+            raise SystemDefinitionError(f"{path}: component {name}: source {source!r} must be resources/<Model>.fmu")
+        model = source[len("resources/"):-len(".fmu")]
+        connectors = []
+        for con in comp.iterfind(f"{_q('ssd:Connectors')}/{_q('ssd:Connector')}"):
+            typed = list(con)
+            typ = typed[0].tag.split("}")[-1] if typed else "Real"
+            connectors.append((con.get("name"), con.get("kind"), typ, typed[0].get("unit") if typed else None))
+        params: dict[str, object] = {}
+        for binding in comp.iterfind(f"{_q('ssd:ParameterBindings')}/{_q('ssd:ParameterBinding')}"):
+            prefix = binding.get("prefix", "")
+            src = binding.get("source")
+            if src:
+                where = f"{path}: {src}"
+                try:
+                    values = _parameter_set(ET.fromstring(read_file(src)), where)
+                except ET.ParseError as err:
+                    raise SystemDefinitionError(f"{where}: not well-formed XML: {err}") from None
+            else:
+                values = _parameter_set(binding, f"{path}: component {name}")
+            for k, v in values.items():
+                params[k[len(prefix):] if prefix and k.startswith(prefix) else k] = v
+        components.append(Component(name, model, params, connectors))
+    connections = [Connection(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
+                   for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
+    exp = root.find(_q("ssd:DefaultExperiment"))
+    stop = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else math.nan
+    step = 1e-3
+    fixed = root.find(f".//{_q('osp:FixedStepAlgorithm')}")
+    if fixed is not None:
+        step = float(fixed.get("baseStepSize"))
+    return System(root.get("name"), components, connections, stop, step, sys_el.get("description", ""))
+
+
+def read_ssp(archive: Path) -> System:
+    """Read the system of an .ssp archive (without extracting it)."""
+    archive = Path(archive)
+    if not archive.is_file():
+        raise SystemDefinitionError(f"SSP archive not found: {archive}")
+    with zipfile.ZipFile(archive) as z:
+        names = set(z.namelist())
+
+        def read_file(rel: str) -> bytes:
+            if rel not in names:
+                raise SystemDefinitionError(f"{archive}: {rel!r} is not in the archive")
+            return z.read(rel)
+        return read_ssd(archive, read_file)

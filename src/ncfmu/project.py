@@ -1,0 +1,110 @@
+"""The project on disk (``models/``, ``fmus/``, ``ssp/``): build everything, open and run systems.
+
+This is the API behind the command line::
+
+    from ncfmu.project import simulate
+    result = simulate("lathe_roughing", start_values={"seq.block[1].Xd": 0.4})
+    result["x_axis.pos"]
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract
+from .cosim.master import InputTable, Master
+from .cosim.result import Result
+from .cosim.ssp import SSD_NAME, System, pack, read_ssd, write_system
+from .errors import SystemDefinitionError
+from .fmi.builder import PACKAGE_DIR, build_all
+from .systems import SYSTEMS, get_system
+
+
+def project_root() -> Path:
+    """The folder with ``models/``: ``$NCFMU_ROOT``, else the working directory or a parent of it,
+    else the checkout this package was installed from."""
+    env = os.environ.get("NCFMU_ROOT")
+    candidates = [Path(env)] if env else []
+    cwd = Path.cwd().resolve()
+    candidates += [cwd, *cwd.parents, PACKAGE_DIR.parents[1]]
+    for c in candidates:
+        if (c / "models" / "CutSequencer.py").is_file():
+            return c
+    raise SystemDefinitionError("cannot find the ncfmu project folder (with models/); set NCFMU_ROOT")
+
+
+def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[Path]]:
+    """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``."""
+    root = Path(root or project_root())
+    fmus = build_all(root / "models", root / "fmus", only_stale=only_stale)
+    archives = []
+    for name in SYSTEMS:
+        folder = write_system(get_system(name), root / "ssp")
+        archives.append(pack(folder, root / "fmus", root / "ssp" / f"{name}.ssp"))
+    return {"fmus": fmus, "ssp": archives}
+
+
+def system_archive(system: str, root: Path | None = None, ensure_built: bool = True) -> Path:
+    """Path of a system's .ssp: a file path as given, or ``ssp/<name>.ssp`` (built when missing or stale)."""
+    p = Path(system)
+    if p.suffix == ".ssp":
+        if not p.is_file():
+            raise SystemDefinitionError(f"SSP archive not found: {p}")
+        return p
+    if system not in SYSTEMS:
+        raise SystemDefinitionError(f"unknown system {system!r}; known systems: {', '.join(SYSTEMS)} "
+                                    "(or give the path of an .ssp file)")
+    root = Path(root or project_root())
+    if ensure_built:
+        build(root, only_stale=True)
+    return root / "ssp" / f"{system}.ssp"
+
+
+class OpenSystem:
+    """An .ssp archive unpacked once, its FMUs instantiated through fmpy, ready to run."""
+
+    def __init__(self, archive: Path, mode: str = "gauss-seidel") -> None:
+        self.archive = Path(archive)
+        self._tmp = Path(tempfile.mkdtemp(prefix="ncfmu_ssp_"))
+        try:
+            safe_extract(self.archive, self._tmp / "ssp")
+            self.system: System = read_ssd(self._tmp / "ssp" / SSD_NAME)
+            self.unpacked: dict[str, UnpackedFmu] = {}
+            for comp in self.system.components:
+                if comp.model not in self.unpacked:
+                    self.unpacked[comp.model] = UnpackedFmu(self._tmp / "ssp" / comp.source, self._tmp / comp.model)
+            self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
+            self.master = Master(self.system, self.slaves, mode)
+        except Exception:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            raise
+
+    def run(self, **kwargs) -> Result:
+        return self.master.run(**kwargs)
+
+    def close(self) -> None:
+        try:
+            self.master.terminate()
+        finally:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def __enter__(self) -> "OpenSystem":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def simulate(system: str = "lathe_roughing", stop_time: float | None = None, step_size: float | None = None,
+             start_values: Mapping[str, object] | None = None, input_csv: Path | None = None,
+             mode: str = "gauss-seidel", root: Path | None = None, progress=None) -> Result:
+    """Build what is missing, run ``system`` (a name or an .ssp path) closed loop, return the result."""
+    archive = system_archive(system, root)
+    inputs = InputTable.from_csv(input_csv) if input_csv else None
+    with OpenSystem(archive, mode) as opened:
+        return opened.run(stop_time=stop_time, step_size=step_size, start_values=start_values,
+                          inputs=inputs, progress=progress)

@@ -1,0 +1,95 @@
+"""The systems of SPEC section 5, defined once here and written to ``ssp/<system>/`` as SSP 1.0.
+
+Components are listed in Gauss-Seidel order (operator panel, controller, servos); the master steps
+them in that order. Connector types and units come from the controllers' port tables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .controllers import CutSequencer, OperatorPanel
+from .controllers.base import Controller
+from .cosim.ssp import Component, Connection, System
+from .errors import SystemDefinitionError
+from .servo.axis import ServoAxis
+
+MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis)}
+
+
+def _component(name: str, model: str, **parameters: object) -> Component:
+    logic = MODELS[model]
+    known = {p.name: p for p in logic.ports("parameter")}
+    for key in parameters:
+        if key not in known:
+            raise SystemDefinitionError(f"{model} has no parameter {key!r}")
+    connectors = [(p.name, p.causality, p.type, p.unit) for p in logic.PORTS if p.causality in ("input", "output")]
+    typed = {k: (int(v) if known[k].type == "Integer" else bool(v) if known[k].type == "Boolean"
+                 else float(v) if known[k].type == "Real" else v) for k, v in parameters.items()}
+    return Component(name, model, typed, connectors)
+
+
+def _wire(*pairs: str) -> list[Connection]:
+    out = []
+    for pair in pairs:
+        src, dst = (s.strip() for s in pair.split("->"))
+        (a, b), (c, d) = src.split(".", 1), dst.split(".", 1)
+        out.append(Connection(a, b, c, d))
+    return out
+
+
+def _blocks(*blocks: dict) -> dict[str, object]:
+    flat: dict[str, object] = {"n_blocks": len(blocks)}
+    for k, b in enumerate(blocks, start=1):
+        for key, value in b.items():
+            flat[f"block[{k}].{key}"] = value
+    return flat
+
+
+def _lathe(name: str, description: str, stop_time: float, blocks: dict[str, object]) -> System:
+    x0, z0 = 30.0, 2.0
+    return System(
+        name=name,
+        description=description,
+        components=[
+            _component("panel", "OperatorPanel", start_at=0.1),
+            _component("seq", "CutSequencer", x_start=x0, z_start=z0, **blocks),
+            _component("x_axis", "ServoAxis", pos_start=x0),
+            _component("z_axis", "ServoAxis", pos_start=z0),
+        ],
+        connections=_wire(
+            "panel.start -> seq.start", "panel.feed_hold -> seq.feed_hold",
+            "panel.feed_override -> seq.feed_override",
+            "seq.x_cmd -> x_axis.pos_cmd", "seq.x_vff -> x_axis.vel_ff",
+            "seq.z_cmd -> z_axis.pos_cmd", "seq.z_vff -> z_axis.vel_ff",
+            "x_axis.pos -> seq.x_pos", "x_axis.in_position -> seq.x_in_position",
+            "z_axis.pos -> seq.z_pos", "z_axis.in_position -> seq.z_in_position",
+        ),
+        stop_time=stop_time,
+    )
+
+
+def lathe_roughing() -> System:
+    """Rough series (Xf 1.0, Xd 0.5, N 6) then finish series (Xf 4.0, Xd 0.1, N 1): final radius 25.9 mm."""
+    return _lathe("lathe_roughing", "Lathe: sequencer -> X and Z servos; 6 roughing passes and 1 finishing pass",
+                  95.0, _blocks(dict(Xf=1.0, Xd=0.5, Xp=0.0, Zp=42.0, N=6, feed=4.0, rapid=50.0),
+                                dict(Xf=4.0, Xd=0.1, Xp=0.0, Zp=42.0, N=1, feed=2.0, rapid=50.0)))
+
+
+def lathe_taper() -> System:
+    """One taper block: Xf 1.0, Xd 0.5, N 4, Zp 42, Xp 1.5."""
+    return _lathe("lathe_taper", "Lathe: taper cut, 4 passes, X falls 1.5 mm over the 42 mm cut",
+                  50.0, _blocks(dict(Xf=1.0, Xd=0.5, Xp=1.5, Zp=42.0, N=4, feed=4.0, rapid=50.0)))
+
+
+SYSTEMS: dict[str, Callable[[], System]] = {
+    "lathe_roughing": lathe_roughing,
+    "lathe_taper": lathe_taper,
+}
+
+
+def get_system(name: str) -> System:
+    try:
+        return SYSTEMS[name]()
+    except KeyError:
+        raise SystemDefinitionError(f"unknown system {name!r}; known systems: {', '.join(SYSTEMS)}") from None
