@@ -108,3 +108,23 @@ def simulate(system: str = "lathe_roughing", stop_time: float | None = None, ste
     with OpenSystem(archive, mode) as opened:
         return opened.run(stop_time=stop_time, step_size=step_size, start_values=start_values,
                           inputs=inputs, progress=progress)
+
+
+def validate(root: Path | None = None) -> list[str]:
+    """Check every FMU with fmpy and every system with fmpy's SSP 1.0 schema; return the problems."""
+    from fmpy.ssp.ssd import read_ssd as fmpy_read_ssd
+    from fmpy.validation import validate_fmu
+
+    root = Path(root or project_root())
+    build(root, only_stale=True)
+    problems = []
+    for fmu in sorted((root / "fmus").glob("*.fmu")):
+        for p in validate_fmu(str(fmu)):
+            problems.append(f"{fmu}: {p}")
+    for name in SYSTEMS:
+        archive = root / "ssp" / f"{name}.ssp"
+        try:
+            fmpy_read_ssd(str(archive), validate=True)
+        except Exception as err:  # fmpy raises plain exceptions for schema violations
+            problems.append(f"{archive}: SSP 1.0 schema: {err}")
+    return problems

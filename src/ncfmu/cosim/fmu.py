@@ -99,6 +99,8 @@ class FmuSlave:
         self.messages.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
 
     def _fail(self, what: str, status: int) -> SimulationError:
+        if status >= 4:
+            self._alive = False   # after fmi2Fatal the FMI standard allows no further call, not even freeing
         said = "; ".join(f"[{lvl}] {msg}" for lvl, msg in self.messages[-5:] if lvl in ("error", "fatal", "warning"))
         return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, status).capitalize()}"
                                + (f": {said}" if said else ""))

@@ -194,14 +194,18 @@ class ServoAxis(Controller):
             if enabled:
                 v_meas = vel if ideal else (p_meas - p_prev) / h
                 v_cmd = kv * (pos_cmd - p_meas) + kff * vel_ff
-                if not ideal and abs(v_cmd) > v_max:
+                speed_limited = not ideal and abs(v_cmd) > v_max
+                if speed_limited:
                     v_cmd = math.copysign(v_max, v_cmd)
-                    limited = True
                 e = v_cmd - v_meas
                 t_cmd = kp * e + ki * xi + t_ff
-                if not ideal and abs(t_cmd) > t_max:
+                torque_limited = not ideal and abs(t_cmd) > t_max
+                if torque_limited:
                     t_cmd = math.copysign(t_max, t_cmd)
-                    limited = True            # conditional integration: no windup while saturated
+                if speed_limited or torque_limited:
+                    # Conditional integration: no windup while a limit acts, so the speed runs into
+                    # its limit on the (over-damped) P loop and does not overshoot it.
+                    limited = True
                 else:
                     xi += e * h
             else:

@@ -1,0 +1,126 @@
+"""The ``ncfmu`` command: build, run, validate."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from .errors import NcfmuError
+
+EPILOG = "Systems: lathe_roughing (default), lathe_taper. Instance names: panel, seq, x_axis, z_axis."
+
+
+def _parse_set(items: list[str]) -> dict[str, object]:
+    values: dict[str, object] = {}
+    for item in items or []:
+        name, eq, raw = item.partition("=")
+        if not eq or "." not in name:
+            raise NcfmuError(f"--set {item!r}: expected INSTANCE.VARIABLE=VALUE, e.g. seq.block[1].Xd=0.4")
+        low = raw.strip().lower()
+        if low in ("true", "false"):
+            values[name] = low == "true"
+        else:
+            try:
+                values[name] = int(raw) if raw.strip().lstrip("+-").isdigit() else float(raw)
+            except ValueError:
+                values[name] = raw
+    return values
+
+
+def _summary(result) -> str:
+    lines = [f"system {result.system}: simulated {result.time[-1]:.3f} s in {result.wall_time:.2f} s wall "
+             f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
+    if "seq.subcycle" in result:
+        sub, x, z = result["seq.subcycle"], result["x_axis.pos"], result["z_axis.pos"]
+        cut = sub == 2
+        passes = int(((sub[1:] == 2) & (sub[:-1] != 2)).sum())
+        lines.append(f"  cuts (SC2): {passes}")
+        if cut.any():
+            starts = [i for i in range(1, len(sub)) if sub[i] == 2 and sub[i - 1] != 2]
+            radii = [float(x[i:][sub[i:] == 2][:1][0]) for i in starts]
+            lines.append("  X at the start of each cut [mm]: " + ", ".join(f"{r:.4f}" for r in radii))
+            lines.append(f"  smallest X during the cuts: {x[cut].min():.4f} mm; Z reached {z[cut].min():.4f} mm")
+        done = result["seq.done"]
+        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
+        lines.append(f"  cycle done: {end}; tool at X {x[-1]:.4f}, Z {z[-1]:.4f} mm; "
+                     f"alarm: {'yes' if result['seq.alarm'].any() else 'no'}")
+    for axis in ("x_axis", "z_axis", "y_axis"):
+        if f"{axis}.following_error" in result:
+            fe = result[f"{axis}.following_error"]
+            lines.append(f"  {axis}: max |following error| {abs(fe).max() * 1000:.2f} um")
+    for inst, msgs in result.messages.items():
+        for level, text in msgs:
+            if level in ("warning", "error", "fatal"):
+                lines.append(f"  [{level}] {text}")
+    return "\n".join(lines)
+
+
+def cmd_build(args) -> int:
+    from .project import build
+    out = build(args.root, only_stale=not args.force)
+    for kind, paths in out.items():
+        for p in paths:
+            print(f"{kind:4s} {p}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .project import simulate
+    result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
+                      start_values=_parse_set(args.set), input_csv=args.input, mode=args.mode, root=args.root)
+    out = Path(args.out)
+    csv = result.to_csv(out / f"{result.system}.csv")
+    print(_summary(result))
+    print(f"  results: {csv}")
+    if args.plot:
+        from .plots import plot_result
+        print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
+    return 0
+
+
+def cmd_validate(args) -> int:
+    from .project import validate
+    problems = validate(args.root)
+    for p in problems:
+        print(p)
+    print("all FMUs and SSPs valid" if not problems else f"{len(problems)} problem(s)")
+    return 1 if problems else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
+                                     "run closed loop with servo axes.", epilog=EPILOG)
+    parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("build", help="build every FMU into fmus/ and pack every system into ssp/<system>.ssp")
+    p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=EPILOG)
+    p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
+    p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--step", type=float, default=None, help="communication step in s (default 0.001)")
+    p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
+                   help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
+    p.add_argument("--input", type=Path, default=None, help="CSV of input changes (columns time, INSTANCE.VARIABLE)")
+    p.add_argument("--mode", choices=("gauss-seidel", "jacobi"), default="gauss-seidel", help="master algorithm")
+    p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out)")
+    p.add_argument("--plot", action="store_true", help="also write SYSTEM.png")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
+    p.set_defaults(func=cmd_validate)
+
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except NcfmuError as err:
+        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

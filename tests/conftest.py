@@ -1,0 +1,72 @@
+"""Session fixtures: the FMUs and SSP archives are built once per test run; each system runs once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def project():
+    """Build every FMU (only what is stale) and pack every system; return the artefacts."""
+    from ncfmu.project import build
+    return build(ROOT, only_stale=True)
+
+
+@pytest.fixture(scope="session")
+def fmus(project) -> dict[str, Path]:
+    return {p.stem: p for p in project["fmus"]}
+
+
+@pytest.fixture(scope="session")
+def lathe_roughing(project):
+    from ncfmu.project import simulate
+    return simulate("lathe_roughing", root=ROOT)
+
+
+@pytest.fixture(scope="session")
+def lathe_taper(project):
+    from ncfmu.project import simulate
+    return simulate("lathe_taper", root=ROOT)
+
+
+class FmuRunner:
+    """One FMU instance stepped by hand through fmpy (for single-FMU tests)."""
+
+    def __init__(self, fmu: Path, name: str = "dut"):
+        from ncfmu.cosim.fmu import FmuSlave, UnpackedFmu
+        self.unpacked = UnpackedFmu(fmu)
+        self.slave = FmuSlave(self.unpacked, name)
+
+    def start(self, **parameters):
+        for k, v in parameters.items():
+            self.slave.set_start(k, v)
+        self.slave.initialize(0.0, 1e6)
+        return self
+
+    def set(self, **values):
+        for k, v in values.items():
+            self.slave.set_start(k, v)   # fmi2SetXxx: the same call for inputs during the run
+
+    def get(self, name):
+        return self.slave.get(name)
+
+    def close(self):
+        self.slave.terminate()
+        self.unpacked.cleanup()
+
+
+@pytest.fixture
+def fmu_runner():
+    opened = []
+
+    def make(fmu: Path, name: str = "dut") -> FmuRunner:
+        r = FmuRunner(fmu, name)
+        opened.append(r)
+        return r
+    yield make
+    for r in opened:
+        r.close()

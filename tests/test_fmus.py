@@ -1,0 +1,87 @@
+"""The built FMUs: validation, code isolation, refused parameters, runtime input faults."""
+
+import math
+import sys
+
+import pytest
+from fmpy.validation import validate_fmu
+
+from ncfmu.errors import SimulationError
+
+
+def test_every_fmu_validates(fmus):
+    assert set(fmus) == {"CutSequencer", "OperatorPanel", "ServoAxis"}
+    for name, path in fmus.items():
+        assert validate_fmu(str(path)) == [], name
+
+
+def test_model_description_carries_units_and_initial_unknowns(fmus):
+    from fmpy import read_model_description
+    md = read_model_description(str(fmus["ServoAxis"]))
+    units = {u.name for u in md.unitDefinitions}
+    assert {"mm", "mm/s", "N.m"} <= units
+    pos = next(v for v in md.modelVariables if v.name == "pos")
+    assert pos.unit == "mm" and pos.description
+    assert {u.variable.name for u in md.initialUnknowns} == {v.name for v in md.modelVariables if v.causality == "output"}
+    assert md.defaultExperiment.stepSize == "0.001"
+
+
+def test_fmu_runs_the_code_it_was_built_from(fmus, fmu_runner, monkeypatch):
+    """Break the in-process ncfmu: the FMU must not notice (it runs its own vendored copy)."""
+    import ncfmu.controllers.sequencer as src
+    monkeypatch.setattr(src.CutSequencer, "step", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("dev copy")))
+    monkeypatch.setattr(src, "MAX_BLOCKS", 1)
+    r = fmu_runner(fmus["CutSequencer"]).start()
+    r.set(start=True)
+    for i in range(100):
+        r.slave.do_step(i * 1e-3, 1e-3)
+    assert r.get("subcycle") == 1 and r.get("x_cmd") < 30.0
+    vendored = [m for m in sys.modules if m.startswith("ncfmu_")]
+    assert vendored, "the FMU imported a content-addressed copy of ncfmu"
+
+
+@pytest.mark.parametrize("name, value, rule", [
+    ("block[1].Xd", -0.5, "must be > 0"),
+    ("block[1].N", 0, "must be in 1..10000"),
+    ("block[2].Zp", 0.0, "must be > 0"),
+    ("n_blocks", 12, "must be in 1..8"),
+    ("block[1].feed", 0.0, "must be > 0"),
+    ("x_start", math.nan, "must be finite"),
+])
+def test_bad_registers_refused_at_initialisation(fmus, fmu_runner, name, value, rule):
+    r = fmu_runner(fmus["CutSequencer"])
+    with pytest.raises(SimulationError) as err:
+        r.start(**{name: value})
+    text = str(err.value)
+    assert "fmi2ExitInitializationMode" in text
+    assert f"{name} = " in text and rule in text
+    # pythonfmu 0.7 reports a Python exception as fmi2Fatal; the message is logged as an error first
+    assert ("error", ) == tuple({lvl for lvl, msg in r.slave.messages if name in msg and rule in msg} & {"error"})
+
+
+def test_nan_position_raises_alarm_and_freezes_commands(fmus, fmu_runner):
+    r = fmu_runner(fmus["CutSequencer"]).start()
+    r.set(start=True)
+    t = 0.0
+    for _ in range(30):
+        r.slave.do_step(t, 1e-3)
+        t += 1e-3
+        r.set(x_pos=r.get("x_cmd"), z_pos=r.get("z_cmd"))
+    before = (r.get("x_cmd"), r.get("z_cmd"))
+    r.set(x_pos=math.nan)
+    for _ in range(10):
+        r.slave.do_step(t, 1e-3)
+        t += 1e-3
+    assert r.get("alarm")
+    assert (r.get("x_cmd"), r.get("z_cmd")) == pytest.approx(before, abs=1e-3)   # stopped at once
+    frozen = (r.get("x_cmd"), r.get("z_cmd"))
+    r.slave.do_step(t, 1e-3)
+    assert (r.get("x_cmd"), r.get("z_cmd")) == frozen and r.get("x_vff") == 0.0
+    assert any("x_pos" in msg and lvl == "error" for lvl, msg in r.slave.messages)
+
+
+def test_two_instances_of_one_fmu_in_one_process(fmus, fmu_runner):
+    a = fmu_runner(fmus["ServoAxis"], "x_axis").start(pos_start=1.0)
+    b = fmu_runner(fmus["ServoAxis"], "z_axis").start(pos_start=2.0)
+    c = fmu_runner(fmus["ServoAxis"], "y_axis").start(pos_start=3.0)
+    assert (a.get("pos"), b.get("pos"), c.get("pos")) == (1.0, 2.0, 3.0)
