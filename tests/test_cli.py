@@ -1,0 +1,35 @@
+"""The ncfmu command line."""
+
+import csv
+
+from ncfmu.cli import main
+
+
+def test_run_writes_fmpy_csv_and_summary(project, tmp_path, capsys):
+    rc = main(["run", "lathe_taper", "--stop-time", "1.0", "--set", "seq.block[1].Xd=0.25", "--out", str(tmp_path)])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "simulated/wall-clock ratio" in out
+    with open(tmp_path / "lathe_taper.csv") as f:
+        header = next(csv.reader(f))
+    assert header[0] == "time" and "x_axis.pos" in header and "seq.subcycle" in header
+
+
+def test_indexed_set_takes_effect(project, tmp_path):
+    from ncfmu.project import simulate
+    r = simulate("lathe_taper", stop_time=0.6, start_values={"seq.block[1].Xd": 0.25})
+    assert r["seq.sigma_x"].max() == 1.25
+
+
+def test_unknown_system_instance_variable_are_clear_errors(project, tmp_path, capsys):
+    assert main(["run", "lathe_nope", "--out", str(tmp_path)]) == 2
+    assert "unknown system 'lathe_nope'" in capsys.readouterr().err
+    assert main(["run", "lathe_taper", "--set", "sq.x_start=1", "--out", str(tmp_path)]) == 2
+    assert "unknown instance 'sq'" in capsys.readouterr().err
+    assert main(["run", "lathe_taper", "--set", "seq.nope=1", "--out", str(tmp_path)]) == 2
+    assert "seq has no variable 'nope'" in capsys.readouterr().err
+
+
+def test_validate_reports_nothing(project, capsys):
+    assert main(["validate"]) == 0
+    assert "all FMUs and SSPs valid" in capsys.readouterr().out
