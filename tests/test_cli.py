@@ -2,6 +2,8 @@
 
 import csv
 
+import numpy as np
+
 from ncfmu.cli import main
 
 
@@ -33,3 +35,15 @@ def test_unknown_system_instance_variable_are_clear_errors(project, tmp_path, ca
 def test_validate_reports_nothing(project, capsys):
     assert main(["validate"]) == 0
     assert "all FMUs and SSPs valid" in capsys.readouterr().out
+
+
+def test_input_csv_drives_an_unconnected_input(project, tmp_path):
+    """An fmpy-style input CSV raises the sequencer's alarm_in at 0.3 s: the motion stops there."""
+    from ncfmu.project import simulate
+    csv_file = tmp_path / "inputs.csv"
+    csv_file.write_text('"time","seq.alarm_in"\n0.0,0\n0.3,1\n')
+    r = simulate("lathe_taper", stop_time=0.6, input_csv=csv_file)
+    t, alarm = r.time, r["seq.alarm"]
+    assert not alarm[t < 0.3].any() and alarm[t > 0.302].all()
+    frozen = r["seq.x_cmd"][t > 0.302]
+    assert np.ptp(frozen) == 0.0 and np.all(r["seq.x_vff"][t > 0.302] == 0.0)
