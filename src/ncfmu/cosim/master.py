@@ -48,11 +48,11 @@ class InputTable:
         return cls(t, {n: np.asarray(data[n]) for n in data.dtype.names if n != "time"})
 
 
-def _plan_kind(slaves, system, kind, variables_of, ext_names):
-    """Slots of every output of ``kind`` and, per slave, its connected inputs' source slots."""
+def _output_slots(slaves, kind, ext_names):
+    """Slot in the global vector of ``kind`` for every output of that kind, then for the CSV inputs."""
     slots: dict[str, int] = {}
     for s in slaves:
-        for v in variables_of(s):
+        for v in s.variables.values():
             if v.causality == "output" and v.type == kind:
                 slots[f"{s.name}.{v.name}"] = len(slots)
     for name in ext_names:
@@ -152,8 +152,7 @@ class Master:
         # Global output vectors and the gather plan.
         values, slots, record_names = {}, {}, {}
         for kind in KINDS:
-            slots[kind] = _plan_kind(self.slaves, self.system, kind, lambda s: s.variables.values(),
-                                     [q for q, t in ext.items() if t == kind])
+            slots[kind] = _output_slots(self.slaves, kind, [q for q, t in ext.items() if t == kind])
             values[kind] = np.zeros(len(slots[kind]), dtype=DTYPES[kind])
             record_names[kind] = [q for q in slots[kind] if q not in ext]
         sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"

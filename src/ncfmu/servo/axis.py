@@ -174,8 +174,9 @@ class ServoAxis(Controller):
     def _digital(self, dt: float, enabled: bool) -> None:
         n = self._substeps(dt)
         h = dt / n
-        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self._plant_coefficients(h)[0]
-        (b00, b01), (b10, b11), (b20, b21) = self._plant_coefficients(h)[1]
+        ad, bd = self._plant_coefficients(h)
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ad
+        (b00, b01), (b10, b11), (b20, b21) = bd
         xi, torque, pos, vel = (float(v) for v in self.x)
         kv, kff, kp, ki = self.p.Kv, self.p.kff, self.kp, self.ki
         v_max, t_max, tc = self.v_max, self.torque_max, self.tau_coulomb
