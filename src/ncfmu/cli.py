@@ -75,7 +75,11 @@ def cmd_run(args) -> int:
     print(_summary(result))
     print(f"  results: {csv}")
     if args.plot:
-        from .plots import plot_result
+        try:
+            from .plots import plot_result
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
         print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
     return 0
 
