@@ -147,12 +147,15 @@ class FmuSlave:
             self._reads.append((getter, vrs, len(output_vrs), outputs.ctypes.data_as(ptr), kind, outputs))
 
     # -- the loop -------------------------------------------------------------------------------
-    def write_inputs(self) -> None:
+    def _transfer(self, calls: list[tuple], what: str) -> None:
         component = self._component
-        for setter, vrs, n, data, kind, _keep in self._writes:
-            status = setter(component, vrs, n, data)
+        for function, vrs, n, data, kind, _keep in calls:
+            status = function(component, vrs, n, data)
             if status > 1:
-                raise self._fail(f"fmi2Set{kind}", status)
+                raise self._fail(f"fmi2{what}{kind}", status)
+
+    def write_inputs(self) -> None:
+        self._transfer(self._writes, "Set")
 
     def do_step(self, t: float, h: float) -> None:
         status = self._step(self._component, t, h, 1)
@@ -160,11 +163,7 @@ class FmuSlave:
             raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
 
     def read_outputs(self) -> None:
-        component = self._component
-        for getter, vrs, n, data, kind, _keep in self._reads:
-            status = getter(component, vrs, n, data)
-            if status > 1:
-                raise self._fail(f"fmi2Get{kind}", status)
+        self._transfer(self._reads, "Get")
 
     def get(self, name: str) -> object:
         """Read one variable (for checks outside the loop)."""

@@ -102,6 +102,7 @@ class ServoAxis(Controller):
 
     def reset(self) -> None:
         self.x = np.array([0.0, 0.0, self.pos_start, 0.0])   # integral, torque, pos, vel
+        self._u = np.zeros(4)                                  # input vector of the ideal step, reused
         self.p_meas = self.p_last = self._quantise(self.pos_start)
         self.limited = False
         self.fault = None
@@ -163,7 +164,9 @@ class ServoAxis(Controller):
         p0 = self.p_meas
         if self.ideal and inputs["enable"]:
             f, g = self._ideal_matrices(dt)
-            self.x = f @ self.x + g @ np.array([self.cmd_prev, self.pos_cmd, self.vff_prev, self.vel_ff])
+            u = self._u
+            u[0], u[1], u[2], u[3] = self.cmd_prev, self.pos_cmd, self.vff_prev, self.vel_ff
+            self.x = f @ self.x + g @ u
             self.p_meas = self.x[2]
             self.limited = False
         else:
