@@ -38,12 +38,10 @@ def test_validate_reports_nothing(project, capsys):
 
 
 def test_input_csv_drives_an_unconnected_input(project, tmp_path):
-    """An fmpy-style input CSV raises the sequencer's alarm_in at 0.3 s: the motion stops there."""
+    """An fmpy-style input CSV sets the panel's m_active at 0.2 s: MFIN answers 0.5 s (mfin_delay) later."""
     from ncfmu.project import simulate
     csv_file = tmp_path / "inputs.csv"
-    csv_file.write_text('"time","seq.alarm_in"\n0.0,0\n0.3,1\n')
-    r = simulate("lathe_taper", stop_time=0.6, input_csv=csv_file)
-    t, alarm = r.time, r["seq.alarm"]
-    assert not alarm[t < 0.3].any() and alarm[t > 0.302].all()
-    frozen = r["seq.x_cmd"][t > 0.302]
-    assert np.ptp(frozen) == 0.0 and np.all(r["seq.x_vff"][t > 0.302] == 0.0)
+    csv_file.write_text('"time","panel.m_active"\n0.0,0\n0.2,3\n')
+    r = simulate("lathe_taper", stop_time=1.0, input_csv=csv_file)
+    t, mfin = r.time, r["panel.mfin"]
+    assert not mfin[t < 0.699].any() and mfin[t > 0.701].all()

@@ -10,7 +10,7 @@ from ncfmu.errors import SimulationError
 
 
 def test_every_fmu_validates(fmus):
-    assert set(fmus) == {"CutSequencer", "OperatorPanel", "ServoAxis"}
+    assert set(fmus) == {"AreaLimiter", "CutSequencer", "OperatorPanel", "ServoAxis"}
     for name, path in fmus.items():
         assert validate_fmu(str(path)) == [], name
 
@@ -85,3 +85,16 @@ def test_two_instances_of_one_fmu_in_one_process(fmus, fmu_runner):
     b = fmu_runner(fmus["ServoAxis"], "z_axis").start(pos_start=2.0)
     c = fmu_runner(fmus["ServoAxis"], "y_axis").start(pos_start=3.0)
     assert (a.get("pos"), b.get("pos"), c.get("pos")) == (1.0, 2.0, 3.0)
+
+
+@pytest.mark.parametrize("name, value, rule", [
+    ("region[2].ref_max", -50.0, "boundaries must increase strictly"),
+    ("region[1].lim_min", 2e6, "must be <= region[1].lim_max"),
+    ("n_regions", 40, "must be in 1..32"),
+    ("monitor_period", -0.005, "must be > 0"),
+])
+def test_bad_limit_table_refused_at_initialisation(fmus, fmu_runner, name, value, rule):
+    r = fmu_runner(fmus["AreaLimiter"])
+    with pytest.raises(SimulationError) as err:
+        r.start(**{name: value})
+    assert f"{name} = " in str(err.value) and rule in str(err.value)

@@ -67,3 +67,25 @@ def test_feed_rate_during_the_cut(lathe_roughing):
     v = -r["z_axis.vel"][a:b]
     steady = v[(r.time[a:b] > r.time[a] + 0.5) & (r.time[a:b] < r.time[b - 1] - 0.5)]
     assert steady == pytest.approx(4.0, rel=0.01)
+
+
+def test_default_programs_never_raise_the_limiter_alarm(lathe_roughing, lathe_taper):
+    for r in (lathe_roughing, lathe_taper):
+        assert not r["limiter.alarm"].any() and not r["seq.alarm"].any()
+        assert r["limiter.blocked"].max() == 0
+
+
+def test_cut_into_the_chuck_stops_before_it(project):
+    """Zp = 50 would take the tool to Z = -48; the chuck zone starts at Z = -45."""
+    from ncfmu.project import simulate
+    r = simulate("lathe_roughing", stop_time=14.0, start_values={"seq.block[1].Zp": 50.0})
+    assert r["limiter.alarm"].any() and r["seq.alarm"][-1]
+    assert r["limiter.blocked"].max() == 2                     # Z- blocked, nothing else
+    assert r["z_axis.pos"].min() > -45.0                       # the actual axis never enters
+    assert r["limiter.ref_cmd"].min() > -45.0                  # nor does the command
+    first = np.argmax(r["limiter.alarm"])
+    assert r["z_axis.pos"][first] < -44.0                      # it got close: stopped by the limit, not early
+    # the sequencer holds: no motion after the alarm has settled
+    late = r.time > r.time[first] + 0.5
+    assert np.ptp(r["z_axis.pos"][late]) < 1e-4 and np.ptp(r["seq.z_cmd"][late]) == 0.0
+    assert not r["seq.busy"][-1]

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from .controllers import CutSequencer, OperatorPanel
+from .controllers import AreaLimiter, CutSequencer, OperatorPanel
 from .controllers.base import Controller
 from .cosim.ssp import Component, Connection, System
 from .errors import SystemDefinitionError
 from .servo.axis import ServoAxis
 
-MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis)}
+MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis, AreaLimiter)}
 
 
 def _component(name: str, model: str, **parameters: object) -> Component:
@@ -46,6 +46,17 @@ def _blocks(*blocks: dict) -> dict[str, object]:
     return flat
 
 
+def _table(rows: list[tuple[float, float, float]]) -> dict[str, object]:
+    flat: dict[str, object] = {"n_regions": len(rows)}
+    for i, (ref_max, lo, hi) in enumerate(rows, start=1):
+        flat[f"region[{i}].ref_max"], flat[f"region[{i}].lim_min"], flat[f"region[{i}].lim_max"] = ref_max, lo, hi
+    return flat
+
+
+#: Lathe envelope: reference Z, limited X. For Z <= -45 (the chuck) X must be >= 40: out of reach.
+CHUCK_TABLE = [(-45.0, 40.0, 1e6), (1e6, -1e6, 1e6)]
+
+
 def _lathe(name: str, description: str, stop_time: float, blocks: dict[str, object]) -> System:
     x0, z0 = 30.0, 2.0
     return System(
@@ -54,16 +65,22 @@ def _lathe(name: str, description: str, stop_time: float, blocks: dict[str, obje
         components=[
             _component("panel", "OperatorPanel", start_at=0.1),
             _component("seq", "CutSequencer", x_start=x0, z_start=z0, **blocks),
+            _component("limiter", "AreaLimiter", ref_start=z0, lim_start=x0, predictive=True, use_actual=True,
+                       **_table(CHUCK_TABLE)),
             _component("x_axis", "ServoAxis", pos_start=x0),
             _component("z_axis", "ServoAxis", pos_start=z0),
         ],
         connections=_wire(
             "panel.start -> seq.start", "panel.feed_hold -> seq.feed_hold",
             "panel.feed_override -> seq.feed_override",
-            "seq.x_cmd -> x_axis.pos_cmd", "seq.x_vff -> x_axis.vel_ff",
-            "seq.z_cmd -> z_axis.pos_cmd", "seq.z_vff -> z_axis.vel_ff",
+            "seq.z_cmd -> limiter.ref_cmd_in", "seq.z_vff -> limiter.ref_vff_in",
+            "seq.x_cmd -> limiter.lim_cmd_in", "seq.x_vff -> limiter.lim_vff_in",
+            "limiter.lim_cmd -> x_axis.pos_cmd", "limiter.lim_vff -> x_axis.vel_ff",
+            "limiter.ref_cmd -> z_axis.pos_cmd", "limiter.ref_vff -> z_axis.vel_ff",
+            "limiter.alarm -> seq.alarm_in",
             "x_axis.pos -> seq.x_pos", "x_axis.in_position -> seq.x_in_position",
             "z_axis.pos -> seq.z_pos", "z_axis.in_position -> seq.z_in_position",
+            "x_axis.pos -> limiter.lim_pos", "z_axis.pos -> limiter.ref_pos",
         ),
         stop_time=stop_time,
     )
@@ -71,7 +88,7 @@ def _lathe(name: str, description: str, stop_time: float, blocks: dict[str, obje
 
 def lathe_roughing() -> System:
     """Rough series (Xf 1.0, Xd 0.5, N 6) then finish series (Xf 4.0, Xd 0.1, N 1): final radius 25.9 mm."""
-    return _lathe("lathe_roughing", "Lathe: sequencer -> X and Z servos; 6 roughing passes and 1 finishing pass",
+    return _lathe("lathe_roughing", "Lathe: sequencer -> area limiter -> X and Z servos; 6 roughing passes, 1 finishing pass",
                   95.0, _blocks(dict(Xf=1.0, Xd=0.5, Xp=0.0, Zp=42.0, N=6, feed=4.0, rapid=50.0),
                                 dict(Xf=4.0, Xd=0.1, Xp=0.0, Zp=42.0, N=1, feed=2.0, rapid=50.0)))
 

@@ -2,6 +2,7 @@
 
 from .base import Controller
 from .panel import OperatorPanel
+from .limiter import AreaLimiter
 from .sequencer import Block, CutSequencer
 
-__all__ = ["Controller", "OperatorPanel", "CutSequencer", "Block"]
+__all__ = ["Controller", "AreaLimiter", "OperatorPanel", "CutSequencer", "Block"]
