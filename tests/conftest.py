@@ -70,3 +70,15 @@ def fmu_runner():
     yield make
     for r in opened:
         r.close()
+
+
+@pytest.fixture(scope="session")
+def grinder_feed(project):
+    from ncfmu.project import simulate
+    return simulate("grinder_feed", root=ROOT)
+
+
+@pytest.fixture(scope="session")
+def grinder_envelope(project):
+    from ncfmu.project import simulate
+    return simulate("grinder_envelope", root=ROOT)

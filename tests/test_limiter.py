@@ -182,17 +182,18 @@ def test_property_predictive_commanded_and_actual_stay_inside(table, program):
         ref_cmd, lim_cmd = o["ref_cmd"], o["lim_cmd"]
         if limiter.blocked:
             blocked = limiter.blocked
-            before = (o["ref_cmd"], o["lim_cmd"])
             back_r = -1 if blocked & REF_PLUS else (1 if blocked & REF_MINUS else 0)
             back_l = -1 if blocked & LIM_PLUS else (1 if blocked & LIM_MINUS else 0)
-            ref_cmd += back_r * 0.5
-            lim_cmd += back_l * 0.5
-            o = limiter.step(t, DT, {"ref_cmd_in": ref_cmd, "lim_cmd_in": lim_cmd, "ref_vff_in": 0.0,
-                                     "lim_vff_in": 0.0, "ref_pos": servo_r.x[2], "lim_pos": servo_l.x[2]})
-            assert (o["ref_cmd"], o["lim_cmd"]) == (ref_cmd, lim_cmd) != before   # followed at once
-            for _ in range(int(limiter.monitor_period / DT) + 1):
-                o = limiter.step(t, DT, {"ref_cmd_in": ref_cmd, "lim_cmd_in": lim_cmd, "ref_vff_in": 0.0,
-                                         "lim_vff_in": 0.0, "ref_pos": o["ref_cmd"], "lim_pos": o["lim_cmd"]})
+            # the inputs held where the gate holds them, the operator backs out at 20 mm/s
+            ref_cmd, lim_cmd = o["ref_cmd"], o["lim_cmd"]
+            for _ in range(int(3 * limiter.monitor_period / DT)):
+                ref_cmd += back_r * 20.0 * DT
+                lim_cmd += back_l * 20.0 * DT
+                o = limiter.step(t, DT, {"ref_cmd_in": ref_cmd, "lim_cmd_in": lim_cmd, "ref_vff_in": back_r * 20.0,
+                                         "lim_vff_in": back_l * 20.0, "ref_pos": o["ref_cmd"],
+                                         "lim_pos": o["lim_cmd"]})
+                assert (o["ref_cmd"], o["lim_cmd"]) == (ref_cmd, lim_cmd)     # followed at once
+                t += DT
             assert not o["alarm"]
 
 

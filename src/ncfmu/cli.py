@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from .errors import NcfmuError
 
-EPILOG = "Systems: lathe_roughing (default), lathe_taper. Instance names: panel, seq, x_axis, z_axis."
+EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope. Instances: lathe "
+          "panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis.")
 
 
 def _parse_set(items: list[str]) -> dict[str, object]:
@@ -46,6 +48,14 @@ def _summary(result) -> str:
         end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
         lines.append(f"  cycle done: {end}; tool at X {x[-1]:.4f}, Z {z[-1]:.4f} mm; "
                      f"alarm: {'yes' if result['seq.alarm'].any() else 'no'}")
+    if "feed.pc" in result:
+        x, run = result["x_axis.pos"], result["feed.run"] | result["feed.emergency_active"]
+        end = f"{result.time[np.flatnonzero(run)[-1] + 1]:.3f} s" if run.any() and not run[-1] else "not finished"
+        lines.append(f"  deepest X: {x.max():.4f} mm; cycle ended: {end}; X at the end {x[-1]:.4f} mm; "
+                     f"return counter X {result['feed.return_counter_x'][-1]:.4f} mm")
+        lines.append(f"  alarm: {'yes' if result['feed.alarm'].any() else 'no'}")
+    if "limiter.alarm" in result:
+        lines.append(f"  area limiter: {'ALARM, blocked mask ' + str(result['limiter.blocked'].max()) if result['limiter.alarm'].any() else 'no violation'}")
     for axis in ("x_axis", "z_axis", "y_axis"):
         if f"{axis}.following_error" in result:
             fe = result[f"{axis}.following_error"]

@@ -2,7 +2,8 @@
 
 from .base import Controller
 from .panel import OperatorPanel
+from .feed import ProgrammableFeed, parse_program
 from .limiter import AreaLimiter
 from .sequencer import Block, CutSequencer
 
-__all__ = ["Controller", "AreaLimiter", "OperatorPanel", "CutSequencer", "Block"]
+__all__ = ["Controller", "AreaLimiter", "ProgrammableFeed", "parse_program", "OperatorPanel", "CutSequencer", "Block"]

@@ -10,8 +10,10 @@ the seed scans linearly) and compares the limited axis with that region's range.
 blocks the direction that was being commanded -- on whichever axis moved into the violation, as the
 seed resets that bit of its movement-axis register -- by holding that axis's last allowed command
 with zero velocity feed-forward. Motion in the opposite direction passes at once, so the axis can be
-backed out without re-homing. ``alarm`` stays set from the violation until such a move has brought
-the (judged) position back inside; only then is the blocked direction released.
+backed out without re-homing. A blocked direction is released, and ``alarm`` cleared, once the
+position is inside and a step in that direction would stay inside -- after backing out, or after the
+other axis has moved clear (the wheel retracted, the table may travel again). An input that ran ahead
+while held is then followed accelerating at ``decel``, never with a jump.
 
 It sits between a controller and the servos and judges the position it commands (its gated output,
 like the seed's current-position counter); with ``use_actual`` also the servo feedback (the
@@ -24,6 +26,8 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Mapping, Sequence
+
+import math
 
 from ..errors import require
 from ..ports import boolean, integer, real
@@ -121,7 +125,8 @@ class AreaLimiter(Controller):
         self.ref_out, self.lim_out = self.ref_start, self.lim_start
         self.ref_vff = self.lim_vff = 0.0
         self.blocked = 0
-        self._blocked_at = (self.ref_out, self.lim_out)
+        self._catch_up = [0.0, 0.0]                # extra speed while following an input that ran ahead
+        self._block_speed = {REF_PLUS: 0.0, REF_MINUS: 0.0, LIM_PLUS: 0.0, LIM_MINUS: 0.0}
         self.alarm = False
         self.region = 0
         self.clock = self.monitor_period        # monitor at the first step
@@ -177,9 +182,13 @@ class AreaLimiter(Controller):
         self.fault = None
         ref_in, lim_in = float(inputs["ref_cmd_in"]), float(inputs["lim_cmd_in"])
 
-        # Gate: a blocked direction holds; anything else passes at once.
-        self.ref_out, self.ref_vff = self._gate(ref_in, float(inputs["ref_vff_in"]), self.ref_out, REF_PLUS, REF_MINUS)
-        self.lim_out, self.lim_vff = self._gate(lim_in, float(inputs["lim_vff_in"]), self.lim_out, LIM_PLUS, LIM_MINUS)
+        if self.blocked:
+            self._release(t, ref_in, lim_in, float(inputs["ref_vff_in"]), float(inputs["lim_vff_in"]))
+        # Gate: a blocked direction holds; anything else passes at once (catching up without a jump).
+        self.ref_out, self.ref_vff = self._gate(0, ref_in, float(inputs["ref_vff_in"]), self.ref_out, dt,
+                                                REF_PLUS, REF_MINUS)
+        self.lim_out, self.lim_vff = self._gate(1, lim_in, float(inputs["lim_vff_in"]), self.lim_out, dt,
+                                                LIM_PLUS, LIM_MINUS)
 
         self.clock += dt
         if self.clock >= self.monitor_period - 1e-12:
@@ -187,10 +196,41 @@ class AreaLimiter(Controller):
             self._monitor(t, ref_in, lim_in, float(inputs["ref_pos"]), float(inputs["lim_pos"]))
         return self._publish()
 
-    def _gate(self, cmd: float, vff: float, held: float, plus: int, minus: int) -> tuple[float, float]:
+    def _gate(self, axis: int, cmd: float, vff: float, held: float, dt: float, plus: int, minus: int):
         if (cmd > held and self.blocked & plus) or (cmd < held and self.blocked & minus):
+            self._catch_up[axis] = 0.0
             return held, 0.0
-        return cmd, vff
+        gap = cmd - held
+        # An interpolator's step may exceed vff*dt by half an acceleration step: that is motion, pass it.
+        if abs(gap) <= (abs(vff) + self.decel * dt) * dt + 1e-9:
+            self._catch_up[axis] = 0.0
+            return cmd, vff
+        # The input ran ahead while this direction was held: follow it accelerating at ``decel``.
+        self._catch_up[axis] += self.decel * dt
+        step = math.copysign(min(abs(gap), (abs(vff) + self._catch_up[axis]) * dt), gap)
+        return held + step, step / dt
+
+    def _release(self, t: float, ref_in: float, lim_in: float, ref_vff_in: float, lim_vff_in: float) -> None:
+        """Free a blocked direction once a step that way from the present position stays inside.
+
+        It is freed either by backing out (a move against it, as in the seed) or because the other axis
+        moved so that this direction is allowed again (the wheel retracted, the table may travel).
+        """
+        freed = 0
+        for bit, axis_ref, sign, vff in ((REF_PLUS, True, 1, ref_vff_in), (REF_MINUS, True, -1, ref_vff_in),
+                                         (LIM_PLUS, False, 1, lim_vff_in), (LIM_MINUS, False, -1, lim_vff_in)):
+            if not self.blocked & bit:
+                continue
+            # probe as far as the axis could go at the speed it was blocked at (or is now asked for)
+            speed = max(abs(vff), self._block_speed[bit])
+            probe = sign * max(self._lookahead(speed, 0.0) if self.predictive else speed * self.monitor_period, 1e-6)
+            ref, lim = (self.ref_out + probe, self.lim_out) if axis_ref else (self.ref_out, self.lim_out + probe)
+            if self.inside(self.ref_out, self.lim_out) and self.inside(ref, lim):
+                freed |= bit
+        if freed:
+            self.blocked &= ~freed
+            self.say("info", f"t = {t:.4f} s: inside the envelope again; releasing {_mask_text(freed)}")
+            self.alarm = bool(self.blocked)
 
     def _monitor(self, t: float, ref_in: float, lim_in: float, ref_pos: float, lim_pos: float) -> None:
         dir_ref = _sign(self.ref_out - self._tick_ref) or _sign(ref_in - self.ref_out)
@@ -208,27 +248,19 @@ class AreaLimiter(Controller):
             new |= self._violations(ref, lim, ref_from, dir_ref, dir_lim)
         self.region = find_region(self.ref_max, self.ref_out)
         if new & ~self.blocked:
+            for bit, v in ((REF_PLUS, self.ref_vff), (REF_MINUS, self.ref_vff), (LIM_PLUS, self.lim_vff),
+                           (LIM_MINUS, self.lim_vff)):
+                if new & bit & ~self.blocked:
+                    self._block_speed[bit] = abs(v)
             self.say("warning", f"t = {t:.4f} s: envelope violated in region {self.region} "
                                 f"(ref {self.ref_out:.4f}, lim {self.lim_out:.4f}); blocking {_mask_text(new)}")
             if new & (REF_PLUS | REF_MINUS):
                 self.ref_vff = 0.0
             if new & (LIM_PLUS | LIM_MINUS):
                 self.lim_vff = 0.0
-        if new & ~self.blocked:
-            self._blocked_at = (self.ref_out, self.lim_out)
         self.blocked |= new
-        if self.blocked and not new and self._backed_out():
-            # As in the seed: a move opposite to the blocked direction brought the tool back inside.
-            self.say("info", f"t = {t:.4f} s: back inside the envelope; releasing {_mask_text(self.blocked)}")
-            self.blocked = 0
         self.alarm = bool(self.blocked) or bool(new)
         self._tick_ref, self._tick_lim = self.ref_out, self.lim_out
-
-    def _backed_out(self) -> bool:
-        """Has every blocked axis moved against its blocked direction since the block?"""
-        b, (ref0, lim0) = self.blocked, self._blocked_at
-        return not ((b & REF_PLUS and self.ref_out >= ref0) or (b & REF_MINUS and self.ref_out <= ref0)
-                    or (b & LIM_PLUS and self.lim_out >= lim0) or (b & LIM_MINUS and self.lim_out <= lim0))
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs

@@ -48,7 +48,9 @@ class Result:
         from fmpy.util import write_csv
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_csv(str(path), self.data)
+        # Booleans as 0/1: fmpy writes numpy bools as "False", which its own read_csv cannot parse.
+        dtype = [(n, np.int32 if self.data.dtype[n] == np.bool_ else self.data.dtype[n]) for n in self.data.dtype.names]
+        write_csv(str(path), self.data.astype(dtype))
         return path
 
     @classmethod

@@ -1,0 +1,376 @@
+"""Grinding-machine programmable feed control (seed: JP S60-43522).
+
+A program store read by a program counter. Each word is one of::
+
+    X+D3F7      feed axis X (or Y) by amount D3 in direction + at rate F7
+    X+D1F2S4    the same as a wheel-wear compensation: its pulses bypass the return counter
+    XF7S1       return X to the feed origin at F7, by the return counter (either side of it)
+    T1          dwell T1 (spark-out: no motion)
+    M2          auxiliary function M2: output m_active = 2, wait for MFIN
+    END         end of the cycle
+
+Values come from separate settings (the seed's digital switches) D1..D7 (mm), F1..F7 (mm/s),
+T1..T7 (s). START1 runs from ``start_address`` (M0), START2 from ``wear_address`` (M43), EMB from
+``emergency_address`` (M41) at any moment, aborting whatever runs (feed, dwell, M wait, wear cycle):
+the running feed decelerates to rest first, so no velocity jump reaches a servo.
+
+The return counters accumulate every feed from the feed origin except S4 moves; so after a
+wear compensation the origin (the feed start point) has moved with the wheel, and S1 returns to it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from ..errors import ConfigError, require
+from ..ports import boolean, integer, real, string
+from .base import Controller, finite_inputs, int_param, real_param
+from .motion import LinearMove
+
+#: The seed's Table 1 (SPEC 3.3).
+SEED_PROGRAM = """\
+M0: X+D3F7
+M1: X+D2F1
+M2: X+D5F2
+M3: T1
+M4: X-D4F7
+M5: END
+M41: XF7S1
+M42: END
+M43: X+D1F2S4
+M44: END
+"""
+
+#: grinder_feed settings (SPEC 5); 0 means "not set".
+DEFAULTS = {"D": (0.02, 0.20, 4.0, 4.30, 0.10, 0.0, 0.0), "F": (0.02, 0.005, 0.0, 0.0, 0.0, 0.0, 10.0),
+            "T": (1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)}
+
+IDLE, RUN, EMERGENCY = 0, 1, 2
+
+
+class ProgramError(ConfigError):
+    """A program line breaks the grammar; names the line, the column and the reason."""
+
+    def __init__(self, line_no: int, column: int, text: str, reason: str):
+        self.line_no, self.column = line_no, column
+        super().__init__("program", text, f"line {line_no}, column {column}: {reason}")
+
+
+@dataclass(frozen=True)
+class Word:
+    """One decoded control word."""
+
+    kind: str                    # "feed", "return", "dwell", "aux", "end"
+    text: str
+    line: int
+    axis: str = ""               # "x" or "y"
+    sign: int = 0                # +1 / -1 for feed words
+    d: int = 0                   # D index 1..7
+    f: int = 0                   # F index 1..7
+    t: int = 0                   # T index 1..7
+    m: int = 0                   # M function 1..7
+    wear: bool = False           # S4
+
+
+_LINE = re.compile(r"^\s*M(?P<addr>\d+)\s*:\s*(?P<word>.*?)\s*$")
+_FEED = re.compile(r"(?P<axis>[XY])(?P<sign>[+-]?)(?P<rest>.*)$")
+_CODE = re.compile(r"([DFST])([0-9])")
+
+
+def parse_program(text: str) -> dict[int, Word]:
+    """Parse ``ADDRESS: WORD`` lines (newline or ``;`` separated); raise :class:`ProgramError`."""
+    program: dict[int, Word] = {}
+    lines = [seg for raw in text.splitlines() for seg in raw.split(";")]
+    for n, raw in enumerate(lines, start=1):
+        if not raw.strip() or raw.strip().startswith("#"):
+            continue
+        m = _LINE.match(raw)
+        if not m:
+            raise ProgramError(n, len(raw) - len(raw.lstrip()) + 1, raw.strip(),
+                               "expected 'M<address>: <word>' (e.g. 'M0: X+D3F7')")
+        addr, word = int(m.group("addr")), m.group("word").upper()
+        col = m.start("word") + 1
+        if addr in program:
+            raise ProgramError(n, m.start("addr"), raw.strip(), f"address M{addr} given twice "
+                                                               f"(first on line {program[addr].line})")
+        program[addr] = _parse_word(word, n, col, raw.strip())
+    return program
+
+
+def _parse_word(word: str, n: int, col: int, raw: str) -> Word:
+    if word == "END":
+        return Word("end", word, n)
+    if re.fullmatch(r"T[1-7]", word):
+        return Word("dwell", word, n, t=int(word[1]))
+    if re.fullmatch(r"M[1-7]", word):
+        return Word("aux", word, n, m=int(word[1]))
+    fm = _FEED.fullmatch(word)
+    if not fm or not word:
+        raise ProgramError(n, col, raw, f"unknown word {word!r} (X/Y feed, T1..T7, M1..M7 or END)")
+    rest, pos = fm.group("rest"), col + fm.start("rest")
+    codes: dict[str, int] = {}
+    i = 0
+    while i < len(rest):
+        cm = _CODE.match(rest, i)
+        if not cm:
+            raise ProgramError(n, pos + i, raw, f"unknown code {rest[i:i + 2]!r} in {word!r} (D1..D7, F1..F7, S1, S4)")
+        letter, digit = cm.group(1), int(cm.group(2))
+        if letter in codes:
+            raise ProgramError(n, pos + i, raw, f"{letter} given twice in {word!r}")
+        if letter in "DFT" and not 1 <= digit <= 7:
+            raise ProgramError(n, pos + i, raw, f"{letter}{digit}: settings are numbered 1..7")
+        if letter == "T":
+            raise ProgramError(n, pos + i, raw, "a dwell T is a word of its own")
+        codes[letter] = digit
+        i = cm.end()
+    axis, sign = fm.group("axis").lower(), {"+": 1, "-": -1, "": 0}[fm.group("sign")]
+    if "F" not in codes:
+        raise ProgramError(n, col + len(word), raw, f"missing rate: {word!r} needs F1..F7")
+    s = codes.get("S")
+    if s is not None and s not in (1, 4):
+        raise ProgramError(n, col, raw, f"S{s} is not supported (S1 return to the feed origin, S4 wear compensation)")
+    if s == 1:
+        if "D" in codes or sign:
+            raise ProgramError(n, col, raw, "S1 takes no direction and no D: the return counter gives both")
+        return Word("return", word, n, axis=axis, f=codes["F"])
+    if "D" not in codes:
+        raise ProgramError(n, col + len(word), raw, f"missing amount: {word!r} needs D1..D7 (or S1)")
+    if not sign:
+        raise ProgramError(n, col + 1, raw, f"missing direction: {word!r} needs + or -")
+    return Word("feed", word, n, axis=axis, sign=sign, d=codes["D"], f=codes["F"], wear=s == 4)
+
+
+def _setting_ports():
+    ports = []
+    for letter, unit, what in (("D", "mm", "feed amount"), ("F", "mm/s", "feed rate"), ("T", "s", "dwell time")):
+        for k in range(1, 8):
+            ports.append(real(f"{letter}{k}", "parameter", DEFAULTS[letter][k - 1], unit,
+                              f"{what} {letter}{k} (digital switch; 0: not set)", min=0.0))
+    return tuple(ports)
+
+
+class ProgrammableFeed(Controller):
+    MODEL_NAME = "ProgrammableFeed"
+    DESCRIPTION = ("Grinding-machine programmable feed control: program store, rough/fine/spark-out, wheel-wear "
+                   "compensation, emergency return to the feed origin (JP S60-43522)")
+    SEED = "programmable-feed-JPS6043522.txt"
+    STOP_TIME = 35.0
+
+    PORTS = (
+        *_setting_ports(),
+        # one line, ';'-separated: an XML attribute would turn newlines into spaces
+        string("program", "parameter", "; ".join(SEED_PROGRAM.split("\n")).strip("; "),
+               "program store: 'M<address>: <word>' separated by newlines or ';'"),
+        integer("start_address", "parameter", 0, "entry of the normal cycle (START1)", min=0),
+        integer("wear_address", "parameter", 43, "entry of the wear-compensation cycle (START2)", min=0),
+        integer("emergency_address", "parameter", 41, "entry of the emergency cycle (EMB)", min=0),
+        real("x_origin", "parameter", 0.0, "mm", "X feed origin (machine position at start)"),
+        real("y_origin", "parameter", 0.0, "mm", "Y feed origin (machine position at start)"),
+        real("accel", "parameter", 500.0, "mm/s2", "acceleration/deceleration limit of every feed", min=0.0),
+        boolean("start", "input", False, "START1: normal cycle (rising edge)"),
+        boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
+        boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
+        boolean("mfin", "input", False, "M-function finish from the auxiliary device"),
+        boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
+        real("x_pos", "input", 0.0, "mm", "actual X position"),
+        real("y_pos", "input", 0.0, "mm", "actual Y position"),
+        boolean("x_in_position", "input", True, "X servo in-position"),
+        boolean("y_in_position", "input", True, "Y servo in-position"),
+        real("x_cmd", "output", None, "mm", "X position command"),
+        real("y_cmd", "output", None, "mm", "Y position command"),
+        real("x_vff", "output", None, "mm/s", "X velocity feed-forward"),
+        real("y_vff", "output", None, "mm/s", "Y velocity feed-forward"),
+        boolean("run", "output", None, "normal or wear-compensation cycle running (RUN)"),
+        boolean("busy", "output", None, "a feed, dwell or M wait is executing (BUSY)"),
+        boolean("emergency_active", "output", None, "emergency return cycle running"),
+        integer("pc", "output", None, "program counter (address of the word executing)"),
+        integer("m_active", "output", None, "auxiliary function waiting for MFIN (0 none)"),
+        real("dwell_left", "output", None, "s", "time left of the present dwell"),
+        real("return_counter_x", "output", None, "mm", "X feed counted from the feed origin (S4 excluded)"),
+        real("return_counter_y", "output", None, "mm", "Y feed counted from the feed origin (S4 excluded)"),
+        boolean("alarm", "output", None, "alarm latched (external alarm, bad input)"),
+    )
+
+    def configure(self, values: Mapping[str, object]) -> None:
+        self.D = [real_param(values, f"D{k}", nonnegative=True) for k in range(1, 8)]
+        self.F = [real_param(values, f"F{k}", nonnegative=True) for k in range(1, 8)]
+        self.T = [real_param(values, f"T{k}", nonnegative=True) for k in range(1, 8)]
+        self.program = parse_program(str(values["program"]))
+        self.start_address = int_param(values, "start_address", lo=0)
+        self.wear_address = int_param(values, "wear_address", lo=0)
+        self.emergency_address = int_param(values, "emergency_address", lo=0)
+        self.x_origin = real_param(values, "x_origin")
+        self.y_origin = real_param(values, "y_origin")
+        self.accel = real_param(values, "accel", positive=True)
+        for name in ("start_address", "emergency_address", "wear_address"):
+            entry = getattr(self, name)
+            require(entry in self.program, name, entry, f"entry address M{entry} is missing from the program")
+            self._check_reaches_end(name, entry)
+
+    def _check_reaches_end(self, name: str, entry: int) -> None:
+        pc = entry
+        while True:
+            word = self.program.get(pc)
+            if word is None:
+                raise ConfigError("program", f"M{entry}", f"the cycle from M{entry} ({name}) runs past M{pc - 1} "
+                                                          "without END")
+            if word.kind == "end":
+                return
+            self._check_settings(word, pc)
+            pc += 1
+
+    def _check_settings(self, word: Word, pc: int) -> None:
+        where = f"used by M{pc}: {word.text} (line {word.line})"
+        if word.kind in ("feed", "return"):
+            require(self.F[word.f - 1] > 0, f"F{word.f}", self.F[word.f - 1], f"must be > 0: {where}")
+        if word.kind == "feed":
+            require(self.D[word.d - 1] > 0, f"D{word.d}", self.D[word.d - 1], f"is not set (0): {where}")
+        if word.kind == "dwell":
+            require(self.T[word.t - 1] > 0, f"T{word.t}", self.T[word.t - 1], f"is not set (0): {where}")
+
+    # -- state ----------------------------------------------------------------------------------
+    def reset(self) -> None:
+        self.mode = IDLE
+        self.pc = 0
+        self.word: Word | None = None
+        self.busy = False
+        self.m_active = 0
+        self.dwell_left = 0.0
+        self.rc = {"x": 0.0, "y": 0.0}                    # return counters
+        self.cmd = {"x": self.x_origin, "y": self.y_origin}
+        self.vff = {"x": 0.0, "y": 0.0}
+        self.alarm = False
+        self.move = LinearMove(self.accel)
+        self.move.begin((self.x_origin, self.y_origin), (self.x_origin, self.y_origin), 1.0)
+        self._counting = True                              # gate 55: closed during S4
+        self._pending_emergency = False
+        self._steps_since_end = 0
+        self._edges = {"start": False, "wear_start": False, "emergency": False}
+        self._outputs: dict[str, object] = {}
+        self._publish()
+
+    # -- the cycle ------------------------------------------------------------------------------
+    def _rising(self, inputs: Mapping[str, object], name: str) -> bool:
+        now = bool(inputs[name])
+        was, self._edges[name] = self._edges[name], now
+        return now and not was
+
+    def _load(self, address: int) -> None:
+        """Read the word at ``address`` (the seed's CL1..CL5 read cycle) and start executing it."""
+        self.pc = address
+        word = self.word = self.program[address]
+        self.busy = True
+        self._steps_since_end = 0
+        here = (self.cmd["x"], self.cmd["y"])
+        if word.kind == "feed":
+            delta = word.sign * self.D[word.d - 1]
+            self._start_move(word.axis, delta, self.F[word.f - 1], counting=not word.wear)
+        elif word.kind == "return":
+            self._start_move(word.axis, -self.rc[word.axis], self.F[word.f - 1], counting=True)
+        elif word.kind == "dwell":
+            self.dwell_left = self.T[word.t - 1]
+        elif word.kind == "aux":
+            self.m_active = word.m
+        else:  # END
+            self.busy = False
+            self.word = None
+            self.mode = IDLE
+            self.move.begin(here, here, 1.0)
+
+    def _start_move(self, axis: str, delta: float, rate: float, counting: bool) -> None:
+        start = (self.cmd["x"], self.cmd["y"])
+        end = (start[0] + delta, start[1]) if axis == "x" else (start[0], start[1] + delta)
+        self._counting = counting
+        self.move.begin(start, end, rate)
+
+    def _word_done(self, inputs: Mapping[str, object]) -> bool:
+        word = self.word
+        if word.kind in ("feed", "return"):
+            self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
+            # in-position answers the final command only after one round trip through the master
+            return self._steps_since_end >= 2 and bool(inputs[f"{word.axis}_in_position"])
+        if word.kind == "dwell":
+            return self.dwell_left <= 1e-12
+        if word.kind == "aux":
+            return bool(inputs["mfin"])
+        return True
+
+    def _raise_alarm(self, t: float, why: str) -> None:
+        if not self.alarm:
+            self.say("error", f"t = {t:.4f} s: {why}; feed stopped, commands held")
+        self.alarm = True
+        self.move.stop_now()
+        self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
+        self._pending_emergency = False
+
+    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        start, wear, emb = (self._rising(inputs, n) for n in ("start", "wear_start", "emergency"))
+        bad = finite_inputs(inputs, ("x_pos", "y_pos"))
+        if bad:
+            self._raise_alarm(t, bad)
+        elif inputs["alarm_in"] and not (self.mode == EMERGENCY and not self._pending_emergency):
+            # the emergency return backs out of the violation; anything else stops at once
+            self._raise_alarm(t, "alarm_in (area limiter) is set")
+
+        if emb and not bad:
+            # EMB: abort whatever runs; a running feed first decelerates to rest (EMB.SDW).
+            self.say("warning", f"t = {t:.4f} s: EMB: emergency return from M{self.emergency_address}")
+            self.alarm = False
+            self.mode, self.m_active, self.dwell_left = EMERGENCY, 0, 0.0
+            self._pending_emergency = True
+            self.word = None
+        elif self.mode == IDLE and not self.alarm and not inputs["alarm_in"] and not bad and (start or wear):
+            self.mode = RUN
+            self._load(self.start_address if start else self.wear_address)
+        elif self.mode == IDLE and self.alarm and (start or wear) and not inputs["alarm_in"] and not bad:
+            self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+            self.alarm = False
+            self.mode = RUN
+            self._load(self.start_address if start else self.wear_address)
+
+        if self._pending_emergency:
+            self.move.advance(dt, 0.0)                     # decelerate the aborted feed
+            if self.move.done or self.move.v == 0.0:
+                self._advance_move_outputs()
+                self.move.stop_now()
+                self._pending_emergency = False
+                self._load(self.emergency_address)
+        elif self.word is not None:
+            if self.word.kind in ("feed", "return"):
+                self.move.advance(dt, 1.0)
+            elif self.word.kind == "dwell":
+                self.dwell_left = max(0.0, self.dwell_left - dt)
+            if self._word_done(inputs):
+                if self.word.kind == "aux":
+                    self.m_active = 0
+                self._advance_move_outputs()
+                self._load(self.pc + 1)
+        self._advance_move_outputs()
+        return self._publish()
+
+    def _advance_move_outputs(self) -> None:
+        """Copy the interpolator's position to the commands; count the feed in the return counters."""
+        x, y = self.move.position()
+        if self._counting:
+            self.rc["x"] += x - self.cmd["x"]
+            self.rc["y"] += y - self.cmd["y"]
+        self.cmd["x"], self.cmd["y"] = x, y
+        vx, vy = self.move.velocity()
+        self.vff["x"], self.vff["y"] = vx, vy
+
+    def _publish(self) -> dict[str, object]:
+        out = self._outputs
+        out["x_cmd"], out["y_cmd"] = self.cmd["x"], self.cmd["y"]
+        out["x_vff"], out["y_vff"] = self.vff["x"], self.vff["y"]
+        out["run"] = self.mode == RUN
+        out["busy"] = self.busy and self.word is not None
+        out["emergency_active"] = self.mode == EMERGENCY
+        out["pc"] = self.pc
+        out["m_active"] = self.m_active
+        out["dwell_left"] = self.dwell_left
+        out["return_counter_x"], out["return_counter_y"] = self.rc["x"], self.rc["y"]
+        out["alarm"] = self.alarm
+        return out
