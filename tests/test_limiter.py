@@ -184,9 +184,11 @@ def test_property_predictive_commanded_and_actual_stay_inside(table, program):
             blocked = limiter.blocked
             back_r = -1 if blocked & REF_PLUS else (1 if blocked & REF_MINUS else 0)
             back_l = -1 if blocked & LIM_PLUS else (1 if blocked & LIM_MINUS else 0)
-            # the inputs held where the gate holds them, the operator backs out at 20 mm/s
+            # the inputs held where the gate holds them, the operator backs out at 20 mm/s -- far enough
+            # that a restart at the speed it was blocked at (<= 60 mm/s) could still stop inside
             ref_cmd, lim_cmd = o["ref_cmd"], o["lim_cmd"]
-            for _ in range(int(3 * limiter.monitor_period / DT)):
+            room = 60.0 * limiter.monitor_period + 60.0 ** 2 / (2 * limiter.decel) + 0.2
+            for _ in range(int(room / 20.0 / DT)):
                 ref_cmd += back_r * 20.0 * DT
                 lim_cmd += back_l * 20.0 * DT
                 o = limiter.step(t, DT, {"ref_cmd_in": ref_cmd, "lim_cmd_in": lim_cmd, "ref_vff_in": back_r * 20.0,
