@@ -10,7 +10,8 @@ from ncfmu.errors import SimulationError
 
 
 def test_every_fmu_validates(fmus):
-    assert set(fmus) == {"AreaLimiter", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis"}
+    assert set(fmus) == {"AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed",
+                         "ServoAxis"}
     for name, path in fmus.items():
         assert validate_fmu(str(path)) == [], name
 

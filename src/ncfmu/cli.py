@@ -10,8 +10,9 @@ import numpy as np
 
 from .errors import NcfmuError
 
-EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope. Instances: lathe "
-          "panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis.")
+EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. Instances: lathe "
+          "panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; mill panel, contour, "
+          "x_axis, y_axis.")
 
 
 def _parse_set(items: list[str]) -> dict[str, object]:
@@ -54,6 +55,11 @@ def _summary(result) -> str:
         lines.append(f"  deepest X: {x.max():.4f} mm; cycle ended: {end}; X at the end {x[-1]:.4f} mm; "
                      f"return counter X {result['feed.return_counter_x'][-1]:.4f} mm")
         lines.append(f"  alarm: {'yes' if result['feed.alarm'].any() else 'no'}")
+    if "contour.segment" in result:
+        done = result["contour.done"]
+        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
+        lines.append(f"  contour done: {end}; segments: {int(result['contour.segment'].max())}; "
+                     f"alarm: {'yes' if result['contour.alarm'].any() else 'no'}")
     if "limiter.alarm" in result:
         lines.append(f"  area limiter: {'ALARM, blocked mask ' + str(result['limiter.blocked'].max()) if result['limiter.alarm'].any() else 'no violation'}")
     for axis in ("x_axis", "z_axis", "y_axis"):

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from .controllers import AreaLimiter, CutSequencer, OperatorPanel, ProgrammableFeed
+from .controllers import AreaLimiter, ContourInterpolator, CutSequencer, OperatorPanel, ProgrammableFeed
 from .controllers.base import Controller
 from .cosim.ssp import Component, Connection, System
 from .errors import SystemDefinitionError
 from .servo.axis import ServoAxis
 
 MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis, AreaLimiter,
-                                                                  ProgrammableFeed)}
+                                                                  ProgrammableFeed, ContourInterpolator)}
 
 
 def _component(name: str, model: str, **parameters: object) -> Component:
@@ -162,7 +162,37 @@ def grinder_envelope() -> System:
     )
 
 
+def mill_contour() -> System:
+    """Contour (0,0) (60,0) (60,40) (20,40) (0,20) (0,0), cutter 0.4 mm larger than nominal, 5 mm/s."""
+    path = [(0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0)]
+    points: dict[str, object] = {"n_points": len(path)}
+    for i, (x, y) in enumerate(path, start=1):
+        points[f"point[{i}].x"], points[f"point[{i}].y"] = x, y
+    x0, y0 = 0.0, -10.0
+    return System(
+        name="mill_contour",
+        description="Mill: contour interpolator with cutter compensation -> X and Y servos",
+        components=[
+            _component("panel", "OperatorPanel", start_at=0.1),
+            _component("contour", "ContourInterpolator", closed=True, diameter_delta=0.4, side=-1, feed=5.0,
+                       approach_feed=5.0, x_start=x0, y_start=y0, **points),
+            _component("x_axis", "ServoAxis", pos_start=x0),
+            _component("y_axis", "ServoAxis", pos_start=y0),
+        ],
+        connections=_wire(
+            "panel.start -> contour.start", "panel.feed_hold -> contour.feed_hold",
+            "panel.feed_override -> contour.feed_override",
+            "contour.x_cmd -> x_axis.pos_cmd", "contour.x_vff -> x_axis.vel_ff",
+            "contour.y_cmd -> y_axis.pos_cmd", "contour.y_vff -> y_axis.vel_ff",
+            "x_axis.pos -> contour.x_pos", "x_axis.in_position -> contour.x_in_position",
+            "y_axis.pos -> contour.y_pos", "y_axis.in_position -> contour.y_in_position",
+        ),
+        stop_time=42.0,
+    )
+
+
 SYSTEMS: dict[str, Callable[[], System]] = {
+    "mill_contour": mill_contour,
     "lathe_roughing": lathe_roughing,
     "lathe_taper": lathe_taper,
     "grinder_feed": grinder_feed,

@@ -2,8 +2,9 @@
 
 from .base import Controller
 from .panel import OperatorPanel
+from .contour import ContourInterpolator, offset_path
 from .feed import ProgrammableFeed, parse_program
 from .limiter import AreaLimiter
 from .sequencer import Block, CutSequencer
 
-__all__ = ["Controller", "AreaLimiter", "ProgrammableFeed", "parse_program", "OperatorPanel", "CutSequencer", "Block"]
+__all__ = ["Controller", "ContourInterpolator", "offset_path", "AreaLimiter", "ProgrammableFeed", "parse_program", "OperatorPanel", "CutSequencer", "Block"]

@@ -1,0 +1,233 @@
+"""ContourInterpolator against the seed (GB 1,175,423): offset corners, DDA, vector feed; through the FMUs."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ncfmu.controllers.contour import ContourInterpolator, GeometryError, offset_path
+from ncfmu.errors import ConfigError
+
+DT = 1e-3
+MILL = [(0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0)]
+
+
+def line_distance(p, a, b):
+    """Signed distance of p from the line a->b (positive to the left of travel)."""
+    ux, uy = b[0] - a[0], b[1] - a[1]
+    length = math.hypot(ux, uy)
+    return (ux * (p[1] - a[1]) - uy * (p[0] - a[0])) / length
+
+
+def segment_distance(p, a, b):
+    ax, ay = b[0] - a[0], b[1] - a[1]
+    t = max(0.0, min(1.0, ((p[0] - a[0]) * ax + (p[1] - a[1]) * ay) / (ax * ax + ay * ay)))
+    return math.hypot(p[0] - a[0] - t * ax, p[1] - a[1] - t * ay)
+
+
+@pytest.mark.parametrize("r", [0.2, -0.2, 1.5])
+@pytest.mark.parametrize("closed", [True, False])
+def test_corners_at_the_correction_from_both_neighbouring_segments(r, closed):
+    pts = MILL if closed else MILL[:-1]
+    c = offset_path(pts, r, closed)
+    distinct = MILL[:-1]
+    n = len(distinct)
+    for i, p in enumerate(c):
+        neighbours = []
+        if closed or i > 0:
+            neighbours.append((distinct[(i - 1) % n], distinct[i]))
+        if closed or i < n - 1:
+            neighbours.append((distinct[i], distinct[(i + 1) % n]))
+        for a, b in neighbours:
+            assert line_distance(p, a, b) == pytest.approx(r, abs=1e-9)
+
+
+def test_convex_and_concave_corners():
+    # (20,40) -> (0,20): the corner at (0,20) is convex; a notch makes a concave one
+    notch = [(0.0, 0.0), (30.0, 0.0), (30.0, 10.0), (40.0, 10.0), (40.0, 0.0), (60.0, 0.0), (60.0, 30.0), (0.0, 30.0)]
+    for r in (0.5, -0.5):
+        c = offset_path(notch, r, True)
+        for i, p in enumerate(c):
+            for a, b in ((notch[i - 1], notch[i]), (notch[i], notch[(i + 1) % len(notch)])):
+                assert line_distance(p, a, b) == pytest.approx(r, abs=1e-9)
+
+
+def test_reversing_and_folding_paths_are_reported():
+    with pytest.raises(GeometryError, match="reverses"):
+        offset_path([(0, 0), (10, 0), (0, 0.0)], 0.1, False)
+    with pytest.raises(GeometryError, match="segment 2"):
+        offset_path([(0, 0), (10, 0), (10, 0.5), (0, 0.5)], 1.0, False)     # 0.5 mm step, 2 mm tool change
+    c = ContourInterpolator(n_points=4, closed=False, diameter_delta=2.0, side=1,
+                            **{"point[1].x": 0, "point[1].y": 0, "point[2].x": 10, "point[2].y": 0,
+                               "point[3].x": 10, "point[3].y": 0.5, "point[4].x": 0, "point[4].y": 0.5})
+    assert c.outputs()["alarm"] and any("segment 2" in m for _, m in c.take_messages())
+    o = c.step(0.0, DT, {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": 0.0, "y_pos": -10.0,
+                         "x_in_position": True, "y_in_position": True})
+    assert not o["busy"] and o["alarm"]
+
+
+@pytest.mark.parametrize("values, variable, rule", [
+    ({"n_points": 1}, "n_points", "must be in 2..64"),
+    ({"point[2].x": 0.0, "point[2].y": 0.0}, "point[2]", "repeats point[1]"),
+    ({"feed": 0.0}, "feed", "must be > 0"),
+    ({"side": 0}, "side", "must be +1"),
+    ({"point[3].y": math.inf}, "point[3].y", "must be finite"),
+])
+def test_bad_input_refused(values, variable, rule):
+    with pytest.raises(ConfigError) as err:
+        ContourInterpolator(**values)
+    assert err.value.variable == variable and rule in str(err.value)
+
+
+def iterative_dda(span, n):
+    """The seed's interpolator literally: N iterative additions with carry, accumulator preset to N/2."""
+    acc, pulses, out = n // 2, 0, []
+    for _ in range(n):
+        acc += abs(span)
+        if acc >= n:
+            acc -= n
+            pulses += 1
+        out.append(pulses)
+    return out
+
+
+@pytest.mark.parametrize("span", [0, 1, 7, 200, 1023, 1024, 4999])
+def test_closed_form_dda_equals_iterative_additions(span):
+    n = 1 << max(1, span).bit_length()
+    half = n >> 1
+    assert [(half + k * span) // n for k in range(1, n + 1)] == iterative_dda(span, n)
+
+
+def run_contour(override=1.0, hold=None, **parameters):
+    c = ContourInterpolator(**parameters)
+    inp = {"start": True, "feed_hold": False, "feed_override": override, "x_pos": c.x_start, "y_pos": c.y_start,
+           "x_in_position": True, "y_in_position": True}
+    t, log = 0.0, []
+    while t < 200:
+        inp["feed_hold"] = hold is not None and hold[0] <= t < hold[1]
+        o = dict(c.step(t, DT, inp))
+        inp["start"] = False
+        inp["x_pos"], inp["y_pos"] = o["x_cmd"], o["y_cmd"]
+        t += DT
+        o["t"] = t
+        log.append(o)
+        if o["done"]:
+            break
+    return c, log
+
+
+def test_dda_points_on_the_corrected_segments_within_one_unit():
+    c, log = run_contour()
+    path = c.path
+    unit = c.dda_unit
+    for o in log:
+        k = o["segment"]
+        if k == 0:
+            continue
+        a, b = path[k - 1], path[k]
+        assert segment_distance((o["x_cmd"], o["y_cmd"]), a, b) <= unit * 1.0000001
+
+
+@pytest.mark.parametrize("override", [1.0, 0.5, 1.5])
+def test_vector_speed_is_feed_times_override(override):
+    c, log = run_contour(override=override)
+    for k in range(1, len(c.path)):
+        rows = [o for o in log if o["segment"] == k]
+        (a, b) = c.path[k - 1], c.path[k]
+        length = math.hypot(b[0] - a[0], b[1] - a[1])
+        if k in (1, len(c.path) - 1):
+            continue      # the first and last segments include the start and the final stop
+        duration = rows[-1]["t"] - rows[0]["t"] + DT
+        assert length / duration == pytest.approx(5.0 * override, rel=0.01)
+
+
+def test_hold_stops_on_the_path_and_resumes():
+    c, log = run_contour(hold=(10.0, 12.0))
+    held = [o for o in log if 10.5 <= o["t"] < 12.0]
+    assert len({(o["x_cmd"], o["y_cmd"]) for o in held}) == 1
+    assert log[-1]["done"]
+    _, plain = run_contour()
+    assert log[-1]["t"] - plain[-1]["t"] == pytest.approx(2.0, abs=0.05)
+
+
+@st.composite
+def convex_polygons(draw):
+    n = draw(st.integers(3, 10))
+    # gaps between the vertices' angles on a circle: every interior angle < 180 degrees
+    gaps = draw(st.lists(st.floats(0.8, 1.0), min_size=n, max_size=n))
+    scale = 2 * math.pi / sum(gaps)
+    phase = draw(st.floats(0.0, 2 * math.pi))
+    angles = [phase + scale * sum(gaps[:i]) for i in range(n)]
+    radius = draw(st.floats(20.0, 100.0))
+    return [(radius * math.cos(a), radius * math.sin(a)) for a in angles]
+
+
+@settings(max_examples=100, deadline=None)
+@given(poly=convex_polygons(), r=st.floats(-2.0, 2.0).filter(lambda r: abs(r) > 1e-3))
+def test_property_corrected_polygon_is_the_offset_polygon(poly, r):
+    c = offset_path(poly, r, True)
+    n = len(poly)
+    for k in range(n):
+        a, b = poly[k], poly[(k + 1) % n]
+        ca, cb = c[k], c[(k + 1) % n]
+        # parallel to the programmed edge ...
+        u = (b[0] - a[0], b[1] - a[1])
+        v = (cb[0] - ca[0], cb[1] - ca[1])
+        cross = (u[0] * v[1] - u[1] * v[0]) / (math.hypot(*u) * math.hypot(*v))
+        assert abs(cross) < 1e-9 and u[0] * v[0] + u[1] * v[1] > 0
+        # ... at the correction distance
+        assert line_distance(ca, a, b) == pytest.approx(r, abs=1e-9)
+        assert line_distance(cb, a, b) == pytest.approx(r, abs=1e-9)
+
+
+# -- through the FMUs ----------------------------------------------------------------------------
+def contour_error(result, path):
+    x, y = result["x_axis.pos"], result["y_axis.pos"]
+    seg = result["contour.segment"]
+    on = (seg >= 1) & result["contour.busy"]
+    pts = np.column_stack([x[on], y[on]])
+    best = np.full(len(pts), np.inf)
+    for a, b in zip(path[:-1], path[1:]):
+        a, b = np.array(a), np.array(b)
+        d = b - a
+        t = np.clip(((pts - a) @ d) / (d @ d), 0, 1)
+        best = np.minimum(best, np.linalg.norm(pts - a - t[:, None] * d, axis=1))
+    return best
+
+
+@pytest.fixture(scope="session")
+def mill_contour(project):
+    from ncfmu.project import simulate
+    return simulate("mill_contour")
+
+
+def test_mill_contour_follows_the_corrected_contour(mill_contour):
+    c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
+    err = contour_error(mill_contour, c.path)
+    assert err.max() <= 0.050
+    assert mill_contour["contour.done"][-1] and not mill_contour["contour.alarm"].any()
+    # the corrected corner (60.2, 40.2) is reached
+    assert mill_contour["x_axis.pos"].max() == pytest.approx(60.2, abs=0.005)
+    assert mill_contour["y_axis.pos"].max() == pytest.approx(40.2, abs=0.005)
+
+
+def test_override_half_doubles_the_contour_time(mill_contour, project):
+    from ncfmu.project import simulate
+    slow = simulate("mill_contour", stop_time=85.0, start_values={"panel.override": 0.5})
+
+    def contour_time(r):
+        on = (r["contour.segment"] >= 1) & r["contour.busy"]
+        return r.time[on][-1] - r.time[on][0]
+    assert contour_time(slow) == pytest.approx(2 * contour_time(mill_contour), rel=0.01)
+
+
+def test_hold_stops_and_resumes_on_the_path(project):
+    from ncfmu.project import simulate
+    r = simulate("mill_contour", stop_time=45.0, start_values={"panel.hold_at": 15.0, "panel.release_at": 17.0})
+    c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
+    assert contour_error(r, c.path).max() <= 0.050
+    held = (r.time > 15.3) & (r.time < 17.0)
+    assert np.ptp(r["x_axis.pos"][held]) < 1e-3 and np.ptp(r["y_axis.pos"][held]) < 1e-3
+    assert r["contour.done"][-1]
