@@ -82,8 +82,35 @@ def cmd_build(args) -> int:
     return 0
 
 
+def _parse_branches(items: list[str]) -> list[dict[str, object]]:
+    """``--branch-set panel.emergency_at=12,21,31`` -> one variant per value (zipped across options)."""
+    columns = {}
+    for item in items or []:
+        name, eq, raw = item.partition("=")
+        if not eq:
+            raise NcfmuError(f"--branch-set {item!r}: expected INSTANCE.VARIABLE=V1,V2,...")
+        columns[name] = [next(iter(_parse_set([f"{name}={v}"]).values())) for v in raw.split(",")]
+    lengths = {len(v) for v in columns.values()}
+    if len(lengths) > 1:
+        raise NcfmuError(f"--branch-set options need the same number of values, got {sorted(lengths)}")
+    n = lengths.pop() if lengths else 1
+    return [{name: values[i] for name, values in columns.items()} for i in range(n)]
+
+
 def cmd_run(args) -> int:
-    from .project import simulate
+    from .project import simulate, simulate_branches
+    if args.branch_at is not None:
+        variants = _parse_branches(args.branch_set)
+        results = simulate_branches(args.system, args.branch_at, variants, stop_time=args.stop_time,
+                                    start_values=_parse_set(args.set), mode=args.mode, root=args.root)
+        out = Path(args.out)
+        for i, (variant, result) in enumerate(zip(variants, results)):
+            csv = result.to_csv(out / f"{result.system}_branch{i}.csv")
+            label = ", ".join(f"{k}={v}" for k, v in variant.items()) or "no change"
+            print(f"branch {i} from t = {args.branch_at} s ({label}):")
+            print(_summary(result))
+            print(f"  results: {csv}")
+        return 0
     result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
                       start_values=_parse_set(args.set), input_csv=args.input, mode=args.mode, root=args.root)
     out = Path(args.out)
@@ -129,6 +156,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--mode", choices=("gauss-seidel", "jacobi"), default="gauss-seidel", help="master algorithm")
     p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out)")
     p.add_argument("--plot", action="store_true", help="also write SYSTEM.png")
+    p.add_argument("--branch-at", type=float, default=None, metavar="T",
+                   help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
+    p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
+                   help="tunable parameter or input set at the branch point, one value per branch, "
+                        "e.g. --branch-set panel.emergency_at=12,21,31")
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")

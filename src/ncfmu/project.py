@@ -112,7 +112,10 @@ def simulate(system: str = "lathe_roughing", stop_time: float | None = None, ste
 
 def validate(root: Path | None = None) -> list[str]:
     """Check every FMU with fmpy and every system with fmpy's SSP 1.0 schema; return the problems."""
+    import zipfile
+
     from fmpy.ssp.ssd import read_ssd as fmpy_read_ssd
+    from fmpy.ssp.ssd import read_ssv as fmpy_read_ssv
     from fmpy.validation import validate_fmu
 
     root = Path(root or project_root())
@@ -126,5 +129,28 @@ def validate(root: Path | None = None) -> list[str]:
         try:
             fmpy_read_ssd(str(archive), validate=True)
         except Exception as err:  # fmpy raises plain exceptions for schema violations
-            problems.append(f"{archive}: SSP 1.0 schema: {err}")
+            problems.append(f"{archive}: SystemStructure.ssd breaks the SSP 1.0 schema: {err}")
+        with zipfile.ZipFile(archive) as z:
+            ssd_text = z.read(SSD_NAME).decode()
+            ssvs = [n for n in z.namelist() if n.endswith(".ssv")]
+        if "<ssd:SystemStructureDescription" not in ssd_text or ssd_text.count("<ssd:System ") != 1:
+            problems.append(f"{archive}: SystemStructure.ssd must be one flat ssd:System with literal prefixes "
+                            "(libcosim reads the prefixes literally)")
+        for ssv in ssvs:
+            try:
+                fmpy_read_ssv(str(archive), resource=ssv, validate=True)
+            except Exception as err:
+                problems.append(f"{archive}: {ssv} breaks the SSP 1.0 parameter-values schema: {err}")
     return problems
+
+
+def simulate_branches(system: str, branch_time: float, variants: list[Mapping[str, object]],
+                      stop_time: float | None = None, start_values: Mapping[str, object] | None = None,
+                      mode: str = "gauss-seidel", root: Path | None = None) -> list[Result]:
+    """Run ``system`` to ``branch_time`` once, then every variant from the saved FMU states.
+
+    >>> simulate_branches("grinder_feed", 10.0, [{"panel.emergency_at": t} for t in (12.0, 21.0, 31.0)])
+    """
+    archive = system_archive(system, root)
+    with OpenSystem(archive, mode) as opened:
+        return opened.master.run_branches(branch_time, variants, stop_time=stop_time, start_values=start_values)

@@ -18,16 +18,17 @@ class OperatorPanel(Controller):
     DESCRIPTION = "Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; MFIN after a delay"
     SEED = "programmable-feed-JPS6043522.txt"
     STOP_TIME = 10.0
+    # The button times and dials are tunable: a run can branch from a saved state with other times.
 
     PORTS = (
-        real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never"),
-        real("wear_start_at", "parameter", -1.0, "s", "time of the wear-compensation start push (START2); negative: never"),
-        real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never"),
-        real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never"),
-        real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never"),
+        real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never", variability="tunable"),
+        real("wear_start_at", "parameter", -1.0, "s", "time of the wear-compensation start push (START2); negative: never", variability="tunable"),
+        real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never", variability="tunable"),
+        real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never", variability="tunable"),
+        real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never", variability="tunable"),
         real("pulse", "parameter", 0.01, "s", "length of a push-button pulse", min=0.0),
-        real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word", min=0.0),
-        real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5),
+        real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word", min=0.0, variability="tunable"),
+        real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5, variability="tunable"),
         integer("m_active", "input", 0, "active M function number (0 none), from the controller"),
         boolean("start", "output", None, "cycle start push button (START1)"),
         boolean("wear_start", "output", None, "wear-compensation start push button (START2)"),
@@ -50,7 +51,7 @@ class OperatorPanel(Controller):
     def reset(self) -> None:
         self.clock = 0.0            # panel time, advanced only by dt
         self.m_seen_for = 0.0       # how long the present M word has been active
-        self._outputs: dict[str, object] = {"feed_override": self.override}
+        self._outputs: dict[str, object] = {}
         self._publish(0)
 
     def _pressed(self, at: float) -> bool:
@@ -72,4 +73,5 @@ class OperatorPanel(Controller):
         released = self.release_at >= 0.0 and self.release_at > self.hold_at and self.clock >= self.release_at - 1e-9
         out["feed_hold"] = held and not released
         out["mfin"] = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
+        out["feed_override"] = self.override
         return out

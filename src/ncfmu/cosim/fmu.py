@@ -177,6 +177,23 @@ class FmuSlave:
         value = self.fmu.getString([v.vr])[0]
         return value.decode() if isinstance(value, bytes) else value
 
+    # -- FMU state ------------------------------------------------------------------------------
+    def get_state(self):
+        """fmi2GetFMUstate: an opaque handle (free it with :meth:`free_state`)."""
+        return self.fmu.getFMUstate()
+
+    def set_state(self, state) -> None:
+        self.fmu.setFMUstate(state)
+
+    def free_state(self, state) -> None:
+        self.fmu.freeFMUstate(state)
+
+    def serialize_state(self, state) -> bytes:
+        return bytes(self.fmu.serializeFMUstate(state))
+
+    def deserialize_state(self, data: bytes):
+        return self.fmu.deSerializeFMUstate(bytes(data))
+
     def reset(self) -> None:
         """fmi2Reset: back to the instantiated state (for batch runs); bindings are dropped."""
         self._check("fmi2Reset", self._dll.fmi2Reset(self._component))

@@ -30,6 +30,22 @@ MODES = ("gauss-seidel", "jacobi")
 
 
 @dataclass
+class _Run:
+    """Everything one run needs inside the loop, prepared once."""
+
+    h: float
+    n_steps: int
+    times: np.ndarray
+    values: dict
+    plan: list
+    ext_updates: list
+    input_times: np.ndarray
+    record_names: dict
+    n_rec: dict
+    rec: dict
+
+
+@dataclass
 class InputTable:
     """Piecewise-constant input changes over time (columns ``INSTANCE.VARIABLE``)."""
 
@@ -120,6 +136,48 @@ class Master:
             start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None,
             start_time: float = 0.0, progress: Callable[[float], None] | None = None) -> Result:
         """Initialise every slave, step to ``stop_time`` and return the recorded outputs."""
+        run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
+        wall = self._loop(run, 0, run.n_steps, progress)
+        return self._assemble(run, run.rec, wall)
+
+    def run_branches(self, branch_time: float, variants: list[Mapping[str, object]],
+                     stop_time: float | None = None, step_size: float | None = None,
+                     start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None,
+                     start_time: float = 0.0) -> list[Result]:
+        """Simulate to ``branch_time`` once, save every FMU's state, then run each variant from it.
+
+        A variant sets tunable parameters or inputs (``INSTANCE.VARIABLE`` -> value) at the branch
+        point, e.g. ``{"panel.emergency_at": 12.5}``. Each result covers the whole run.
+        """
+        run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
+        k = int(round((branch_time - start_time) / run.h))
+        if not 0 < k < run.n_steps:
+            raise SystemDefinitionError(f"branch time {branch_time} s must lie inside the run "
+                                        f"({start_time}..{start_time + run.n_steps * run.h} s)")
+        wall = self._loop(run, 0, k)
+        states = [s.get_state() for s in self.slaves]
+        prefix = {kind: run.rec[kind][:k + 1].copy() for kind in KINDS}
+        vector = {kind: run.values[kind].copy() for kind in KINDS}
+        results = []
+        try:
+            for variant in variants:
+                for s, state in zip(self.slaves, states):
+                    s.set_state(state)
+                for kind in KINDS:
+                    run.values[kind][:] = vector[kind]
+                    run.rec[kind][:k + 1] = prefix[kind]
+                for qualified, value in variant.items():
+                    slave, v = self.variable(qualified)
+                    slave.set_start(v.name, value)
+                for s in self.slaves:
+                    s.read_outputs()
+                results.append(self._assemble(run, run.rec, wall + self._loop(run, k, run.n_steps)))
+        finally:
+            for s, state in zip(self.slaves, states):
+                s.free_state(state)
+        return results
+
+    def _prepare(self, stop_time, step_size, start_values, inputs, start_time) -> "_Run":
         stop = self.system.stop_time if stop_time is None else float(stop_time)
         h = self.system.step_size if step_size is None else float(step_size)
         if not (math.isfinite(h) and h > 0):
@@ -181,20 +239,28 @@ class Master:
 
         n_rec = {k: len(record_names[k]) for k in KINDS}
         rec = {k: np.empty((n_steps + 1, n_rec[k]), dtype=DTYPES[k]) for k in KINDS}
-
         for s in self.slaves:
             s.read_outputs()
-        row = 0
         for k in KINDS:
-            rec[k][row] = values[k][:n_rec[k]]
-
+            rec[k][0] = values[k][:n_rec[k]]
         times = start_time + h * np.arange(n_steps + 1)
-        next_change, input_times = 0, (inputs.time if inputs is not None else np.empty(0))
+        input_times = inputs.time if inputs is not None else np.empty(0)
+        return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec)
+
+    def _loop(self, run: "_Run", first: int, last: int, progress=None) -> float:
+        """Steps ``first`` .. ``last - 1``; returns the wall time."""
+        values, plan, rec, n_rec, times, h = run.values, run.plan, run.rec, run.n_rec, run.times, run.h
+        ext_updates, input_times = run.ext_updates, run.input_times
+        next_change = int(np.searchsorted(input_times, times[first] + 1e-12, side="right")) - 1 if len(input_times) else 0
+        if len(input_times) and next_change >= 0:
+            for arr, slot, col in ext_updates:
+                arr[slot] = col[next_change]
+        next_change = max(next_change + 1, 0)
         jacobi = self.mode == "jacobi"
         take = np.take
-        report_every = max(1, n_steps // 100)
+        report_every = max(1, run.n_steps // 100)
         wall0 = _time.perf_counter()
-        for i in range(n_steps):
+        for i in range(first, last):
             t = float(times[i])
             while next_change < len(input_times) and input_times[next_change] <= t + 1e-12:
                 for arr, slot, col in ext_updates:
@@ -220,17 +286,18 @@ class Master:
             for k in KINDS:
                 rec[k][row] = values[k][:n_rec[k]]
             if progress is not None and row % report_every == 0:
-                progress(row / n_steps)
-        wall = _time.perf_counter() - wall0
+                progress(row / run.n_steps)
+        return _time.perf_counter() - wall0
 
+    def _assemble(self, run: "_Run", rec, wall: float) -> Result:
         dtype = [("time", np.float64)]
         for k in KINDS:
             dtype += [(q, np.float64 if k == "Real" else (np.bool_ if k == "Boolean" else np.int32))
-                      for q in record_names[k]]
-        data = np.empty(n_steps + 1, dtype=dtype)
-        data["time"] = times
+                      for q in run.record_names[k]]
+        data = np.empty(run.n_steps + 1, dtype=dtype)
+        data["time"] = run.times
         for k in KINDS:
-            for j, q in enumerate(record_names[k]):
+            for j, q in enumerate(run.record_names[k]):
                 data[q] = rec[k][:, j]
         messages = {s.name: list(getattr(s, "messages", [])) for s in self.slaves}
         return Result(data, self.system.name, wall, messages)

@@ -13,6 +13,9 @@ Call order, for every slave (the master keeps to it; a fake slave can check it):
         s.read_outputs()               # fill the bound output buffers
     s.terminate()                      # and free
 
+Optional, for branching (FMUs with canGetAndSetFMUstate): ``get_state()`` / ``set_state(state)`` /
+``free_state(state)`` between steps; after ``set_state`` the master reads the outputs again.
+
 Buffers are float64 for Real and int32 for Integer and Boolean (FMI's fmi2Boolean is an int).
 """
 

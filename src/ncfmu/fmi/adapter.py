@@ -14,6 +14,8 @@ log with their level.
 
 from __future__ import annotations
 
+import copy
+import pickle
 import sys
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
@@ -58,8 +60,16 @@ class ControllerSlave(Fmi2Slave):
         if store is None:
             getter = lambda: self.out[name]            # noqa: E731 -- looked up each call: self.out is rebound
             setter = None
+        elif port.fmi_variability == "tunable":
+            getter = lambda: store[name]               # noqa: E731
+
+            def setter(value, store=store, name=name, convert=convert):
+                store[name] = convert(value)
+                if self.logic is not None:             # a tunable parameter set during the run
+                    self._retune(name)
         else:
             getter = lambda: store[name]               # noqa: E731
+
             def setter(value, store=store, name=name, convert=convert):
                 store[name] = convert(value)
         var = _TYPES[port.type](name, causality=_CAUSALITY[port.causality],
@@ -77,7 +87,40 @@ class ControllerSlave(Fmi2Slave):
         self.out = self.logic.outputs()
         self._flush()
 
+    def _retune(self, name: str) -> None:
+        try:
+            self.logic.configure(self.parameters)                 # type: ignore[union-attr]
+        except ConfigError as err:
+            self.log(f"{self.instance_name}: tunable parameter refused: {err}", Fmi2Status.error)
+            raise
+
+    # -- FMU state: the controller object holds every hidden state (registers, counters, program
+    # counter, DDA, servo states, caches); a deep copy of it is the FMU state.
+    def _get_fmu_state(self):
+        return copy.deepcopy((self.logic, self.parameters, self.inputs))
+
+    def _set_fmu_state(self, state) -> None:
+        logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
+        # in place: the registered getters and setters hold these very dicts
+        self.parameters.clear()
+        self.parameters.update(parameters)
+        self.inputs.clear()
+        self.inputs.update(inputs)
+        self.logic = logic
+        self.out = logic.outputs() if logic is not None else self.out
+
+    @staticmethod
+    def _fmu_state_to_bytes(state) -> bytes:
+        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes):
+        return pickle.loads(data)
+
     def do_step(self, current_time: float, step_size: float) -> bool:
+        # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
+        # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
+        step_size = round(step_size * 1e9) * 1e-9
         self.logic.step(current_time, step_size, self.inputs)   # type: ignore[union-attr]
         if self.logic.messages:                                  # type: ignore[union-attr]
             self._flush()

@@ -22,6 +22,12 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+# Imported here, at import time: once an FMU has been instantiated, pythonfmu puts that FMU's
+# resources/ (which holds a pythonfmu copy *without* binaries) first on sys.path, and a builder
+# imported from there would build FMUs without binaries.
+from pythonfmu.builder import FmuBuilder
+from pythonfmu.osutil import get_lib_extension, get_platform
+
 from .. import __version__
 from ..errors import BuildError
 from .modeldesc import enrich
@@ -43,6 +49,18 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
     return h.hexdigest()[:12]
 
 
+def binary_name(model: str) -> str:
+    return f"binaries/{get_platform()}/{model}.{get_lib_extension()}"
+
+
+def has_binary(fmu: Path, model: str) -> bool:
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            return binary_name(model) in z.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
 def fmu_version(fmu: Path) -> str | None:
     """The ``version`` attribute the builder recorded in an FMU, or None."""
     try:
@@ -60,8 +78,9 @@ def expected_version(script: Path) -> str:
 
 def build_fmu(script: Path, dest_dir: Path) -> Path:
     """Build one FMU from a model script into ``dest_dir``; return the FMU's path."""
-    from pythonfmu.builder import FmuBuilder
-
+    if not FmuBuilder.has_binary():
+        raise BuildError(f"pythonfmu at {Path(sys.modules[FmuBuilder.__module__].__file__).parent} has no binary for "
+                         f"{get_platform()}: reinstall pythonfmu")
     script = Path(script).resolve()
     model = script.stem
     digest = source_digest(script)
@@ -89,6 +108,9 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
         logic = getattr(importlib.import_module(module), model).logic_class
         target = dest_dir / f"{logic.MODEL_NAME}.fmu"
         _rewrite(built, target, logic, f"{__version__}+{digest}")
+    if not has_binary(target, logic.MODEL_NAME):
+        target.unlink()
+        raise BuildError(f"{script.name}: the built FMU lacks {binary_name(logic.MODEL_NAME)}")
     return target
 
 
@@ -112,7 +134,8 @@ def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> lis
     built = []
     for script in model_scripts(models_dir):
         target = Path(dest_dir) / f"{script.stem}.fmu"
-        if only_stale and target.exists() and fmu_version(target) == expected_version(script):
+        if (only_stale and target.exists() and fmu_version(target) == expected_version(script)
+                and has_binary(target, script.stem)):
             built.append(target)
             continue
         built.append(build_fmu(script, dest_dir))

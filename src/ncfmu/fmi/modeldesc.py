@@ -26,6 +26,10 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
     root.set("version", version)
     root.set("description", logic.DESCRIPTION)
     ports = {p.name: p for p in logic.PORTS}
+    # The adapter's state hooks copy the whole controller: every hidden state round-trips.
+    cosim = root.find("CoSimulation")
+    cosim.set("canGetAndSetFMUstate", "true")
+    cosim.set("canSerializeFMUstate", "true")
 
     used_units = sorted({p.unit for p in logic.PORTS if p.unit})
     if used_units:

@@ -100,6 +100,21 @@ class ServoAxis(Controller):
         self._ideal_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._plant_cache: dict[float, tuple] = {}
 
+    # FMU state: the python-control models are derived from self.p (and cannot be pickled); the
+    # state keeps the parameters, the discretisation caches and the loop states.
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["linear"] = state["plant"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
+    def _models(self):
+        if self.linear is None:
+            self.linear, self.plant = servo_axis(self.p), drive_plant(self.p)
+        return self.linear, self.plant
+
     def reset(self) -> None:
         self.x = np.array([0.0, 0.0, self.pos_start, 0.0])   # integral, torque, pos, vel
         self._u = np.zeros(4)                                  # input vector of the ideal step, reused
@@ -121,7 +136,7 @@ class ServoAxis(Controller):
         m = self._ideal_cache.get(dt)
         if m is None:
             n = self._substeps(dt)
-            d = discretize(self.linear, dt / n)
+            d = discretize(self._models()[0], dt / n)
             ad, bd = np.asarray(d.A), np.asarray(d.B)
             f = np.eye(4)
             g = np.zeros((4, 4))
@@ -140,7 +155,7 @@ class ServoAxis(Controller):
     def _plant_coefficients(self, h: float):
         c = self._plant_cache.get(h)
         if c is None:
-            d = discretize(self.plant, h)
+            d = discretize(self._models()[1], h)
             c = self._plant_cache[h] = (tuple(map(tuple, np.asarray(d.A))), tuple(map(tuple, np.asarray(d.B))))
         return c
 

@@ -1,0 +1,104 @@
+"""Physics checks of each system over a Result, shared by ncfmu's master and libcosim runs.
+
+They use Real and Integer signals only (libcosim's time-series observer samples no Booleans).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+BAND = 0.005
+X0, Z0 = 30.0, 2.0
+
+
+def intervals(values: np.ndarray, what: int) -> list[tuple[int, int]]:
+    """[start, end) index ranges where ``values == what``."""
+    on = np.concatenate([[0], (values == what).astype(int), [0]])
+    edges = np.flatnonzero(np.diff(on))
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def check_lathe_roughing(r) -> None:
+    cuts = intervals(r["seq.subcycle"], 2)
+    assert len(cuts) == 7
+    expected = [X0 - (1.0 + n * 0.5) for n in range(1, 7)] + [X0 - (4.0 + 0.1)]
+    for (a, b), x_target in zip(cuts, expected):
+        x = r["x_axis.pos"][a:b]
+        assert np.abs(x - x_target).max() <= 0.002, (x_target, np.abs(x - x_target).max())
+        assert abs(r["z_axis.pos"][b - 1] - (Z0 - 42.0)) <= BAND
+    assert expected[-1] == pytest.approx(25.9)
+    assert abs(r["x_axis.pos"][-1] - X0) <= BAND and abs(r["z_axis.pos"][-1] - Z0) <= BAND
+    assert r["seq.subcycle"][-1] == 0 and r["seq.block_no"].max() == 2
+    assert r["limiter.blocked"].max() == 0
+    assert r["x_axis.pos"][r["seq.subcycle"] == 4].min() > 29.0      # returns clear of the stock
+
+
+def check_lathe_taper(r) -> None:
+    cuts = intervals(r["seq.subcycle"], 2)
+    assert len(cuts) == 4
+    for n, (a, b) in enumerate(cuts, start=1):
+        sigma = 1.0 + n * 0.5
+        x, z = r["x_axis.pos"][a:b], r["z_axis.pos"][a:b]
+        p0, p1 = np.array([X0 - sigma, Z0]), np.array([X0 - sigma - 1.5, Z0 - 42.0])
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        dist = (x - p0[0]) * -d[1] + (z - p0[1]) * d[0]
+        assert np.abs(dist).max() <= 0.002, (n, np.abs(dist).max())
+        assert abs(x[-1] - p1[0]) <= BAND and abs(z[-1] - p1[1]) <= BAND
+    assert abs(r["x_axis.pos"][-1] - X0) <= BAND and abs(r["z_axis.pos"][-1] - Z0) <= BAND
+    assert r["limiter.blocked"].max() == 0
+
+
+def check_grinder_feed(r) -> None:
+    x, t, pc = r["x_axis.pos"], r.time, r["feed.pc"]
+    span = {k: intervals(pc, k)[0] for k in range(1, 6)}
+    assert x[span[1][0]] == pytest.approx(4.0, abs=BAND)
+    assert x[span[2][0]] == pytest.approx(4.2, abs=BAND)
+    assert x[span[3][0]] == pytest.approx(4.3, abs=BAND)
+    for k, rate in ((1, 0.02), (2, 0.005)):
+        a, b = span[k]
+        a, b = a + (b - a) // 4, b - (b - a) // 4
+        assert (x[b] - x[a]) / (t[b] - t[a]) == pytest.approx(rate, rel=0.02)
+    a, b = span[3]
+    assert t[b] - t[a] == pytest.approx(1.5, abs=0.003) and np.ptp(x[a:b]) < 1e-4
+    assert x[-1] == pytest.approx(0.0, abs=BAND) and r["feed.return_counter_x"][-1] == 0.0
+    assert pc[-1] == 5
+
+
+def check_grinder_envelope(r) -> None:
+    assert r["limiter.blocked"].max() == 0
+    x, y = r["x_axis.pos"], r["y_axis.pos"]
+    assert x.max() == pytest.approx(170.0, abs=BAND)
+    assert x[-1] == pytest.approx(0.0, abs=BAND) and y[-1] == pytest.approx(100.0, abs=BAND)
+    # the actual wheel position never leaves the envelope
+    table = [(200.0, 250.0), (350.0, 80.0), (800.0, 180.0), (1000.0, 60.0)]
+    bounds = np.array([b for b, _ in table])
+    highs = np.array([h for _, h in table])
+    region = np.searchsorted(bounds, y, side="left")
+    assert region.max() < len(table) and np.all(x <= highs[region] + 1e-9)
+
+
+def contour_error(r, path) -> np.ndarray:
+    on = r["contour.segment"] >= 1
+    pts = np.column_stack([r["x_axis.pos"][on], r["y_axis.pos"][on]])
+    best = np.full(len(pts), np.inf)
+    for a, b in zip(path[:-1], path[1:]):
+        a, b = np.array(a), np.array(b)
+        d = b - a
+        s = np.clip(((pts - a) @ d) / (d @ d), 0, 1)
+        best = np.minimum(best, np.linalg.norm(pts - a - s[:, None] * d, axis=1))
+    return best
+
+
+def check_mill_contour(r) -> None:
+    from ncfmu.controllers.contour import ContourInterpolator
+    c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
+    assert contour_error(r, c.path).max() <= 0.050
+    assert r["x_axis.pos"].max() == pytest.approx(60.2, abs=BAND)
+    assert r["y_axis.pos"].max() == pytest.approx(40.2, abs=BAND)
+    assert r["x_axis.pos"][-1] == pytest.approx(-0.2, abs=BAND) and r["y_axis.pos"][-1] == pytest.approx(-0.2, abs=BAND)
+
+
+CHECKS = {"lathe_roughing": check_lathe_roughing, "lathe_taper": check_lathe_taper,
+          "grinder_feed": check_grinder_feed, "grinder_envelope": check_grinder_envelope,
+          "mill_contour": check_mill_contour}

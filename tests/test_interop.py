@@ -1,0 +1,45 @@
+"""Every system runs unchanged in libcosim (the independent FMI tool) and gives our trajectories."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from ncfmu.cosim.libcosim import run_ssp
+from ncfmu.project import simulate
+from ncfmu.systems import SYSTEMS, get_system
+
+from conftest import ROOT
+from physics import CHECKS
+
+
+@pytest.fixture(scope="session")
+def libcosim_runs(project):
+    """Every system's whole cycle in libcosim, two child processes at a time."""
+    def run(name):
+        return name, run_ssp(ROOT / "ssp" / f"{name}.ssp", get_system(name).stop_time)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        return dict(pool.map(run, SYSTEMS))
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_libcosim_run_passes_the_physics_checks(libcosim_runs, name):
+    CHECKS[name](libcosim_runs[name])
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_our_gauss_seidel_run_passes_the_same_checks(project, name, request):
+    fixture = {"lathe_roughing": "lathe_roughing", "lathe_taper": "lathe_taper", "grinder_feed": "grinder_feed",
+               "grinder_envelope": "grinder_envelope"}.get(name)
+    result = request.getfixturevalue(fixture) if fixture else simulate(name)
+    CHECKS[name](result)
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_jacobi_mode_reproduces_libcosim(libcosim_runs, name):
+    theirs = libcosim_runs[name]
+    ours = simulate(name, mode="jacobi")
+    assert len(theirs.names) >= 10
+    for variable in theirs.names:
+        a, b = theirs[variable].astype(float), ours[variable].astype(float)
+        assert np.abs(a - b).max() <= 1e-9, variable

@@ -1,0 +1,55 @@
+"""Robust loading: bad archives and system definitions are refused with the names involved, before running."""
+
+import zipfile
+
+import pytest
+
+from ncfmu.errors import SystemDefinitionError
+from ncfmu.project import OpenSystem, system_archive, validate
+
+
+def rewrite(src, dst, change_ssd=None, drop=(), add=()):
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            if item.filename in drop:
+                continue
+            data = zin.read(item.filename)
+            if item.filename == "SystemStructure.ssd" and change_ssd:
+                data = change_ssd(data.decode()).encode()
+            zout.writestr(item.filename, data)
+        for name, data in add:
+            zout.writestr(name, data)
+    return dst
+
+
+@pytest.mark.parametrize("entry", ["../escaped.txt", "/tmp/absolute.txt", "resources/../../escaped.txt"])
+def test_entry_escaping_the_extraction_folder_is_refused(project, tmp_path, entry):
+    bad = rewrite(system_archive("lathe_taper"), tmp_path / "bad.ssp", add=[(entry, b"x")])
+    with pytest.raises(SystemDefinitionError, match="outside the extraction folder"):
+        OpenSystem(bad)
+    assert not (tmp_path.parent / "escaped.txt").exists()
+
+
+def test_missing_fmu_is_named(project, tmp_path):
+    bad = rewrite(system_archive("lathe_taper"), tmp_path / "bad.ssp", drop={"resources/AreaLimiter.fmu"})
+    with pytest.raises(SystemDefinitionError, match="FMU not found: .*AreaLimiter.fmu"):
+        OpenSystem(bad)
+
+
+def test_unknown_connector_is_named(project, tmp_path):
+    bad = rewrite(system_archive("lathe_taper"), tmp_path / "bad.ssp",
+                  change_ssd=lambda s: s.replace('startConnector="x_cmd"', 'startConnector="x_command"'))
+    with pytest.raises(SystemDefinitionError, match="seq has no variable 'x_command'"):
+        OpenSystem(bad)
+
+
+def test_type_mismatch_is_named(project, tmp_path):
+    bad = rewrite(system_archive("lathe_taper"), tmp_path / "bad.ssp",
+                  change_ssd=lambda s: s.replace('startElement="panel" startConnector="start"',
+                                                 'startElement="seq" startConnector="subcycle"'))
+    with pytest.raises(SystemDefinitionError, match=r"seq.subcycle -> seq.start: type mismatch \(Integer -> Boolean\)"):
+        OpenSystem(bad)
+
+
+def test_every_archive_is_schema_valid_and_flat(project):
+    assert validate() == []
