@@ -9,11 +9,13 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+pytest_plugins = ["pytester"]
+
+
 @pytest.fixture(scope="session")
-def project():
-    """Build every FMU (only what is stale) and pack every system; return the artefacts."""
-    from ncfmu.project import build
-    return build(ROOT, only_stale=True)
+def project(ncfmu_project):
+    """Every FMU built (only what is stale) and every system packed, once: the plugin's fixture."""
+    return ncfmu_project
 
 
 @pytest.fixture(scope="session")
@@ -22,15 +24,13 @@ def fmus(project) -> dict[str, Path]:
 
 
 @pytest.fixture(scope="session")
-def lathe_roughing(project):
-    from ncfmu.project import simulate
-    return simulate("lathe_roughing", root=ROOT)
+def lathe_roughing(ncfmu_run):
+    return ncfmu_run("lathe_roughing")
 
 
 @pytest.fixture(scope="session")
-def lathe_taper(project):
-    from ncfmu.project import simulate
-    return simulate("lathe_taper", root=ROOT)
+def lathe_taper(ncfmu_run):
+    return ncfmu_run("lathe_taper")
 
 
 class FmuRunner:
@@ -73,12 +73,15 @@ def fmu_runner():
 
 
 @pytest.fixture(scope="session")
-def grinder_feed(project):
-    from ncfmu.project import simulate
-    return simulate("grinder_feed", root=ROOT)
+def grinder_feed(ncfmu_run):
+    return ncfmu_run("grinder_feed")
 
 
 @pytest.fixture(scope="session")
-def grinder_envelope(project):
-    from ncfmu.project import simulate
-    return simulate("grinder_envelope", root=ROOT)
+def grinder_envelope(ncfmu_run):
+    return ncfmu_run("grinder_envelope")
+
+
+@pytest.fixture(scope="session")
+def mill_contour(ncfmu_run):
+    return ncfmu_run("mill_contour")

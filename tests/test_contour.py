@@ -197,12 +197,6 @@ def contour_error(result, path):
     return best
 
 
-@pytest.fixture(scope="session")
-def mill_contour(project):
-    from ncfmu.project import simulate
-    return simulate("mill_contour")
-
-
 def test_mill_contour_follows_the_corrected_contour(mill_contour):
     c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
     err = contour_error(mill_contour, c.path)

@@ -28,11 +28,8 @@ def test_libcosim_run_passes_the_physics_checks(libcosim_runs, name):
 
 
 @pytest.mark.parametrize("name", sorted(SYSTEMS))
-def test_our_gauss_seidel_run_passes_the_same_checks(project, name, request):
-    fixture = {"lathe_roughing": "lathe_roughing", "lathe_taper": "lathe_taper", "grinder_feed": "grinder_feed",
-               "grinder_envelope": "grinder_envelope"}.get(name)
-    result = request.getfixturevalue(fixture) if fixture else simulate(name)
-    CHECKS[name](result)
+def test_our_gauss_seidel_run_passes_the_same_checks(ncfmu_run, name):
+    CHECKS[name](ncfmu_run(name))
 
 
 @pytest.mark.parametrize("name", sorted(SYSTEMS))

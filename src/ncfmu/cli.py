@@ -127,6 +127,51 @@ def cmd_run(args) -> int:
     return 0
 
 
+def _parse_vary(items: list[str]) -> dict[str, list[object]]:
+    vary: dict[str, list[object]] = {}
+    for item in items or []:
+        name, eq, raw = item.partition("=")
+        if not eq or not raw:
+            raise NcfmuError(f"--vary {item!r}: expected INSTANCE.VARIABLE=V1,V2,... e.g. --vary seq.block[1].Xd=0.4,0.5")
+        vary[name] = [next(iter(_parse_set([f"{name}={v}"]).values())) for v in raw.split(",")]
+    if not vary:
+        raise NcfmuError("sweep needs at least one --vary INSTANCE.VARIABLE=V1,V2,...")
+    return vary
+
+
+def cmd_sweep(args) -> int:
+    from .batch import sweep
+    rows = sweep(args.system, _parse_vary(args.vary), Path(args.out), workers=args.workers,
+                 scheduler=args.scheduler, stop_time=args.stop_time, root=args.root)
+    ok = sum(r["status"] == "ok" for r in rows)
+    print(f"{args.system}: {len(rows)} variants, {ok} ok, {len(rows) - ok} failed -> {Path(args.out) / 'summary.csv'}")
+    for r in rows:
+        if r["status"] != "ok":
+            varied = ", ".join(f"{k}={r[k]}" for k in _parse_vary(args.vary))
+            print(f"  failed: {varied}: {r['error']}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from .cosim.result import Result
+    from .plots import plot_result, plot_sweep
+    src = Path(args.file)
+    if not src.is_file():
+        raise NcfmuError(f"{src}: no such file (give a result CSV from 'ncfmu run' or a sweep's summary.csv)")
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
+    out = Path(args.png) if args.png else src.with_suffix(".png")
+    if src.name == "summary.csv":
+        print(plot_sweep(src, out))
+    else:
+        result = Result.from_csv(src)
+        result.system = args.system or src.stem.split("_branch")[0]
+        print(plot_result(result, out))
+    return 0
+
+
 def cmd_validate(args) -> int:
     from .project import validate
     problems = validate(args.root)
@@ -162,6 +207,30 @@ def main(argv: list[str] | None = None) -> int:
                    help="tunable parameter or input set at the branch point, one value per branch, "
                         "e.g. --branch-set panel.emergency_at=12,21,31")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
+                       description="Run every combination of the --vary values. Each variant writes "
+                                   "OUT/variants/<key>.csv and a row of OUT/summary.csv (status, error, metrics). "
+                                   "Running the same command again skips the variants already done.",
+                       epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
+                              "--out sweep_xd")
+    p.add_argument("system", help="system name or path of an .ssp file")
+    p.add_argument("--vary", action="append", required=True, metavar="INSTANCE.VAR=V1,V2,...",
+                   help="values of one parameter (repeat for more: the product is run)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--workers", type=int, default=2,
+                       help="worker processes of a local dask cluster (default 2; 0: serial, no dask)")
+    group.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="address of a running dask scheduler, e.g. tcp://127.0.0.1:8786")
+    p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--out", required=True, help="folder for summary.csv and variants/")
+    p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv")
+    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', or OUT/summary.csv from 'ncfmu sweep'")
+    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name)")
+    p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
+    p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)

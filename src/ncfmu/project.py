@@ -41,6 +41,8 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``."""
     root = Path(root or project_root())
     fmus = build_all(root / "models", root / "fmus", only_stale=only_stale)
+    from .docs import write_docs
+    write_docs(root, fmus)
     archives = []
     for name in SYSTEMS:
         folder = write_system(get_system(name), root / "ssp")

@@ -8,6 +8,7 @@ allocated per step.
 from __future__ import annotations
 
 import ctypes
+import itertools
 import shutil
 import tempfile
 import zipfile
@@ -23,6 +24,20 @@ from ..errors import SimulationError, SystemDefinitionError
 from .slave import Variable
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
+
+# fmpy's C proxy that formats the variadic log message keeps ONE logger per process; so one logger
+# routes every message by the componentEnvironment each slave registers (its own id).
+_SINKS: dict[int, list[tuple[str, str]]] = {}
+_IDS = itertools.count(1)
+
+
+def _dispatch(env, instance, status, category, message) -> None:
+    sink = _SINKS.get(env or 0)
+    if sink is not None:
+        sink.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
 
 
 def safe_extract(archive: Path, target: Path) -> Path:
@@ -76,8 +91,11 @@ class FmuSlave:
         md = unpacked.model_description
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._env = next(_IDS)
+        _SINKS[self._env] = self.messages
         self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.logger = _LOGGER
+        self._callbacks.componentEnvironment = self._env
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         try:
@@ -94,14 +112,14 @@ class FmuSlave:
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
-    # -- logging --------------------------------------------------------------------------------
-    def _log(self, env, instance, status, category, message) -> None:
-        self.messages.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
-
     def _fail(self, what: str, status: int) -> SimulationError:
         if status >= 4:
             self._alive = False   # after fmi2Fatal the FMI standard allows no further call, not even freeing
-        said = "; ".join(f"[{lvl}] {msg}" for lvl, msg in self.messages[-5:] if lvl in ("error", "fatal", "warning"))
+        recent = self.messages[-5:]
+        # our own error lines name the variable and the rule; pythonfmu's "Fatal py exception" adds nothing then
+        errors = [msg for lvl, msg in recent if lvl == "error"]
+        said = "; ".join(errors) if errors else "; ".join(f"[{lvl}] {msg}" for lvl, msg in recent
+                                                              if lvl in ("fatal", "warning"))
         return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, status).capitalize()}"
                                + (f": {said}" if said else ""))
 
@@ -201,6 +219,7 @@ class FmuSlave:
         self._writes.clear()
 
     def terminate(self) -> None:
+        _SINKS.pop(self._env, None)
         if self._alive:
             self._alive = False
             try:

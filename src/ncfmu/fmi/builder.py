@@ -115,12 +115,14 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
 
 
 def _rewrite(src: Path, target: Path, logic, version: str) -> None:
+    from ..docs import fmu_html
     partial = target.with_suffix(".fmu.part")
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
             data = zin.read(item.filename)
             if item.filename == "modelDescription.xml":
                 data = enrich(data, logic, version)
+                zout.writestr("documentation/index.html", fmu_html(data, logic))
             zout.writestr(item.filename, data)
     partial.replace(target)
 
