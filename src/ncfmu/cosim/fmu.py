@@ -106,9 +106,9 @@ class FmuSlave:
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
         self._component = self.fmu.component
         self._dll = self.fmu.dll
-        self._bound: list[tuple] = []
         self._reads: list[tuple] = []
         self._writes: list[tuple] = []
+        self._sent: list[bytes | None] = []
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
@@ -129,6 +129,7 @@ class FmuSlave:
 
     # -- set-up ---------------------------------------------------------------------------------
     def set_start(self, name: str, value: object) -> None:
+        self._sent = [None] * len(self._writes)        # an input may have been set directly
         v = self.variables.get(name)
         if v is None:
             raise SystemDefinitionError(f"{self.name} has no variable {name!r}")
@@ -160,6 +161,7 @@ class FmuSlave:
         if input_vrs:
             vrs = (ctypes.c_uint * len(input_vrs))(*input_vrs)
             self._writes.append((setter, vrs, len(input_vrs), inputs.ctypes.data_as(ptr), kind, inputs))
+            self._sent.append(None)
         if output_vrs:
             vrs = (ctypes.c_uint * len(output_vrs))(*output_vrs)
             self._reads.append((getter, vrs, len(output_vrs), outputs.ctypes.data_as(ptr), kind, outputs))
@@ -173,7 +175,18 @@ class FmuSlave:
                 raise self._fail(f"fmi2{what}{kind}", status)
 
     def write_inputs(self) -> None:
-        self._transfer(self._writes, "Set")
+        # An FMU input keeps its value until set again: send a kind only when its values changed
+        # (buttons, in-position flags and integers rarely do). Cleared whenever the FMU's inputs may
+        # have changed behind our back (initialisation, reset, state restore).
+        component, sent = self._component, self._sent
+        for i, (function, vrs, n, data, kind, buffer) in enumerate(self._writes):
+            now = buffer.tobytes()
+            if sent[i] == now:
+                continue
+            status = function(component, vrs, n, data)
+            if status > 1:
+                raise self._fail(f"fmi2Set{kind}", status)
+            sent[i] = now
 
     def do_step(self, t: float, h: float) -> None:
         status = self._step(self._component, t, h, 1)
@@ -202,6 +215,7 @@ class FmuSlave:
 
     def set_state(self, state) -> None:
         self.fmu.setFMUstate(state)
+        self._sent = [None] * len(self._writes)
 
     def free_state(self, state) -> None:
         self.fmu.freeFMUstate(state)
@@ -217,6 +231,7 @@ class FmuSlave:
         self._check("fmi2Reset", self._dll.fmi2Reset(self._component))
         self._reads.clear()
         self._writes.clear()
+        self._sent.clear()
 
     def terminate(self) -> None:
         _SINKS.pop(self._env, None)

@@ -229,7 +229,7 @@ class Master:
                 in_buf = np.zeros(len(ins), dtype=DTYPES[kind])
                 s.bind(kind, in_buf, [v.vr for v in ins], out_view, [v.vr for v in outs])
                 if len(ins):
-                    gathers.append((in_buf, values[kind], idx))
+                    gathers.append((in_buf, values[kind].take, idx))
             plan.append((s, tuple(gathers)))
 
         ext_updates = []
@@ -257,7 +257,6 @@ class Master:
                 arr[slot] = col[next_change]
         next_change = max(next_change + 1, 0)
         jacobi = self.mode == "jacobi"
-        take = np.take
         report_every = max(1, run.n_steps // 100)
         wall0 = _time.perf_counter()
         for i in range(first, last):
@@ -268,8 +267,8 @@ class Master:
                 next_change += 1
             if jacobi:
                 for s, gathers in plan:
-                    for buf, src, idx in gathers:
-                        take(src, idx, out=buf)
+                    for buf, take, idx in gathers:
+                        take(idx, out=buf)
                 for s, _ in plan:
                     s.write_inputs()
                     s.do_step(t, h)
@@ -277,8 +276,8 @@ class Master:
                     s.read_outputs()
             else:
                 for s, gathers in plan:
-                    for buf, src, idx in gathers:
-                        take(src, idx, out=buf)
+                    for buf, take, idx in gathers:
+                        take(idx, out=buf)
                     s.write_inputs()
                     s.do_step(t, h)
                     s.read_outputs()

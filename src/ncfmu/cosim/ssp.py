@@ -110,12 +110,16 @@ def ssd_document(system: System) -> bytes:
     sys_el = ET.SubElement(root, _q("ssd:System"), name=system.name, description=system.description)
     elements = ET.SubElement(sys_el, _q("ssd:Elements"))
     units = set()
+    # Inputs are declared only where a connection drives them: fmpy's simulate_ssp cannot load an
+    # SSD that declares an unconnected input; the FMU variable itself stays settable in every tool.
+    driven = {(k.end_element, k.end_connector) for k in system.connections}
     for comp in system.components:
         c = ET.SubElement(elements, _q("ssd:Component"), name=comp.name,
                           type="application/x-fmu-sharedlibrary", source=comp.source)
-        if comp.connectors:
+        declared = [con for con in comp.connectors if con[1] != "input" or (comp.name, con[0]) in driven]
+        if declared:
             cons = ET.SubElement(c, _q("ssd:Connectors"))
-            for name, kind, typ, unit in comp.connectors:
+            for name, kind, typ, unit in declared:
                 con = ET.SubElement(cons, _q("ssd:Connector"), name=name, kind=kind)
                 t = ET.SubElement(con, _q(f"ssc:{typ}"))
                 if unit:

@@ -15,6 +15,7 @@ log with their level.
 from __future__ import annotations
 
 import copy
+import operator
 import pickle
 import sys
 
@@ -53,6 +54,66 @@ class ControllerSlave(Fmi2Slave):
         self.logic: Controller | None = None
         for port in logic.PORTS:
             self._register(port)
+        self._causality = {vr: (v.causality.name, type(v).__name__, v.name) for vr, v in self.vars.items()}
+        self._fast_get: dict[tuple, object] = {}
+        self._fast_set: dict[tuple, object] = {}
+
+    # -- fast paths for the calls a master makes every step ---------------------------------------
+    # pythonfmu's generic get/set check every variable's type and call its getter one by one; a
+    # master asks for the same value references every step, so a compiled accessor is cached per list.
+    def _getter_for(self, vrs: list[int], kind: str):
+        key = (kind, *vrs)
+        fn = self._fast_get.get(key)
+        if fn is None:
+            info = [self._causality.get(vr) for vr in vrs]
+            if all(i is not None and i[0] == "output" and i[1] == kind for i in info) and vrs:
+                pick = operator.itemgetter(*(i[2] for i in info))
+                fn = (lambda: [pick(self.out)]) if len(vrs) == 1 else (lambda: list(pick(self.out)))
+            else:
+                fn = None
+            self._fast_get[key] = fn
+        return fn
+
+    def _setter_for(self, vrs: list[int], kind: str):
+        key = (kind, *vrs)
+        fn = self._fast_set.get(key, False)
+        if fn is False:
+            info = [self._causality.get(vr) for vr in vrs]
+            if all(i is not None and i[0] == "input" and i[1] == kind for i in info) and vrs:
+                names = tuple(i[2] for i in info)
+                inputs = self.inputs
+
+                def fn(values, names=names, inputs=inputs):
+                    for name, value in zip(names, values):
+                        inputs[name] = value
+            else:
+                fn = None
+            self._fast_set[key] = fn
+        return fn
+
+    def get_real(self, vrs):
+        fn = self._getter_for(vrs, "Real")
+        return fn() if fn is not None else super().get_real(vrs)
+
+    def get_integer(self, vrs):
+        fn = self._getter_for(vrs, "Integer")
+        return fn() if fn is not None else super().get_integer(vrs)
+
+    def get_boolean(self, vrs):
+        fn = self._getter_for(vrs, "Boolean")
+        return fn() if fn is not None else super().get_boolean(vrs)
+
+    def set_real(self, vrs, values):
+        fn = self._setter_for(vrs, "Real")
+        return fn(values) if fn is not None else super().set_real(vrs, values)
+
+    def set_integer(self, vrs, values):
+        fn = self._setter_for(vrs, "Integer")
+        return fn(values) if fn is not None else super().set_integer(vrs, values)
+
+    def set_boolean(self, vrs, values):
+        fn = self._setter_for(vrs, "Boolean")
+        return fn(values) if fn is not None else super().set_boolean(vrs, values)
 
     def _register(self, port: Port) -> None:
         store = {"parameter": self.parameters, "input": self.inputs}.get(port.causality)

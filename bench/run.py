@@ -1,0 +1,150 @@
+"""ncfmu benchmarks, measured side by side in one run: ``python bench/run.py [--quick] [--json FILE]``.
+
+Every comparison interleaves its contenders (A, B, A, B, ...) and reports medians, on the lathe_taper
+system (``--quick``: the first pass only, 13 s of simulated time, which still runs SC1..SC4).
+
+- fmi_overhead_ratio       ncfmu's master running the FMUs / the same controller and servo Python objects
+                           stepped directly in one loop with the same step (the limit). Goal <= 1.5.
+- vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 1.5.
+- vs_libcosim_speedup      libcosim (libcosimpy) on the same .ssp / ncfmu's master. Goal >= 2.5.
+- sweep_speedup_2_workers  a 16-variant sweep run serially / the same on 2 dask workers. Goal >= 1.7.
+- rtf_lathe                simulated seconds per wall-clock second of the full lathe_roughing cycle.
+- limiter_lookup_ns        AreaLimiter region search at 10, 100, 1000, 10000 regions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+
+def direct_loop(system_name: str, stop_time: float) -> float:
+    """The same controllers and servos as plain Python objects, stepped in one loop (Gauss-Seidel)."""
+    from ncfmu.systems import MODELS, get_system
+    system = get_system(system_name)
+    objects = {c.name: MODELS[c.model](**c.parameters) for c in system.components}
+    inputs = {name: type(obj).default_inputs() for name, obj in objects.items()}
+    outputs = {name: obj.outputs() for name, obj in objects.items()}
+    wiring = {name: [] for name in objects}
+    for k in system.connections:
+        wiring[k.end_element].append((k.end_connector, outputs[k.start_element], k.start_connector))
+    order = [(objects[c.name], inputs[c.name], wiring[c.name]) for c in system.components]
+    h = system.step_size
+    n = int(round(stop_time / h))
+    t0 = time.perf_counter()
+    for i in range(n):
+        t = i * h
+        for obj, ins, wires in order:
+            for port, src, name in wires:
+                ins[port] = src[name]
+            obj.step(t, h, ins)
+    return time.perf_counter() - t0
+
+
+def ncfmu_master(archive: Path, stop_time: float) -> float:
+    from ncfmu.project import OpenSystem
+    with OpenSystem(archive) as opened:
+        return opened.run(stop_time=stop_time).wall_time
+
+
+def fmpy_ssp(archive: Path, stop_time: float) -> float:
+    from fmpy.ssp.simulation import simulate_ssp
+    t0 = time.perf_counter()
+    simulate_ssp(str(archive), stop_time=stop_time, step_size=1e-3)
+    return time.perf_counter() - t0
+
+
+def libcosim(archive: Path, stop_time: float) -> float:
+    from ncfmu.cosim.libcosim import run_ssp
+    return run_ssp(archive, stop_time).wall_time     # the simulate_until time inside libcosim's process
+
+
+def interleaved(contenders: dict, repeats: int) -> dict[str, float]:
+    times = {k: [] for k in contenders}
+    for _ in range(repeats):
+        for name, fn in contenders.items():
+            times[name].append(fn())
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def sweep_speedup(quick: bool) -> tuple[float, float, float]:
+    from ncfmu.batch import sweep
+    vary = {"seq.block[1].Xd": [0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65],
+            "seq.block[1].feed": [3.0, 4.0]}                      # 16 variants
+    stop = 3.0 if quick else 12.0
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        sweep("lathe_taper", vary, Path(tmp) / "serial", workers=0, stop_time=stop, progress=False)
+        serial = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        sweep("lathe_taper", vary, Path(tmp) / "dask", workers=2, stop_time=stop, progress=False)
+        parallel = time.perf_counter() - t0
+    return serial / parallel, serial, parallel
+
+
+def main() -> dict:
+    parser = argparse.ArgumentParser(description="ncfmu benchmarks (ratios measured side by side)")
+    parser.add_argument("--quick", action="store_true", help="the first lathe_taper pass only (13 s simulated)")
+    parser.add_argument("--json", default=None, help="also write the numbers to this JSON file")
+    args = parser.parse_args()
+    from ncfmu.project import build
+    root = HERE.parent
+    build(root)
+    taper = root / "ssp" / "lathe_taper.ssp"
+    stop = 13.0 if args.quick else 50.0
+    repeats = 3 if args.quick else 5
+    out: dict[str, object] = {"cores": os.cpu_count(), "quick": args.quick, "stop_time_s": stop}
+
+    t = interleaved({"master": lambda: ncfmu_master(taper, stop), "direct": lambda: direct_loop("lathe_taper", stop)},
+                    repeats)
+    out["fmi_overhead_ratio"] = t["master"] / t["direct"]
+    out["master_s"], out["direct_s"] = t["master"], t["direct"]
+
+    t2 = interleaved({"master": lambda: ncfmu_master(taper, stop), "fmpy": lambda: fmpy_ssp(taper, stop),
+                      "libcosim": lambda: libcosim(taper, stop)}, max(2, repeats - 2))
+    out["vs_fmpy_ssp_speedup"] = t2["fmpy"] / t2["master"]
+    out["vs_libcosim_speedup"] = t2["libcosim"] / t2["master"]
+    out["fmpy_ssp_s"], out["libcosim_s"] = t2["fmpy"], t2["libcosim"]
+
+    speedup, serial, parallel = sweep_speedup(args.quick)
+    out["sweep_speedup_2_workers"], out["sweep_serial_s"], out["sweep_2_workers_s"] = speedup, serial, parallel
+
+    if args.quick:
+        out["rtf_lathe"] = 13.0 / ncfmu_master(root / "ssp" / "lathe_roughing.ssp", 13.0)
+    else:
+        out["rtf_lathe"] = 95.0 / ncfmu_master(root / "ssp" / "lathe_roughing.ssp", 95.0)
+
+    import limiter_lookup
+    sys.argv = [sys.argv[0]]
+    out.update(limiter_lookup.main())
+
+    goals = {"fmi_overhead_ratio": ("<=", 1.5), "vs_fmpy_ssp_speedup": (">=", 1.5),
+             "vs_libcosim_speedup": (">=", 2.5), "sweep_speedup_2_workers": (">=", 1.7)}
+    print(f"\nncfmu benchmarks ({'quick' if args.quick else 'full'}, {out['cores']} cores), medians of interleaved runs")
+    print(f"{'metric':28s} {'value':>10s}  goal")
+    for key in ("fmi_overhead_ratio", "vs_fmpy_ssp_speedup", "vs_libcosim_speedup", "sweep_speedup_2_workers",
+                "rtf_lathe"):
+        goal = goals.get(key)
+        mark = ""
+        if goal:
+            ok = out[key] <= goal[1] if goal[0] == "<=" else out[key] >= goal[1]
+            mark = f"{goal[0]} {goal[1]}  {'met' if ok else 'NOT met'}"
+        print(f"{key:28s} {out[key]:10.2f}  {mark}")
+    print(f"  master {out['master_s']:.2f} s, direct {out['direct_s']:.2f} s, fmpy simulate_ssp {out['fmpy_ssp_s']:.2f} s, "
+          f"libcosim {out['libcosim_s']:.2f} s, sweep serial {serial:.1f} s vs 2 workers {parallel:.1f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()
