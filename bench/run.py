@@ -7,7 +7,8 @@ system (``--quick``: the first pass only, 13 s of simulated time, which still ru
                            stepped directly in one loop with the same step (the limit). Goal <= 1.5.
 - vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 1.5.
 - vs_libcosim_speedup      libcosim (libcosimpy) on the same .ssp / ncfmu's master. Goal >= 2.5.
-- sweep_speedup_2_workers  a 16-variant sweep run serially / the same on 2 dask workers. Goal >= 1.7.
+- sweep_speedup_2_workers  a 16-variant sweep of whole lathe_taper cycles run serially / the same on a
+                           2-worker dask LocalCluster, cluster start-up included. Goal >= 1.7.
 - rtf_lathe                simulated seconds per wall-clock second of the full lathe_roughing cycle.
 - limiter_lookup_ns        AreaLimiter region search at 10, 100, 1000, 10000 regions.
 """
@@ -80,7 +81,7 @@ def sweep_speedup(quick: bool) -> tuple[float, float, float]:
     from ncfmu.batch import sweep
     vary = {"seq.block[1].Xd": [0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65],
             "seq.block[1].feed": [3.0, 4.0]}                      # 16 variants
-    stop = 3.0 if quick else 12.0
+    stop = 6.0 if quick else 50.0          # the full bench sweeps whole lathe_taper cycles
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         sweep("lathe_taper", vary, Path(tmp) / "serial", workers=0, stop_time=stop, progress=False)

@@ -92,3 +92,20 @@ def test_readme_example_test_file_passes(project, pytester):
     pytester.makepyfile(test_readme=example)
     result = pytester.runpytest_subprocess("-q", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
+
+
+def test_progress_bar_shows_done_failed_remaining_on_a_terminal():
+    import io
+    from ncfmu.batch import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+    term = Terminal()
+    bar = Progress(4, stream=term)
+    bar.update(True)
+    bar.update(False)
+    assert term.getvalue().rsplit("\r", 1)[-1].strip().endswith("done 1  failed 1  remaining 2")
+    pipe = io.StringIO()                       # not a terminal: silent
+    Progress(4, stream=pipe).update(True)
+    assert pipe.getvalue() == ""
