@@ -3,7 +3,7 @@
 import math
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from ncfmu.controllers.feed import ProgrammableFeed, ProgramError, parse_program
@@ -144,41 +144,58 @@ def test_m_word_waits_for_mfin_and_emb_aborts_the_wait():
     assert o["x"] == pytest.approx(0.0, abs=BAND)
 
 
-PHASES = {  # (cycle, program counter) of every phase of the seed's program
+PHASES = {  # (cycle, program counter) of every phase of the seed's program, and an M wait
     "approach": ("start", 0), "rough": ("start", 1), "fine": ("start", 2), "dwell": ("start", 3),
-    "return": ("start", 4), "wear": ("wear_start", 43),
+    "return": ("start", 4), "wear": ("wear_start", 43), "m_wait": ("start", 1),
 }
+#: The seed's program with an auxiliary function (M2, answered after 0.5 s) after the approach.
+M_PROGRAM = "M0: X+D3F7; M1: M2; M2: X+D2F1; M3: X-D4F7; M4: END; M41: XF7S1; M42: END; M43: X+D1F2S4; M44: END"
+
+
+def grinder_for(phase):
+    return Grinder(program=M_PROGRAM, D4=4.2) if phase == "m_wait" else Grinder()
 
 
 _DURATIONS: dict = {}
 
 
-def phase_window(button, pc):
-    """(entry time, duration) of program address ``pc`` in a cycle started by ``button`` at t = 0."""
-    if button not in _DURATIONS:
-        g = Grinder()
+def phase_window(phase):
+    """(entry time, duration) of ``phase`` in its cycle started at t = 0."""
+    button, pc = PHASES[phase]
+    key = (button, phase == "m_wait")
+    if key not in _DURATIONS:
+        g = grinder_for(phase)
         g.step(**{button: True})
         g.finish()
         spans = {}
         for r in g.log:
             spans.setdefault(r["pc"], [r["t"], r["t"]])[1] = r["t"]
-        _DURATIONS[button] = {k: (a, b - a) for k, (a, b) in spans.items()}
-    return _DURATIONS[button][pc]
+        _DURATIONS[key] = {k: (a, b - a) for k, (a, b) in spans.items()}
+    return _DURATIONS[key][pc]
+
+
+def _every_phase(test):
+    for phase in sorted(PHASES):
+        test = example(phase=phase, fraction=0.5, worn=False)(test)
+    return test
 
 
 @settings(max_examples=20, deadline=None)
 @given(phase=st.sampled_from(sorted(PHASES)), fraction=st.floats(0.0, 1.0), worn=st.booleans())
+@_every_phase
 def test_property_emergency_at_any_instant_returns_to_the_feed_origin(phase, fraction, worn):
-    g = Grinder()
+    g = grinder_for(phase)
     if worn and phase != "wear":
         g.step(wear_start=True)
         g.finish()
     button, pc = PHASES[phase]
-    entry, duration = phase_window(button, pc)
+    entry, duration = phase_window(phase)
     t0 = g.t
     g.step(**{button: True})
     while g.t - t0 < entry + fraction * duration:
         g.step()
+    if phase == "m_wait":
+        assert g.log[-1]["m_active"] == 2 or fraction > 0.99     # struck while waiting for MFIN
     g.step(emergency=True)
     returning = g.run_until(lambda o: o["pc"] == 41 and o["emergency_active"])
     # the feed origin as the seed's return counter defines it: here minus what was counted
