@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ncfmu.checks import assert_inside_envelope, assert_no_motion, assert_reaches
+from ncfmu.checks import assert_inside_envelope, assert_no_motion, assert_reaches, path_distance
 
 BAND = 0.005
 X0, Z0 = 30.0, 2.0
@@ -81,14 +81,7 @@ def check_grinder_envelope(r) -> None:
 
 def contour_error(r, path) -> np.ndarray:
     on = r["contour.segment"] >= 1
-    pts = np.column_stack([r["x_axis.pos"][on], r["y_axis.pos"][on]])
-    best = np.full(len(pts), np.inf)
-    for a, b in zip(path[:-1], path[1:]):
-        a, b = np.array(a), np.array(b)
-        d = b - a
-        s = np.clip(((pts - a) @ d) / (d @ d), 0, 1)
-        best = np.minimum(best, np.linalg.norm(pts - a - s[:, None] * d, axis=1))
-    return best
+    return path_distance(r["x_axis.pos"][on], r["y_axis.pos"][on], path)
 
 
 def check_mill_contour(r) -> None:

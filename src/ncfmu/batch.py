@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .checks import path_distance
 from .errors import NcfmuError, SystemDefinitionError
 
 SUMMARY = "summary.csv"
@@ -61,13 +62,7 @@ def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str,
                   if k.startswith("contour.") and k.split(".", 1)[1] in names}
         path = ContourInterpolator(**values).path
         on = result["contour.segment"] >= 1
-        pts = np.column_stack([result["x_axis.pos"][on], result["y_axis.pos"][on]])
-        best = np.full(len(pts), np.inf)
-        for a, b in zip(path[:-1], path[1:]):
-            a, b = np.array(a), np.array(b)
-            d = b - a
-            s = np.clip(((pts - a) @ d) / (d @ d), 0, 1)
-            best = np.minimum(best, np.linalg.norm(pts - a - s[:, None] * d, axis=1))
+        best = path_distance(result["x_axis.pos"][on], result["y_axis.pos"][on], path)
         out["max_contour_error_mm"] = float(best.max()) if len(best) else float("nan")
         out["cycle_time_s"] = _first_time(result, result["contour.done"])
         out["alarms"] = int(result["contour.alarm"].any())

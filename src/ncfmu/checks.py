@@ -71,6 +71,31 @@ def assert_inside_envelope(result, ref: str, lim: str, table: Sequence[tuple[flo
                              f"({int(bad.sum())} samples outside)")
 
 
+def path_distance(x: np.ndarray, y: np.ndarray, path: Sequence[tuple[float, float]]) -> np.ndarray:
+    """Distance of each point (x, y) from the polyline ``path`` (e.g. a corrected contour)."""
+    pts = np.column_stack([np.asarray(x, float), np.asarray(y, float)])
+    best = np.full(len(pts), np.inf)
+    for a, b in zip(path[:-1], path[1:]):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        d = b - a
+        s = np.clip(((pts - a) @ d) / (d @ d), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(pts - a - s[:, None] * d, axis=1))
+    return best
+
+
+def assert_on_path(result, x: str, y: str, path: Sequence[tuple[float, float]], tolerance: float,
+                   between: tuple[float, float] | None = None) -> float:
+    """The point (``x``, ``y``) stays within ``tolerance`` of the polyline ``path``; returns the largest distance."""
+    w = _window(result, between)
+    dist = path_distance(result[x][w], result[y][w], path)
+    worst = float(dist.max()) if len(dist) else 0.0
+    if worst > tolerance:
+        i = int(np.argmax(dist))
+        raise AssertionError(f"({x}, {y}) is {worst * 1000:.1f} µm from the path at t = {result.time[w][i]:.4f} s "
+                             f"(allowed {tolerance * 1000:.1f} µm)")
+    return worst
+
+
 def assert_alarm(result, signal: str, raised: bool = True, between: tuple[float, float] | None = None) -> None:
     """``signal`` (a Boolean or a nonzero Integer) is raised at least once -- or never, with ``raised=False``."""
     y = np.asarray(result[signal])[_window(result, between)]

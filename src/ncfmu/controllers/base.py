@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError, require
-from ..ports import Port
+from ..ports import Port, boolean, real
 
 
 class Controller:
@@ -87,6 +87,19 @@ class Controller:
     def take_messages(self) -> list[tuple[str, str]]:
         out, self.messages = self.messages, []
         return out
+
+
+def servo_ports(*axes: tuple[str, float]) -> tuple[Port, ...]:
+    """The ports by which a controller drives servo axes (SPEC 2): per axis ``(letter, start position)``,
+    inputs ``<a>_pos`` and ``<a>_in_position``, outputs ``<a>_cmd`` and ``<a>_vff``."""
+    inputs, outputs = [], []
+    for a, start in axes:
+        A = a.upper()
+        inputs += [real(f"{a}_pos", "input", start, "mm", f"actual {A} position from the {A} servo"),
+                   boolean(f"{a}_in_position", "input", True, f"{A} servo in-position")]
+        outputs += [real(f"{a}_cmd", "output", None, "mm", f"{A} position command"),
+                    real(f"{a}_vff", "output", None, "mm/s", f"{A} velocity feed-forward")]
+    return (*inputs, *outputs)
 
 
 # -- parameter checks shared by the controllers ------------------------------------------------

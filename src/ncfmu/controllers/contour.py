@@ -30,7 +30,7 @@ from collections.abc import Mapping, Sequence
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .base import Controller, finite_inputs, int_param, real_param
+from .base import Controller, finite_inputs, int_param, real_param, servo_ports
 
 MAX_POINTS = 64
 #: mill_contour (SPEC 5).
@@ -119,14 +119,7 @@ class ContourInterpolator(Controller):
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override", min=0.0, max=1.5),
-        real("x_pos", "input", 0.0, "mm", "actual X position"),
-        real("y_pos", "input", 0.0, "mm", "actual Y position"),
-        boolean("x_in_position", "input", True, "X servo in-position"),
-        boolean("y_in_position", "input", True, "Y servo in-position"),
-        real("x_cmd", "output", None, "mm", "X position command"),
-        real("y_cmd", "output", None, "mm", "Y position command"),
-        real("x_vff", "output", None, "mm/s", "X velocity feed-forward"),
-        real("y_vff", "output", None, "mm/s", "Y velocity feed-forward"),
+        *servo_ports(("x", 0.0), ("y", 0.0)),
         integer("segment", "output", None, "segment being interpolated (0: approach)"),
         boolean("busy", "output", None, "a contour is running"),
         boolean("done", "output", None, "the contour is finished (until the next start)"),

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real, string
-from .base import Controller, finite_inputs, int_param, real_param
+from .base import Controller, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
 
 #: The seed's Table 1 (SPEC 3.3).
@@ -175,14 +175,7 @@ class ProgrammableFeed(Controller):
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
         boolean("mfin", "input", False, "M-function finish from the auxiliary device"),
         boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
-        real("x_pos", "input", 0.0, "mm", "actual X position"),
-        real("y_pos", "input", 0.0, "mm", "actual Y position"),
-        boolean("x_in_position", "input", True, "X servo in-position"),
-        boolean("y_in_position", "input", True, "Y servo in-position"),
-        real("x_cmd", "output", None, "mm", "X position command"),
-        real("y_cmd", "output", None, "mm", "Y position command"),
-        real("x_vff", "output", None, "mm/s", "X velocity feed-forward"),
-        real("y_vff", "output", None, "mm/s", "Y velocity feed-forward"),
+        *servo_ports(("x", 0.0), ("y", 0.0)),
         boolean("run", "output", None, "normal or wear-compensation cycle running (RUN)"),
         boolean("busy", "output", None, "a feed, dwell or M wait is executing (BUSY)"),
         boolean("emergency_active", "output", None, "emergency return cycle running"),

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .base import Controller, finite_inputs, int_param, real_param
+from .base import Controller, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
 
 MAX_BLOCKS = 8
@@ -93,15 +93,8 @@ class CutSequencer(Controller):
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override of the cutting feed (SC2)", min=0.0, max=1.5),
-        real("x_pos", "input", 30.0, "mm", "actual X position from the X servo"),
-        real("z_pos", "input", 2.0, "mm", "actual Z position from the Z servo"),
-        boolean("x_in_position", "input", True, "X servo in-position"),
-        boolean("z_in_position", "input", True, "Z servo in-position"),
         boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
-        real("x_cmd", "output", None, "mm", "X position command"),
-        real("z_cmd", "output", None, "mm", "Z position command"),
-        real("x_vff", "output", None, "mm/s", "X velocity feed-forward"),
-        real("z_vff", "output", None, "mm/s", "Z velocity feed-forward"),
+        *servo_ports(("x", 30.0), ("z", 2.0)),
         integer("subcycle", "output", None, "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
         integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
         integer("passes_left", "output", None, "the seed's pass down-counter (counts down at SC3 -> SC4)"),
