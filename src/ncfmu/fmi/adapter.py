@@ -18,6 +18,7 @@ import copy
 import operator
 import pickle
 import sys
+from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.default_experiment import DefaultExperiment
@@ -52,6 +53,10 @@ class ControllerSlave(Fmi2Slave):
         self.inputs: dict[str, object] = logic.default_inputs()
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
+        self._init_refused = False
+        resources = kwargs.get("resources")
+        self._status_shim = bool(resources) and sys.platform.startswith("linux") and \
+            Path(resources, "ncfmu_status_shim").is_file()
         for port in logic.PORTS:
             self._register(port)
         self._causality = {vr: (v.causality.name, type(v).__name__, v.name) for vr, v in self.vars.items()}
@@ -96,6 +101,8 @@ class ControllerSlave(Fmi2Slave):
         return fn() if fn is not None else super().get_real(vrs)
 
     def get_integer(self, vrs):
+        if len(vrs) == 1 and vrs[0] == INIT_REFUSED_VR:
+            return [int(self._init_refused)]
         fn = self._getter_for(vrs, "Integer")
         return fn() if fn is not None else super().get_integer(vrs)
 
@@ -144,6 +151,9 @@ class ControllerSlave(Fmi2Slave):
             self.logic = self.logic_class.from_parameters(self.parameters)
         except ConfigError as err:
             self.log(f"{self.instance_name}: parameter refused: {err}", Fmi2Status.error)
+            if self._status_shim:
+                self._init_refused = True      # the shim turns this into fmi2Error; the instance lives on
+                return
             raise
         self.out = self.logic.outputs()
         self._flush()
@@ -179,6 +189,10 @@ class ControllerSlave(Fmi2Slave):
         return pickle.loads(data)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        if self.logic is None:
+            self.log(f"{self.instance_name}: doStep refused: the parameters were refused at initialisation",
+                     Fmi2Status.error)
+            return False
         # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
         # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
         step_size = round(step_size * 1e9) * 1e-9
@@ -191,6 +205,10 @@ class ControllerSlave(Fmi2Slave):
         for level, text in self.logic.take_messages():           # type: ignore[union-attr]
             self.log(f"{self.instance_name}: {text}", _LEVEL[level])
 
+
+#: Reserved Integer value reference: 1 when exitInitializationMode refused the parameters. The FMU's
+#: status shim (builder.status_shim) reads it and returns fmi2Error instead of pythonfmu's fmi2Fatal.
+INIT_REFUSED_VR = 2147483000
 
 #: Spare references to a model module's globals (see :func:`fmu_slave`).
 INSTANTIATION_RESERVE = 100_000

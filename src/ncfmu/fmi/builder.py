@@ -13,12 +13,15 @@ An FMU must run the code it was built from, even in a process that has imported 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import re
 import shutil
+import subprocess
 import sys
 import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -47,6 +50,34 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
         h.update(str(path.relative_to(path.parents[0] if path == script else package_dir)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:12]
+
+
+SHIM_SOURCE = Path(__file__).with_name("status_shim.c")
+SHIM_MARKER = "resources/ncfmu_status_shim"
+
+
+@functools.lru_cache(maxsize=1)
+def status_shim() -> bytes | None:
+    """The compiled status shim for this platform (linux64), or None where it cannot be built.
+
+    Without it an FMU still works; a refused parameter is then reported as fmi2Fatal (pythonfmu's
+    status for any Python exception) instead of fmi2Error.
+    """
+    if get_platform() != "linux64" or not SHIM_SOURCE.is_file():
+        return None
+    with tempfile.TemporaryDirectory(prefix="ncfmu_shim_") as tmp:
+        out = Path(tmp) / "shim.so"
+        for cc in ("cc", "gcc", "clang"):
+            if shutil.which(cc) is None:
+                continue
+            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(out), str(SHIM_SOURCE), "-ldl"],
+                                  capture_output=True, text=True)
+            if proc.returncode == 0:
+                return out.read_bytes()
+            warnings.warn(f"ncfmu: compiling the status shim with {cc} failed: {proc.stderr.strip()[:300]}")
+            return None
+    warnings.warn("ncfmu: no C compiler found; FMUs report refused parameters as fmi2Fatal, not fmi2Error")
+    return None
 
 
 def binary_name(model: str) -> str:
@@ -116,6 +147,8 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
 
 def _rewrite(src: Path, target: Path, logic, version: str) -> None:
     from ..docs import fmu_html
+    shim = status_shim()
+    linux_binary = f"binaries/linux64/{logic.MODEL_NAME}.so"
     partial = target.with_suffix(".fmu.part")
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
@@ -123,6 +156,11 @@ def _rewrite(src: Path, target: Path, logic, version: str) -> None:
             if item.filename == "modelDescription.xml":
                 data = enrich(data, logic, version)
                 zout.writestr("documentation/index.html", fmu_html(data, logic))
+            if item.filename == linux_binary and shim is not None:
+                # the shim becomes the FMU's binary and forwards to pythonfmu's, kept beside it
+                zout.writestr(f"binaries/linux64/{logic.MODEL_NAME}.pythonfmu.so", data)
+                zout.writestr(SHIM_MARKER, "linux64\n")
+                data = shim
             zout.writestr(item.filename, data)
     partial.replace(target)
 
