@@ -104,3 +104,18 @@ def test_bad_limit_table_refused_at_initialisation(fmus, fmu_runner, name, value
         r.start(**{name: value})
     assert "returned fmi2Error" in str(err.value)
     assert f"{name} = " in str(err.value) and rule in str(err.value)
+
+
+def test_a_controller_exception_fails_the_step_with_fmi2error(fmus, fmu_runner, monkeypatch):
+    """A defect inside the controller: fmi2Error and the exception in the log, the host keeps running."""
+    r = fmu_runner(fmus["OperatorPanel"]).start()
+    r.slave.do_step(0.0, 1e-3)
+    vendored = next(m for name, m in sys.modules.items()
+                    if name.startswith("ncfmu_") and name.endswith(".controllers.panel"))
+
+    def broken(self, t, dt, inputs):
+        raise ZeroDivisionError("deliberate defect")
+    monkeypatch.setattr(vendored.OperatorPanel, "step", broken)
+    with pytest.raises(SimulationError) as err:
+        r.slave.do_step(1e-3, 1e-3)
+    assert "returned fmi2Error" in str(err.value) and "deliberate defect" in str(err.value)

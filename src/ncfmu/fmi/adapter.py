@@ -18,6 +18,7 @@ import copy
 import operator
 import pickle
 import sys
+import types
 from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
@@ -54,6 +55,7 @@ class ControllerSlave(Fmi2Slave):
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
         self._init_refused = False
+        self.step_failed = False          # a failed doStep: fmi2Error through the shim (not discard)
         resources = kwargs.get("resources")
         self._status_shim = bool(resources) and sys.platform.startswith("linux") and \
             Path(resources, "ncfmu_status_shim").is_file()
@@ -62,6 +64,9 @@ class ControllerSlave(Fmi2Slave):
         self._causality = {vr: (v.causality.name, type(v).__name__, v.name) for vr, v in self.vars.items()}
         self._fast_get: dict[tuple, object] = {}
         self._fast_set: dict[tuple, object] = {}
+        # The status shim picks this instance up right after pythonfmu created it (fmi2Instantiate,
+        # fmi2Reset) and then reads outputs and writes inputs straight from/into these dicts.
+        sys.modules.setdefault("_ncfmu_fast", types.ModuleType("_ncfmu_fast")).last = self
 
     # -- fast paths for the calls a master makes every step ---------------------------------------
     # pythonfmu's generic get/set check every variable's type and call its getter one by one; a
@@ -192,12 +197,20 @@ class ControllerSlave(Fmi2Slave):
         if self.logic is None:
             self.log(f"{self.instance_name}: doStep refused: the parameters were refused at initialisation",
                      Fmi2Status.error)
+            self.step_failed = True
             return False
         # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
         # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
         step_size = round(step_size * 1e9) * 1e-9
-        self.logic.step(current_time, step_size, self.inputs)   # type: ignore[union-attr]
-        if self.logic.messages:                                  # type: ignore[union-attr]
+        try:
+            self.logic.step(current_time, step_size, self.inputs)
+        except Exception as err:                                  # a defect: say where, fail the step
+            import traceback
+            self.log(f"{self.instance_name}: doStep at t = {current_time:.6f} s failed: {err!r}\n"
+                     f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
+            self.step_failed = True
+            return False
+        if self.logic.messages:
             self._flush()
         return True
 
