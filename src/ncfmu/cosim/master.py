@@ -249,7 +249,10 @@ class Master:
 
     def _loop(self, run: "_Run", first: int, last: int, progress=None) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time."""
-        values, plan, rec, n_rec, times, h = run.values, run.plan, run.rec, run.n_rec, run.times, run.h
+        values, plan, rec, n_rec, h = run.values, run.plan, run.rec, run.n_rec, run.h
+        times = run.times.tolist()
+        # the rows to record and the slices of the output vectors they copy, prepared once
+        record = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
         ext_updates, input_times = run.ext_updates, run.input_times
         next_change = int(np.searchsorted(input_times, times[first] + 1e-12, side="right")) - 1 if len(input_times) else 0
         if len(input_times) and next_change >= 0:
@@ -260,7 +263,7 @@ class Master:
         report_every = max(1, run.n_steps // 100)
         wall0 = _time.perf_counter()
         for i in range(first, last):
-            t = float(times[i])
+            t = times[i]
             while next_change < len(input_times) and input_times[next_change] <= t + 1e-12:
                 for arr, slot, col in ext_updates:
                     arr[slot] = col[next_change]
@@ -282,8 +285,8 @@ class Master:
                     s.do_step(t, h)
                     s.read_outputs()
             row = i + 1
-            for k in KINDS:
-                rec[k][row] = values[k][:n_rec[k]]
+            for table, vector in record:
+                table[row] = vector
             if progress is not None and row % report_every == 0:
                 progress(row / run.n_steps)
         return _time.perf_counter() - wall0
