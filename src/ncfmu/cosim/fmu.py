@@ -111,6 +111,7 @@ class FmuSlave:
         self._sent: list[bytes | None] = []
         self._raw = None                       # our own handle of the FMU library (see bind)
         self._raw_component = None
+        self._raw_step = None
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
@@ -160,6 +161,9 @@ class FmuSlave:
         if self._raw is None:
             self._raw = ctypes.CDLL(self._dll._name)
             self._raw_component = ctypes.c_void_p(self._component)
+            self._raw_step = self._raw.fmi2DoStep
+            self._raw_step.restype = ctypes.c_int
+            self._t, self._h, self._true = ctypes.c_double(), ctypes.c_double(), ctypes.c_int(1)
         setter = getattr(self._raw, f"fmi2Set{kind}")
         getter = getattr(self._raw, f"fmi2Get{kind}")
         setter.restype = getter.restype = ctypes.c_int
@@ -197,7 +201,12 @@ class FmuSlave:
             sent[i] = now
 
     def do_step(self, t: float, h: float) -> None:
-        status = self._step(self._component, t, h, 1)
+        raw = self._raw_step
+        if raw is not None:
+            self._t.value, self._h.value = t, h
+            status = raw(self._raw_component, self._t, self._h, self._true)
+        else:
+            status = self._step(self._component, t, h, 1)
         if status > 1:
             raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
 
