@@ -147,29 +147,48 @@ def test_commands_never_jump():
             assert abs(b[f"{axis}_cmd"] - a[f"{axis}_cmd"]) <= 50.0 * DT * 1.000001
 
 
-def test_alarm_in_stops_at_once_and_latches():
-    seq = CutSequencer()
+def assert_controlled_stop(seq, trace, axis="z"):
+    """From the alarm on: the command decelerates within accel to rest, along the path, and stays there."""
+    v0 = abs(trace[0][f"{axis}_vff"])
+    for a, b in zip(trace, trace[1:]):
+        for ax in "xz":
+            assert abs(b[f"{ax}_vff"] - a[f"{ax}_vff"]) <= seq.accel * DT * 1.000001
+            assert math.isfinite(b[f"{ax}_cmd"])
+    assert trace[-1]["x_vff"] == trace[-1]["z_vff"] == 0.0
+    travel = abs(trace[-1][f"{axis}_cmd"] - trace[0][f"{axis}_cmd"])
+    assert travel <= v0 * v0 / (2 * seq.accel) + v0 * DT + 1e-9
+
+
+def test_alarm_in_decelerates_along_the_path_and_latches():
+    seq = CutSequencer.with_blocks([Block(feed=40.0)])
     axes = PerfectAxes(seq)
     axes.press_start()
     before = axes.run_until(lambda o: o["subcycle"] == 2 and o["z_cmd"] < -5)
+    trace = [before]
     o = axes.step(alarm_in=True)
     assert o["alarm"] and not o["busy"]
-    assert o["z_cmd"] == before["z_cmd"] and o["z_vff"] == 0.0
-    o = axes.step(alarm_in=False)
-    assert o["alarm"] and o["z_cmd"] == before["z_cmd"]
+    assert o["z_vff"] < 0 and o["x_cmd"] == before["x_cmd"]         # still moving: no velocity step
+    trace.append(o)
+    for _ in range(200):
+        trace.append(axes.step(alarm_in=False))
+    assert_controlled_stop(seq, trace)
+    assert trace[-1]["alarm"] and trace[-1]["z_cmd"] < before["z_cmd"] - 1.0   # 40 mm/s: 1.6 mm to stop
     assert any("alarm_in" in text for _, text in seq.take_messages())
 
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf])
-def test_nan_position_raises_alarm_and_freezes(bad):
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 1e300])
+def test_absurd_position_raises_alarm_and_stops_under_control(bad):
     seq = CutSequencer()
     axes = PerfectAxes(seq)
     axes.press_start()
-    before = axes.run_until(lambda o: o["subcycle"] == 2)
-    o = axes.step(x_pos=bad)
-    assert o["alarm"]
-    assert (o["x_cmd"], o["z_cmd"]) == (before["x_cmd"], before["z_cmd"])
-    assert all(math.isfinite(o[k]) for k in ("x_cmd", "z_cmd", "x_vff", "z_vff"))
+    before = axes.run_until(lambda o: o["subcycle"] == 2 and o["z_cmd"] < -1)
+    seq.step(axes.t, DT, {**axes.inputs, "x_pos": bad})
+    trace = [before, dict(seq.outputs())]
+    assert trace[-1]["alarm"]
+    axes.t += DT
+    for _ in range(50):
+        trace.append(axes.step())
+    assert_controlled_stop(seq, trace)
     assert any("x_pos" in text for _, text in seq.take_messages())
 
 

@@ -144,3 +144,54 @@ def finite_inputs(inputs: Mapping[str, object], names: tuple[str, ...]) -> str |
         if not math.isfinite(value):  # type: ignore[arg-type]
             return f"input {name} = {value!r}: must be finite"
     return None
+
+
+#: No machine axis is this long: a position input beyond it is a broken signal, not a place (mm).
+POSITION_LIMIT = 1.0e5
+#: No feed axis moves this fast: a position input changing faster between two steps is a broken
+#: signal (a wrong connection, a unit error, a host writing garbage), not motion (mm/s).
+SPEED_LIMIT = 2000.0
+
+
+class PositionGuard:
+    """Judges position inputs every step: finite, within ``POSITION_LIMIT``, and no jump beyond
+    ``SPEED_LIMIT * dt`` since the last step (the first step after ``reset()`` has nothing to compare)."""
+
+    def __init__(self, names: tuple[str, ...]) -> None:
+        self.names = names
+        self.last: list[float] | None = None
+
+    def reset(self) -> None:
+        self.last = None
+
+    def check(self, inputs: Mapping[str, object], dt: float) -> str | None:
+        """Return a message naming the first absurd input (and the rule), else None."""
+        values = [inputs[n] for n in self.names]
+        for name, value in zip(self.names, values):
+            if not math.isfinite(value):  # type: ignore[arg-type]
+                return f"input {name} = {value!r}: must be finite"
+            if abs(value) > POSITION_LIMIT:  # type: ignore[arg-type]
+                return f"input {name} = {value!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
+        last, self.last = self.last, [float(v) for v in values]  # type: ignore[arg-type]
+        if last is not None:
+            for name, old, new in zip(self.names, last, self.last):
+                if abs(new - old) > SPEED_LIMIT * dt + 1e-9:
+                    return (f"input {name} jumped {old!r} -> {new!r} in one step of {dt:g} s: "
+                            f"faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
+        return None
+
+
+class OverrideDial:
+    """A feed-override input: clamped to 0..``hi``; a value outside is said once per excursion."""
+
+    def __init__(self, name: str = "feed_override", hi: float = 1.5) -> None:
+        self.name, self.hi = name, hi
+        self.outside = False
+
+    def read(self, controller: Controller, t: float, value: float) -> float:
+        clamped = min(max(value, 0.0), self.hi)
+        if clamped != value and not self.outside:
+            controller.say("warning", f"t = {t:.4f} s: input {self.name} = {value!r}: outside 0..{self.hi:g}, "
+                                      f"clamped to {clamped:g}")
+        self.outside = clamped != value
+        return clamped

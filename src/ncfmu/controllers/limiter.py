@@ -8,18 +8,29 @@ is stepped, not rectangular. A reference position above the last boundary is out
 Every monitor period (5 ms in the seed) the limiter finds the region (binary search, O(log n);
 the seed scans linearly) and compares the limited axis with that region's range. On a violation it
 blocks the direction that was being commanded -- on whichever axis moved into the violation, as the
-seed resets that bit of its movement-axis register -- by holding that axis's last allowed command
-with zero velocity feed-forward. Motion in the opposite direction passes at once, so the axis can be
-backed out without re-homing. A blocked direction is released, and ``alarm`` cleared, once the
-position is inside and a step in that direction would stay inside -- after backing out, or after the
-other axis has moved clear (the wheel retracted, the table may travel again). An input that ran ahead
-while held is then followed accelerating at ``decel``, never with a jump.
+seed resets that bit of its movement-axis register. Motion in the opposite direction passes at once,
+so the axis can be backed out without re-homing.
 
-It sits between a controller and the servos and judges the position it commands (its gated output,
-like the seed's current-position counter); with ``use_actual`` also the servo feedback (the
-stricter of both). With ``predictive`` it judges where the axis can get: the command plus one
-monitor period of travel, the stopping distance at ``decel`` and the servo's following error, so the
-boundary is not crossed at all.
+Stops are controlled (SPEC 2): a blocked direction is not a frozen command. The gated output of that
+axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the command
+never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
+gated command may pass the boundary by at most ``v * (monitor_period + dt) + v**2 / (2 * decel)``
+(``v``: its speed; :meth:`AreaLimiter.overshoot_bound`). With ``predictive`` the limiter governs
+the speed every step: each axis may move toward a boundary only as fast as it can still stop
+``margin`` before it at ``decel`` (the boundary being the nearest region edge that the other axis,
+within its own stopping reach, makes forbidden), so the command stops at the boundary and the actual
+axis never crosses. Then ``alarm``/``blocked`` say that the *input* asks to go outside.
+
+No deadlock: a command that stays inside is always followed -- passed at once when it is consistent
+with its feed-forward, otherwise (after a hold, a braking, or a start away from the input) rejoined
+without a jump, closing the gap at ``decel`` and at most ``max_speed``. A blocked direction is
+released once the position is inside and a step in that direction stays inside.
+
+Absurd inputs -- NaN or infinite values, a position beyond any machine, a feed-forward beyond
+``max_speed``, a command jump beyond what the axis can do in one step -- bring both axes to a
+controlled stop with ``alarm`` and one log line. A jump latches until the input comes back to within
+one step of the gated output (the controller has re-based on the axis); the start is exempt: the first
+input is rejoined.
 """
 
 from __future__ import annotations
@@ -31,7 +42,8 @@ import math
 
 from ..errors import require
 from ..ports import boolean, integer, real
-from .base import Controller, finite_inputs, int_param, real_param
+from .base import POSITION_LIMIT, Controller, PositionGuard, int_param, real_param
+from .motion import stop_speed
 
 MAX_REGIONS = 32
 REF_PLUS, REF_MINUS, LIM_PLUS, LIM_MINUS = 1, 2, 4, 8
@@ -59,6 +71,8 @@ def _table_ports():
     return tuple(ports)
 
 
+
+
 class AreaLimiter(Controller):
     MODEL_NAME = "AreaLimiter"
     DESCRIPTION = ("Operating-area limiter: stepped, region-dependent limits; blocks only the offending direction "
@@ -70,12 +84,16 @@ class AreaLimiter(Controller):
         integer("n_regions", "parameter", len(DEFAULT_TABLE), "number of regions in the limit table", min=1, max=MAX_REGIONS),
         *_table_ports(),
         real("monitor_period", "parameter", 0.005, "s", "monitor period (the seed's 5 ms interrupt)", min=0.0),
-        boolean("predictive", "parameter", False, "judge the position the axis can reach (command + travel "
-                "in one period + stopping distance + following error)"),
+        boolean("predictive", "parameter", False, "govern the speed so that each axis can still stop 'margin' before "
+                "the boundary at 'decel': the command stops at the boundary, the actual axis never crosses"),
         boolean("use_actual", "parameter", False, "also judge the servo feedback ref_pos/lim_pos (the stricter)"),
         real("ref_start", "parameter", 0.0, "mm", "reference-axis command before the first step (the axis's start position)"),
         real("lim_start", "parameter", 0.0, "mm", "limited-axis command before the first step (the axis's start position)"),
-        real("decel", "parameter", 500.0, "mm/s2", "deceleration assumed for the stopping distance (predictive)", min=0.0),
+        real("decel", "parameter", 500.0, "mm/s2", "deceleration of every controlled stop and rejoin, and the one "
+             "assumed for the stopping distance (predictive)", min=0.0),
+        real("max_speed", "parameter", 500.0, "mm/s", "fastest the axes can move: a larger feed-forward, or a command "
+             "jump beyond max_speed * dt, is absurd (hold, alarm); rejoins never go faster", min=0.0),
+        real("margin", "parameter", 0.05, "mm", "predictive: the command stops this far before the boundary", min=0.0),
         real("ref_cmd_in", "input", 0.0, "mm", "reference-axis position command from the controller"),
         real("lim_cmd_in", "input", 0.0, "mm", "limited-axis position command from the controller"),
         real("ref_vff_in", "input", 0.0, "mm/s", "reference-axis velocity feed-forward from the controller"),
@@ -86,7 +104,7 @@ class AreaLimiter(Controller):
         real("lim_cmd", "output", None, "mm", "gated limited-axis position command"),
         real("ref_vff", "output", None, "mm/s", "gated reference-axis velocity feed-forward"),
         real("lim_vff", "output", None, "mm/s", "gated limited-axis velocity feed-forward"),
-        boolean("alarm", "output", None, "envelope violated (until back inside)"),
+        boolean("alarm", "output", None, "envelope violated or asked for, or an absurd input (until resolved)"),
         integer("region", "output", None, "region of the reference axis (0: above the table)"),
         integer("blocked", "output", None, "blocked directions: 1 ref+, 2 ref-, 4 lim+, 8 lim-"),
     )
@@ -107,10 +125,12 @@ class AreaLimiter(Controller):
         self.ref_max, self.lim_min, self.lim_max = bounds, lows, highs
         self.monitor_period = real_param(values, "monitor_period", positive=True)
         self.decel = real_param(values, "decel", positive=True)
+        self.max_speed = real_param(values, "max_speed", positive=True)
+        self.margin = real_param(values, "margin", nonnegative=True)
         self.predictive = bool(values["predictive"])
         self.use_actual = bool(values["use_actual"])
-        self.ref_start = real_param(values, "ref_start")
-        self.lim_start = real_param(values, "lim_start")
+        self.ref_start = real_param(values, "ref_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
+        self.lim_start = real_param(values, "lim_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
 
     @classmethod
     def with_table(cls, table: Sequence[tuple[float, float, float]], **parameters: object) -> "AreaLimiter":
@@ -121,19 +141,38 @@ class AreaLimiter(Controller):
         flat.update(parameters)
         return cls(**flat)
 
+    def overshoot_bound(self, speed: float, dt: float) -> float:
+        """Without ``predictive``: how far past a boundary the gated command of an axis moving at ``speed``
+        can get -- one monitor period and one step before the violation is seen, then the stop at ``decel``."""
+        return speed * (self.monitor_period + dt) + speed * speed / (2.0 * self.decel) + 1e-9
+
     def reset(self) -> None:
-        self.ref_out, self.lim_out = self.ref_start, self.lim_start
-        self.ref_vff = self.lim_vff = 0.0
+        self.pos = [self.ref_start, self.lim_start]   # gated commands (ref, lim)
+        self.vel = [0.0, 0.0]                          # gated velocity feed-forwards
+        self.passing = [True, True]                    # the output is the input (else: governed/rejoining)
+        self.hard = 0          # blocks from a violation of the gated (or actual) position: the axis stops
+        self.soft = 0          # predictive: the input asks to leave the envelope (the governor holds it)
         self.blocked = 0
-        self._catch_up = [0.0, 0.0]                # extra speed while following an input that ran ahead
         self._block_speed = {REF_PLUS: 0.0, REF_MINUS: 0.0, LIM_PLUS: 0.0, LIM_MINUS: 0.0}
+        self._prev_in: tuple[float, float] | None = None
+        self._jump = [False, False]
+        self._feedback = PositionGuard(("ref_pos", "lim_pos"))
         self.alarm = False
-        self.region = 0
+        self.region = find_region(self.ref_max, self.ref_start)
         self.clock = self.monitor_period        # monitor at the first step
-        self._tick_ref, self._tick_lim = self.ref_out, self.lim_out   # gated positions at the last tick
-        self.fault = None
+        self._tick = list(self.pos)             # gated positions at the last tick
+        self.fault: str | None = None
         self._outputs: dict[str, object] = {}
         self._publish()
+
+    # compatibility: the gated commands by name
+    @property
+    def ref_out(self) -> float:
+        return self.pos[0]
+
+    @property
+    def lim_out(self) -> float:
+        return self.pos[1]
 
     # -- the envelope -----------------------------------------------------------------------------
     def inside(self, ref: float, lim: float) -> bool:
@@ -164,108 +203,226 @@ class AreaLimiter(Controller):
                 mask |= LIM_MINUS
         return mask
 
-    def _lookahead(self, v: float, fe: float) -> float:
-        """How far beyond its command an axis moving at ``v`` can get (predictive mode)."""
-        return abs(v) * self.monitor_period + v * v / (2.0 * self.decel) + abs(fe)
+    def _reach(self, axis: int, dt: float) -> tuple[float, float]:
+        """Where an axis can get before it stops (one step, then braking at ``decel``)."""
+        v = self.vel[axis]
+        d = v * dt + v * abs(v) / (2.0 * self.decel)
+        p = self.pos[axis]
+        return p + min(0.0, d), p + max(0.0, d)
+
+    def _rooms(self, dt: float) -> tuple[float, float, float, float]:
+        """Predictive: distance each axis may still travel (ref+, ref-, lim+, lim-) to ``margin`` before the
+        nearest boundary that the other axis, anywhere within its stopping reach, makes forbidden."""
+        m, n = self.margin, self.n_regions
+        ref, lim = self.pos
+        lim_lo, lim_hi = self._reach(1, dt)
+        ref_lo, ref_hi = self._reach(0, dt)
+        inf = math.inf
+        # limited axis: the tightest range over the regions the reference axis may be in
+        r1, r2 = find_region(self.ref_max, ref_lo), find_region(self.ref_max, ref_hi)
+        if r1 == 0:                      # off the table: the reference axis must back out; X is no worse
+            lim_plus = lim_minus = inf
+        else:
+            last = r2 if r2 else n
+            lim_plus = min(self.lim_max[r1 - 1:last]) - m - lim
+            lim_minus = lim - (max(self.lim_min[r1 - 1:last]) + m)
+
+        def forbids(j: int) -> bool:
+            return lim_lo < self.lim_min[j - 1] or lim_hi > self.lim_max[j - 1]
+
+        r = find_region(self.ref_max, ref) or n + 1
+        ref_plus = self.ref_max[n - 1] - m - ref            # the end of the table
+        for j in range(r + 1, n + 1):
+            if forbids(j):
+                ref_plus = self.ref_max[j - 2] - m - ref    # region j starts just above ref_max[j-2]
+                break
+        ref_minus = inf
+        for j in range(min(r, n + 1) - 1, 0, -1):
+            if forbids(j):
+                ref_minus = ref - self.ref_max[j - 1] - m   # region j ends at ref_max[j-1], inclusive
+                break
+        return ref_plus, ref_minus, lim_plus, lim_minus
+
+    def _windows(self, dt: float) -> list[list[float]]:
+        """Velocity window [lo, hi] of each axis for this step."""
+        w = [[-self.max_speed, self.max_speed], [-self.max_speed, self.max_speed]]
+        for axis, plus, minus in ((0, REF_PLUS, REF_MINUS), (1, LIM_PLUS, LIM_MINUS)):
+            if self.hard & plus:
+                w[axis][1] = 0.0
+            if self.hard & minus:
+                w[axis][0] = 0.0
+        if self.predictive:
+            rp, rm, lp, lm = self._rooms(dt)
+            a = self.decel
+            w[0][1] = min(w[0][1], stop_speed(rp, self.vel[0], a, dt))
+            w[0][0] = max(w[0][0], -stop_speed(rm, -self.vel[0], a, dt))
+            w[1][1] = min(w[1][1], stop_speed(lp, self.vel[1], a, dt))
+            w[1][0] = max(w[1][0], -stop_speed(lm, -self.vel[1], a, dt))
+        return w
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = finite_inputs(inputs, ("ref_cmd_in", "lim_cmd_in", "ref_vff_in", "lim_vff_in", "ref_pos", "lim_pos"))
+        cmd = (inputs["ref_cmd_in"], inputs["lim_cmd_in"])
+        vff = (inputs["ref_vff_in"], inputs["lim_vff_in"])
+        bad = self._absurd(cmd, vff, inputs, dt)  # type: ignore[arg-type]
         if bad:
-            # Hold both axes where they are: a NaN never reaches a servo.
+            # Both axes come to a controlled stop where they are: nothing absurd reaches a servo.
             if self.fault != bad:
-                self.say("error", f"t = {t:.4f} s: {bad}; holding the last commands")
+                self.say("error", f"t = {t:.4f} s: {bad}; both axes stopped, holding")
             self.fault = bad
+            for axis in (0, 1):
+                self._brake(axis, dt)
             self.alarm = True
-            self.ref_vff = self.lim_vff = 0.0
             return self._publish()
-        self.fault = None
-        ref_in, lim_in = float(inputs["ref_cmd_in"]), float(inputs["lim_cmd_in"])
+        if self.fault:
+            self.say("info", f"t = {t:.4f} s: inputs sane again; following the commands")
+            self.fault = None
+        c = (float(cmd[0]), float(cmd[1]))  # type: ignore[arg-type]
+        v_in = (float(vff[0]), float(vff[1]))  # type: ignore[arg-type]
 
-        if self.blocked:
-            self._release(t, ref_in, lim_in, float(inputs["ref_vff_in"]), float(inputs["lim_vff_in"]))
-        # Gate: a blocked direction holds; anything else passes at once (catching up without a jump).
-        self.ref_out, self.ref_vff = self._gate(0, ref_in, float(inputs["ref_vff_in"]), self.ref_out, dt,
-                                                REF_PLUS, REF_MINUS)
-        self.lim_out, self.lim_vff = self._gate(1, lim_in, float(inputs["lim_vff_in"]), self.lim_out, dt,
-                                                LIM_PLUS, LIM_MINUS)
+        if self.hard:
+            self._release(t, v_in)
+        window = self._windows(dt)
+        for axis in (0, 1):
+            self._follow(axis, c[axis], v_in[axis], window[axis], dt)
 
         self.clock += dt
         if self.clock >= self.monitor_period - 1e-12:
             self.clock = 0.0
-            self._monitor(t, ref_in, lim_in, float(inputs["ref_pos"]), float(inputs["lim_pos"]))
+            self._monitor(t, c, float(inputs["ref_pos"]), float(inputs["lim_pos"]))  # type: ignore[arg-type]
         return self._publish()
 
-    def _gate(self, axis: int, cmd: float, vff: float, held: float, dt: float, plus: int, minus: int):
-        if (cmd > held and self.blocked & plus) or (cmd < held and self.blocked & minus):
-            self._catch_up[axis] = 0.0
-            return held, 0.0
-        gap = cmd - held
-        # An interpolator's step may exceed vff*dt by half an acceleration step: that is motion, pass it.
-        if abs(gap) <= (abs(vff) + self.decel * dt) * dt + 1e-9:
-            self._catch_up[axis] = 0.0
-            return cmd, vff
-        # The input ran ahead while this direction was held: follow it accelerating at ``decel``.
-        self._catch_up[axis] += self.decel * dt
-        step = math.copysign(min(abs(gap), (abs(vff) + self._catch_up[axis]) * dt), gap)
-        return held + step, step / dt
+    def _absurd(self, cmd: tuple[float, float], vff: tuple[float, float], inputs: Mapping[str, object],
+                dt: float) -> str | None:
+        names = (("ref_cmd_in", "ref_vff_in"), ("lim_cmd_in", "lim_vff_in"))
+        for axis in (0, 1):
+            if not math.isfinite(cmd[axis]):
+                return f"input {names[axis][0]} = {cmd[axis]!r}: must be finite"
+            if not math.isfinite(vff[axis]):
+                return f"input {names[axis][1]} = {vff[axis]!r}: must be finite"
+            if abs(cmd[axis]) > POSITION_LIMIT:
+                return f"input {names[axis][0]} = {cmd[axis]!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
+            if abs(vff[axis]) > self.max_speed * (1 + 1e-9):
+                return f"input {names[axis][1]} = {vff[axis]!r}: faster than max_speed = {self.max_speed:g} mm/s"
+        bad = self._feedback.check(inputs, dt)
+        if bad:
+            return bad
+        reach = self.max_speed * dt + 1e-9
+        prev, self._prev_in = self._prev_in, (float(cmd[0]), float(cmd[1]))
+        for axis in (0, 1):
+            # A jump latches until the input is back within one step of the gated output.
+            if self._jump[axis] and abs(cmd[axis] - self.pos[axis]) <= reach:
+                self._jump[axis] = False
+            elif prev is not None and abs(cmd[axis] - prev[axis]) > reach and abs(cmd[axis] - self.pos[axis]) > reach:
+                self._jump[axis] = True
+                self._jump_from = (prev[axis], cmd[axis])
+        for axis in (0, 1):
+            if self._jump[axis]:
+                return (f"input {names[axis][0]} jumped more than max_speed * dt = {reach:.4g} mm in one step "
+                        f"(to {cmd[axis]!r}, the axis is at {self.pos[axis]:.4f}); holding until it returns to the axis")
+        return None
 
-    def _release(self, t: float, ref_in: float, lim_in: float, ref_vff_in: float, lim_vff_in: float) -> None:
-        """Free a blocked direction once a step that way from the present position stays inside.
+    def _brake(self, axis: int, dt: float) -> None:
+        """Controlled stop of one axis: decelerate at ``decel`` to rest."""
+        v = self.vel[axis]
+        a_dt = self.decel * dt
+        v_new = max(v - a_dt, 0.0) if v > 0 else min(v + a_dt, 0.0)
+        self.pos[axis] += 0.5 * (v + v_new) * dt
+        self.vel[axis] = v_new
+        self.passing[axis] = False
+
+    def _follow(self, axis: int, c: float, v_in: float, window: list[float], dt: float) -> None:
+        """Pass the input at once, or govern: rejoin it without a jump, never leaving the velocity window."""
+        lo, hi = window
+        p, v = self.pos[axis], self.vel[axis]
+        a_dt = self.decel * dt
+        gap = c - p
+        # An interpolator's step may exceed vff*dt by half an acceleration step: that is motion, pass it.
+        consistent = abs(gap) <= (abs(v_in) + a_dt) * dt + 1e-9
+        allowed = lo - 1e-9 <= v_in <= hi + 1e-9 and lo * dt - 1e-9 <= gap <= hi * dt + 1e-9
+        if self.passing[axis] and consistent and allowed:
+            self.pos[axis], self.vel[axis] = c, v_in
+            return
+        self.passing[axis] = False
+        # Rejoin in the input's frame: close the gap as fast as still lets the relative speed reach 0 at it.
+        w = v - v_in
+        direction = 1.0 if gap > 0 else -1.0
+        w_target = direction * stop_speed(abs(gap), direction * w, self.decel, dt)
+        v_new = v_in + min(max(w_target, w - a_dt), w + a_dt)
+        v_new = min(max(v_new, lo), hi)
+        v_new = min(max(v_new, v - a_dt), v + a_dt)        # never a velocity step, even when braking
+        p_new = p + 0.5 * (v + v_new) * dt
+        if (abs(c - p_new) <= a_dt * dt + 1e-9 and abs(v_in - v_new) <= a_dt + 1e-9
+                and lo - 1e-9 <= v_in <= hi + 1e-9):
+            p_new, v_new = c, v_in                          # rejoined: pass from here on
+            self.passing[axis] = True
+        self.pos[axis], self.vel[axis] = p_new, v_new
+
+    def _release(self, t: float, v_in: tuple[float, float]) -> None:
+        """Free a hard-blocked direction once a step that way from the present position stays inside.
 
         It is freed either by backing out (a move against it, as in the seed) or because the other axis
         moved so that this direction is allowed again (the wheel retracted, the table may travel).
         """
         freed = 0
-        for bit, axis_ref, sign, vff in ((REF_PLUS, True, 1, ref_vff_in), (REF_MINUS, True, -1, ref_vff_in),
-                                         (LIM_PLUS, False, 1, lim_vff_in), (LIM_MINUS, False, -1, lim_vff_in)):
-            if not self.blocked & bit:
+        ref_out, lim_out = self.pos
+        for bit, axis in ((REF_PLUS, 0), (REF_MINUS, 0), (LIM_PLUS, 1), (LIM_MINUS, 1)):
+            if not self.hard & bit:
                 continue
-            # probe as far as the axis could go at the speed it was blocked at (or is now asked for)
-            speed = max(abs(vff), self._block_speed[bit])
-            probe = sign * max(self._lookahead(speed, 0.0) if self.predictive else speed * self.monitor_period, 1e-6)
-            ref, lim = (self.ref_out + probe, self.lim_out) if axis_ref else (self.ref_out, self.lim_out + probe)
-            if self.inside(self.ref_out, self.lim_out) and self.inside(ref, lim):
+            sign = 1.0 if bit in (REF_PLUS, LIM_PLUS) else -1.0
+            # probe as far as the axis could go in one monitor period at the speed it was blocked at (or
+            # is now asked for); speeds are bounded by max_speed, so the probe is too
+            speed = min(max(abs(v_in[axis]), self._block_speed[bit]), self.max_speed)
+            probe = sign * max(speed * self.monitor_period, 1e-6)
+            ref, lim = (ref_out + probe, lim_out) if axis == 0 else (ref_out, lim_out + probe)
+            if self.inside(ref_out, lim_out) and self.inside(ref, lim):
                 freed |= bit
         if freed:
-            self.blocked &= ~freed
+            self.hard &= ~freed
             self.say("info", f"t = {t:.4f} s: inside the envelope again; releasing {_mask_text(freed)}")
-            self.alarm = bool(self.blocked)
+            self._update_alarm()
 
-    def _monitor(self, t: float, ref_in: float, lim_in: float, ref_pos: float, lim_pos: float) -> None:
-        dir_ref = _sign(self.ref_out - self._tick_ref) or _sign(ref_in - self.ref_out)
-        dir_lim = _sign(self.lim_out - self._tick_lim) or _sign(lim_in - self.lim_out)
-        points = [(self.ref_out, self.lim_out, self._tick_ref)]
+    def _monitor(self, t: float, c: tuple[float, float], ref_pos: float, lim_pos: float) -> None:
+        ref_out, lim_out = self.pos
+        dir_ref = _sign(ref_out - self._tick[0]) or _sign(c[0] - ref_out)
+        dir_lim = _sign(lim_out - self._tick[1]) or _sign(c[1] - lim_out)
+        points = [(ref_out, lim_out)]
         if self.use_actual:
-            points.append((ref_pos, lim_pos, self._tick_ref))
-        if self.predictive:
-            fe_ref, fe_lim = self.ref_out - ref_pos, self.lim_out - lim_pos
-            reach_ref = dir_ref * self._lookahead(self.ref_vff, fe_ref)
-            reach_lim = dir_lim * self._lookahead(self.lim_vff, fe_lim)
-            points = [(r + reach_ref, l + reach_lim, r) for r, l, _ in points]
+            points.append((ref_pos, lim_pos))
         new = 0
-        for ref, lim, ref_from in points:
-            new |= self._violations(ref, lim, ref_from, dir_ref, dir_lim)
-        self.region = find_region(self.ref_max, self.ref_out)
-        if new & ~self.blocked:
-            for bit, v in ((REF_PLUS, self.ref_vff), (REF_MINUS, self.ref_vff), (LIM_PLUS, self.lim_vff),
-                           (LIM_MINUS, self.lim_vff)):
-                if new & bit & ~self.blocked:
-                    self._block_speed[bit] = abs(v)
+        for ref, lim in points:
+            new |= self._violations(ref, lim, self._tick[0], dir_ref, dir_lim)
+        self.region = find_region(self.ref_max, ref_out)
+        if new & ~self.hard:
+            for bit, axis in ((REF_PLUS, 0), (REF_MINUS, 0), (LIM_PLUS, 1), (LIM_MINUS, 1)):
+                if new & bit & ~self.hard:
+                    self._block_speed[bit] = min(abs(self.vel[axis]), self.max_speed)
             self.say("warning", f"t = {t:.4f} s: envelope violated in region {self.region} "
-                                f"(ref {self.ref_out:.4f}, lim {self.lim_out:.4f}); blocking {_mask_text(new)}")
-            if new & (REF_PLUS | REF_MINUS):
-                self.ref_vff = 0.0
-            if new & (LIM_PLUS | LIM_MINUS):
-                self.lim_vff = 0.0
-        self.blocked |= new
-        self.alarm = bool(self.blocked) or bool(new)
-        self._tick_ref, self._tick_lim = self.ref_out, self.lim_out
+                                f"(ref {ref_out:.4f}, lim {lim_out:.4f}); stopping {_mask_text(new)}")
+        self.hard |= new
+        if self.predictive:
+            # The governor keeps the output inside; say so when the input itself asks to leave.
+            soft = 0
+            if not self.inside(*c):
+                soft = self._violations(c[0], c[1], ref_out, _sign(c[0] - ref_out), _sign(c[1] - lim_out))
+            if soft & ~self.soft:
+                self.say("warning", f"t = {t:.4f} s: command (ref {c[0]:.4f}, lim {c[1]:.4f}) outside the envelope "
+                                    f"in region {find_region(self.ref_max, c[0])}; holding {_mask_text(soft)} at the "
+                                    "boundary")
+            elif self.soft and not soft:
+                self.say("info", f"t = {t:.4f} s: command inside the envelope again; following it")
+            self.soft = soft
+        self._update_alarm()
+        self._tick = list(self.pos)
+
+    def _update_alarm(self) -> None:
+        self.blocked = self.hard | self.soft
+        self.alarm = bool(self.blocked) or self.fault is not None
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs
-        out["ref_cmd"], out["lim_cmd"] = self.ref_out, self.lim_out
-        out["ref_vff"], out["lim_vff"] = self.ref_vff, self.lim_vff
+        out["ref_cmd"], out["lim_cmd"] = self.pos
+        out["ref_vff"], out["lim_vff"] = self.vel
         out["alarm"], out["region"], out["blocked"] = self.alarm, self.region, self.blocked
         return out
 

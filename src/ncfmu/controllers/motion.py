@@ -11,6 +11,17 @@ from __future__ import annotations
 import math
 
 
+def stop_speed(room: float, v_old: float, accel: float, dt: float) -> float:
+    """Highest end-of-step speed toward a stop point ``room`` ahead from which braking at ``accel`` still
+    stops within it, the speed changing linearly within the step (trapezoidal steps):
+    ``(v_old + v)/2*dt + v**2/(2*accel) <= room``. 0 when there is no room left."""
+    half = 0.5 * accel * dt
+    rest = room - 0.5 * max(v_old, 0.0) * dt
+    if rest <= 0.0:
+        return 0.0
+    return -half + math.sqrt(half * half + 2.0 * accel * rest)
+
+
 class LinearMove:
     """One straight move in n axes, advanced step by step.
 
@@ -30,6 +41,7 @@ class LinearMove:
         self.s = 0.0          # path position, mm
         self.v = 0.0          # path velocity at the end of the last step, mm/s
         self.done = True
+        self.halting = False  # a controlled stop is under way: decelerate, then end the move where it rests
 
     def begin(self, start: tuple[float, ...], end: tuple[float, ...], rate: float) -> None:
         """Start a move from ``start`` to ``end`` at vector rate ``rate`` (mm/s), from rest."""
@@ -41,6 +53,7 @@ class LinearMove:
         self.s = 0.0
         self.v = 0.0
         self.done = self.length == 0.0
+        self.halting = False
 
     def advance(self, dt: float, scale: float) -> None:
         """Advance by ``dt`` at ``scale`` times the rate (override; 0 for feed hold).
@@ -51,14 +64,13 @@ class LinearMove:
         if self.done:
             self.v = 0.0
             return
+        if self.halting:
+            scale = 0.0
         a_dt = self.accel * dt
         v_old = self.v
         remaining = self.length - self.s
-        # Highest end-of-step speed from which decelerating at ``accel`` still stops within
-        # ``remaining``: (v_old + v)/2*dt + v**2/(2*accel) <= remaining.
-        half = 0.5 * a_dt
         room = remaining - 0.5 * v_old * dt
-        v_stop = -half + math.sqrt(half * half + 2.0 * self.accel * room) if room > 0 else 0.0
+        v_stop = stop_speed(remaining, v_old, self.accel, dt)
         v_target = min(max(self.rate * scale, v_old - a_dt), v_old + a_dt)
         v = max(min(v_target, v_stop), 0.0)
         s = self.s + 0.5 * (v_old + v) * dt
@@ -67,6 +79,8 @@ class LinearMove:
             v = 0.0
             self.done = True
         self.s, self.v = s, v
+        if self.halting and v == 0.0 and not self.done:
+            self._end_here()
 
     def position(self) -> tuple[float, ...]:
         if self.done:
@@ -76,9 +90,23 @@ class LinearMove:
     def velocity(self) -> tuple[float, ...]:
         return tuple(u * self.v for u in self.unit)
 
-    def stop_now(self) -> None:
-        """Abort: stay where the command is (used on an alarm)."""
+    def halt(self) -> None:
+        """Controlled stop (alarm, EMB, a blocked move): decelerate along the path at ``accel``, then
+        end the move where it comes to rest. The command never steps its velocity; :attr:`done` turns
+        true at rest. Already at rest: ends at once."""
+        if self.done:
+            return
+        self.halting = True
+        if self.v == 0.0:
+            self._end_here()
+
+    @property
+    def at_rest(self) -> bool:
+        return self.done or self.v == 0.0
+
+    def _end_here(self) -> None:
         here = self.position()
         self.start_point = self.end_point = here
         self.length = self.s = self.v = 0.0
         self.done = True
+        self.halting = False

@@ -17,6 +17,19 @@ Axis convention: X is the radius, infeed is -X; Z runs along the spindle, cuttin
     SC2 cut      Z: -Zp, X: -Xp at the same time (taper)        (feed, override applies)
     SC3 retract  X: +ΣX                                          (rapid)
     SC4 return   Z: +Zp, X: +Xp -> back at STP                  (rapid)
+
+Each block may set its own start point (``block[k].own_stp``; the seed: "cut another part of the
+same workpiece"), else it keeps the previous block's, so one block series can rough the two
+diameters of a stepped shaft. Every move to a start point -- the first, between blocks, and the
+restart after an alarm -- is a safe approach: X retracts clear first (to the higher of the two
+radii), then Z travels, then X comes down; never a diagonal across the work.
+
+Stops are controlled: feed hold, ``alarm_in``, an excess following error or a bad input decelerate
+the present move along its path at ``accel`` (the alarm latches at once). A sub-cycle ends only when
+the sequencer's own command has reached its end AND the actual positions are within ``inpos_band``
+of it AND the servos report in-position, so a move held downstream (by the area limiter) never
+counts as done. After an alarm, START re-bases the command on the actual position (follow-up, as an
+NC does after a stop it did not command) and approaches the start point safely.
 """
 
 from __future__ import annotations
@@ -27,7 +40,7 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .base import Controller, finite_inputs, int_param, real_param, servo_ports
+from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
 
 MAX_BLOCKS = 8
@@ -48,6 +61,9 @@ class Block:
     N: int = 6
     feed: float = 4.0
     rapid: float = 50.0
+    own_stp: bool = False
+    x_stp: float = 30.0
+    z_stp: float = 2.0
 
 
 #: The lathe_roughing program (SPEC 5): rough series then finish series.
@@ -70,6 +86,10 @@ def _block_ports():
             integer(f"{p}.N", "parameter", b.N, f"block {k}: number of passes (pass counter preset)", min=1, max=10000),
             real(f"{p}.feed", "parameter", b.feed, "mm/s", f"block {k}: cutting feed of SC2", min=0.0),
             real(f"{p}.rapid", "parameter", b.rapid, "mm/s", f"block {k}: rapid rate of SC1, SC3, SC4", min=0.0),
+            boolean(f"{p}.own_stp", "parameter", b.own_stp, f"block {k}: starts from its own start point "
+                    f"block[{k}].x_stp/z_stp (else the previous block's; block 1: x_start/z_start)"),
+            real(f"{p}.x_stp", "parameter", b.x_stp, "mm", f"block {k}: X of its own start point (with own_stp)"),
+            real(f"{p}.z_stp", "parameter", b.z_stp, "mm", f"block {k}: Z of its own start point (with own_stp)"),
         ]
     return tuple(ports)
 
@@ -89,11 +109,13 @@ class CutSequencer(Controller):
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0),
         real("max_following_error", "parameter", 2.0, "mm",
              "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
+        real("inpos_band", "parameter", 0.005, "mm",
+             "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0),
         *_block_ports(),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override of the cutting feed (SC2)", min=0.0, max=1.5),
-        boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
+        boolean("alarm_in", "input", False, "external alarm (area limiter): latch alarm, decelerate to rest"),
         *servo_ports(("x", 30.0), ("z", 2.0)),
         integer("subcycle", "output", None, "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
         integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
@@ -112,6 +134,7 @@ class CutSequencer(Controller):
         self.n_blocks = int_param(values, "n_blocks", 1, MAX_BLOCKS)
         self.accel = real_param(values, "accel", positive=True)
         self.max_following_error = real_param(values, "max_following_error", positive=True)
+        self.inpos_band = real_param(values, "inpos_band", positive=True)
         blocks = []
         for k in range(1, self.n_blocks + 1):
             p = f"block[{k}]"
@@ -123,8 +146,17 @@ class CutSequencer(Controller):
                 N=int_param(values, f"{p}.N", 1, 10000),
                 feed=real_param(values, f"{p}.feed", positive=True),
                 rapid=real_param(values, f"{p}.rapid", positive=True),
+                own_stp=bool(values[f"{p}.own_stp"]),
+                x_stp=real_param(values, f"{p}.x_stp"),
+                z_stp=real_param(values, f"{p}.z_stp"),
             ))
         self.blocks = blocks
+        # the start point of every block: its own, else the previous block's
+        stps, stp = [], (self.x_start, self.z_start)
+        for b in blocks:
+            stp = (b.x_stp, b.z_stp) if b.own_stp else stp
+            stps.append(stp)
+        self.stps = stps
 
     @classmethod
     def with_blocks(cls, blocks: list[Block] | tuple[Block, ...], **parameters: object) -> "CutSequencer":
@@ -132,7 +164,7 @@ class CutSequencer(Controller):
         flat: dict[str, object] = {"n_blocks": len(blocks)}
         require(1 <= len(blocks) <= MAX_BLOCKS, "n_blocks", len(blocks), f"must be in 1..{MAX_BLOCKS}")
         for k, b in enumerate(blocks, start=1):
-            for field in ("Xf", "Xd", "Xp", "Zp", "N", "feed", "rapid"):
+            for field in ("Xf", "Xd", "Xp", "Zp", "N", "feed", "rapid", "own_stp", "x_stp", "z_stp"):
                 flat[f"block[{k}].{field}"] = getattr(b, field)
         flat.update(parameters)
         return cls(**flat)
@@ -152,6 +184,10 @@ class CutSequencer(Controller):
         self.move = LinearMove(self.accel)
         self._start_was = False
         self._steps_since_end = 0
+        self._waypoints: list[tuple[float, float]] = []
+        self._then_block = 0                 # block to begin once the approach is done
+        self._positions = PositionGuard(("x_pos", "z_pos"))
+        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -160,21 +196,21 @@ class CutSequencer(Controller):
         """Load the distance counters for ``phase`` (the seed's non-destructive transfers)."""
         b = self.blocks[self.block_index]
         here = (self.x_cmd, self.z_cmd)
-        stp = (self.x_start, self.z_start)
+        stp = x0, z0 = self.stps[self.block_index]
         self.phase = phase
         if phase == SC1:
             self.sigma_x += b.Xd                   # ΣX <- ΣX + Xd at the start of every pass
             self.pass_no += 1
-            self.move.begin(here, (self.x_start - self.sigma_x, self.z_start), b.rapid)
+            self.move.begin(here, (x0 - self.sigma_x, z0), b.rapid)
         elif phase == SC2:
-            self.move.begin(here, (self.x_start - self.sigma_x - b.Xp, self.z_start - b.Zp), b.feed)
+            self.move.begin(here, (x0 - self.sigma_x - b.Xp, z0 - b.Zp), b.feed)
         elif phase == SC3:
-            self.move.begin(here, (self.x_start - b.Xp, self.z_start - b.Zp), b.rapid)
+            self.move.begin(here, (x0 - b.Xp, z0 - b.Zp), b.rapid)
         elif phase == SC4:
             self.passes_left -= 1                  # the SC3/4 shift pulse counts the pass down
             self.move.begin(here, stp, b.rapid)
         elif phase == APPROACH:
-            self.move.begin(here, stp, b.rapid)
+            self.move.begin(here, self._waypoints.pop(0), self.blocks[self._then_block].rapid)
 
     def _begin_block(self, index: int) -> None:
         self.block_index = index
@@ -184,72 +220,112 @@ class CutSequencer(Controller):
         self.pass_no = 0
         self._begin_phase(SC1)
 
+    def _approach(self, index: int) -> None:
+        """Go to block ``index``'s start point safely (X clear first, then Z, then X), then begin it."""
+        (x0, z0), (x1, z1) = (self.x_cmd, self.z_cmd), self.stps[index]
+        clear = max(x0, x1)                          # +X is away from the work
+        path = [(clear, z0), (clear, z1), (x1, z1)]
+        points, here = [], (x0, z0)
+        for p in path:
+            if abs(p[0] - here[0]) > 1e-9 or abs(p[1] - here[1]) > 1e-9:
+                points.append(p)
+                here = p
+        if not points:
+            self._begin_block(index)
+            return
+        self._waypoints, self._then_block = points, index
+        self.block_index = index
+        self.sigma_x, self.passes_left, self.pass_no = 0.0, 0, 0
+        self._begin_phase(APPROACH)
+
     def _start_cycle(self) -> None:
         self.busy, self.done = True, False
-        self.block_index = 0
-        if abs(self.x_cmd - self.x_start) > 1e-9 or abs(self.z_cmd - self.z_start) > 1e-9:
-            self.sigma_x, self.passes_left, self.pass_no = 0.0, 0, 0
-            self._begin_phase(APPROACH)
-        else:
-            self._begin_block(0)
+        self._approach(0)
 
     def _next_phase(self) -> None:
         if self.phase == APPROACH:
-            self._begin_block(0)
+            if self._waypoints:
+                self._begin_phase(APPROACH)
+            else:
+                self._begin_block(self._then_block)
         elif self.phase in (SC1, SC2, SC3):
             self._begin_phase(self.phase + 1)
         elif self.passes_left > 0:
             self._begin_phase(SC1)
         elif self.block_index + 1 < self.n_blocks:
-            self._begin_block(self.block_index + 1)   # read the next block
+            self._approach(self.block_index + 1)      # read the next block (from its start point)
         else:
             self.phase = IDLE
             self.busy, self.done = False, True
             self.pass_no = 0
 
     def _raise_alarm(self, t: float, why: str) -> None:
+        """Latch the alarm and bring the present move to a controlled stop along its path."""
         if not self.alarm:
-            self.say("error", f"t = {t:.4f} s: {why}; motion stopped, commands held")
+            self.say("error", f"t = {t:.4f} s: {why}; decelerating to rest, cycle stopped")
         self.alarm = True
-        self.move.stop_now()
+        self.move.halt()
         self.phase = IDLE
         self.busy = False
+        self._waypoints = []
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = finite_inputs(inputs, ("x_pos", "z_pos", "feed_override"))
+        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
         if bad:
             self._raise_alarm(t, bad)
         elif inputs["alarm_in"]:
             self._raise_alarm(t, "alarm_in (area limiter) is set")
         else:
-            err = max(abs(self.x_cmd - inputs["x_pos"]), abs(self.z_cmd - inputs["z_pos"]))
+            err = max(abs(self.x_cmd - inputs["x_pos"]), abs(self.z_cmd - inputs["z_pos"]))  # type: ignore[operator]
             if err > self.max_following_error:
                 self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
                                      f"{self.max_following_error:g} mm")
 
         start = bool(inputs["start"])
-        if start and not self._start_was and not self.busy and not inputs["alarm_in"]:
-            if self.alarm:
-                self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-            self.alarm = False
-            self._start_cycle()
+        if start and not self._start_was and not self.busy and not inputs["alarm_in"] and not bad:
+            if self.move.at_rest:
+                if self.alarm:
+                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+                    self._follow_up(t, float(inputs["x_pos"]), float(inputs["z_pos"]))  # type: ignore[arg-type]
+                self.alarm = False
+                self._start_cycle()
+            else:
+                self.say("warning", f"t = {t:.4f} s: start ignored: the axes are still decelerating")
         self._start_was = start
 
         if self.busy:
-            override = min(max(float(inputs["feed_override"]), 0.0), 1.5)
+            override = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
             scale = 0.0 if inputs["feed_hold"] else (override if self.phase == SC2 else 1.0)
             self.move.advance(dt, scale)
             # The servos' in-position answers the final command only after one round trip through
             # the master (one step with Gauss-Seidel, two with Jacobi): trust it from the 2nd step on.
             self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
-            if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]:
+            if (self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]
+                    and self._arrived(inputs)):
                 self._steps_since_end = 0
                 self._next_phase()
+            self.x_cmd, self.z_cmd = self.move.position()
+            self.x_vff, self.z_vff = self.move.velocity()
+        elif not self.move.done:
+            self.move.advance(dt, 0.0)                 # the controlled stop after an alarm
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         else:
             self.x_vff = self.z_vff = 0.0
         return self._publish()
+
+    def _arrived(self, inputs: Mapping[str, object]) -> bool:
+        """The actual axes stand at the sequencer's own command (not only at whatever reached the servos)."""
+        return (abs(float(inputs["x_pos"]) - self.x_cmd) <= self.inpos_band  # type: ignore[arg-type]
+                and abs(float(inputs["z_pos"]) - self.z_cmd) <= self.inpos_band)  # type: ignore[arg-type]
+
+    def _follow_up(self, t: float, x_pos: float, z_pos: float) -> None:
+        """Re-base the command on the actual position where a stop left them apart (a held axis)."""
+        if abs(x_pos - self.x_cmd) > self.inpos_band or abs(z_pos - self.z_cmd) > self.inpos_band:
+            self.say("info", f"t = {t:.4f} s: follow-up: command ({self.x_cmd:.4f}, {self.z_cmd:.4f}) re-based on "
+                             f"the actual position ({x_pos:.4f}, {z_pos:.4f})")
+            self.x_cmd, self.z_cmd = x_pos, z_pos
+            self.move.begin((x_pos, z_pos), (x_pos, z_pos), 1.0)
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs
