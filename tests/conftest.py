@@ -5,6 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests are seeded: CI runs the same examples every time (a failure reproduces).
+settings.register_profile("ncfmu", derandomize=True, print_blob=True)
+settings.load_profile("ncfmu")
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,7 +22,7 @@ class Grinder:
         self.axis = ServoAxis(pos_start=self.feed.x_origin)
         self.t = 0.0
         self.inputs = {"start": False, "wear_start": False, "emergency": False, "mfin": False, "alarm_in": False,
-                       "x_pos": self.feed.x_origin, "y_pos": self.feed.y_origin, "x_in_position": True,
+                       "x_pos": self.feed.x_origin, "y_pos": self.feed.y_origin, "x_in_position": True, "feed_hold": False, "feed_override": 1.0,
                        "y_in_position": True}
         self.mfin_delay, self.m_for = mfin_delay, 0.0
         self.log = []
@@ -195,7 +195,8 @@ def test_property_emergency_at_any_instant_returns_to_the_feed_origin(phase, fra
     while g.t - t0 < entry + fraction * duration:
         g.step()
     if phase == "m_wait":
-        assert g.log[-1]["m_active"] == 2 or fraction > 0.99     # struck while waiting for MFIN
+        # struck while waiting for MFIN (the strobe rises the step after the M word is read)
+        assert g.log[-1]["pc"] == 1 and (g.log[-1]["m_active"] == 2 or fraction < 0.01 or fraction > 0.99)
     g.step(emergency=True)
     returning = g.run_until(lambda o: o["pc"] == 41 and o["emergency_active"])
     # the feed origin as the seed's return counter defines it: here minus what was counted

@@ -16,6 +16,24 @@ the running feed decelerates to rest first, so no velocity jump reaches a servo.
 
 The return counters accumulate every feed from the feed origin except S4 moves; so after a
 wear compensation the origin (the feed start point) has moved with the wheel, and S1 returns to it.
+
+At the edges, as a control does:
+
+- Stops are controlled: an alarm (``alarm_in``, an excess following error, a bad input), EMB and feed
+  hold decelerate the running feed at ``accel``; a command never steps its velocity.
+- A start (START1 or START2) while the wheel is away from the feed origin -- a return counter not 0,
+  after an alarm stopped a cycle -- never feeds toward the work first: the start first returns every
+  such axis to the feed origin (X, the infeed, before Y), at ``return_rate``, then runs the cycle
+  from its entry address. The log says so.
+- The M/MFIN handshake: an M word raises ``m_active`` only once MFIN is low, then waits for MFIN's
+  rising edge; ``m_active`` drops to 0 when answered, so every M word has its own MFIN.
+- Feed hold stops feeds (decelerating) and pauses a dwell; feed override (0..1.5, clamped with one
+  log line) scales the rate of every feed word, F7 included. S1 returns -- the emergency cycle and the
+  return before a restart -- run at their own rate whatever the dial says, and EMB ignores feed hold:
+  an emergency return is not slowed by the operator's dial.
+- ``alarm_in`` is honoured in every state: it stops a cycle, a dwell or an M wait; during the
+  emergency return it latches the alarm but the return goes on (it is the back-out the limiter lets
+  through).
 """
 
 from __future__ import annotations
@@ -27,7 +45,7 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real, string
-from .base import Controller, finite_inputs, int_param, real_param, servo_ports
+from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
 
 #: The seed's Table 1 (SPEC 3.3).
@@ -49,6 +67,12 @@ DEFAULTS = {"D": (0.02, 0.20, 4.0, 4.30, 0.10, 0.0, 0.0), "F": (0.02, 0.005, 0.0
             "T": (1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)}
 
 IDLE, RUN, EMERGENCY = 0, 1, 2
+#: A return counter within this of 0 is at the feed origin (mm): float sums of D settings leave ~1e-15.
+RC_ZERO = 1e-6
+#: A feed word ends when the actual axis is this close to the feed's own command (mm).
+IN_POSITION = 0.005
+#: Time left of a dwell below which it is over (s): steps of dt do not sum exactly to T.
+DWELL_EPS = 1e-9
 
 
 class ProgramError(ConfigError):
@@ -170,11 +194,18 @@ class ProgrammableFeed(Controller):
         real("x_origin", "parameter", 0.0, "mm", "X feed origin (machine position at start)"),
         real("y_origin", "parameter", 0.0, "mm", "Y feed origin (machine position at start)"),
         real("accel", "parameter", 500.0, "mm/s2", "acceleration/deceleration limit of every feed", min=0.0),
+        real("return_rate", "parameter", 10.0, "mm/s", "rate of the return to the feed origin before a start away "
+             "from it", min=0.0),
+        real("max_following_error", "parameter", 2.0, "mm",
+             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
         boolean("mfin", "input", False, "M-function finish from the auxiliary device"),
-        boolean("alarm_in", "input", False, "external alarm (area limiter): stop at once, latch alarm"),
+        boolean("alarm_in", "input", False, "external alarm (area limiter): latch alarm, decelerate to rest"),
+        boolean("feed_hold", "input", False, "feed hold: feeds decelerate to rest, a dwell pauses, while true"),
+        real("feed_override", "input", 1.0, "1", "feed override of every feed word (not of S1 returns)",
+             min=0.0, max=1.5),
         *servo_ports(("x", 0.0), ("y", 0.0)),
         boolean("run", "output", None, "normal or wear-compensation cycle running (RUN)"),
         boolean("busy", "output", None, "a feed, dwell or M wait is executing (BUSY)"),
@@ -198,6 +229,8 @@ class ProgrammableFeed(Controller):
         self.x_origin = real_param(values, "x_origin")
         self.y_origin = real_param(values, "y_origin")
         self.accel = real_param(values, "accel", positive=True)
+        self.return_rate = real_param(values, "return_rate", positive=True)
+        self.max_following_error = real_param(values, "max_following_error", positive=True)
         for name in ("start_address", "emergency_address", "wear_address"):
             entry = getattr(self, name)
             require(entry in self.program, name, entry, f"entry address M{entry} is missing from the program")
@@ -242,6 +275,10 @@ class ProgrammableFeed(Controller):
         self._pending_emergency = False
         self._steps_since_end = 0
         self._edges = {"start": False, "wear_start": False, "emergency": False}
+        self._mfin_was = False
+        self._then = 0                                     # entry address after the return to the origin
+        self._positions = PositionGuard(("x_pos", "y_pos"))
+        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -266,7 +303,7 @@ class ProgrammableFeed(Controller):
         elif word.kind == "dwell":
             self.dwell_left = self.T[word.t - 1]
         elif word.kind == "aux":
-            self.m_active = word.m
+            self.m_active = 0                              # raised once MFIN is low (step)
         else:  # END
             self.busy = False
             self.word = None
@@ -283,66 +320,130 @@ class ProgrammableFeed(Controller):
         word = self.word
         if word.kind in ("feed", "return"):
             self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
-            # in-position answers the final command only after one round trip through the master
-            return self._steps_since_end >= 2 and bool(inputs[f"{word.axis}_in_position"])
+            # in-position answers the final command only after one round trip through the master;
+            # the actual position must stand at this controller's own command (not a held one)
+            axis = word.axis
+            return (self._steps_since_end >= 2 and bool(inputs[f"{axis}_in_position"])
+                    and abs(float(inputs[f"{axis}_pos"]) - self.cmd[axis]) <= IN_POSITION)  # type: ignore[arg-type]
         if word.kind == "dwell":
-            return self.dwell_left <= 1e-12
+            return self.dwell_left == 0.0
         if word.kind == "aux":
-            return bool(inputs["mfin"])
+            # its own MFIN: a rising edge after the strobe went up
+            return self.m_active != 0 and bool(inputs["mfin"]) and not self._mfin_was
         return True
 
     def _raise_alarm(self, t: float, why: str) -> None:
+        """Latch the alarm; the running feed decelerates to rest; a dwell or M wait is abandoned."""
         if not self.alarm:
-            self.say("error", f"t = {t:.4f} s: {why}; feed stopped, commands held")
+            self.say("error", f"t = {t:.4f} s: {why}; feed decelerating to rest, cycle stopped")
         self.alarm = True
-        self.move.stop_now()
+        self.move.halt()
         self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
         self._pending_emergency = False
 
+    def away_from_origin(self) -> list[str]:
+        """Axes whose return counter is not 0: the wheel is not at the feed origin there (X first)."""
+        return [a for a in ("x", "y") if abs(self.rc[a]) > RC_ZERO]
+
+    def _start(self, t: float, entry: int) -> None:
+        self.mode = RUN
+        away = self.away_from_origin()
+        if away:
+            # Never feed toward the work from where an alarm left the wheel: back to the origin first.
+            self.say("warning", f"t = {t:.4f} s: start away from the feed origin (return counters "
+                                f"{', '.join(f'{a.upper()} {self.rc[a]:+.4f} mm' for a in away)}); returning to "
+                                f"the origin at {self.return_rate:g} mm/s before M{entry}")
+            self._then = entry
+            self._return_first(away[0])
+        else:
+            self._load(entry)
+
+    def _return_first(self, axis: str) -> None:
+        self.word = Word("return", f"{axis.upper()} to the feed origin", 0, axis=axis)
+        self.busy = True
+        self._steps_since_end = 0
+        self._start_move(axis, -self.rc[axis], self.return_rate, counting=True)
+
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
         start, wear, emb = (self._rising(inputs, n) for n in ("start", "wear_start", "emergency"))
-        bad = finite_inputs(inputs, ("x_pos", "y_pos"))
+        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
         if bad:
             self._raise_alarm(t, bad)
-        elif inputs["alarm_in"] and not (self.mode == EMERGENCY and not self._pending_emergency):
-            # the emergency return backs out of the violation; anything else stops at once
-            self._raise_alarm(t, "alarm_in (area limiter) is set")
+        elif inputs["alarm_in"]:
+            if self.mode == EMERGENCY and not self._pending_emergency:
+                # the emergency return backs out of the violation: latch the alarm, keep returning
+                if not self.alarm:
+                    self.say("error", f"t = {t:.4f} s: alarm_in (area limiter) is set during the emergency "
+                                      "return; alarm latched, the return goes on")
+                self.alarm = True
+            elif self.mode != IDLE or self.word is not None or self._pending_emergency:
+                self._raise_alarm(t, "alarm_in (area limiter) is set")
+            else:
+                self.alarm = True
+        elif self.mode != IDLE and not self._pending_emergency:
+            err = max(abs(self.cmd[a] - float(inputs[f"{a}_pos"])) for a in ("x", "y"))  # type: ignore[arg-type]
+            if err > self.max_following_error:
+                self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
+                                     f"{self.max_following_error:g} mm")
 
         if emb and not bad:
             # EMB: abort whatever runs; a running feed first decelerates to rest (EMB.SDW).
             self.say("warning", f"t = {t:.4f} s: EMB: emergency return from M{self.emergency_address}")
-            self.alarm = False
+            self.alarm = bool(inputs["alarm_in"])
             self.mode, self.m_active, self.dwell_left = EMERGENCY, 0, 0.0
             self._pending_emergency = True
+            self.move.halt()
             self.word = None
-        elif self.mode == IDLE and not self.alarm and not inputs["alarm_in"] and not bad and (start or wear):
-            self.mode = RUN
-            self._load(self.start_address if start else self.wear_address)
-        elif self.mode == IDLE and self.alarm and (start or wear) and not inputs["alarm_in"] and not bad:
-            self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-            self.alarm = False
-            self.mode = RUN
-            self._load(self.start_address if start else self.wear_address)
+        elif self.mode == IDLE and (start or wear) and not inputs["alarm_in"] and not bad:
+            if not self.move.at_rest:
+                self.say("warning", f"t = {t:.4f} s: start ignored: the feed is still decelerating")
+            else:
+                if self.alarm:
+                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+                self.alarm = False
+                self._start(t, self.start_address if start else self.wear_address)
 
+        hold = bool(inputs["feed_hold"]) and self.mode != EMERGENCY
         if self._pending_emergency:
             self.move.advance(dt, 0.0)                     # decelerate the aborted feed
-            if self.move.done or self.move.v == 0.0:
+            if self.move.done:
                 self._advance_move_outputs()
-                self.move.stop_now()
                 self._pending_emergency = False
                 self._load(self.emergency_address)
         elif self.word is not None:
-            if self.word.kind in ("feed", "return"):
-                self.move.advance(dt, 1.0)
-            elif self.word.kind == "dwell":
-                self.dwell_left = max(0.0, self.dwell_left - dt)
+            word = self.word
+            if word.kind == "feed":
+                rate = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+                self.move.advance(dt, 0.0 if hold else rate)
+            elif word.kind == "return":
+                self.move.advance(dt, 0.0 if hold else 1.0)
+            elif word.kind == "dwell" and not hold:
+                left = self.dwell_left - dt
+                self.dwell_left = left if left > DWELL_EPS else 0.0
+            elif word.kind == "aux" and self.m_active == 0 and not inputs["mfin"]:
+                self.m_active = word.m                     # strobe: the previous answer has dropped
+            elif word.kind == "aux" and self.m_active == 0:
+                pass
             if self._word_done(inputs):
-                if self.word.kind == "aux":
+                if word.kind == "aux":
                     self.m_active = 0
                 self._advance_move_outputs()
-                self._load(self.pc + 1)
+                self._next_word()
+        elif not self.move.done:
+            self.move.advance(dt, 0.0)                     # the controlled stop after an alarm
+        self._mfin_was = bool(inputs["mfin"])
         self._advance_move_outputs()
         return self._publish()
+
+    def _next_word(self) -> None:
+        if self.word is not None and self.word.line == 0:  # a return before the start: next axis, then the entry
+            away = self.away_from_origin()
+            if away:
+                self._return_first(away[0])
+            else:
+                self._load(self._then)
+        else:
+            self._load(self.pc + 1)
 
     def _advance_move_outputs(self) -> None:
         """Copy the interpolator's position to the commands; count the feed in the return counters."""
