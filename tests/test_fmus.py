@@ -64,7 +64,7 @@ def test_bad_registers_refused_at_initialisation(fmus, fmu_runner, name, value, 
     assert r.get("alarm") == 0 and r.get("x_cmd") == 30.0
 
 
-def test_nan_position_raises_alarm_and_freezes_commands(fmus, fmu_runner):
+def test_nan_position_raises_alarm_and_stops_under_control(fmus, fmu_runner):
     r = fmu_runner(fmus["CutSequencer"]).start()
     r.set(start=True)
     t = 0.0
@@ -72,16 +72,22 @@ def test_nan_position_raises_alarm_and_freezes_commands(fmus, fmu_runner):
         r.slave.do_step(t, 1e-3)
         t += 1e-3
         r.set(x_pos=r.get("x_cmd"), z_pos=r.get("z_cmd"))
-    before = (r.get("x_cmd"), r.get("z_cmd"))
+    before, v0 = r.get("x_cmd"), r.get("x_vff")
+    assert v0 < -10.0                                    # infeed under way
     r.set(x_pos=math.nan)
-    for _ in range(10):
+    vffs = [v0]
+    for _ in range(60):
         r.slave.do_step(t, 1e-3)
         t += 1e-3
+        vffs.append(r.get("x_vff"))
+        assert math.isfinite(r.get("x_cmd"))
     assert r.get("alarm")
-    assert (r.get("x_cmd"), r.get("z_cmd")) == pytest.approx(before, abs=1e-3)   # stopped at once
-    frozen = (r.get("x_cmd"), r.get("z_cmd"))
+    # a controlled stop at accel = 500 mm/s2, along the infeed, then at rest
+    assert max(abs(b - a) for a, b in zip(vffs, vffs[1:])) <= 500.0 * 1e-3 * (1 + 1e-9)
+    assert vffs[-1] == 0.0 and 0 < before - r.get("x_cmd") <= v0 * v0 / 1000.0 + abs(v0) * 1e-3
+    rest = (r.get("x_cmd"), r.get("z_cmd"))
     r.slave.do_step(t, 1e-3)
-    assert (r.get("x_cmd"), r.get("z_cmd")) == frozen and r.get("x_vff") == 0.0
+    assert (r.get("x_cmd"), r.get("z_cmd")) == rest and r.get("x_vff") == 0.0
     assert any("x_pos" in msg and lvl == "error" for lvl, msg in r.slave.messages)
 
 

@@ -21,6 +21,10 @@ an axis with span |d| over N = 2^bits iterations has emitted floor((N/2 + k*|d|)
 what the iterative additions give. The path speed follows ``feed * feed_override`` (0..1.5) and feed
 hold within ``accel``, so neither acts as a jump. Segment 0 is the approach from the present position
 to the first corrected point.
+
+A bad input (NaN, a position beyond any machine, a position jump no axis can make) raises the alarm
+and brings the path to a controlled stop: it decelerates along the contour at ``accel`` and rests
+there; an override outside 0..1.5 is clamped and said once.
 """
 
 from __future__ import annotations
@@ -30,9 +34,11 @@ from collections.abc import Mapping, Sequence
 
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .base import Controller, finite_inputs, int_param, real_param, servo_ports
+from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 
 MAX_POINTS = 64
+#: The contour ends when the actual axes are this close to its last command (mm).
+IN_POSITION = 0.005
 #: mill_contour (SPEC 5).
 DEFAULT_PATH = ((0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0))
 
@@ -170,6 +176,9 @@ class ContourInterpolator(Controller):
         self._k = 0.0                     # DDA iterations done in the present segment (fractional carry)
         self._start_was = False
         self._steps_since_end = 0
+        self._halting = False             # controlled stop after an alarm
+        self._positions = PositionGuard(("x_pos", "y_pos"))
+        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -196,12 +205,21 @@ class ContourInterpolator(Controller):
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = finite_inputs(inputs, ("x_pos", "y_pos", "feed_override"))
-        if bad:
-            if not self.alarm:
-                self.say("error", f"t = {t:.4f} s: {bad}; motion stopped, commands held")
-            self.alarm, self.busy, self.v = True, False, 0.0
-            self.vff = [0.0, 0.0]
+        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
+        if bad or self._halting:
+            if bad and not self.alarm:
+                self.say("error", f"t = {t:.4f} s: {bad}; decelerating to rest on the path, cycle stopped")
+            if bad:
+                self.alarm, self.busy = True, False
+                self._halting = self._seg is not None and self.v > 0.0
+            if self._halting:
+                self._advance(dt, 0.0, inputs, finishing=False)
+                self._halting = self.v > 0.0
+                if not self._halting:
+                    self.vff = [0.0, 0.0]
+            else:
+                self.vff = [0.0, 0.0]
+            self._start_was = bool(inputs["start"])
             return self._publish()
         start = bool(inputs["start"])
         if start and not self._start_was and not self.busy:
@@ -213,13 +231,12 @@ class ContourInterpolator(Controller):
                 self._begin_segment(0)
         self._start_was = start
         if self.busy:
-            self._advance(dt, inputs)
+            override = self._override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+            rate = self.approach_feed if self.segment == 0 else self.feed
+            self._advance(dt, 0.0 if inputs["feed_hold"] else rate * override, inputs)
         return self._publish()
 
-    def _advance(self, dt: float, inputs: Mapping[str, object]) -> None:
-        override = min(max(float(inputs["feed_override"]), 0.0), 1.5)
-        rate = self.approach_feed if self.segment == 0 else self.feed
-        target = 0.0 if inputs["feed_hold"] else rate * override
+    def _advance(self, dt: float, target: float, inputs: Mapping[str, object], finishing: bool = True) -> None:
         # distance left to the end of the whole contour, for the final deceleration
         remaining = self._remaining()
         a_dt = self.accel * dt
@@ -251,8 +268,13 @@ class ContourInterpolator(Controller):
         else:
             self.vff = [0.0, 0.0]
             self.v = 0.0
+            if not finishing:
+                return
             self._steps_since_end += 1
-            if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"]:
+            # the actual axes must stand at this controller's own end point, not only be in position
+            arrived = all(abs(float(inputs[f"{a}_pos"]) - c) <= IN_POSITION  # type: ignore[arg-type]
+                          for a, c in zip("xy", self.cmd))
+            if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"] and arrived:
                 self.busy, self.done, self._steps_since_end = False, True, 0
 
     def _direction(self) -> tuple[float, float]:

@@ -341,6 +341,23 @@ class ProgrammableFeed(Controller):
         self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
         self._pending_emergency = False
 
+    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
+        """Re-base the commands on the actual positions where a stop left them apart (an axis held by the
+        area limiter while the command went on). The return counters follow: they count where the wheel
+        really is from the feed origin, so S1 and the return before a restart go to the true origin."""
+        moved = []
+        for axis in ("x", "y"):
+            pos = float(inputs[f"{axis}_pos"])  # type: ignore[arg-type]
+            if abs(pos - self.cmd[axis]) > IN_POSITION:
+                moved.append(f"{axis.upper()} {self.cmd[axis]:.4f} -> {pos:.4f}")
+                self.rc[axis] += pos - self.cmd[axis]
+                self.cmd[axis] = pos
+        if moved:
+            self.say("info", f"t = {t:.4f} s: follow-up: command re-based on the actual position ({', '.join(moved)})")
+            here = (self.cmd["x"], self.cmd["y"])
+            self.move.begin(here, here, 1.0)
+            self.vff["x"] = self.vff["y"] = 0.0
+
     def away_from_origin(self) -> list[str]:
         """Axes whose return counter is not 0: the wheel is not at the feed origin there (X first)."""
         return [a for a in ("x", "y") if abs(self.rc[a]) > RC_ZERO]
@@ -400,6 +417,8 @@ class ProgrammableFeed(Controller):
             else:
                 if self.alarm:
                     self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+                    self._advance_move_outputs()
+                    self._follow_up(t, inputs)
                 self.alarm = False
                 self._start(t, self.start_address if start else self.wear_address)
 
@@ -409,6 +428,7 @@ class ProgrammableFeed(Controller):
             if self.move.done:
                 self._advance_move_outputs()
                 self._pending_emergency = False
+                self._follow_up(t, inputs)
                 self._load(self.emergency_address)
         elif self.word is not None:
             word = self.word

@@ -156,6 +156,7 @@ class AreaLimiter(Controller):
         self._block_speed = {REF_PLUS: 0.0, REF_MINUS: 0.0, LIM_PLUS: 0.0, LIM_MINUS: 0.0}
         self._prev_in: tuple[float, float] | None = None
         self._jump = [False, False]
+        self._jump_text = ["", ""]
         self._feedback = PositionGuard(("ref_pos", "lim_pos"))
         self.alarm = False
         self.region = find_region(self.ref_max, self.ref_start)
@@ -315,11 +316,12 @@ class AreaLimiter(Controller):
                 self._jump[axis] = False
             elif prev is not None and abs(cmd[axis] - prev[axis]) > reach and abs(cmd[axis] - self.pos[axis]) > reach:
                 self._jump[axis] = True
-                self._jump_from = (prev[axis], cmd[axis])
+                self._jump_text[axis] = (f"input {names[axis][0]} jumped {prev[axis]!r} -> {cmd[axis]!r} in one step: "
+                                         f"more than max_speed * dt = {reach:.4g} mm; holding until it returns to "
+                                         f"the axis ({self.pos[axis]:.4f})")
         for axis in (0, 1):
             if self._jump[axis]:
-                return (f"input {names[axis][0]} jumped more than max_speed * dt = {reach:.4g} mm in one step "
-                        f"(to {cmd[axis]!r}, the axis is at {self.pos[axis]:.4f}); holding until it returns to the axis")
+                return self._jump_text[axis]
         return None
 
     def _brake(self, axis: int, dt: float) -> None:
@@ -337,11 +339,15 @@ class AreaLimiter(Controller):
         p, v = self.pos[axis], self.vel[axis]
         a_dt = self.decel * dt
         gap = c - p
-        # An interpolator's step may exceed vff*dt by half an acceleration step: that is motion, pass it.
-        consistent = abs(gap) <= (abs(v_in) + a_dt) * dt + 1e-9
+        # An interpolator's step may exceed vff*dt by half an acceleration step, and its last step before
+        # it stops carries vff 0: that is motion, pass it.
+        consistent = abs(gap) <= (max(abs(v_in), abs(v)) + a_dt) * dt + 1e-9
         allowed = lo - 1e-9 <= v_in <= hi + 1e-9 and lo * dt - 1e-9 <= gap <= hi * dt + 1e-9
-        if self.passing[axis] and consistent and allowed:
+        # Pass: while passing, or from rest when the input starts from where the output stands (a
+        # back-out after a block: the input's own motion, which it accelerates itself).
+        if consistent and allowed and (self.passing[axis] or v == 0.0):
             self.pos[axis], self.vel[axis] = c, v_in
+            self.passing[axis] = True
             return
         self.passing[axis] = False
         # Rejoin in the input's frame: close the gap as fast as still lets the relative speed reach 0 at it.
@@ -352,7 +358,8 @@ class AreaLimiter(Controller):
         v_new = min(max(v_new, lo), hi)
         v_new = min(max(v_new, v - a_dt), v + a_dt)        # never a velocity step, even when braking
         p_new = p + 0.5 * (v + v_new) * dt
-        if (abs(c - p_new) <= a_dt * dt + 1e-9 and abs(v_in - v_new) <= a_dt + 1e-9
+        # rejoined when taking the input's (c, v_in) now is itself a step within decel
+        if (abs(v_in - v) <= a_dt + 1e-9 and abs(c - p - 0.5 * (v + v_in) * dt) <= a_dt * dt + 1e-9
                 and lo - 1e-9 <= v_in <= hi + 1e-9):
             p_new, v_new = c, v_in                          # rejoined: pass from here on
             self.passing[axis] = True

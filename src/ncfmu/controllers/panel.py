@@ -1,8 +1,11 @@
 """Operator panel and auxiliary devices, so that every system runs unchanged in any FMI tool.
 
-Push buttons are pressed at parameterised times (a pulse of ``pulse`` seconds); the M-function
-finish signal MFIN answers an active M word after ``mfin_delay`` seconds, as the auxiliary device
-would. A negative time means "never".
+Push buttons are pressed at parameterised times (a pulse of ``pulse`` seconds); START can be
+pressed a second time (``restart_at``), so a restart after an alarm is scriptable in an SSP. The
+M-function finish signal MFIN answers every M word with its own pulse: it rises ``mfin_delay``
+seconds after that M word appeared on ``m_active`` and falls when ``m_active`` drops (or changes to
+another M word, whose delay then starts afresh), as the auxiliary device would. A negative time
+means "never".
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ class OperatorPanel(Controller):
 
     PORTS = (
         real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never", variability="tunable"),
+        real("restart_at", "parameter", -1.0, "s", "time of a second cycle-start push (a restart, e.g. after an "
+             "alarm); negative: never", variability="tunable"),
         real("wear_start_at", "parameter", -1.0, "s", "time of the wear-compensation start push (START2); negative: never", variability="tunable"),
         real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never", variability="tunable"),
         real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never", variability="tunable"),
@@ -40,6 +45,7 @@ class OperatorPanel(Controller):
 
     def configure(self, values: Mapping[str, object]) -> None:
         self.start_at = real_param(values, "start_at")
+        self.restart_at = real_param(values, "restart_at")
         self.wear_start_at = real_param(values, "wear_start_at")
         self.emergency_at = real_param(values, "emergency_at")
         self.hold_at = real_param(values, "hold_at")
@@ -51,6 +57,7 @@ class OperatorPanel(Controller):
     def reset(self) -> None:
         self.clock = 0.0            # panel time, advanced only by dt
         self.m_seen_for = 0.0       # how long the present M word has been active
+        self.m_seen = 0             # which M word that is
         self._outputs: dict[str, object] = {}
         self._publish(0)
 
@@ -60,13 +67,15 @@ class OperatorPanel(Controller):
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
         self.clock += dt
-        m = int(inputs["m_active"])
-        self.m_seen_for = self.m_seen_for + dt if m else 0.0
+        m = int(inputs["m_active"])  # type: ignore[call-overload]
+        # a new M word (also one replacing another without a 0 between) starts its own delay
+        self.m_seen_for = (self.m_seen_for + dt if m == self.m_seen else dt) if m else 0.0
+        self.m_seen = m
         return self._publish(m)
 
     def _publish(self, m: int) -> dict[str, object]:
         out = self._outputs
-        out["start"] = self._pressed(self.start_at)
+        out["start"] = self._pressed(self.start_at) or self._pressed(self.restart_at)
         out["wear_start"] = self._pressed(self.wear_start_at)
         out["emergency"] = self._pressed(self.emergency_at)
         held = self.hold_at >= 0.0 and self.clock >= self.hold_at - 1e-9
