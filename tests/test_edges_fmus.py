@@ -198,3 +198,49 @@ def test_lathe_restart_after_an_alarm_retracts_x_before_z_moves(project, tmp_pat
     assert moving_z.any() and (x[moving_z] > 30.0 - 0.01).all()           # Z travels only with X clear
     assert math.isclose(r["seq.z_cmd"][approach][-1], 2.0, abs_tol=1e-9)
     assert r["seq.subcycle"][t > 8.0].max() >= 1 and not r["seq.alarm"][t > 4.1].any()
+
+
+# -- 4. absurd positions and out-of-range overrides in every controller FMU ----------------------------
+@pytest.mark.parametrize("model, start, axis_inputs", [
+    ("ProgrammableFeed", "start", {"x_pos": 0.0, "y_pos": 0.0}),
+    ("ContourInterpolator", "start", {"x_pos": 0.0, "y_pos": -10.0}),
+    ("CutSequencer", "start", {"x_pos": 30.0, "z_pos": 2.0}),
+])
+@pytest.mark.parametrize("bad", [1e300, -1e300, "jump"])
+def test_absurd_position_input_alarms_and_stops_under_control(fmus, fmu_runner, model, start, axis_inputs, bad):
+    r = fmu_runner(fmus[model]).start()
+    axes = sorted(axis_inputs)
+    r.set(**{start: True}, **axis_inputs)
+    t = 0.0
+    for _ in range(200):
+        r.slave.do_step(t, DT)
+        t += DT
+        r.set(**{a: r.get(a.replace("_pos", "_cmd")) for a in axes})
+    assert not r.get("alarm")
+    first = axes[0]
+    value = r.get(first.replace("_pos", "_cmd")) + 1000.0 if bad == "jump" else bad
+    r.set(**{first: value})
+    vffs = []
+    for _ in range(100):
+        r.slave.do_step(t, DT)
+        t += DT
+        vffs.append([r.get(a.replace("_pos", "_vff")) for a in axes])
+        assert all(math.isfinite(r.get(a.replace("_pos", "_cmd"))) for a in axes)
+    assert r.get("alarm")
+    assert vffs[-1] == [0.0, 0.0]
+    errors = [msg for lvl, msg in r.slave.messages if lvl == "error"]
+    assert len(errors) == 1 and first in errors[0]
+
+
+def test_override_out_of_range_is_clamped_and_said_once(fmus, fmu_runner):
+    r = fmu_runner(fmus["ContourInterpolator"]).start()
+    r.set(start=True, x_pos=0.0, y_pos=-10.0, feed_override=5.0)
+    t = 0.0
+    for _ in range(1000):
+        r.slave.do_step(t, DT)
+        t += DT
+        r.set(x_pos=r.get("x_cmd"), y_pos=r.get("y_cmd"))
+    speed = math.hypot(r.get("x_vff"), r.get("y_vff"))
+    assert speed == pytest.approx(5.0 * 1.5)                  # clamped to 150 %
+    warnings = [msg for lvl, msg in r.slave.messages if "feed_override" in msg]
+    assert len(warnings) == 1 and "clamped to 1.5" in warnings[0]
