@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import operator
-import pickle
 import sys
 import types
 from pathlib import Path
@@ -28,6 +27,7 @@ from pythonfmu.enums import Fmi2Status
 from ..controllers.base import Controller
 from ..errors import ConfigError
 from ..ports import Port
+from . import state as state_format
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 _CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input, "output": Fmi2Causality.output}
@@ -41,6 +41,8 @@ class ControllerSlave(Fmi2Slave):
     """pythonfmu slave around a controller class (set ``logic_class`` in a subclass)."""
 
     logic_class: type[Controller]
+    _shim_present = False                 # set by __init__: the status shim turns refusals into fmi2Error
+    _parked_refusal: str | None = None    # a refusal from a classmethod, for the next flag read
     author = "ncfmu"
     license = "MIT"
 
@@ -55,10 +57,12 @@ class ControllerSlave(Fmi2Slave):
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
         self._init_refused = False
+        self._call_refused = False        # the last FMU-state call was refused (read and cleared by the shim)
         self.step_failed = False          # a failed doStep: fmi2Error through the shim (not discard)
         resources = kwargs.get("resources")
         self._status_shim = bool(resources) and sys.platform.startswith("linux") and \
             Path(resources, "ncfmu_status_shim").is_file()
+        type(self)._shim_present = self._status_shim
         for port in logic.PORTS:
             self._register(port)
         self._causality = {vr: (v.causality.name, type(v).__name__, v.name) for vr, v in self.vars.items()}
@@ -108,6 +112,13 @@ class ControllerSlave(Fmi2Slave):
     def get_integer(self, vrs):
         if len(vrs) == 1 and vrs[0] == INIT_REFUSED_VR:
             return [int(self._init_refused)]
+        if len(vrs) == 1 and vrs[0] == CALL_REFUSED_VR:
+            cls = type(self)
+            parked, cls._parked_refusal = cls._parked_refusal, None
+            if parked:
+                self.log(f"{self.instance_name}: {parked}", Fmi2Status.error)
+            refused, self._call_refused = self._call_refused or bool(parked), False
+            return [int(refused)]
         fn = self._getter_for(vrs, "Integer")
         return fn() if fn is not None else super().get_integer(vrs)
 
@@ -176,6 +187,10 @@ class ControllerSlave(Fmi2Slave):
         return copy.deepcopy((self.logic, self.parameters, self.inputs))
 
     def _set_fmu_state(self, state) -> None:
+        if not (isinstance(state, tuple) and len(state) == 3
+                and (state[0] is None or isinstance(state[0], self.logic_class))):
+            self._refuse_state_call("fmi2SetFMUstate", "not a state of this FMU (a refused or foreign state)")
+            return
         logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
         # in place: the registered getters and setters hold these very dicts
         self.parameters.clear()
@@ -185,13 +200,31 @@ class ControllerSlave(Fmi2Slave):
         self.logic = logic
         self.out = logic.outputs() if logic is not None else self.out
 
-    @staticmethod
-    def _fmu_state_to_bytes(state) -> bytes:
-        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+    # Serialized: plain data in a versioned format tied to this model and build (fmi/state.py); no code
+    # ever runs from the bytes a host hands us (pythonfmu's default is pickle). pythonfmu calls these two
+    # on the class, not the instance; a refusal is therefore parked on the class and picked up by the
+    # instance when the shim asks, right after the call, in the same thread.
+    @classmethod
+    def _fmu_state_to_bytes(cls, state) -> bytes:
+        logic, parameters, inputs = state
+        return state_format.dumps(cls.logic_class.MODEL_NAME, parameters, inputs, logic)
 
-    @staticmethod
-    def _fmu_state_from_bytes(data: bytes):
-        return pickle.loads(data)
+    @classmethod
+    def _fmu_state_from_bytes(cls, data: bytes):
+        try:
+            return state_format.loads(data, cls.logic_class, cls.logic_class.from_parameters)
+        except (state_format.StateError, ConfigError) as err:
+            if not cls._shim_present:
+                raise                            # pythonfmu alone: its fmi2Fatal is all it can say
+            cls._parked_refusal = f"fmi2DeSerializeFMUstate refused: {err}"
+            return None
+
+    def _refuse_state_call(self, call: str, why: str) -> None:
+        """Log why; the shim reads the flag after the call and returns fmi2Error (the instance lives on)."""
+        self.log(f"{self.instance_name}: {call} refused: {why}", Fmi2Status.error)
+        self._call_refused = True
+        if not self._status_shim:
+            raise state_format.StateError(why)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         if self.logic is None:
@@ -222,6 +255,8 @@ class ControllerSlave(Fmi2Slave):
 #: Reserved Integer value reference: 1 when exitInitializationMode refused the parameters. The FMU's
 #: status shim (builder.status_shim) reads it and returns fmi2Error instead of pythonfmu's fmi2Fatal.
 INIT_REFUSED_VR = 2147483000
+#: Reserved Integer value reference: 1 once when the last FMU-state call was refused (read clears it).
+CALL_REFUSED_VR = 2147483001
 
 #: Spare references to a model module's globals (see :func:`fmu_slave`).
 INSTANTIATION_RESERVE = 100_000

@@ -255,6 +255,8 @@ static int fast_step(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Status *st, in
 
 /* Must match ncfmu.fmi.adapter.INIT_REFUSED_VR */
 #define NCFMU_INIT_REFUSED_VR 2147483000u
+/* Must match ncfmu.fmi.adapter.CALL_REFUSED_VR */
+#define NCFMU_CALL_REFUSED_VR 2147483001u
 
 static void *inner = NULL;
 
@@ -303,11 +305,9 @@ FWD(fmi2Status, fmi2Fatal, fmi2Terminate, (fmi2Component c), (c))
 FWD(fmi2Status, fmi2Fatal, fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]), (c, vr, n, v))
 FWD(fmi2Status, fmi2Fatal, fmi2SetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]), (c, vr, n, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
-FWD(fmi2Status, fmi2Fatal, fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))
 FWD(fmi2Status, fmi2Fatal, fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
 FWD(fmi2Status, fmi2Fatal, fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size))
 FWD(fmi2Status, fmi2Fatal, fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size), (c, s, b, size))
-FWD(fmi2Status, fmi2Fatal, fmi2DeSerializeFMUstate, (fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s), (c, b, size, s))
 FWD(fmi2Status, fmi2Fatal, fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference u[], size_t nu, const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]), (c, u, nu, z, nz, dv, dz))
 FWD(fmi2Status, fmi2Fatal, fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], const fmi2Real v[]), (c, vr, n, order, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], fmi2Real v[]), (c, vr, n, order, v))
@@ -331,6 +331,45 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     fmi2ValueReference vr = NCFMU_INIT_REFUSED_VR;
     fmi2Integer refused = 0;
     if (get_integer(c, &vr, 1, &refused) == fmi2OK && refused) return fmi2Error;
+    return status;
+}
+
+/* FMU-state calls the adapter may refuse (garbage bytes, a state of another FMU): it logs why and
+ * raises a flag, read (and cleared) here through a reserved value reference, that becomes fmi2Error.
+ * A refused deserialisation frees the empty state pythonfmu made, so the host gets nothing to misuse. */
+static int call_refused(fmi2Component c)
+{
+    static fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]) = NULL;
+    if (!get_integer)
+        get_integer = (fmi2Status(*)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]))sym("fmi2GetInteger");
+    fmi2ValueReference vr = NCFMU_CALL_REFUSED_VR;
+    fmi2Integer refused = 0;
+    return get_integer && get_integer(c, &vr, 1, &refused) == fmi2OK && refused;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
+{
+    static fmi2Status (*f)(fmi2Component, fmi2FMUstate) = NULL;
+    if (!f) f = (fmi2Status(*)(fmi2Component, fmi2FMUstate))sym("fmi2SetFMUstate");
+    if (!f) return fmi2Fatal;
+    fmi2Status status = f(c, s);
+    if (status <= fmi2Warning && call_refused(c)) return fmi2Error;
+    return status;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s)
+{
+    static fmi2Status (*f)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *) = NULL;
+    static fmi2Status (*free_state)(fmi2Component, fmi2FMUstate *) = NULL;
+    if (!f) f = (fmi2Status(*)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *))sym("fmi2DeSerializeFMUstate");
+    if (!free_state) free_state = (fmi2Status(*)(fmi2Component, fmi2FMUstate *))sym("fmi2FreeFMUstate");
+    if (!f || !s) return fmi2Fatal;
+    fmi2Status status = f(c, b, size, s);
+    if (status <= fmi2Warning && call_refused(c)) {
+        if (free_state && *s) free_state(c, s);
+        *s = NULL;
+        return fmi2Error;
+    }
     return status;
 }
 

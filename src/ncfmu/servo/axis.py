@@ -39,6 +39,8 @@ class ServoAxis(Controller):
                    "motor + ball screw + load, friction, torque/speed limits, encoder, in-position band")
     SEED = "SPEC.md section 4"
     STOP_TIME = 1.0
+    #: python-control models rebuilt by configure() from the parameters: not part of a saved FMU state.
+    DERIVED = ("linear", "plant")
 
     PORTS = (
         real("Kv", "parameter", 30.0, "1/s", "position-loop gain", min=0.0),

@@ -1,0 +1,95 @@
+"""A safe FMU state (issue 12): host bytes are data, never code; a wrong state is fmi2Error, not a crash.
+
+Every case runs in its own process against the built FMU, so a crash is a failure, not a lost run.
+"""
+
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+SCRIPT = textwrap.dedent('''
+    import os, pickle, shutil, sys, tempfile
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi1 import FMICallException
+
+    fmu_path, case, marker = sys.argv[1], sys.argv[2], sys.argv[3]
+    other_path = sys.argv[4] if len(sys.argv) > 4 else None
+
+    def open_fmu(path, name):
+        md = read_model_description(path)
+        folder = extract(path, tempfile.mkdtemp())
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=name)
+        fmu.instantiate(loggingOn=True)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        return fmu, md
+
+    fmu, md = open_fmu(fmu_path, "dut")
+    t = 0.0
+    for _ in range(50):
+        fmu.doStep(t, 1e-3); t += 1e-3
+    good = bytes(fmu.serializeFMUstate(fmu.getFMUstate()))
+
+    class Exploit:
+        def __reduce__(self):
+            return (os.system, (f"touch {marker}",))
+
+    if case == "garbage":
+        blob = os.urandom(200)
+    elif case == "pickle":
+        blob = pickle.dumps(Exploit())
+    elif case == "truncated":
+        blob = good[: len(good) // 2]
+    elif case == "empty":
+        blob = b""
+    elif case == "other_model":
+        other, _ = open_fmu(other_path, "other")
+        blob = bytes(other.serializeFMUstate(other.getFMUstate()))
+    elif case == "other_build":
+        blob = good.replace(b'"build":"', b'"build":"x', 1)
+    elif case == "object_tag":
+        blob = good.replace(b'"logic":{', b'"logic":{"evil":{"o":"os:system","v":{}},', 1)
+    elif case == "good":
+        blob = good
+    try:
+        state = fmu.deSerializeFMUstate(blob)
+        fmu.setFMUstate(state)
+        fmu.freeFMUstate(state)
+        status = "OK"
+    except FMICallException as err:
+        status = {3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+    # the instance lives on: it steps, and it is freed cleanly
+    fmu.doStep(t, 1e-3)
+    fmu.terminate()
+    fmu.freeInstance()
+    print("STATUS", status, "EXECUTED", os.path.exists(marker))
+''')
+
+
+def run_case(fmu, case, tmp_path, other=None):
+    marker = tmp_path / "code_ran_from_state_bytes"
+    args = [sys.executable, "-c", SCRIPT, str(fmu), case, str(marker)] + ([str(other)] if other else [])
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])     # no crash
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("STATUS")][-1]
+    return line.split()[1], line.split()[3] == "True", proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize("case", ["garbage", "pickle", "truncated", "empty", "other_model", "other_build",
+                                  "object_tag"])
+def test_bad_state_bytes_are_an_error_and_run_no_code(fmus, tmp_path, case):
+    status, executed, log = run_case(fmus["CutSequencer"], case, tmp_path, other=fmus["ServoAxis"])
+    assert status == "Error", log
+    assert not executed
+    assert "fmi2DeSerializeFMUstate refused" in log
+
+
+def test_a_good_state_round_trips_in_a_fresh_process(fmus, tmp_path):
+    for model in ("CutSequencer", "ServoAxis", "ProgrammableFeed"):
+        status, executed, log = run_case(fmus[model], "good", tmp_path)
+        assert status == "OK", log
