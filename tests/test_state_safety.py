@@ -93,3 +93,85 @@ def test_a_good_state_round_trips_in_a_fresh_process(fmus, tmp_path):
     for model in ("CutSequencer", "ServoAxis", "ProgrammableFeed"):
         status, executed, log = run_case(fmus[model], "good", tmp_path)
         assert status == "OK", log
+
+
+MACHINE = textwrap.dedent('''
+    import ctypes, math, sys, tempfile
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime
+    from fmpy.fmi1 import FMICallException
+
+    path, case = sys.argv[1], sys.argv[2]
+    md = read_model_description(path)
+    folder = extract(path, tempfile.mkdtemp())
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+
+    def make(name="dut"):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=name)
+        fmu.instantiate(loggingOn=True)
+        return fmu
+
+    def status(call, *args):
+        try:
+            call(*args)
+            return "OK"
+        except FMICallException as err:
+            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+
+    fmu = make()
+    fmu.setupExperiment(startTime=0.0)
+    if case == "step_in_init":
+        fmu.enterInitializationMode()
+        result = status(fmu.doStep, 0.0, 1e-3)
+        fmu.exitInitializationMode()
+    else:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        for k in range(10):
+            fmu.doStep(k * 1e-3, 1e-3)
+        if case in ("h_zero", "h_negative", "h_nan", "t_nan", "h_inf"):
+            t, h = {"h_zero": (0.01, 0.0), "h_negative": (0.01, -1e-3), "h_nan": (0.01, math.nan),
+                    "t_nan": (math.nan, 1e-3), "h_inf": (0.01, math.inf)}[case]
+            result = status(fmu.doStep, t, h)
+            assert status(fmu.doStep, 0.01, 1e-3) == "OK"          # the instance steps on
+        elif case == "exit_init_twice":
+            result = status(fmu.exitInitializationMode)
+        elif case == "set_after_terminate":
+            fmu.terminate()
+            result = status(fmu.setReal, [vr["x_pos"]], [1.0])
+        elif case == "step_after_terminate":
+            fmu.terminate()
+            result = status(fmu.doStep, 0.01, 1e-3)
+            fmu.reset()                                              # and back to life
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode(); fmu.exitInitializationMode()
+            assert status(fmu.doStep, 0.0, 1e-3) == "OK"
+        elif case == "last_successful_time":
+            value = ctypes.c_double(-1.0)
+            fmu.fmi2GetRealStatus(fmu.component, fmi2LastSuccessfulTime, ctypes.byref(value))
+            result = "OK" if abs(value.value - 0.01) < 1e-12 else f"wrong {value.value}"
+    try:
+        fmu.terminate()
+    except FMICallException:
+        pass
+    fmu.freeInstance()
+    again = make("again")                                            # the process is sound after it all
+    again.freeInstance()
+    print("RESULT", result)
+''')
+
+
+@pytest.mark.parametrize("case, expected", [
+    ("h_zero", "Error"), ("h_negative", "Error"), ("h_nan", "Error"), ("t_nan", "Error"), ("h_inf", "Error"),
+    ("step_in_init", "Error"), ("exit_init_twice", "Error"), ("set_after_terminate", "Error"),
+    ("step_after_terminate", "Error"), ("last_successful_time", "OK"),
+])
+def test_fmi_state_machine_is_enforced(fmus, case, expected):
+    proc = subprocess.run([sys.executable, "-c", MACHINE, str(fmus["CutSequencer"]), case],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = [ln.split(" ", 1)[1] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == expected, proc.stdout[-2000:]
+    if expected == "Error":
+        assert "must be finite and > 0" in proc.stdout or "not allowed in the" in proc.stdout

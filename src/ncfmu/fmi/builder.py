@@ -57,6 +57,12 @@ SHIM_MARKER = "resources/ncfmu_status_shim"
 
 
 @functools.lru_cache(maxsize=1)
+def fmi_headers() -> Path:
+    """The official FMI 2.0 C headers, as fmpy ships them."""
+    import fmpy
+    return Path(fmpy.__file__).parent / "c-code"
+
+
 def status_shim() -> bytes | None:
     """The compiled status shim for this platform (linux64), or None where it cannot be built.
 
@@ -70,7 +76,8 @@ def status_shim() -> bytes | None:
         for cc in ("cc", "gcc", "clang"):
             if shutil.which(cc) is None:
                 continue
-            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(out), str(SHIM_SOURCE), "-ldl"],
+            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{fmi_headers()}", "-o", str(out),
+                                   str(SHIM_SOURCE), "-ldl", "-lm"],
                                   capture_output=True, text=True)
             if proc.returncode == 0:
                 return out.read_bytes()

@@ -17,24 +17,13 @@
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char *fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-typedef struct fmi2CallbackFunctions fmi2CallbackFunctions;
+/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code). */
+#include "fmi2Functions.h"
 
 /* ---- the Python C API, resolved at run time ------------------------------------------------- */
 typedef struct _object PyObject;
@@ -253,12 +242,71 @@ static int fast_step(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Status *st, in
     return 1;
 }
 
+/* ---- the FMI 2.0 co-simulation state machine, per instance -------------------------------------
+ * pythonfmu checks no call against the state of the instance; the checks live here, in one place:
+ * which call is allowed in which phase, a step size that is not a positive finite number, and the
+ * time of the last successful step (fmi2LastSuccessfulTime). A refused call logs why (through the
+ * host's logger) and returns fmi2Error; the instance stays usable (fmi2Reset) and freeable. */
+enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8 };
+typedef struct Inst {
+    fmi2Component c;
+    int phase;
+    double last_time;                     /* end of the last successful doStep */
+    char name[128];
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment env;
+    struct Inst *next;
+} Inst;
+static Inst *inst_list = NULL;
+
+static Inst *inst_find(fmi2Component c)
+{
+    for (Inst *i = inst_list; i; i = i->next)
+        if (i->c == c) return i;
+    return NULL;
+}
+
+static void inst_drop(fmi2Component c)
+{
+    for (Inst **p = &inst_list; *p; p = &(*p)->next)
+        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); return; }
+}
+
+static const char *phase_name(int phase)
+{
+    return phase == P_INSTANTIATED ? "instantiated" : phase == P_INIT ? "initialization mode"
+         : phase == P_STEP ? "step mode" : phase == P_TERMINATED ? "terminated" : "unknown";
+}
+
+/* 1 when ``call`` is allowed in the instance's phase; else logs and returns 0. Unknown instances
+ * (not made by this shim) pass: pythonfmu answers them as before. */
+static int allowed(fmi2Component c, const char *call, int phases)
+{
+    Inst *i = inst_find(c);
+    if (!i || (i->phase & phases)) return 1;
+    if (i->logger)
+        i->logger(i->env, i->name, fmi2Error, "error", "%s: not allowed in the %s state (FMI 2.0 state machine)",
+                  call, phase_name(i->phase));
+    return 0;
+}
+
+static void inst_phase(fmi2Component c, int phase)
+{
+    Inst *i = inst_find(c);
+    if (i) i->phase = phase;
+}
+
+#define P_SETTABLE (P_INSTANTIATED | P_INIT | P_STEP)
+
 /* Must match ncfmu.fmi.adapter.INIT_REFUSED_VR */
 #define NCFMU_INIT_REFUSED_VR 2147483000u
 /* Must match ncfmu.fmi.adapter.CALL_REFUSED_VR */
 #define NCFMU_CALL_REFUSED_VR 2147483001u
 
 static void *inner = NULL;
+static void *sym(const char *name);
+#define INNER_(ret, name, params) static ret(*inner_##name) params = NULL; \
+    if (!inner_##name) inner_##name = (ret(*) params)sym(#name);
 
 static void *sym(const char *name)
 {
@@ -299,11 +347,7 @@ static void *sym(const char *name)
 FWD(const char *, "cs", fmi2GetTypesPlatform, (void), ())
 FWD(const char *, "2.0", fmi2GetVersion, (void), ())
 FWD(fmi2Status, fmi2Fatal, fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]), (c, on, n, cats))
-FWD(fmi2Status, fmi2Fatal, fmi2SetupExperiment, (fmi2Component c, fmi2Boolean tol_def, fmi2Real tol, fmi2Real start, fmi2Boolean stop_def, fmi2Real stop), (c, tol_def, tol, start, stop_def, stop))
-FWD(fmi2Status, fmi2Fatal, fmi2EnterInitializationMode, (fmi2Component c), (c))
-FWD(fmi2Status, fmi2Fatal, fmi2Terminate, (fmi2Component c), (c))
 FWD(fmi2Status, fmi2Fatal, fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]), (c, vr, n, v))
-FWD(fmi2Status, fmi2Fatal, fmi2SetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]), (c, vr, n, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
 FWD(fmi2Status, fmi2Fatal, fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
 FWD(fmi2Status, fmi2Fatal, fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size))
@@ -313,13 +357,65 @@ FWD(fmi2Status, fmi2Fatal, fmi2SetRealInputDerivatives, (fmi2Component c, const 
 FWD(fmi2Status, fmi2Fatal, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], fmi2Real v[]), (c, vr, n, order, v))
 FWD(fmi2Status, fmi2Fatal, fmi2CancelStep, (fmi2Component c), (c))
 FWD(fmi2Status, fmi2Fatal, fmi2GetStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Status *v), (c, k, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Real *v), (c, k, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Integer *v), (c, k, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v), (c, k, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind k, fmi2String *v), (c, k, v))
 
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real tol, fmi2Real start,
+                               fmi2Boolean stop_def, fmi2Real stop)
+{
+    INNER_(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real))
+    if (!allowed(c, "fmi2SetupExperiment", P_INSTANTIATED)) return fmi2Error;
+    if (!isfinite(start) || (stop_def && !(isfinite(stop) && stop >= start))) {
+        Inst *i = inst_find(c);
+        if (i && i->logger)
+            i->logger(i->env, i->name, fmi2Error, "error", "fmi2SetupExperiment: startTime = %g, stopTime = %g: "
+                      "times must be finite and stopTime >= startTime", start, stop);
+        return fmi2Error;
+    }
+    Inst *i = inst_find(c);
+    if (i) i->last_time = start;
+    return inner_fmi2SetupExperiment ? inner_fmi2SetupExperiment(c, tol_def, tol, start, stop_def, stop) : fmi2Fatal;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    INNER_(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))
+    if (!allowed(c, "fmi2EnterInitializationMode", P_INSTANTIATED)) return fmi2Error;
+    fmi2Status s = inner_fmi2EnterInitializationMode ? inner_fmi2EnterInitializationMode(c) : fmi2Fatal;
+    if (s <= fmi2Warning) inst_phase(c, P_INIT);
+    return s;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    INNER_(fmi2Status, fmi2Terminate, (fmi2Component))
+    if (!allowed(c, "fmi2Terminate", P_STEP)) return fmi2Error;
+    fmi2Status s = inner_fmi2Terminate ? inner_fmi2Terminate(c) : fmi2Fatal;
+    if (s <= fmi2Warning) inst_phase(c, P_TERMINATED);
+    return s;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
+{
+    Inst *i = inst_find(c);
+    if (i && k == fmi2LastSuccessfulTime && v) { *v = i->last_time; return fmi2OK; }
+    if (i && i->logger)
+        i->logger(i->env, i->name, fmi2Discard, "warning", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is "
+                  "available (no asynchronous steps)");
+    return fmi2Discard;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
+{
+    INNER_(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]))
+    if (!allowed(c, "fmi2SetString", P_SETTABLE)) return fmi2Error;
+    return inner_fmi2SetString ? inner_fmi2SetString(c, vr, n, v) : fmi2Fatal;
+}
+
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
+    if (!allowed(c, "fmi2ExitInitializationMode", P_INIT)) return fmi2Error;
     static fmi2Status (*exit_init)(fmi2Component) = NULL;
     static fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]) = NULL;
     if (!exit_init) exit_init = (fmi2Status(*)(fmi2Component))sym("fmi2ExitInitializationMode");
@@ -331,6 +427,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     fmi2ValueReference vr = NCFMU_INIT_REFUSED_VR;
     fmi2Integer refused = 0;
     if (get_integer(c, &vr, 1, &refused) == fmi2OK && refused) return fmi2Error;
+    inst_phase(c, P_STEP);
     return status;
 }
 
@@ -384,6 +481,18 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
                                            const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean))
     if (!inner_fmi2Instantiate) return NULL;
     fmi2Component c = inner_fmi2Instantiate(name, type, guid, res, cb, vis, log);
+    if (c) {
+        Inst *i = calloc(1, sizeof *i);
+        if (i) {
+            i->c = c;
+            i->phase = P_INSTANTIATED;
+            snprintf(i->name, sizeof i->name, "%s", name ? name : "");
+            i->logger = cb ? cb->logger : NULL;
+            i->env = cb ? cb->componentEnvironment : NULL;
+            i->next = inst_list;
+            inst_list = i;
+        }
+    }
     if (c && name) fast_register(c, name);
     return c;
 }
@@ -392,6 +501,7 @@ void fmi2FreeInstance(fmi2Component c)
 {
     INNER(void, fmi2FreeInstance, (fmi2Component))
     fast_drop(c);
+    inst_drop(c);
     if (inner_fmi2FreeInstance) inner_fmi2FreeInstance(c);
 }
 
@@ -412,6 +522,7 @@ fmi2Status fmi2Reset(fmi2Component c)
     fast_drop(c);
     fmi2Status s = inner_fmi2Reset(c);
     if (s <= fmi2Warning && name[0]) fast_register(c, name);
+    if (s <= fmi2Warning) inst_phase(c, P_INSTANTIATED);
     return s;
 }
 
@@ -426,6 +537,7 @@ fmi2Status fmi2Reset(fmi2Component c)
     fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, const type v[])     \
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, const type[]))\
+        if (!allowed(c, #name, P_SETTABLE)) return fmi2Error;                                     \
         if (fast_set(c, vr, n, kind, v)) return fmi2OK;                                           \
         return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
     }
@@ -442,9 +554,19 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean disca
     INNER(fmi2Status, fmi2SetReal, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]))
     fmi2Status st;
     int flush = 0;
+    if (!allowed(c, "fmi2DoStep", P_STEP)) return fmi2Error;
+    Inst *i = inst_find(c);
+    if (!(isfinite(t) && isfinite(h) && h > 0.0)) {
+        if (i && i->logger)
+            i->logger(i->env, i->name, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %g, "
+                      "communicationStepSize = %g: the step size must be finite and > 0, the time finite", t, h);
+        return fmi2Error;
+    }
     if (fast_step(c, t, h, &st, &flush)) {
         if (flush && inner_fmi2SetReal) inner_fmi2SetReal(c, NULL, 0, NULL);   /* pythonfmu flushes the log */
-        return st;
+    } else {
+        st = inner_fmi2DoStep ? inner_fmi2DoStep(c, t, h, discard) : fmi2Fatal;
     }
-    return inner_fmi2DoStep ? inner_fmi2DoStep(c, t, h, discard) : fmi2Fatal;
+    if (i && st <= fmi2Warning) i->last_time = t + h;
+    return st;
 }
