@@ -116,8 +116,24 @@ def unwired(name, folder):
     return pack(write_system(system, folder), project_root() / "fmus", folder / f"{name}_unwired.ssp")
 
 
-def test_taper_held_by_the_limiter_never_ends_short_even_with_the_alarm_unwired(project, tmp_path):
-    """With limiter.alarm -> seq.alarm_in removed, a taper pass held at the chuck ended 0.2 mm short, no alarm."""
+def test_taper_pass_held_in_x_never_ends_short_with_the_alarm_unwired(project, tmp_path):
+    """Issue 11, 3: with limiter.alarm -> seq.alarm_in removed and X limited to >= 27.2 (a shoulder), the first
+    taper pass (X 28.5 -> 27.0 over the cut) was held at X 27.2 while Z went on, and ended there: 'done',
+    no alarm. Now the sequencer waits for its own end point and raises its in-position alarm."""
+    r = simulate(unwired("lathe_taper", tmp_path), stop_time=20.0, start_values={"limiter.region[2].lim_min": 27.2})
+    x, sub, t = r["x_axis.pos"], r["seq.subcycle"], r.time
+    assert r["limiter.alarm"].any()
+    assert x.min() >= 27.2 - 1e-6                                       # held by the limiter
+    first_cut = np.flatnonzero(sub == 2)
+    assert first_cut.size and not (sub[first_cut[0]:] == 3).any()     # the held cut never "ends"
+    assert r["seq.alarm"][-1] and not r["seq.done"].any()
+    alarm_at = t[np.argmax(r["seq.alarm"])]
+    end_of_command = t[first_cut[0]] + 42.0 / 4.0                       # the cut's command ends ~10.5 s later
+    assert end_of_command < alarm_at < end_of_command + 2.0 + 0.5       # inpos_timeout = 2 s after it
+
+
+def test_cut_held_at_the_chuck_never_ends_short_with_the_alarm_unwired(project, tmp_path):
+    """The same with Z held at the chuck boundary (Zp 50): no sub-cycle after the held cut."""
     r = simulate(unwired("lathe_taper", tmp_path), stop_time=15.0, start_values={"seq.block[1].Zp": 50.0})
     cut = r["seq.subcycle"] == 2
     assert cut.any() and r["limiter.alarm"].any()

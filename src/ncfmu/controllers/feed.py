@@ -198,6 +198,8 @@ class ProgrammableFeed(Controller):
              "from it", min=0.0),
         real("max_following_error", "parameter", 2.0, "mm",
              "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
+        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axis has not reached the "
+             "command this long after it stopped (an axis held downstream)", min=0.0),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
@@ -231,6 +233,7 @@ class ProgrammableFeed(Controller):
         self.accel = real_param(values, "accel", positive=True)
         self.return_rate = real_param(values, "return_rate", positive=True)
         self.max_following_error = real_param(values, "max_following_error", positive=True)
+        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
         for name in ("start_address", "emergency_address", "wear_address"):
             entry = getattr(self, name)
             require(entry in self.program, name, entry, f"entry address M{entry} is missing from the program")
@@ -276,6 +279,7 @@ class ProgrammableFeed(Controller):
         self._steps_since_end = 0
         self._edges = {"start": False, "wear_start": False, "emergency": False}
         self._mfin_was = False
+        self._waiting = 0.0                                # time since a feed's command stopped
         self._then = 0                                     # entry address after the return to the origin
         self._positions = PositionGuard(("x_pos", "y_pos"))
         self._override = OverrideDial()
@@ -447,8 +451,18 @@ class ProgrammableFeed(Controller):
             if self._word_done(inputs):
                 if word.kind == "aux":
                     self.m_active = 0
+                self._waiting = 0.0
                 self._advance_move_outputs()
                 self._next_word()
+            elif word.kind in ("feed", "return") and self.move.done:
+                self._waiting += dt
+                if self._waiting > self.inpos_timeout:
+                    self._waiting = 0.0
+                    axis = word.axis
+                    self._raise_alarm(t, f"in-position check: {axis.upper()} stands at "
+                                         f"{float(inputs[f'{axis}_pos']):.4f}, not at the command "  # type: ignore[arg-type]
+                                         f"{self.cmd[axis]:.4f}, {self.inpos_timeout:g} s after it stopped "
+                                         "(held downstream?)")
         elif not self.move.done:
             self.move.advance(dt, 0.0)                     # the controlled stop after an alarm
         self._mfin_was = bool(inputs["mfin"])

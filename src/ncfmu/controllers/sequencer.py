@@ -111,6 +111,8 @@ class CutSequencer(Controller):
              "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
         real("inpos_band", "parameter", 0.005, "mm",
              "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0),
+        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
+             "command this long after it stopped (an axis held downstream)", min=0.0),
         *_block_ports(),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
@@ -135,6 +137,7 @@ class CutSequencer(Controller):
         self.accel = real_param(values, "accel", positive=True)
         self.max_following_error = real_param(values, "max_following_error", positive=True)
         self.inpos_band = real_param(values, "inpos_band", positive=True)
+        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
         blocks = []
         for k in range(1, self.n_blocks + 1):
             p = f"block[{k}]"
@@ -184,6 +187,7 @@ class CutSequencer(Controller):
         self.move = LinearMove(self.accel)
         self._start_was = False
         self._steps_since_end = 0
+        self._waiting = 0.0                  # time since the command stopped, waiting for in-position
         self._waypoints: list[tuple[float, float]] = []
         self._then_block = 0                 # block to begin once the approach is done
         self._positions = PositionGuard(("x_pos", "z_pos"))
@@ -303,7 +307,16 @@ class CutSequencer(Controller):
             if (self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]
                     and self._arrived(inputs)):
                 self._steps_since_end = 0
+                self._waiting = 0.0
                 self._next_phase()
+            elif self.move.done:
+                self._waiting += dt
+                if self._waiting > self.inpos_timeout:
+                    self._waiting = 0.0
+                    self._raise_alarm(t, f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
+                                         f"{float(inputs['z_pos']):.4f}), not at the command ({self.x_cmd:.4f}, "  # type: ignore[arg-type]
+                                         f"{self.z_cmd:.4f}), {self.inpos_timeout:g} s after it stopped "
+                                         "(held downstream?)")
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         elif not self.move.done:
