@@ -15,6 +15,7 @@ log with their level.
 from __future__ import annotations
 
 import copy
+import ctypes
 import operator
 import sys
 import types
@@ -258,9 +259,6 @@ INIT_REFUSED_VR = 2147483000
 #: Reserved Integer value reference: 1 once when the last FMU-state call was refused (read clears it).
 CALL_REFUSED_VR = 2147483001
 
-#: Spare references to a model module's globals (see :func:`fmu_slave`).
-INSTANTIATION_RESERVE = 100_000
-
 
 def fmu_slave(logic_class: type[Controller]):
     """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``.
@@ -269,14 +267,17 @@ def fmu_slave(logic_class: type[Controller]):
     re-executes the model script and then releases one reference to the module's globals that it
     never owned (``PyModule_GetDict`` returns a borrowed reference). After a few instantiations of
     the same FMU in one process -- two servo axes, a sweep -- the module's namespace would be freed
-    under it (a crash, or "Failed to instantiate"). Holding spare references keeps it alive for
-    :data:`INSTANTIATION_RESERVE` instantiations per process.
+    under it (a crash, or "Failed to instantiate"). The script runs this decorator once per
+    instantiation, so each run takes one reference of its own to give pythonfmu's release. The
+    references are owned by nobody (``Py_IncRef``), not kept in a list inside the namespace: such a
+    list, freed while the interpreter tears the module down, released them all at once and freed the
+    namespace while it was being cleared (heap corruption at exit, seen intermittently). Over-counting
+    by one (the first import) only keeps the namespace to the end of the process.
     """
 
     def decorate(cls: type) -> type:
         module_globals = sys.modules[cls.__module__].__dict__
-        if "_pythonfmu_instantiation_reserve" not in module_globals:
-            module_globals["_pythonfmu_instantiation_reserve"] = [module_globals] * INSTANTIATION_RESERVE
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(module_globals))
         namespace = {k: v for k, v in vars(cls).items() if k not in ("__dict__", "__weakref__")}
         namespace["logic_class"] = logic_class
         return type(cls.__name__, (ControllerSlave,), namespace)
