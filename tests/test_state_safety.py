@@ -175,3 +175,59 @@ def test_fmi_state_machine_is_enforced(fmus, case, expected):
     assert result == expected, proc.stdout[-2000:]
     if expected == "Error":
         assert "must be finite and > 0" in proc.stdout or "not allowed in the" in proc.stdout
+
+
+BAD_CALLS = textwrap.dedent('''
+    import sys, tempfile
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi1 import FMICallException
+
+    path, case = sys.argv[1], sys.argv[2]
+    md = read_model_description(path)
+    folder = extract(path, tempfile.mkdtemp())
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="dut")
+    fmu.instantiate(loggingOn=True)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.doStep(0.0, 1e-3)
+
+    def status(call, *args):
+        try:
+            call(*args)
+            return "OK"
+        except FMICallException as err:
+            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+
+    calls = {
+        "unknown_vr_get": lambda: fmu.getReal([123456]),
+        "unknown_vr_set": lambda: fmu.setReal([123456], [1.0]),
+        "set_output": lambda: fmu.setBoolean([vr["start"]], [True]),
+        "wrong_type": lambda: fmu.getReal([vr["start"]]),
+        "fixed_after_init": lambda: fmu.setReal([vr["pulse"]], [0.5]),
+        "tunable_out_of_range": lambda: fmu.setReal([vr["override"]], [5.0]),
+    }
+    result = status(calls[case])
+    kept = fmu.getReal([vr["override"]])[0]
+    assert status(fmu.doStep, 1e-3, 1e-3) == "OK"                   # the instance lives on
+    fmu.terminate()
+    fmu.freeInstance()
+    print("RESULT", result, kept)
+''')
+
+
+@pytest.mark.parametrize("case, says", [
+    ("unknown_vr_get", "is not a variable of this FMU"), ("unknown_vr_set", "is not a variable of this FMU"),
+    ("set_output", "is an output"), ("wrong_type", "is not of this call's type"),
+    ("fixed_after_init", "fixed parameter"), ("tunable_out_of_range", "override = 5.0: must be <= 1.5"),
+])
+def test_bad_calls_are_an_error_not_fatal(fmus, case, says):
+    proc = subprocess.run([sys.executable, "-c", BAD_CALLS, str(fmus["OperatorPanel"]), case],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = [ln.split()[1:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result[0] == "Error" and says in proc.stdout, proc.stdout[-2000:]
+    assert float(result[1]) == 1.0                                    # a refused tunable keeps its old value

@@ -66,7 +66,8 @@ class ControllerSlave(Fmi2Slave):
         type(self)._shim_present = self._status_shim
         for port in logic.PORTS:
             self._register(port)
-        self._causality = {vr: (v.causality.name, type(v).__name__, v.name) for vr, v in self.vars.items()}
+        self._causality = {vr: (v.causality.name, type(v).__name__, v.name, v.variability.name)
+                           for vr, v in self.vars.items()}
         self._fast_get: dict[tuple, object] = {}
         self._fast_set: dict[tuple, object] = {}
         # The status shim picks this instance up right after pythonfmu created it (fmi2Instantiate,
@@ -149,9 +150,9 @@ class ControllerSlave(Fmi2Slave):
             getter = lambda: store[name]               # noqa: E731
 
             def setter(value, store=store, name=name, convert=convert):
-                store[name] = convert(value)
-                if self.logic is not None:             # a tunable parameter set during the run
-                    self._retune(name)
+                old, store[name] = store[name], convert(value)
+                if self.logic is not None and not self._retune(name):   # a tunable parameter set during the run
+                    store[name] = old                                    # refused: the old value stays
         else:
             getter = lambda: store[name]               # noqa: E731
 
@@ -175,12 +176,17 @@ class ControllerSlave(Fmi2Slave):
         self.out = self.logic.outputs()
         self._flush()
 
-    def _retune(self, name: str) -> None:
+    def _retune(self, name: str) -> bool:
+        """Apply a tunable parameter set during the run; False (logged, flagged for the shim) if refused."""
         try:
             self.logic.configure(self.parameters)                 # type: ignore[union-attr]
+            return True
         except ConfigError as err:
-            self.log(f"{self.instance_name}: tunable parameter refused: {err}", Fmi2Status.error)
-            raise
+            self.log(f"{self.instance_name}: tunable parameter refused, the old value kept: {err}", Fmi2Status.error)
+            if not self._status_shim:
+                raise
+            self._call_refused = True                             # the shim returns fmi2Error
+            return False
 
     # -- FMU state: the controller object holds every hidden state (registers, counters, program
     # counter, DDA, servo states, caches); a deep copy of it is the FMU state.

@@ -82,7 +82,7 @@ typedef struct Fast {
     PyObject *queue;          /* slave.log_queue: pythonfmu's log list, flushed by any pythonfmu call */
     unsigned n;
     PyObject **names;         /* by value reference: the port's name (borrowed from slave._causality) */
-    unsigned char *kind, *causality;
+    unsigned char *kind, *causality, *fixed;
     struct Fast *next;
 } Fast;
 static Fast *fast_list = NULL;
@@ -107,7 +107,7 @@ static void fast_drop(fmi2Component c)
                 py.DecRef(f->queue);
                 py.GILRelease(g);
             }
-            free(f->names); free(f->kind); free(f->causality); free(f);
+            free(f->names); free(f->kind); free(f->causality); free(f->fixed); free(f);
             return;
         }
     }
@@ -141,6 +141,7 @@ static void fast_register(fmi2Component c, fmi2String instance_name)
     f->names = calloc(n ? n : 1, sizeof(PyObject *));
     f->kind = calloc(n ? n : 1, 1);
     f->causality = calloc(n ? n : 1, 1);
+    f->fixed = calloc(n ? n : 1, 1);
     f->n = n;
     pos = 0;
     while (py.DictNext(caus, &pos, &k, &v)) {
@@ -148,6 +149,10 @@ static void fast_register(fmi2Component c, fmi2String instance_name)
         const char *c_s = py.Utf8(py.TupleGet(v, 0)), *k_s = py.Utf8(py.TupleGet(v, 1));
         if (vr < 0 || !c_s || !k_s) continue;
         f->names[vr] = py.TupleGet(v, 2);
+        PyObject *variability = py.TupleGet(v, 3);
+        const char *var_s = variability ? py.Utf8(variability) : NULL;
+        if (!variability && py.Occurred()) py.Clear();
+        f->fixed[vr] = var_s && !strcmp(var_s, "fixed") && !strcmp(c_s, "parameter");
         f->causality[vr] = !strcmp(c_s, "input") ? C_INPUT : !strcmp(c_s, "output") ? C_OUTPUT : C_OTHER;
         f->kind[vr] = !strcmp(k_s, "Real") ? K_REAL : !strcmp(k_s, "Integer") ? K_INTEGER
                     : !strcmp(k_s, "Boolean") ? K_BOOLEAN : K_NONE;
@@ -526,11 +531,43 @@ fmi2Status fmi2Reset(fmi2Component c)
     return s;
 }
 
+/* The value references of a Get/Set: known, of the call's type, and (for a set) settable now. 1 when
+ * fine (or not checkable: no record), else logs the first offender and returns 0. */
+static const char *kind_name(int kind)
+{
+    return kind == K_REAL ? "Real" : kind == K_INTEGER ? "Integer" : kind == K_BOOLEAN ? "Boolean" : "String";
+}
+
+static int check_refs(fmi2Component c, const char *call, const fmi2ValueReference vr[], size_t n, int kind, int set)
+{
+    Fast *f = fast_find(c);
+    Inst *i = inst_find(c);
+    if (!f) return 1;
+    for (size_t k = 0; k < n; k++) {
+        unsigned r = vr[k];
+        const char *why = NULL;
+        if (!set && kind == K_INTEGER && (r == NCFMU_INIT_REFUSED_VR || r == NCFMU_CALL_REFUSED_VR)) continue;
+        if (r >= f->n || !f->names[r]) why = "is not a variable of this FMU";
+        else if (f->kind[r] != kind) why = "is not of this call's type";
+        else if (set && f->causality[r] == C_OUTPUT) why = "is an output: it cannot be set";
+        else if (set && f->fixed[r] && i && i->phase == P_STEP)
+            why = "is a fixed parameter: it cannot be set after initialisation";
+        if (why) {
+            if (i && i->logger)
+                i->logger(i->env, i->name, fmi2Error, "error", "%s: value reference %u %s (%s call)", call, r, why,
+                          kind_name(kind));
+            return 0;
+        }
+    }
+    return 1;
+}
+
 #define GETTER(name, type, kind)                                                                  \
     fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, type v[])           \
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, type[]))      \
         if (fast_get(c, vr, n, kind, v)) return fmi2OK;                                           \
+        if (!check_refs(c, #name, vr, n, kind, 0)) return fmi2Error;                              \
         return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
     }
 #define SETTER(name, type, kind)                                                                  \
@@ -539,7 +576,10 @@ fmi2Status fmi2Reset(fmi2Component c)
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, const type[]))\
         if (!allowed(c, #name, P_SETTABLE)) return fmi2Error;                                     \
         if (fast_set(c, vr, n, kind, v)) return fmi2OK;                                           \
-        return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
+        if (!check_refs(c, #name, vr, n, kind, 1)) return fmi2Error;                              \
+        fmi2Status st = inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                     \
+        if (st <= fmi2Warning && n > 0 && call_refused(c)) return fmi2Error;                      \
+        return st;                                                                                \
     }
 GETTER(fmi2GetReal, fmi2Real, K_REAL)
 GETTER(fmi2GetInteger, fmi2Integer, K_INTEGER)
