@@ -231,3 +231,56 @@ def test_bad_calls_are_an_error_not_fatal(fmus, case, says):
     result = [ln.split()[1:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
     assert result[0] == "Error" and says in proc.stdout, proc.stdout[-2000:]
     assert float(result[1]) == 1.0                                    # a refused tunable keeps its old value
+
+
+BAD_INIT = textwrap.dedent('''
+    import ctypes, sys, tempfile
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi1 import FMICallException
+
+    path, case = sys.argv[1], sys.argv[2]
+    md = read_model_description(path)
+    folder = extract(path, tempfile.mkdtemp())
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="dut")
+    fmu.instantiate(loggingOn=True)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+
+    def status(call, *args):
+        try:
+            call(*args)
+            return "OK"
+        except FMICallException as err:
+            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+
+    if case == "huge_bandwidth":
+        fmu.setReal([vr["vel_bandwidth"]], [1e300])
+        result = status(fmu.exitInitializationMode)
+    elif case == "bad_utf8":
+        refs = (ctypes.c_uint * 1)(vr["program"])
+        text = (ctypes.c_char_p * 1)(b"M0: X+D3F7\\xff\\xfe; M1: END")
+        result = status(fmu.fmi2SetString, fmu.component, refs, 1, text)
+    fmu.reset()                                                      # usable again after the error
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    assert status(fmu.doStep, 0.0, 1e-3) == "OK"
+    fmu.terminate()
+    fmu.freeInstance()
+    print("RESULT", result)
+''')
+
+
+@pytest.mark.parametrize("model, case, says", [
+    ("ServoAxis", "huge_bandwidth", "vel_bandwidth"),
+    ("ProgrammableFeed", "bad_utf8", "not valid UTF-8"),
+])
+def test_bad_parameter_values_are_an_error_not_fatal(fmus, model, case, says):
+    proc = subprocess.run([sys.executable, "-c", BAD_INIT, str(fmus[model]), case],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == "Error" and says in proc.stdout, proc.stdout[-3000:]

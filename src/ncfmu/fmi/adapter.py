@@ -167,8 +167,9 @@ class ControllerSlave(Fmi2Slave):
     def exit_initialization_mode(self) -> None:
         try:
             self.logic = self.logic_class.from_parameters(self.parameters)
-        except ConfigError as err:
-            self.log(f"{self.instance_name}: parameter refused: {err}", Fmi2Status.error)
+        except Exception as err:               # ConfigError names the rule; anything else is a value no rule foresaw
+            text = str(err) if isinstance(err, ConfigError) else f"the parameters cannot be used: {err!r}"
+            self.log(f"{self.instance_name}: parameter refused: {text}", Fmi2Status.error)
             if self._status_shim:
                 self._init_refused = True      # the shim turns this into fmi2Error; the instance lives on
                 return
@@ -181,7 +182,7 @@ class ControllerSlave(Fmi2Slave):
         try:
             self.logic.configure(self.parameters)                 # type: ignore[union-attr]
             return True
-        except ConfigError as err:
+        except Exception as err:
             self.log(f"{self.instance_name}: tunable parameter refused, the old value kept: {err}", Fmi2Status.error)
             if not self._status_shim:
                 raise

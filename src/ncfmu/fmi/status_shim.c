@@ -411,10 +411,37 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *
     return fmi2Discard;
 }
 
+/* 1 when ``s`` is well-formed UTF-8 (no overlongs, no surrogates, at most U+10FFFF). */
+static int utf8_ok(const unsigned char *s)
+{
+    while (*s) {
+        unsigned c = *s++;
+        int more = c < 0x80 ? 0 : (c >> 5) == 6 ? 1 : (c >> 4) == 14 ? 2 : (c >> 3) == 30 ? 3 : -1;
+        if (more < 0) return 0;
+        unsigned cp = more == 0 ? c : more == 1 ? c & 0x1F : more == 2 ? c & 0x0F : c & 0x07;
+        for (int k = 0; k < more; k++) {
+            if ((*s & 0xC0) != 0x80) return 0;
+            cp = (cp << 6) | (*s++ & 0x3F);
+        }
+        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000)
+            || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
+    }
+    return 1;
+}
+
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
 {
     INNER_(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]))
     if (!allowed(c, "fmi2SetString", P_SETTABLE)) return fmi2Error;
+    for (size_t k = 0; k < n; k++) {
+        if (!v || !v[k] || !utf8_ok((const unsigned char *)v[k])) {
+            Inst *i = inst_find(c);
+            if (i && i->logger)
+                i->logger(i->env, i->name, fmi2Error, "error", "fmi2SetString: value reference %u: %s",
+                          vr ? vr[k] : 0u, v && v[k] ? "not valid UTF-8 text" : "a NULL string");
+            return fmi2Error;
+        }
+    }
     return inner_fmi2SetString ? inner_fmi2SetString(c, vr, n, v) : fmi2Fatal;
 }
 

@@ -28,7 +28,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..controllers.base import Controller, finite_inputs, int_param, real_param
-from ..errors import ConfigError
+from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
 from .model import AxisParameters, discretize, drive_plant, servo_axis
 
@@ -89,6 +89,10 @@ class ServoAxis(Controller):
         self.pos_start = real_param(values, "pos_start")
         self.substep = real_param(values, "substep", positive=True, hi=0.01)
         self.ideal = bool(values["ideal"])
+        # The velocity loop is sampled every substep: a crossover above 0.5 rad per sample is no design.
+        require(self.p.vel_bandwidth * self.substep <= 0.5, "vel_bandwidth", self.p.vel_bandwidth,
+                f"must be <= 0.5 / substep = {0.5 / self.substep:g} rad/s (the velocity loop is sampled every "
+                f"substep = {self.substep:g} s)")
         self.linear = servo_axis(self.p)
         poles = np.linalg.eigvals(self.linear.A)
         if np.max(poles.real) >= 0:
