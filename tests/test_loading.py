@@ -53,3 +53,29 @@ def test_type_mismatch_is_named(project, tmp_path):
 
 def test_every_archive_is_schema_valid_and_flat(project):
     assert validate() == []
+
+
+@pytest.mark.parametrize("version, kind, says", [
+    ("3.0", "CoSimulation", "an FMI 3.0 FMU"),
+    ("2.0", "ModelExchange", "a model-exchange-only FMU"),
+])
+def test_fmus_the_master_cannot_run_are_named(tmp_path, version, kind, says):
+    """An SSP may reference an FMI 3.0 or a model-exchange-only FMU: a clear error, not a KeyError."""
+    import zipfile
+    from ncfmu.cosim.fmu import UnpackedFmu
+    from ncfmu.errors import SystemDefinitionError
+    variables = ('<ModelVariables><Float64 name="time" valueReference="1" causality="independent"/>'
+                 '<Float64 name="x" valueReference="0" causality="output"/></ModelVariables>'
+                 '<ModelStructure><Output valueReference="0"/></ModelStructure>' if version == "3.0" else
+                 '<ModelVariables><ScalarVariable name="x" valueReference="0" causality="output" '
+                 'variability="discrete"><Real/></ScalarVariable></ModelVariables>'
+                 '<ModelStructure><Outputs><Unknown index="1"/></Outputs></ModelStructure>')
+    md = (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="{version}" modelName="Other" '
+          f'{"instantiationToken" if version == "3.0" else "guid"}="{{00000000-0000-0000-0000-000000000000}}">'
+          f'<{kind} modelIdentifier="Other"/>{variables}</fmiModelDescription>')
+    fmu = tmp_path / "Other.fmu"
+    with zipfile.ZipFile(fmu, "w") as z:
+        z.writestr("modelDescription.xml", md)
+    with pytest.raises(SystemDefinitionError) as err:
+        UnpackedFmu(fmu, tmp_path / "x")
+    assert "Other.fmu" in str(err.value) and says in str(err.value)

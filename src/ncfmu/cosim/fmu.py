@@ -64,8 +64,17 @@ class UnpackedFmu:
             self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
             workdir = Path(self._tmp)
         self.directory = safe_extract(self.path, Path(workdir))
-        self.model_description = read_model_description(str(self.path))
+        try:
+            self.model_description = read_model_description(str(self.path))
+        except Exception as err:                         # fmpy's own errors name the schema problem
+            raise SystemDefinitionError(f"{self.path.name}: cannot read its modelDescription.xml: {err}") from None
         md = self.model_description
+        if md.fmiVersion != "2.0":
+            raise SystemDefinitionError(f"{self.path.name}: an FMI {md.fmiVersion} FMU; ncfmu's master runs FMI 2.0 "
+                                        "co-simulation FMUs only")
+        if md.coSimulation is None:
+            raise SystemDefinitionError(f"{self.path.name}: a model-exchange-only FMU; ncfmu's master runs FMI 2.0 "
+                                        "co-simulation FMUs only (no solver for model exchange)")
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
             start = v.start
