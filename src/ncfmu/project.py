@@ -15,7 +15,7 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract
+from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, System, pack, read_ssd, write_system
@@ -78,7 +78,7 @@ class OpenSystem:
             self.unpacked: dict[str, UnpackedFmu] = {}
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
-                    self.unpacked[comp.model] = UnpackedFmu(self._tmp / "ssp" / comp.source, self._tmp / comp.model)
+                    self.unpacked[comp.model] = unpacked_fmu(self._tmp / "ssp" / comp.source)
             self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
         except Exception:

@@ -7,7 +7,9 @@ allocated per step.
 
 from __future__ import annotations
 
+import atexit
 import ctypes
+import hashlib
 import itertools
 import shutil
 import tempfile
@@ -50,6 +52,30 @@ def safe_extract(archive: Path, target: Path) -> Path:
                 raise SystemDefinitionError(f"{archive}: entry {name!r} would be written outside the extraction folder")
         z.extractall(target)
     return target
+
+
+_UNPACKED: dict[str, "UnpackedFmu"] = {}
+_CACHE_ROOT: list[Path] = []
+
+
+def unpacked_fmu(path: Path) -> "UnpackedFmu":
+    """The FMU at ``path`` unpacked once per process, keyed by its content.
+
+    Every run of a system used to unpack its FMUs afresh and load their binaries from the new folder: each
+    run left another copy of each shared library mapped (deleted) in the process and a few MB of memory.
+    Keyed by content, a second run of the same FMU loads the very same library file, which the dynamic
+    loader shares. The folder lives until the process exits.
+    """
+    if not Path(path).is_file():
+        raise SystemDefinitionError(f"FMU not found: {path}")
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()[:20]
+    unpacked = _UNPACKED.get(digest)
+    if unpacked is None:
+        if not _CACHE_ROOT:
+            _CACHE_ROOT.append(Path(tempfile.mkdtemp(prefix="ncfmu_fmus_")))
+            atexit.register(shutil.rmtree, _CACHE_ROOT[0], True)
+        unpacked = _UNPACKED[digest] = UnpackedFmu(path, _CACHE_ROOT[0] / digest)
+    return unpacked
 
 
 class UnpackedFmu:

@@ -61,6 +61,13 @@ class ControllerSlave(Fmi2Slave):
         self._call_refused = False        # the last FMU-state call was refused (read and cleared by the shim)
         self.step_failed = False          # a failed doStep: fmi2Error through the shim (not discard)
         resources = kwargs.get("resources")
+        # pythonfmu 0.7 puts the FMU's resources folder on sys.path at every fmi2Instantiate and never takes it
+        # out: one more entry per instance. Keep one (its builder removes exactly one after it built the
+        # model description), drop the repeats: the entries stay bounded by the FMUs a process has loaded.
+        if resources:
+            repeats = [i for i, p in enumerate(sys.path) if p and Path(p) == Path(resources)][1:]
+            for i in reversed(repeats):
+                del sys.path[i]
         self._status_shim = bool(resources) and sys.platform.startswith("linux") and \
             Path(resources, "ncfmu_status_shim").is_file()
         type(self)._shim_present = self._status_shim
