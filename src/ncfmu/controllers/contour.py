@@ -119,6 +119,8 @@ class ContourInterpolator(Controller):
         real("feed", "parameter", 5.0, "mm/s", "vector feed rate", min=0.0),
         real("approach_feed", "parameter", 5.0, "mm/s", "vector feed of the approach (segment 0)", min=0.0),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration for start, stop, override and hold", min=0.0),
+        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
+             "end point this long after the command stopped", min=0.0),
         real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=0.0),
         real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position)"),
         real("y_start", "parameter", -10.0, "mm", "Y command before the cycle (the axis's start position)"),
@@ -149,6 +151,7 @@ class ContourInterpolator(Controller):
         self.feed = real_param(values, "feed", positive=True)
         self.approach_feed = real_param(values, "approach_feed", positive=True)
         self.accel = real_param(values, "accel", positive=True)
+        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
         self.dda_unit = real_param(values, "dda_unit", positive=True)
         self.x_start = real_param(values, "x_start")
         self.y_start = real_param(values, "y_start")
@@ -276,6 +279,12 @@ class ContourInterpolator(Controller):
                           for a, c in zip("xy", self.cmd))
             if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"] and arrived:
                 self.busy, self.done, self._steps_since_end = False, True, 0
+            elif self._steps_since_end * dt > self.inpos_timeout:
+                self._steps_since_end = 0
+                self.alarm, self.busy = True, False
+                self.say("error", f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
+                                  f"{float(inputs['y_pos']):.4f}), not at the end point ({self.cmd[0]:.4f}, "  # type: ignore[arg-type]
+                                  f"{self.cmd[1]:.4f}), {self.inpos_timeout:g} s after the command stopped")
 
     def _direction(self) -> tuple[float, float]:
         _, (dx, dy), _, _ = self._seg

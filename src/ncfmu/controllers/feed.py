@@ -279,6 +279,7 @@ class ProgrammableFeed(Controller):
         self._steps_since_end = 0
         self._edges = {"start": False, "wear_start": False, "emergency": False}
         self._mfin_was = False
+        self._mfin_stuck_said = False
         self._waiting = 0.0                                # time since a feed's command stopped
         self._then = 0                                     # entry address after the return to the origin
         self._positions = PositionGuard(("x_pos", "y_pos"))
@@ -308,6 +309,7 @@ class ProgrammableFeed(Controller):
             self.dwell_left = self.T[word.t - 1]
         elif word.kind == "aux":
             self.m_active = 0                              # raised once MFIN is low (step)
+            self._mfin_stuck_said = False
         else:  # END
             self.busy = False
             self.word = None
@@ -354,7 +356,8 @@ class ProgrammableFeed(Controller):
             pos = float(inputs[f"{axis}_pos"])  # type: ignore[arg-type]
             if abs(pos - self.cmd[axis]) > IN_POSITION:
                 moved.append(f"{axis.upper()} {self.cmd[axis]:.4f} -> {pos:.4f}")
-                self.rc[axis] += pos - self.cmd[axis]
+                if self._counting:                     # an S4 move is not counted: nor is what it fell short
+                    self.rc[axis] += pos - self.cmd[axis]
                 self.cmd[axis] = pos
         if moved:
             self.say("info", f"t = {t:.4f} s: follow-up: command re-based on the actual position ({', '.join(moved)})")
@@ -391,7 +394,7 @@ class ProgrammableFeed(Controller):
         if bad:
             self._raise_alarm(t, bad)
         elif inputs["alarm_in"]:
-            if self.mode == EMERGENCY and not self._pending_emergency:
+            if self.mode == EMERGENCY:
                 # the emergency return backs out of the violation: latch the alarm, keep returning
                 if not self.alarm:
                     self.say("error", f"t = {t:.4f} s: alarm_in (area limiter) is set during the emergency "
@@ -446,8 +449,10 @@ class ProgrammableFeed(Controller):
                 self.dwell_left = left if left > DWELL_EPS else 0.0
             elif word.kind == "aux" and self.m_active == 0 and not inputs["mfin"]:
                 self.m_active = word.m                     # strobe: the previous answer has dropped
-            elif word.kind == "aux" and self.m_active == 0:
-                pass
+            elif word.kind == "aux" and self.m_active == 0 and not self._mfin_stuck_said:
+                self._mfin_stuck_said = True
+                self.say("warning", f"t = {t:.4f} s: M{word.m} (M{self.pc}) waits for MFIN to drop: it is still "
+                                    "high (the auxiliary device has not released the previous answer)")
             if self._word_done(inputs):
                 if word.kind == "aux":
                     self.m_active = 0

@@ -128,6 +128,9 @@ class AreaLimiter(Controller):
         self.max_speed = real_param(values, "max_speed", positive=True)
         self.margin = real_param(values, "margin", nonnegative=True)
         self.predictive = bool(values["predictive"])
+        require(self.margin >= 1e-3 or not self.predictive, "margin", self.margin,
+                "must be >= 0.001 mm with predictive (a stop computed to end exactly on the boundary can end a "
+                "rounding past it)")
         self.use_actual = bool(values["use_actual"])
         self.ref_start = real_param(values, "ref_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
         self.lim_start = real_param(values, "lim_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
@@ -191,8 +194,11 @@ class AreaLimiter(Controller):
                 mask |= LIM_PLUS
             if lim < self.lim_min[r - 1] and dir_lim < 0:
                 mask |= LIM_MINUS
-        # The reference axis is the offender when it carried the tool into this region (or off the table).
-        if dir_ref != 0 and (r == 0 or find_region(self.ref_max, ref_from) != r):
+        # The reference axis is the offender when it carried the tool into this region. Off the table (above
+        # its last boundary) only going further up is blocked: going down leads back onto it.
+        if r == 0:
+            mask |= REF_PLUS
+        elif dir_ref != 0 and find_region(self.ref_max, ref_from) != r:
             mask |= REF_PLUS if dir_ref > 0 else REF_MINUS
         if mask == 0:
             # Outside with nothing moving that way yet: block whatever motion would deepen it.
@@ -282,7 +288,7 @@ class AreaLimiter(Controller):
         v_in = (float(vff[0]), float(vff[1]))  # type: ignore[arg-type]
 
         if self.hard:
-            self._release(t, v_in)
+            self._release(t, c, v_in)
         window = self._windows(dt)
         for axis in (0, 1):
             self._follow(axis, c[axis], v_in[axis], window[axis], dt)
@@ -365,7 +371,7 @@ class AreaLimiter(Controller):
             self.passing[axis] = True
         self.pos[axis], self.vel[axis] = p_new, v_new
 
-    def _release(self, t: float, v_in: tuple[float, float]) -> None:
+    def _release(self, t: float, c: tuple[float, float], v_in: tuple[float, float]) -> None:
         """Free a hard-blocked direction once a step that way from the present position stays inside.
 
         It is freed either by backing out (a move against it, as in the seed) or because the other axis
@@ -381,6 +387,14 @@ class AreaLimiter(Controller):
             # is now asked for); speeds are bounded by max_speed, so the probe is too
             speed = min(max(abs(v_in[axis]), self._block_speed[bit]), self.max_speed)
             probe = sign * max(speed * self.monitor_period, 1e-6)
+            # An input that is itself inside asks only as far as itself: probe no farther than it (a back-out
+            # that stops just inside the boundary is released, not held for ever).
+            ahead = sign * (c[axis] - self.pos[axis])
+            if self.inside(*c):
+                if ahead <= 0.0:
+                    probe = 0.0
+                else:
+                    probe = sign * min(abs(probe), ahead)
             ref, lim = (ref_out + probe, lim_out) if axis == 0 else (ref_out, lim_out + probe)
             if self.inside(ref_out, lim_out) and self.inside(ref, lim):
                 freed |= bit

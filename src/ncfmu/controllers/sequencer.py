@@ -227,7 +227,8 @@ class CutSequencer(Controller):
     def _approach(self, index: int) -> None:
         """Go to block ``index``'s start point safely (X clear first, then Z, then X), then begin it."""
         (x0, z0), (x1, z1) = (self.x_cmd, self.z_cmd), self.stps[index]
-        clear = max(x0, x1)                          # +X is away from the work
+        # +X is away from the work; the highest start point of any block is above every surface they cut
+        clear = max(x0, x1, max(x for x, _ in self.stps))
         path = [(clear, z0), (clear, z1), (x1, z1)]
         points, here = [], (x0, z0)
         for p in path:
