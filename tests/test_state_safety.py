@@ -95,7 +95,9 @@ def test_a_good_state_round_trips_in_a_fresh_process(fmus, tmp_path):
         assert status == "OK", log
 
 
-MACHINE = textwrap.dedent('''
+#: What the subprocess scripts below share: the FMU (argv[1]) unpacked, its value references, a factory for
+#: instances and ``status(call, ...)`` -> "OK" / "Error" / "Fatal" / ...
+PREAMBLE = textwrap.dedent('''
     import ctypes, math, sys, tempfile
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime
@@ -118,7 +120,10 @@ MACHINE = textwrap.dedent('''
             return "OK"
         except FMICallException as err:
             return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+''')
 
+
+MACHINE = PREAMBLE + textwrap.dedent('''
     fmu = make()
     fmu.setupExperiment(startTime=0.0)
     if case == "step_in_init":
@@ -177,30 +182,12 @@ def test_fmi_state_machine_is_enforced(fmus, case, expected):
         assert "must be finite and > 0" in proc.stdout or "not allowed in the" in proc.stdout
 
 
-BAD_CALLS = textwrap.dedent('''
-    import sys, tempfile
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-    from fmpy.fmi1 import FMICallException
-
-    path, case = sys.argv[1], sys.argv[2]
-    md = read_model_description(path)
-    folder = extract(path, tempfile.mkdtemp())
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="dut")
-    fmu.instantiate(loggingOn=True)
+BAD_CALLS = PREAMBLE + textwrap.dedent('''
+    fmu = make()
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
     fmu.doStep(0.0, 1e-3)
-
-    def status(call, *args):
-        try:
-            call(*args)
-            return "OK"
-        except FMICallException as err:
-            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
 
     calls = {
         "unknown_vr_get": lambda: fmu.getReal([123456]),
@@ -233,28 +220,10 @@ def test_bad_calls_are_an_error_not_fatal(fmus, case, says):
     assert float(result[1]) == 1.0                                    # a refused tunable keeps its old value
 
 
-BAD_INIT = textwrap.dedent('''
-    import ctypes, sys, tempfile
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-    from fmpy.fmi1 import FMICallException
-
-    path, case = sys.argv[1], sys.argv[2]
-    md = read_model_description(path)
-    folder = extract(path, tempfile.mkdtemp())
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="dut")
-    fmu.instantiate(loggingOn=True)
+BAD_INIT = PREAMBLE + textwrap.dedent('''
+    fmu = make()
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
-
-    def status(call, *args):
-        try:
-            call(*args)
-            return "OK"
-        except FMICallException as err:
-            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
 
     if case == "huge_bandwidth":
         fmu.setReal([vr["vel_bandwidth"]], [1e300])
