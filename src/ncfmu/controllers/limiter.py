@@ -169,15 +169,6 @@ class AreaLimiter(Controller):
         self._outputs: dict[str, object] = {}
         self._publish()
 
-    # compatibility: the gated commands by name
-    @property
-    def ref_out(self) -> float:
-        return self.pos[0]
-
-    @property
-    def lim_out(self) -> float:
-        return self.pos[1]
-
     # -- the envelope -----------------------------------------------------------------------------
     def inside(self, ref: float, lim: float) -> bool:
         r = find_region(self.ref_max, ref)
@@ -301,7 +292,7 @@ class AreaLimiter(Controller):
 
     def _absurd(self, cmd: tuple[float, float], vff: tuple[float, float], inputs: Mapping[str, object],
                 dt: float) -> str | None:
-        names = (("ref_cmd_in", "ref_vff_in"), ("lim_cmd_in", "lim_vff_in"))
+        names = _INPUT_NAMES
         for axis in (0, 1):
             if not math.isfinite(cmd[axis]):
                 return f"input {names[axis][0]} = {cmd[axis]!r}: must be finite"
@@ -446,6 +437,10 @@ class AreaLimiter(Controller):
         out["ref_vff"], out["lim_vff"] = self.vel
         out["alarm"], out["region"], out["blocked"] = self.alarm, self.region, self.blocked
         return out
+
+
+#: (command, feed-forward) input names of the reference and the limited axis.
+_INPUT_NAMES = (("ref_cmd_in", "ref_vff_in"), ("lim_cmd_in", "lim_vff_in"))
 
 
 def _sign(x: float) -> int:

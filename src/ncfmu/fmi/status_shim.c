@@ -72,51 +72,75 @@ static int py_load(void)
     return 1;
 }
 
-/* ---- one record per instance: the adapter and its ports by value reference --------------------- */
+/* ---- one record per instance: its FMI state, and the fast path to the adapter ---------------- */
+enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8 };
+typedef struct Inst {
+    fmi2Component c;
+    int phase;
+    double last_time;                     /* end of the last successful doStep */
+    char name[128];
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment env;
+    struct Fast *fast;                    /* the fast path, once the adapter is found (NULL before) */
+    struct Inst *next;
+} Inst;
+static Inst *inst_list = NULL;
+
+static Inst *inst_find(fmi2Component c)
+{
+    for (Inst *i = inst_list; i; i = i->next)
+        if (i->c == c) return i;
+    return NULL;
+}
+
+static void fast_drop(fmi2Component c);
+
+static void inst_drop(fmi2Component c)
+{
+    fast_drop(c);
+    for (Inst **p = &inst_list; *p; p = &(*p)->next)
+        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); return; }
+}
+
+/* ---- the fast path: the adapter and its ports by value reference --------------------- */
 enum { K_NONE = 0, K_REAL = 1, K_INTEGER = 2, K_BOOLEAN = 3 };
 enum { C_OTHER = 0, C_INPUT = 1, C_OUTPUT = 2 };
 typedef struct Fast {
-    fmi2Component c;
     PyObject *slave;          /* the ControllerSlave (a reference held) */
     PyObject *inputs;         /* slave.inputs: the same dict for the instance's life */
     PyObject *queue;          /* slave.log_queue: pythonfmu's log list, flushed by any pythonfmu call */
     unsigned n;
     PyObject **names;         /* by value reference: the port's name (borrowed from slave._causality) */
     unsigned char *kind, *causality, *fixed;
-    struct Fast *next;
 } Fast;
-static Fast *fast_list = NULL;
 
 static Fast *fast_find(fmi2Component c)
 {
-    for (Fast *f = fast_list; f; f = f->next)
-        if (f->c == c) return f;
-    return NULL;
+    Inst *i = inst_find(c);
+    return i ? i->fast : NULL;
 }
 
 static void fast_drop(fmi2Component c)
 {
-    for (Fast **p = &fast_list; *p; p = &(*p)->next) {
-        if ((*p)->c == c) {
-            Fast *f = *p;
-            *p = f->next;
-            if (py_load()) {
-                PyGILState_STATE g = py.GILEnsure();
-                py.DecRef(f->slave);
-                py.DecRef(f->inputs);
-                py.DecRef(f->queue);
-                py.GILRelease(g);
-            }
-            free(f->names); free(f->kind); free(f->causality); free(f->fixed); free(f);
-            return;
-        }
+    Inst *i = inst_find(c);
+    Fast *f = i ? i->fast : NULL;
+    if (!f) return;
+    i->fast = NULL;
+    if (py_load()) {
+        PyGILState_STATE g = py.GILEnsure();
+        py.DecRef(f->slave);
+        py.DecRef(f->inputs);
+        py.DecRef(f->queue);
+        py.GILRelease(g);
     }
+    free(f->names); free(f->kind); free(f->causality); free(f->fixed); free(f);
 }
 
 /* The adapter puts itself in module _ncfmu_fast (attribute "last") when pythonfmu creates it. */
 static void fast_register(fmi2Component c, fmi2String instance_name)
 {
-    if (!c || !py_load()) return;
+    Inst *inst = inst_find(c);
+    if (!inst || !py_load()) return;
     fast_drop(c);
     PyGILState_STATE g = py.GILEnsure();
     PyObject *mod = py.ImportAdd("_ncfmu_fast");                  /* borrowed */
@@ -157,12 +181,10 @@ static void fast_register(fmi2Component c, fmi2String instance_name)
         f->kind[vr] = !strcmp(k_s, "Real") ? K_REAL : !strcmp(k_s, "Integer") ? K_INTEGER
                     : !strcmp(k_s, "Boolean") ? K_BOOLEAN : K_NONE;
     }
-    f->c = c;
     f->slave = slave; slave = NULL;                                /* keeps the names alive too */
     f->inputs = inputs; inputs = NULL;
     f->queue = queue;
-    f->next = fast_list;
-    fast_list = f;
+    inst->fast = f;
 done:
     if (py.Occurred()) py.Clear();
     if (slave) py.DecRef(slave);
@@ -173,9 +195,8 @@ done:
 }
 
 /* Reads: every vr an output of ``kind``; returns 0 to fall back to pythonfmu. */
-static int fast_get(fmi2Component c, const fmi2ValueReference vr[], size_t n, int kind, void *values)
+static int fast_get(Fast *f, const fmi2ValueReference vr[], size_t n, int kind, void *values)
 {
-    Fast *f = fast_find(c);
     if (!f) return 0;
     for (size_t i = 0; i < n; i++)
         if (vr[i] >= f->n || f->kind[vr[i]] != kind || f->causality[vr[i]] != C_OUTPUT) return 0;
@@ -199,9 +220,8 @@ static int fast_get(fmi2Component c, const fmi2ValueReference vr[], size_t n, in
 }
 
 /* Writes: every vr an input of ``kind`` (tunable parameters go through pythonfmu: they retune). */
-static int fast_set(fmi2Component c, const fmi2ValueReference vr[], size_t n, int kind, const void *values)
+static int fast_set(Fast *f, const fmi2ValueReference vr[], size_t n, int kind, const void *values)
 {
-    Fast *f = fast_find(c);
     if (!f) return 0;
     for (size_t i = 0; i < n; i++)
         if (vr[i] >= f->n || f->kind[vr[i]] != kind || f->causality[vr[i]] != C_INPUT) return 0;
@@ -221,9 +241,8 @@ static int fast_set(fmi2Component c, const fmi2ValueReference vr[], size_t n, in
 
 /* doStep straight into the adapter: 1 done (status in *st), 0 fall back to pythonfmu. */
 static PyObject *s_do_step = NULL, *s_failed = NULL;
-static int fast_step(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Status *st, int *flush)
+static int fast_step(Fast *f, fmi2Real t, fmi2Real h, fmi2Status *st, int *flush)
 {
-    Fast *f = fast_find(c);
     if (!f) return 0;
     PyGILState_STATE g = py.GILEnsure();
     if (!s_do_step) { s_do_step = py.StrFrom("do_step"); s_failed = py.StrFrom("step_failed"); }
@@ -252,31 +271,6 @@ static int fast_step(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Status *st, in
  * which call is allowed in which phase, a step size that is not a positive finite number, and the
  * time of the last successful step (fmi2LastSuccessfulTime). A refused call logs why (through the
  * host's logger) and returns fmi2Error; the instance stays usable (fmi2Reset) and freeable. */
-enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8 };
-typedef struct Inst {
-    fmi2Component c;
-    int phase;
-    double last_time;                     /* end of the last successful doStep */
-    char name[128];
-    fmi2CallbackLogger logger;
-    fmi2ComponentEnvironment env;
-    struct Inst *next;
-} Inst;
-static Inst *inst_list = NULL;
-
-static Inst *inst_find(fmi2Component c)
-{
-    for (Inst *i = inst_list; i; i = i->next)
-        if (i->c == c) return i;
-    return NULL;
-}
-
-static void inst_drop(fmi2Component c)
-{
-    for (Inst **p = &inst_list; *p; p = &(*p)->next)
-        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); return; }
-}
-
 static const char *phase_name(int phase)
 {
     return phase == P_INSTANTIATED ? "instantiated" : phase == P_INIT ? "initialization mode"
@@ -285,9 +279,8 @@ static const char *phase_name(int phase)
 
 /* 1 when ``call`` is allowed in the instance's phase; else logs and returns 0. Unknown instances
  * (not made by this shim) pass: pythonfmu answers them as before. */
-static int allowed(fmi2Component c, const char *call, int phases)
+static int allowed(Inst *i, const char *call, int phases)
 {
-    Inst *i = inst_find(c);
     if (!i || (i->phase & phases)) return 1;
     if (i->logger)
         i->logger(i->env, i->name, fmi2Error, "error", "%s: not allowed in the %s state (FMI 2.0 state machine)",
@@ -370,7 +363,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real to
                                fmi2Boolean stop_def, fmi2Real stop)
 {
     INNER_(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real))
-    if (!allowed(c, "fmi2SetupExperiment", P_INSTANTIATED)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2SetupExperiment", P_INSTANTIATED)) return fmi2Error;
     if (!isfinite(start) || (stop_def && !(isfinite(stop) && stop >= start))) {
         Inst *i = inst_find(c);
         if (i && i->logger)
@@ -386,7 +379,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real to
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     INNER_(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))
-    if (!allowed(c, "fmi2EnterInitializationMode", P_INSTANTIATED)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2EnterInitializationMode", P_INSTANTIATED)) return fmi2Error;
     fmi2Status s = inner_fmi2EnterInitializationMode ? inner_fmi2EnterInitializationMode(c) : fmi2Fatal;
     if (s <= fmi2Warning) inst_phase(c, P_INIT);
     return s;
@@ -395,7 +388,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 fmi2Status fmi2Terminate(fmi2Component c)
 {
     INNER_(fmi2Status, fmi2Terminate, (fmi2Component))
-    if (!allowed(c, "fmi2Terminate", P_STEP)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2Terminate", P_STEP)) return fmi2Error;
     fmi2Status s = inner_fmi2Terminate ? inner_fmi2Terminate(c) : fmi2Fatal;
     if (s <= fmi2Warning) inst_phase(c, P_TERMINATED);
     return s;
@@ -432,7 +425,7 @@ static int utf8_ok(const unsigned char *s)
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
 {
     INNER_(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]))
-    if (!allowed(c, "fmi2SetString", P_SETTABLE)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2SetString", P_SETTABLE)) return fmi2Error;
     for (size_t k = 0; k < n; k++) {
         if (!v || !v[k] || !utf8_ok((const unsigned char *)v[k])) {
             Inst *i = inst_find(c);
@@ -447,7 +440,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    if (!allowed(c, "fmi2ExitInitializationMode", P_INIT)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2ExitInitializationMode", P_INIT)) return fmi2Error;
     static fmi2Status (*exit_init)(fmi2Component) = NULL;
     static fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]) = NULL;
     if (!exit_init) exit_init = (fmi2Status(*)(fmi2Component))sym("fmi2ExitInitializationMode");
@@ -532,8 +525,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
 void fmi2FreeInstance(fmi2Component c)
 {
     INNER(void, fmi2FreeInstance, (fmi2Component))
-    fast_drop(c);
-    inst_drop(c);
+    inst_drop(c);                                  /* and its fast path */
     if (inner_fmi2FreeInstance) inner_fmi2FreeInstance(c);
 }
 
@@ -565,10 +557,9 @@ static const char *kind_name(int kind)
     return kind == K_REAL ? "Real" : kind == K_INTEGER ? "Integer" : kind == K_BOOLEAN ? "Boolean" : "String";
 }
 
-static int check_refs(fmi2Component c, const char *call, const fmi2ValueReference vr[], size_t n, int kind, int set)
+static int check_refs(Inst *i, const char *call, const fmi2ValueReference vr[], size_t n, int kind, int set)
 {
-    Fast *f = fast_find(c);
-    Inst *i = inst_find(c);
+    Fast *f = i ? i->fast : NULL;
     if (!f) return 1;
     for (size_t k = 0; k < n; k++) {
         unsigned r = vr[k];
@@ -593,17 +584,19 @@ static int check_refs(fmi2Component c, const char *call, const fmi2ValueReferenc
     fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, type v[])           \
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, type[]))      \
-        if (fast_get(c, vr, n, kind, v)) return fmi2OK;                                           \
-        if (!check_refs(c, #name, vr, n, kind, 0)) return fmi2Error;                              \
+        Inst *i = inst_find(c);                                                                   \
+        if (fast_get(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
+        if (!check_refs(i, #name, vr, n, kind, 0)) return fmi2Error;                              \
         return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
     }
 #define SETTER(name, type, kind)                                                                  \
     fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, const type v[])     \
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, const type[]))\
-        if (!allowed(c, #name, P_SETTABLE)) return fmi2Error;                                     \
-        if (fast_set(c, vr, n, kind, v)) return fmi2OK;                                           \
-        if (!check_refs(c, #name, vr, n, kind, 1)) return fmi2Error;                              \
+        Inst *i = inst_find(c);                                                                   \
+        if (!allowed(i, #name, P_SETTABLE)) return fmi2Error;                                     \
+        if (fast_set(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
+        if (!check_refs(i, #name, vr, n, kind, 1)) return fmi2Error;                              \
         fmi2Status st = inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                     \
         if (st <= fmi2Warning && n > 0 && call_refused(c)) return fmi2Error;                      \
         return st;                                                                                \
@@ -621,15 +614,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean disca
     INNER(fmi2Status, fmi2SetReal, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]))
     fmi2Status st;
     int flush = 0;
-    if (!allowed(c, "fmi2DoStep", P_STEP)) return fmi2Error;
     Inst *i = inst_find(c);
+    if (!allowed(i, "fmi2DoStep", P_STEP)) return fmi2Error;
     if (!(isfinite(t) && isfinite(h) && h > 0.0)) {
         if (i && i->logger)
             i->logger(i->env, i->name, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %g, "
                       "communicationStepSize = %g: the step size must be finite and > 0, the time finite", t, h);
         return fmi2Error;
     }
-    if (fast_step(c, t, h, &st, &flush)) {
+    if (fast_step(i ? i->fast : NULL, t, h, &st, &flush)) {
         if (flush && inner_fmi2SetReal) inner_fmi2SetReal(c, NULL, 0, NULL);   /* pythonfmu flushes the log */
     } else {
         st = inner_fmi2DoStep ? inner_fmi2DoStep(c, t, h, discard) : fmi2Fatal;
