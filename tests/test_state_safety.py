@@ -225,8 +225,17 @@ BAD_INIT = PREAMBLE + textwrap.dedent('''
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
 
-    if case == "huge_bandwidth":
-        fmu.setReal([vr["vel_bandwidth"]], [1e300])
+    if case == "huge_bandwidth":            # refused when set: outside the port's range
+        result = status(fmu.setReal, [vr["vel_bandwidth"]], [1e300])
+    elif case == "huge_inertia":
+        result = status(fmu.setReal, [vr["J"]], [1e300])
+    elif case == "tiny_substep":
+        result = status(fmu.setReal, [vr["substep"]], [1e-12])
+    elif case == "low_position_margin":     # each value in range, the design refused at exit
+        fmu.setReal([vr["Kv"]], [1000.0])
+        result = status(fmu.exitInitializationMode)
+    elif case == "low_velocity_margin":
+        fmu.setReal([vr["vel_bandwidth"], vr["substep"]], [3000.0, 1e-5])
         result = status(fmu.exitInitializationMode)
     elif case == "bad_utf8":
         refs = (ctypes.c_uint * 1)(vr["program"])
@@ -244,7 +253,11 @@ BAD_INIT = PREAMBLE + textwrap.dedent('''
 
 
 @pytest.mark.parametrize("model, case, says", [
-    ("ServoAxis", "huge_bandwidth", "vel_bandwidth"),
+    ("ServoAxis", "huge_bandwidth", "vel_bandwidth = 1.0000000000000001e+300: must be in (0, 100000]"),
+    ("ServoAxis", "huge_inertia", "J = 1.0000000000000001e+300: must be in [1e-07, 10]"),
+    ("ServoAxis", "tiny_substep", "substep = 9.9999999999999998e-13: must be in [1e-06, 0.01]"),
+    ("ServoAxis", "low_position_margin", "Kv = 1000: gives the position loop a phase margin of 8.9 deg (< 30 deg)"),
+    ("ServoAxis", "low_velocity_margin", "vel_bandwidth = 3000: gives the velocity loop a phase margin of 23.7 deg"),
     ("ProgrammableFeed", "bad_utf8", "not valid UTF-8"),
 ])
 def test_bad_parameter_values_are_an_error_not_fatal(fmus, model, case, says):

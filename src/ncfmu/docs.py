@@ -53,7 +53,8 @@ def _compact(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     return out
 
 
-def fmu_html(md_xml: bytes, logic) -> bytes:
+def fmu_html(md_xml: bytes, logic, built_with: str = "pythonfmu", extra: str = "") -> bytes:
+    """The FMU's ``documentation/index.html``; ``extra`` is HTML appended (runtime needs, design figures)."""
     root = ET.fromstring(md_xml)
     rows = _compact(_variables(md_xml))
     table = "\n".join(
@@ -68,7 +69,7 @@ padding:2px 6px;text-align:left;vertical-align:top}}table{{border-collapse:colla
 </head><body>
 <h1>{logic.MODEL_NAME}</h1>
 <p>{html.escape(logic.DESCRIPTION)}</p>
-<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {html.escape(root.get("version", ""))} with pythonfmu.
+<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {html.escape(root.get("version", ""))} with {html.escape(built_with)}.
 Default experiment: step {exp.get("stepSize")} s, stop {exp.get("stopTime")} s.
 Capabilities: canGetAndSetFMUstate = {root.find("CoSimulation").get("canGetAndSetFMUstate")}.</p>
 <h2>Behaviour</h2>
@@ -79,6 +80,7 @@ Capabilities: canGetAndSetFMUstate = {root.find("CoSimulation").get("canGetAndSe
 </table>
 <p>Bad parameters are refused at fmi2ExitInitializationMode with a log message naming the variable, the value
 and the rule.</p>
+{extra}
 </body></html>
 """
     return page.encode()

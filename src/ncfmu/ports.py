@@ -53,6 +53,9 @@ class Port:
     description : str
     min, max : float, optional
         Range of legal values, written into the modelDescription.
+    min_exclusive : bool
+        ``min`` itself is not legal (a gain or a time constant must be > 0). The modelDescription can
+        only say ``min``; the rule text (:meth:`rule`) and :meth:`check` say it exactly.
     variability : str, optional
         ``fixed`` for parameters, ``discrete`` for non-Real ports, ``continuous`` for Real inputs/outputs
         unless given.
@@ -67,6 +70,7 @@ class Port:
     min: float | None = None
     max: float | None = None
     variability: str | None = None
+    min_exclusive: bool = False
 
     def __post_init__(self) -> None:
         if self.unit is not None and self.unit not in UNITS:
@@ -81,6 +85,45 @@ class Port:
         if self.causality == "parameter":
             return "fixed"
         return "continuous" if self.type == "Real" else "discrete"
+
+    def rule(self) -> str:
+        """The port's range as text, for messages (``must be in (0, 10]``)."""
+        lo = None if self.min is None else ("(" if self.min_exclusive else "[") + f"{self.min:g}"
+        hi = None if self.max is None else f"{self.max:g}]"
+        if lo and hi:
+            return f"must be in {lo}, {hi}"
+        if lo:
+            return f"must be {'>' if self.min_exclusive else '>='} {self.min:g}"
+        if hi:
+            return f"must be <= {self.max:g}"
+        return "must be finite"
+
+    def check(self, value: object) -> object:
+        """The value as the port's type, if it keeps the port's rule; else :class:`~ncfmu.errors.ConfigError`.
+
+        Nothing is rounded: an Integer must be a whole number, a Boolean a bool (or 0/1).
+        """
+        from .errors import ConfigError
+        if self.type == "String":
+            if not isinstance(value, str):
+                raise ConfigError(self.name, value, "must be text")
+            return value
+        if self.type == "Boolean":
+            if isinstance(value, bool) or value in (0, 1):
+                return bool(value)
+            raise ConfigError(self.name, value, "must be true or false")
+        try:
+            x = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise ConfigError(self.name, value, "must be a number") from None
+        if not math.isfinite(x):
+            raise ConfigError(self.name, value, "must be finite")
+        if self.type == "Integer" and x != int(x):
+            raise ConfigError(self.name, value, "must be a whole number")
+        if ((self.min is not None and (x < self.min or (self.min_exclusive and x == self.min)))
+                or (self.max is not None and x > self.max)):
+            raise ConfigError(self.name, value, self.rule())
+        return int(x) if self.type == "Integer" else x
 
     def default(self) -> object:
         """The start value, or the type's zero for an output without one."""

@@ -8,7 +8,7 @@ Layout of a system source folder and of the packed archive (what libcosim and fm
 
 Each component binds its own .ssv (``ssd:ParameterBinding source=...``): libcosim applies a
 binding's parameters by plain name and ignores ``prefix``, so one set per component is what both
-tools read the same way.
+tools read the same way. Every .ssv carries the same set name, :data:`PARAMETER_SET`.
 """
 
 from __future__ import annotations
@@ -32,6 +32,13 @@ for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
 
 SSD_NAME = "SystemStructure.ssd"
+
+#: The ``name`` of every .ssv parameter set, in every system. ecos applies parameter sets only when
+#: asked by name (``ecos simulate ... --parameterSet parameters``) and merges the sets of that name
+#: across components, so one shared name applies a whole system; one constant (not the system's
+#: name) keeps that command the same for every system. libcosim applies each component's first
+#: set whatever its name, and fmpy and ncfmu's reader ignore the name.
+PARAMETER_SET = "parameters"
 
 
 def _q(tag: str) -> str:
@@ -95,7 +102,8 @@ def _value_element(parent: ET.Element, ns: str, value: object) -> None:
         ET.SubElement(parent, _q(f"{ns}:String"), value=str(value))
 
 
-def ssv_document(name: str, parameters: dict[str, object]) -> bytes:
+def ssv_document(parameters: dict[str, object], name: str = PARAMETER_SET) -> bytes:
+    """One .ssv parameter set: plain variable names, typed values."""
     root = ET.Element(_q("ssv:ParameterSet"), version="1.0", name=name)
     params = ET.SubElement(root, _q("ssv:Parameters"))
     for pname, value in parameters.items():
@@ -158,7 +166,7 @@ def write_system(system: System, folder: Path) -> Path:
     (out / SSD_NAME).write_bytes(ssd_document(system))
     for comp in system.components:
         if comp.parameters:
-            (out / "resources" / f"{comp.name}.ssv").write_bytes(ssv_document(comp.name, comp.parameters))
+            (out / "resources" / f"{comp.name}.ssv").write_bytes(ssv_document(comp.parameters))
     return out
 
 

@@ -39,12 +39,19 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 
 
+#: What a controller FMU runs, relative to the package: the controllers and the slave adapter. Only the
+#: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
+#: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
+FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py", "fmi/adapter.py",
+               "fmi/state.py")
+
+
 def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
-    return sorted(p for p in package_dir.rglob("*.py") if "__pycache__" not in p.parts)
+    return sorted({p for pattern in FMU_RUNTIME for p in package_dir.glob(pattern)})
 
 
 def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
-    """Digest of the model script and every module of the package (12 hex digits)."""
+    """Digest of the model script and every module the FMU carries (12 hex digits)."""
     h = hashlib.sha256()
     for path in [script, *_package_files(package_dir)]:
         h.update(str(path.relative_to(path.parents[0] if path == script else package_dir)).encode())
@@ -52,7 +59,8 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
     return h.hexdigest()[:12]
 
 
-SHIM_SOURCE = Path(__file__).with_name("status_shim.c")
+C_LAYER = Path(__file__).with_name("c")
+SHIM_SOURCE = C_LAYER / "status_shim.c"
 SHIM_MARKER = "resources/ncfmu_status_shim"
 
 
@@ -76,7 +84,7 @@ def status_shim() -> bytes | None:
         for cc in ("cc", "gcc", "clang"):
             if shutil.which(cc) is None:
                 continue
-            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{fmi_headers()}", "-o", str(out),
+            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{fmi_headers()}", f"-I{C_LAYER}", "-o", str(out),
                                    str(SHIM_SOURCE), "-ldl", "-lm"],
                                   capture_output=True, text=True)
             if proc.returncode == 0:
@@ -130,7 +138,10 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
         tmp = Path(tmp)
         stage = tmp / "stage"
         stage.mkdir()
-        shutil.copytree(PACKAGE_DIR, stage / vendored, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        for path in _package_files():
+            copy = stage / vendored / path.relative_to(PACKAGE_DIR)
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, copy)
         text = script.read_text()
         if not re.search(rf"^class {model}\(\s*Fmi2Slave\s*\)\s*:", text, re.MULTILINE):
             raise BuildError(f"{script}: needs a line 'class {model}(Fmi2Slave):' (pythonfmu finds the class by it)")
@@ -152,6 +163,26 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
     return target
 
 
+def python_runtime_record() -> str:
+    """``resources/ncfmu_python.txt``: the libpython this FMU was built with (full path, then soname),
+    which the status shim loads in a native host (see status_shim.c; ``NCFMU_LIBPYTHON`` overrides)."""
+    import sysconfig
+    libdir, soname = sysconfig.get_config_var("LIBDIR") or "", sysconfig.get_config_var("INSTSONAME") or ""
+    if not sysconfig.get_config_var("Py_ENABLE_SHARED") or not soname:
+        return ""                  # a static Python: native hosts need NCFMU_LIBPYTHON
+    return f"{Path(libdir) / soname}\n{soname}\n"
+
+
+RUNTIME_HTML = """<h2>Runtime requirements</h2>
+<p>This FMU runs Python code (the controller and pythonfmu's slave API, both inside the FMU's resources):
+it needs a CPython {version} runtime with its shared library, and only its standard library.
+In a Python host (fmpy, ncfmu) it uses the host's interpreter. In a native host (fmusim, ecos, libcosim) the
+FMU's binary loads the runtime itself: <code>$NCFMU_LIBPYTHON</code> (a path or soname) when set, else the
+library recorded at build time in <code>resources/ncfmu_python.txt</code> (<code>{record}</code>), then its
+soname through the system's library search. If none loads, fmi2Instantiate fails with one message saying so.
+The interpreter is started once per process and never finalised.</p>"""
+
+
 def _rewrite(src: Path, target: Path, logic, version: str) -> None:
     from ..docs import fmu_html
     shim = status_shim()
@@ -162,7 +193,11 @@ def _rewrite(src: Path, target: Path, logic, version: str) -> None:
             data = zin.read(item.filename)
             if item.filename == "modelDescription.xml":
                 data = enrich(data, logic, version)
-                zout.writestr("documentation/index.html", fmu_html(data, logic))
+                record = python_runtime_record()
+                extra = RUNTIME_HTML.format(version=".".join(map(str, sys.version_info[:2])),
+                                            record=", ".join(record.split()) or "none: a static Python")
+                zout.writestr("documentation/index.html", fmu_html(data, logic, extra=extra))
+                zout.writestr("resources/ncfmu_python.txt", record)
             if item.filename == linux_binary and shim is not None:
                 # the shim becomes the FMU's binary and forwards to pythonfmu's, kept beside it
                 zout.writestr(f"binaries/linux64/{logic.MODEL_NAME}.pythonfmu.so", data)
@@ -177,8 +212,16 @@ def model_scripts(models_dir: Path) -> list[Path]:
 
 
 def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> list[Path]:
-    """Build every model script; with ``only_stale`` skip FMUs built from the same source."""
+    """Build every model script (pythonfmu) and every native model (C); with ``only_stale`` skip FMUs
+    built from the same source."""
+    from .native import build_native_fmu, native_models
     built = []
+    for native in native_models():
+        target = Path(dest_dir) / f"{native.name}.fmu"
+        if only_stale and target.exists() and fmu_version(target) == native.version() and has_binary(target, native.name):
+            built.append(target)
+            continue
+        built.append(build_native_fmu(native, dest_dir))
     for script in model_scripts(models_dir):
         target = Path(dest_dir) / f"{script.stem}.fmu"
         if (only_stale and target.exists() and fmu_version(target) == expected_version(script)

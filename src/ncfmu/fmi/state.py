@@ -27,7 +27,14 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
+try:     # numpy is optional: the controller FMUs run on the standard library alone
+    import numpy as np
+except ImportError:  # pragma: no cover - exercised where numpy is absent
+    np = None
+_NP_INTEGER = (np.integer,) if np else ()
+_NP_FLOATING = (np.floating,) if np else ()
+_NP_BOOL = (np.bool_,) if np else ()
+_NP_ARRAY = (np.ndarray,) if np else ()
 
 from ..errors import NcfmuError
 
@@ -54,12 +61,12 @@ def build_digest(package: str = _PACKAGE) -> str:
 def _encode(value: Any, where: str) -> Any:
     if value is None or isinstance(value, (bool, str)):
         return value
-    if isinstance(value, (int, np.integer)) and not isinstance(value, np.bool_):
+    if isinstance(value, (int, *_NP_INTEGER)) and not isinstance(value, _NP_BOOL):
         return int(value)
-    if isinstance(value, (float, np.floating)):
+    if isinstance(value, (float, *_NP_FLOATING)):
         x = float(value)
         return x if math.isfinite(x) else {"f": repr(x)}
-    if isinstance(value, np.bool_):
+    if isinstance(value, _NP_BOOL):
         return bool(value)
     if isinstance(value, list):
         return [_encode(v, f"{where}[{i}]") for i, v in enumerate(value)]
@@ -71,7 +78,7 @@ def _encode(value: Any, where: str) -> Any:
                 return {"d": [[k, _encode(v, f"{where}[{k!r}]")] for k, v in value.items()]}
             return {k: _encode(v, f"{where}[{k!r}]") for k, v in value.items()}
         return {"d": [[_encode(k, where), _encode(v, f"{where}[{k!r}]")] for k, v in value.items()]}
-    if isinstance(value, np.ndarray):
+    if isinstance(value, _NP_ARRAY):
         if value.dtype.name not in _DTYPES:
             raise StateError(f"{where}: numpy dtype {value.dtype} cannot be saved")
         return {"a": [_encode(v, where) for v in value.ravel().tolist()], "dtype": value.dtype.name,
@@ -129,6 +136,8 @@ def _decode(tree: Any, where: str) -> Any:
             out[key] = _decode(pair[1], where)
         return out
     if set(tree) == {"a", "dtype", "shape"}:
+        if np is None:
+            raise StateError(f"{where}: a numpy array, and numpy is not available here")
         if tree["dtype"] not in _DTYPES or not isinstance(tree["a"], list) or not isinstance(tree["shape"], list):
             raise StateError(f"{where}: malformed array")
         try:

@@ -27,10 +27,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..controllers.base import Controller, finite_inputs, int_param, real_param
+from ..controllers.base import Controller, finite_inputs
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .model import AxisParameters, discretize, drive_plant, servo_axis
+from .model import AxisParameters, design, discretize, drive_plant, servo_axis
 
 
 class ServoAxis(Controller):
@@ -42,22 +42,30 @@ class ServoAxis(Controller):
     #: python-control models rebuilt by configure() from the parameters: not part of a saved FMU state.
     DERIVED = ("linear", "plant")
 
+    # The ranges are physical (a machine-tool feed axis) and keep the discretisation well conditioned:
+    # a parameter outside them is refused naming itself, not a derived quantity.
     PORTS = (
-        real("Kv", "parameter", 30.0, "1/s", "position-loop gain", min=0.0),
+        real("Kv", "parameter", 30.0, "1/s", "position-loop gain", min=0.0, max=1e4, min_exclusive=True),
         real("kff", "parameter", 1.0, "1", "velocity feed-forward factor", min=0.0, max=2.0),
         real("kaff", "parameter", 1.0, "1", "acceleration (torque) feed-forward factor", min=0.0, max=2.0),
-        real("J", "parameter", 2.5e-3, "kg.m2", "inertia of motor + screw + load, referred to the motor", min=0.0),
-        real("pitch", "parameter", 10.0, "mm/rev", "ball-screw lead", min=0.0),
-        real("b_visc", "parameter", 1e-3, "N.m.s/rad", "viscous friction", min=0.0),
-        real("tau_coulomb", "parameter", 0.1, "N.m", "Coulomb friction torque", min=0.0),
-        real("torque_max", "parameter", 12.0, "N.m", "motor torque limit", min=0.0),
-        real("speed_max", "parameter", 3000.0, "rev/min", "motor speed limit", min=0.0),
-        real("tau_current", "parameter", 0.5e-3, "s", "current-loop time constant", min=0.0),
-        real("vel_bandwidth", "parameter", 400.0, "rad/s", "velocity-loop crossover (PI zero at a quarter of it)", min=0.0),
-        integer("counts_per_rev", "parameter", 2 ** 20, "encoder counts per motor revolution", min=1),
-        real("inpos_band", "parameter", 0.005, "mm", "in-position band on |pos_cmd - pos|", min=0.0),
-        real("pos_start", "parameter", 0.0, "mm", "initial axis position"),
-        real("substep", "parameter", 1e-4, "s", "internal sub-step of the digital drive", min=0.0),
+        real("J", "parameter", 2.5e-3, "kg.m2", "inertia of motor + screw + load, referred to the motor",
+             min=1e-7, max=10.0),
+        real("pitch", "parameter", 10.0, "mm/rev", "ball-screw lead", min=0.1, max=1000.0),
+        real("b_visc", "parameter", 1e-3, "N.m.s/rad", "viscous friction", min=0.0, max=100.0),
+        real("tau_coulomb", "parameter", 0.1, "N.m", "Coulomb friction torque", min=0.0, max=1e12),
+        real("torque_max", "parameter", 12.0, "N.m", "motor torque limit", min=0.0, max=1e5, min_exclusive=True),
+        real("speed_max", "parameter", 3000.0, "rev/min", "motor speed limit", min=0.0, max=1e5,
+             min_exclusive=True),
+        real("tau_current", "parameter", 0.5e-3, "s", "current-loop time constant", min=1e-6, max=0.1),
+        real("vel_bandwidth", "parameter", 400.0, "rad/s", "velocity-loop crossover (PI zero at a quarter of it)",
+             min=0.0, max=1e5, min_exclusive=True),
+        integer("counts_per_rev", "parameter", 2 ** 20, "encoder counts per motor revolution", min=1, max=2 ** 30),
+        real("inpos_band", "parameter", 0.005, "mm", "in-position band on |pos_cmd - pos|", min=0.0, max=1e3,
+             min_exclusive=True),
+        real("pos_start", "parameter", 0.0, "mm", "initial axis position", min=-1e5, max=1e5),
+        # Drives close their loops every 31-125 us; below 1 us nothing physical is gained and a 1 ms
+        # step would cost over a thousand sub-steps.
+        real("substep", "parameter", 1e-4, "s", "internal sub-step of the digital drive", min=1e-6, max=0.01),
         boolean("ideal", "parameter", False, "true: linear model only (no limits, Coulomb friction, quantisation)"),
         real("pos_cmd", "input", 0.0, "mm", "position command"),
         real("vel_ff", "input", 0.0, "mm/s", "velocity feed-forward"),
@@ -71,34 +79,26 @@ class ServoAxis(Controller):
     )
 
     def configure(self, values: Mapping[str, object]) -> None:
-        self.p = AxisParameters(
-            Kv=real_param(values, "Kv", positive=True),
-            kff=real_param(values, "kff", lo=0.0, hi=2.0),
-            kaff=real_param(values, "kaff", lo=0.0, hi=2.0),
-            J=real_param(values, "J", positive=True),
-            pitch=real_param(values, "pitch", positive=True),
-            b_visc=real_param(values, "b_visc", nonnegative=True),
-            tau_current=real_param(values, "tau_current", positive=True),
-            vel_bandwidth=real_param(values, "vel_bandwidth", positive=True),
-        )
-        self.tau_coulomb = real_param(values, "tau_coulomb", nonnegative=True)
-        self.torque_max = real_param(values, "torque_max", positive=True)
-        self.speed_max = real_param(values, "speed_max", positive=True)
-        self.counts_per_rev = int_param(values, "counts_per_rev", lo=1)
-        self.inpos_band = real_param(values, "inpos_band", positive=True)
-        self.pos_start = real_param(values, "pos_start")
-        self.substep = real_param(values, "substep", positive=True, hi=0.01)
-        self.ideal = bool(values["ideal"])
+        v = {port.name: port.check(values[port.name]) for port in self.ports("parameter")}
+        self.p = AxisParameters(Kv=v["Kv"], kff=v["kff"], kaff=v["kaff"], J=v["J"], pitch=v["pitch"],
+                                b_visc=v["b_visc"], tau_current=v["tau_current"], vel_bandwidth=v["vel_bandwidth"])
+        self.tau_coulomb = v["tau_coulomb"]
+        self.torque_max = v["torque_max"]
+        self.speed_max = v["speed_max"]
+        self.counts_per_rev = v["counts_per_rev"]
+        self.inpos_band = v["inpos_band"]
+        self.pos_start = v["pos_start"]
+        self.substep = v["substep"]
+        self.ideal = v["ideal"]
         # The velocity loop is sampled every substep: a crossover above 0.5 rad per sample is no design.
         require(self.p.vel_bandwidth * self.substep <= 0.5, "vel_bandwidth", self.p.vel_bandwidth,
                 f"must be <= 0.5 / substep = {0.5 / self.substep:g} rad/s (the velocity loop is sampled every "
                 f"substep = {self.substep:g} s)")
+        self.design = design(self.p)
+        refusal = self.design.refusal(self.p)
+        if refusal:
+            raise ConfigError(*refusal)
         self.linear = servo_axis(self.p)
-        poles = np.linalg.eigvals(self.linear.A)
-        if np.max(poles.real) >= 0:
-            raise ConfigError("vel_bandwidth", self.p.vel_bandwidth,
-                              f"with Kv = {self.p.Kv:g} 1/s the closed loop is unstable (poles {np.round(poles, 1)}); "
-                              "raise vel_bandwidth or lower Kv")
         self.plant = drive_plant(self.p)
         self.kp, self.ki = self.p.velocity_gains
         self.v_max = self.speed_max * self.p.pitch / 60.0       # mm/s
@@ -129,6 +129,7 @@ class ServoAxis(Controller):
         self.fault = None
         self.pos_cmd = self.cmd_prev = self.pos_start
         self.vel_ff = self.vff_prev = 0.0
+        self._dt_nominal = 0.0
         self._outputs: dict[str, object] = {}
         self._publish(self.pos_start, 0.0, 0.0)
 
@@ -171,7 +172,21 @@ class ServoAxis(Controller):
         return round(pos / self.quantum) * self.quantum
 
     # -- stepping -------------------------------------------------------------------------------
+    def _nominal_step(self, dt: float) -> float:
+        """The step, as the drive's cycle: a step within 1e-9 of the previous one is the previous one.
+
+        Hosts that count time in integers (libcosim: ns) hand over ``t(k+1) - t(k)`` in doubles, which
+        wanders by a few ulps from step to step; the drive must not re-discretise (and a quantised
+        encoder must not flip a count) on arithmetic noise, so the result is the same in every host.
+        """
+        last = self._dt_nominal
+        if last and abs(dt - last) <= 1e-9 * last:
+            return last
+        self._dt_nominal = dt
+        return dt
+
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        dt = self._nominal_step(dt)
         bad = finite_inputs(inputs, ("pos_cmd", "vel_ff"))
         if bad:
             # Never act on a NaN: hold the last good command, say why once.
@@ -245,10 +260,15 @@ class ServoAxis(Controller):
             torque, pos_n, vel_n = (a00 * torque + a01 * pos + a02 * vel + b00 * t_cmd + b01 * t_fr,
                                     a10 * torque + a11 * pos + a12 * vel + b10 * t_cmd + b11 * t_fr,
                                     a20 * torque + a21 * pos + a22 * vel + b20 * t_cmd + b21 * t_fr)
-            if t_fr != 0.0 and (vel == 0.0 and abs(torque) <= tc or vel * vel_n < 0.0):
-                vel_n = 0.0                 # stick (or stop at the zero crossing, re-decided next substep)
-                if vel == 0.0:
-                    pos_n = pos
+            if t_fr != 0.0:
+                if vel == 0.0 and abs(torque) <= tc:
+                    pos_n, vel_n = pos, 0.0          # stick
+                elif vel * vel_n < 0.0:
+                    # Sliding friction stopped the axis within the sub-step (re-decided next sub-step).
+                    # Friction only brakes: the axis stops where a uniform deceleration from vel to 0
+                    # takes it, never behind where it was, however large tau_coulomb is.
+                    s_stop = vel / (vel - vel_n)     # fraction of the sub-step until the stop
+                    pos_n, vel_n = pos + 0.5 * vel * s_stop * h, 0.0
             pos, vel = pos_n, vel_n
         self.x = np.array([xi, torque, pos, vel])
         self.p_last = p_meas          # the last sample the velocity loop took

@@ -153,3 +153,76 @@ def drive_plant(p: AxisParameters = AxisParameters(), name: str = "drive_plant")
 def discretize(sys: ct.StateSpace, h: float) -> ct.StateSpace:
     """Exact zero-order-hold discretisation at step ``h`` (s)."""
     return ct.c2d(sys, h, method="zoh")
+
+
+# -- design: the loops opened, their margins and bandwidths ------------------------------------
+#: The smallest phase margin ncfmu accepts for either loop, degrees.
+MIN_PHASE_MARGIN = 30.0
+
+
+def velocity_loop(p: AxisParameters = AxisParameters(), name: str = "velocity_loop") -> ct.TransferFunction:
+    """The velocity loop opened at the velocity feedback: velocity error (mm/s) in, velocity (mm/s) out.
+
+    PI controller, current loop and mechanics in series (the feed-forwards do not change the loop).
+    A transfer function, reduced: the mechanics' position state is not seen from the velocity.
+    """
+    kp, ki = p.velocity_gains
+    pi = velocity_controller(kp, ki)[0, 0]                        # vel_cmd -> torque_cmd
+    mech = mechanics(p.J, p.pitch, p.b_visc)[1, 0]                # torque -> vel
+    loop = ct.minreal(ct.tf(ct.series(pi, current_loop(p.tau_current), mech)), verbose=False)
+    return ct.tf(loop.num, loop.den, name=name, inputs="vel_error", outputs="vel")
+
+
+def position_loop(p: AxisParameters = AxisParameters(), name: str = "position_loop") -> ct.TransferFunction:
+    """The position loop opened at the position feedback: position error (mm) in, position (mm) out.
+
+    ``Kv`` times the closed velocity loop times an integrator (position is the integral of velocity).
+    """
+    closed = ct.feedback(velocity_loop(p), 1)
+    loop = ct.minreal(p.Kv * closed * ct.tf([1.0], [1.0, 0.0]), verbose=False)
+    return ct.tf(loop.num, loop.den, name=name, inputs="pos_error", outputs="pos")
+
+
+@dataclass(frozen=True)
+class LoopDesign:
+    """Design figures of one axis (continuous model; the drive's sampling is bounded separately).
+
+    Phase margins in degrees (as :func:`control.margin` gives them), crossovers and closed-loop -3 dB
+    bandwidths in rad/s.
+    """
+
+    velocity_margin: float
+    velocity_crossover: float
+    velocity_bandwidth: float
+    position_margin: float
+    position_crossover: float
+    position_bandwidth: float
+    stable: bool
+
+    def refusal(self, p: AxisParameters) -> tuple[str, float, str] | None:
+        """``(parameter, value, rule)`` when the design is unstable or lacks phase margin, else None.
+
+        The velocity loop is shaped by ``vel_bandwidth`` (against the current loop's lag); the position
+        loop by ``Kv`` (against the velocity loop's bandwidth): the parameter named is the one to change.
+        """
+        if not (self.velocity_margin >= MIN_PHASE_MARGIN):
+            return ("vel_bandwidth", p.vel_bandwidth,
+                    f"gives the velocity loop a phase margin of {self.velocity_margin:.1f} deg (< "
+                    f"{MIN_PHASE_MARGIN:g} deg) with tau_current = {p.tau_current:g} s; lower vel_bandwidth")
+        if not (self.position_margin >= MIN_PHASE_MARGIN):
+            return ("Kv", p.Kv,
+                    f"gives the position loop a phase margin of {self.position_margin:.1f} deg (< "
+                    f"{MIN_PHASE_MARGIN:g} deg) with vel_bandwidth = {p.vel_bandwidth:g} rad/s; lower Kv")
+        if not self.stable:
+            return ("Kv", p.Kv, "the closed loop is unstable; lower Kv or vel_bandwidth")
+        return None
+
+
+def design(p: AxisParameters = AxisParameters()) -> LoopDesign:
+    """Margins and bandwidths of both loops of the axis ``p`` (python-control)."""
+    lv, lp = velocity_loop(p), position_loop(p)
+    _, pm_v, _, wc_v = ct.margin(lv)
+    _, pm_p, _, wc_p = ct.margin(lp)
+    stable = bool(np.all(np.real(ct.poles(servo_axis(p))) < 0))
+    return LoopDesign(float(pm_v), float(wc_v), float(ct.bandwidth(ct.feedback(lv, 1))),
+                      float(pm_p), float(wc_p), float(ct.bandwidth(ct.feedback(lp, 1))), stable)

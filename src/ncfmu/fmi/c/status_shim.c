@@ -18,12 +18,15 @@
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code). */
+/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code), and the state
+ * machine this shim shares with ncfmu's native FMUs. */
 #include "fmi2Functions.h"
+#include "fmi2_machine.h"
 
 /* ---- the Python C API, resolved at run time ------------------------------------------------- */
 typedef struct _object PyObject;
@@ -73,7 +76,6 @@ static int py_load(void)
 }
 
 /* ---- one record per instance: its FMI state, and the fast path to the adapter ---------------- */
-enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8 };
 typedef struct Inst {
     fmi2Component c;
     int phase;
@@ -85,12 +87,17 @@ typedef struct Inst {
     struct Inst *next;
 } Inst;
 static Inst *inst_list = NULL;
+/* Hosts such as ecos instantiate, step and free instances on several threads at once. */
+static pthread_mutex_t inst_lock = PTHREAD_MUTEX_INITIALIZER;
 
 static Inst *inst_find(fmi2Component c)
 {
+    pthread_mutex_lock(&inst_lock);
+    Inst *found = NULL;
     for (Inst *i = inst_list; i; i = i->next)
-        if (i->c == c) return i;
-    return NULL;
+        if (i->c == c) { found = i; break; }
+    pthread_mutex_unlock(&inst_lock);
+    return found;
 }
 
 static void fast_drop(fmi2Component c);
@@ -98,8 +105,10 @@ static void fast_drop(fmi2Component c);
 static void inst_drop(fmi2Component c)
 {
     fast_drop(c);
+    pthread_mutex_lock(&inst_lock);
     for (Inst **p = &inst_list; *p; p = &(*p)->next)
-        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); return; }
+        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); break; }
+    pthread_mutex_unlock(&inst_lock);
 }
 
 /* ---- the fast path: the adapter and its ports by value reference --------------------- */
@@ -271,21 +280,13 @@ static int fast_step(Fast *f, fmi2Real t, fmi2Real h, fmi2Status *st, int *flush
  * which call is allowed in which phase, a step size that is not a positive finite number, and the
  * time of the last successful step (fmi2LastSuccessfulTime). A refused call logs why (through the
  * host's logger) and returns fmi2Error; the instance stays usable (fmi2Reset) and freeable. */
-static const char *phase_name(int phase)
-{
-    return phase == P_INSTANTIATED ? "instantiated" : phase == P_INIT ? "initialization mode"
-         : phase == P_STEP ? "step mode" : phase == P_TERMINATED ? "terminated" : "unknown";
-}
-
-/* 1 when ``call`` is allowed in the instance's phase; else logs and returns 0. Unknown instances
- * (not made by this shim) pass: pythonfmu answers them as before. */
+/* 1 when ``call`` is allowed in the instance's phase (fmi2_machine.h); else logs and returns 0.
+ * Unknown instances (not made by this shim) pass: pythonfmu answers them as before. */
 static int allowed(Inst *i, const char *call, int phases)
 {
-    if (!i || (i->phase & phases)) return 1;
-    if (i->logger)
-        i->logger(i->env, i->name, fmi2Error, "error", "%s: not allowed in the %s state (FMI 2.0 state machine)",
-                  call, phase_name(i->phase));
-    return 0;
+    if (!i) return 1;
+    Fmi2Log log = {i->logger, i->env, i->name};
+    return fmi2_allowed(&log, i->phase, call, phases);
 }
 
 static void inst_phase(fmi2Component c, int phase)
@@ -294,12 +295,78 @@ static void inst_phase(fmi2Component c, int phase)
     if (i) i->phase = phase;
 }
 
-#define P_SETTABLE (P_INSTANTIATED | P_INIT | P_STEP)
-
 /* Must match ncfmu.fmi.adapter.INIT_REFUSED_VR */
 #define NCFMU_INIT_REFUSED_VR 2147483000u
 /* Must match ncfmu.fmi.adapter.CALL_REFUSED_VR */
 #define NCFMU_CALL_REFUSED_VR 2147483001u
+
+/* ---- a Python runtime for native hosts ------------------------------------------------------------
+ * pythonfmu's library does not link libpython: in a Python host the symbols are there, in a native
+ * host (fmusim, ecos, libcosim) they are not. Before pythonfmu's library is loaded, the shim makes sure
+ * a libpython is loaded with RTLD_GLOBAL, choosing, in this order:
+ *   1. $NCFMU_LIBPYTHON (a path or a soname), and nothing else when it is set;
+ *   2. the library recorded at build time in resources/ncfmu_python.txt (path, then its soname);
+ * and starts the interpreter itself (then releases the GIL). pythonfmu then finds it initialised and
+ * leaves it alone: it never runs Py_Finalize from a static destructor at process exit, where numpy's
+ * and scipy's clean-up crashed native hosts (SIGSEGV/SIGABRT after the run). The interpreter lives
+ * until the process ends. If no runtime loads, one message says so, once, and every instantiation
+ * fails (fmi2Instantiate returns NULL). */
+static char python_problem[1024] = "";
+
+static int python_runtime(const char *fmu_binary)
+{
+    static int state = 0;                  /* 0 not tried, 1 ready, -1 failed */
+    if (state) return state > 0;
+    int (*is_init)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (is_init) { state = 1; return 1; }  /* a Python host: its interpreter */
+    char recorded[2][1024] = {"", ""}, path[4096], tried[2048] = "";
+    const char *env = getenv("NCFMU_LIBPYTHON");
+    /* resources/ncfmu_python.txt, next to binaries/<platform>/ */
+    snprintf(path, sizeof path, "%s", fmu_binary);
+    for (int up = 0; up < 3; up++) { char *slash = strrchr(path, '/'); if (slash) *slash = 0; }
+    size_t used = strlen(path);
+    if (used + 32 < sizeof path) {
+        strcat(path, "/resources/ncfmu_python.txt");
+        FILE *f = fopen(path, "r");
+        if (f) {
+            for (int k = 0; k < 2 && fgets(recorded[k], sizeof recorded[k], f); k++)
+                recorded[k][strcspn(recorded[k], "\r\n")] = 0;
+            fclose(f);
+        }
+    }
+    const char *candidates[3] = {env, env ? NULL : recorded[0], env ? NULL : recorded[1]};
+    void *lib = NULL;
+    for (int k = 0; k < 3 && !lib; k++) {
+        if (!candidates[k] || !candidates[k][0]) continue;
+        lib = dlopen(candidates[k], RTLD_NOW | RTLD_GLOBAL);
+        size_t n = strlen(tried);
+        snprintf(tried + n, sizeof tried - n, "%s%s", n ? ", " : "", candidates[k]);
+    }
+    if (!lib) {
+        snprintf(python_problem, sizeof python_problem, "ncfmu: this FMU runs Python code and needs a Python "
+                 "runtime (libpython); none could be loaded (tried: %s). Install that Python with its shared "
+                 "library, or set NCFMU_LIBPYTHON to the path of a libpython3.x.so of the same version.",
+                 tried[0] ? tried : "nothing: no NCFMU_LIBPYTHON and no resources/ncfmu_python.txt");
+        fprintf(stderr, "%s\n", python_problem);
+        state = -1;
+        return 0;
+    }
+    is_init = (int (*)(void))dlsym(lib, "Py_IsInitialized");
+    void (*init_ex)(int) = (void (*)(int))dlsym(lib, "Py_InitializeEx");
+    void *(*save_thread)(void) = (void *(*)(void))dlsym(lib, "PyEval_SaveThread");
+    if (!is_init || !init_ex || !save_thread) {
+        snprintf(python_problem, sizeof python_problem, "ncfmu: %s is not a Python runtime library", tried);
+        fprintf(stderr, "%s\n", python_problem);
+        state = -1;
+        return 0;
+    }
+    if (!is_init()) {
+        init_ex(0);                         /* 0: leave the host's signal handlers alone */
+        save_thread();                      /* release the GIL: every call takes it with PyGILState_Ensure */
+    }
+    state = 1;
+    return 1;
+}
 
 static void *inner = NULL;
 static void *sym(const char *name);
@@ -308,10 +375,13 @@ static void *sym(const char *name);
 
 static void *sym(const char *name)
 {
+    static int inner_failed = 0;           /* say a load failure once, not on every call */
     if (!inner) {
         Dl_info info;
         char path[4096];
+        if (inner_failed) return NULL;
         if (!dladdr((void *)&sym, &info) || !info.dli_fname) return NULL;
+        if (!python_runtime(info.dli_fname)) { inner_failed = 1; return NULL; }
         const char *dot = strrchr(info.dli_fname, '.');
         size_t stem = dot ? (size_t)(dot - info.dli_fname) : strlen(info.dli_fname);
         if (stem + 32 >= sizeof path) return NULL;
@@ -319,7 +389,9 @@ static void *sym(const char *name)
         strcpy(path + stem, ".pythonfmu.so");
         inner = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
         if (!inner) {
-            fprintf(stderr, "ncfmu status shim: cannot load %s: %s\n", path, dlerror());
+            snprintf(python_problem, sizeof python_problem, "ncfmu status shim: cannot load %s: %s", path, dlerror());
+            fprintf(stderr, "%s\n", python_problem);
+            inner_failed = 1;
             return NULL;
         }
     }
@@ -363,15 +435,10 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real to
                                fmi2Boolean stop_def, fmi2Real stop)
 {
     INNER_(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real))
-    if (!allowed(inst_find(c), "fmi2SetupExperiment", P_INSTANTIATED)) return fmi2Error;
-    if (!isfinite(start) || (stop_def && !(isfinite(stop) && stop >= start))) {
-        Inst *i = inst_find(c);
-        if (i && i->logger)
-            i->logger(i->env, i->name, fmi2Error, "error", "fmi2SetupExperiment: startTime = %g, stopTime = %g: "
-                      "times must be finite and stopTime >= startTime", start, stop);
-        return fmi2Error;
-    }
     Inst *i = inst_find(c);
+    if (!allowed(i, "fmi2SetupExperiment", P_SETUP)) return fmi2Error;
+    Fmi2Log log = {i ? i->logger : NULL, i ? i->env : NULL, i ? i->name : ""};
+    if (!fmi2_experiment_ok(&log, start, stop_def, stop)) return fmi2Error;
     if (i) i->last_time = start;
     return inner_fmi2SetupExperiment ? inner_fmi2SetupExperiment(c, tol_def, tol, start, stop_def, stop) : fmi2Fatal;
 }
@@ -379,7 +446,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real to
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     INNER_(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))
-    if (!allowed(inst_find(c), "fmi2EnterInitializationMode", P_INSTANTIATED)) return fmi2Error;
+    if (!allowed(inst_find(c), "fmi2EnterInitializationMode", P_SETUP)) return fmi2Error;
     fmi2Status s = inner_fmi2EnterInitializationMode ? inner_fmi2EnterInitializationMode(c) : fmi2Fatal;
     if (s <= fmi2Warning) inst_phase(c, P_INIT);
     return s;
@@ -404,30 +471,12 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *
     return fmi2Discard;
 }
 
-/* 1 when ``s`` is well-formed UTF-8 (no overlongs, no surrogates, at most U+10FFFF). */
-static int utf8_ok(const unsigned char *s)
-{
-    while (*s) {
-        unsigned c = *s++;
-        int more = c < 0x80 ? 0 : (c >> 5) == 6 ? 1 : (c >> 4) == 14 ? 2 : (c >> 3) == 30 ? 3 : -1;
-        if (more < 0) return 0;
-        unsigned cp = more == 0 ? c : more == 1 ? c & 0x1F : more == 2 ? c & 0x0F : c & 0x07;
-        for (int k = 0; k < more; k++) {
-            if ((*s & 0xC0) != 0x80) return 0;
-            cp = (cp << 6) | (*s++ & 0x3F);
-        }
-        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000)
-            || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
-    }
-    return 1;
-}
-
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
 {
     INNER_(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]))
     if (!allowed(inst_find(c), "fmi2SetString", P_SETTABLE)) return fmi2Error;
     for (size_t k = 0; k < n; k++) {
-        if (!v || !v[k] || !utf8_ok((const unsigned char *)v[k])) {
+        if (!v || !v[k] || !fmi2_utf8_ok((const unsigned char *)v[k])) {
             Inst *i = inst_find(c);
             if (i && i->logger)
                 i->logger(i->env, i->name, fmi2Error, "error", "fmi2SetString: value reference %u: %s",
@@ -504,7 +553,12 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
 {
     INNER(fmi2Component, fmi2Instantiate, (fmi2String, fmi2Type, fmi2String, fmi2String,
                                            const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean))
-    if (!inner_fmi2Instantiate) return NULL;
+    if (!inner_fmi2Instantiate) {
+        if (cb && cb->logger)               /* the host's log says why, too */
+            cb->logger(cb->componentEnvironment, name ? name : "", fmi2Error, "error", "%s",
+                       python_problem[0] ? python_problem : "ncfmu: pythonfmu's library could not be loaded");
+        return NULL;
+    }
     fmi2Component c = inner_fmi2Instantiate(name, type, guid, res, cb, vis, log);
     if (c) {
         Inst *i = calloc(1, sizeof *i);
@@ -514,8 +568,10 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
             snprintf(i->name, sizeof i->name, "%s", name ? name : "");
             i->logger = cb ? cb->logger : NULL;
             i->env = cb ? cb->componentEnvironment : NULL;
+            pthread_mutex_lock(&inst_lock);
             i->next = inst_list;
             inst_list = i;
+            pthread_mutex_unlock(&inst_lock);
         }
     }
     if (c && name) fast_register(c, name);
@@ -616,12 +672,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean disca
     int flush = 0;
     Inst *i = inst_find(c);
     if (!allowed(i, "fmi2DoStep", P_STEP)) return fmi2Error;
-    if (!(isfinite(t) && isfinite(h) && h > 0.0)) {
-        if (i && i->logger)
-            i->logger(i->env, i->name, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %g, "
-                      "communicationStepSize = %g: the step size must be finite and > 0, the time finite", t, h);
-        return fmi2Error;
-    }
+    Fmi2Log log = {i ? i->logger : NULL, i ? i->env : NULL, i ? i->name : ""};
+    if (!fmi2_step_ok(&log, t, h)) return fmi2Error;
     if (fast_step(i ? i->fast : NULL, t, h, &st, &flush)) {
         if (flush && inner_fmi2SetReal) inner_fmi2SetReal(c, NULL, 0, NULL);   /* pythonfmu flushes the log */
     } else {

@@ -1,0 +1,604 @@
+/*
+ * ncfmu: the FMI 2.0 co-simulation layer of the native FMUs (ServoAxis), table-driven.
+ *
+ * The model (fmi2_model.h) supplies its equations; the generated model_vars.h its variables. This
+ * file holds everything FMI: instances, the state machine (fmi2_machine.h, shared with the status
+ * shim of the Python FMUs), value references checked against the table (unknown, wrong type, an
+ * output, a fixed parameter after initialisation, a value outside the port's rule: fmi2Error naming
+ * the variable, the value and the rule), and the FMU state (plain data, serialized in a versioned
+ * format checked against the model and its build). No call reaches fmi2Fatal on bad input.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "fmi2_machine.h"
+#include "fmi2_model.h"
+#define NCFMU_VAR_TABLE
+#include "model_vars.h"
+
+/* ---- instances -------------------------------------------------------------------------------- */
+typedef struct State State;
+
+typedef struct {
+    int phase;
+    double last_time;                   /* end of the last successful doStep */
+    char name[128];
+    Fmi2Log log;
+    fmi2CallbackFunctions cb;
+    double values[NVARS];
+    ModelState *model;
+    State *states;                      /* the FMU states this instance handed out and not freed */
+} Instance;
+
+#define STATE_MAGIC 0x4e43534du          /* "NCSM": a live state record (never trusted from bytes) */
+struct State {
+    uint32_t magic;
+    Instance *owner;
+    State *next;
+    int phase;
+    double last_time;
+    double values[NVARS];
+    unsigned char model[];              /* model_state_size() bytes */
+};
+
+static void *mem_alloc(Instance *i, size_t n)
+{
+    void *p = i->cb.allocateMemory ? i->cb.allocateMemory(1, n) : calloc(1, n);
+    if (p) memset(p, 0, n);
+    return p;
+}
+
+static void mem_free(Instance *i, void *p)
+{
+    if (!p) return;
+    if (i->cb.freeMemory) i->cb.freeMemory(p); else free(p);
+}
+
+#define LOG(i) (&(i)->log)
+
+static void set_defaults(Instance *i)
+{
+    for (unsigned vr = 0; vr < NVARS; vr++) i->values[vr] = MODEL_VARS[vr].start;
+}
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String resources,
+                              const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging)
+{
+    (void)resources; (void)visible; (void)logging;
+    Fmi2Log early = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name ? name : ""};
+    if (type != fmi2CoSimulation) {
+        FMI2_SAY(&early, fmi2Error, "error", "fmi2Instantiate: %s is a co-simulation FMU (fmuType = %d asked)",
+                 MODEL_IDENTIFIER, (int)type);
+        return NULL;
+    }
+    if (!guid || strcmp(guid, MODEL_GUID) != 0) {
+        FMI2_SAY(&early, fmi2Error, "error", "fmi2Instantiate: GUID %s is not this FMU's (%s): the "
+                 "modelDescription and the binary are from different builds", guid ? guid : "(null)", MODEL_GUID);
+        return NULL;
+    }
+    Instance tmp = {0};
+    if (cb) tmp.cb = *cb;
+    Instance *i = mem_alloc(&tmp, sizeof *i);
+    if (!i) return NULL;
+    *i = tmp;
+    i->model = mem_alloc(i, model_state_size());
+    if (!i->model) { mem_free(i, i); return NULL; }
+    snprintf(i->name, sizeof i->name, "%s", name ? name : "");
+    i->log.logger = i->cb.logger;
+    i->log.env = i->cb.componentEnvironment;
+    i->log.name = i->name;
+    i->phase = P_INSTANTIATED;
+    set_defaults(i);
+    return i;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    Instance *i = c;
+    if (!i) return;
+    for (State *s = i->states, *next; s; s = next) {
+        next = s->next;
+        s->magic = 0;
+        mem_free(i, s);
+    }
+    mem_free(i, i->model);
+    fmi2CallbackFreeMemory free_memory = i->cb.freeMemory;
+    if (free_memory) free_memory(i); else free(i);
+}
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
+{
+    (void)on; (void)n; (void)categories;
+    return c ? fmi2OK : fmi2Error;
+}
+
+/* ---- the state machine ------------------------------------------------------------------------ */
+#define ALLOWED(i, call, phases) \
+    do { if (!(i)) return fmi2Error; if (!fmi2_allowed(LOG(i), (i)->phase, call, phases)) return fmi2Error; } while (0)
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Real tol, fmi2Real start,
+                               fmi2Boolean stop_defined, fmi2Real stop)
+{
+    Instance *i = c;
+    (void)tol_defined; (void)tol;
+    ALLOWED(i, "fmi2SetupExperiment", P_SETUP);
+    if (!fmi2_experiment_ok(LOG(i), start, stop_defined, stop)) return fmi2Error;
+    i->last_time = start;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2EnterInitializationMode", P_SETUP);
+    /* Outputs are initial unknowns: compute them now when the parameters allow (quietly; the
+     * parameters may still change, and are judged at fmi2ExitInitializationMode). */
+    model_init(i->values, i->model, NULL);
+    i->phase = P_INIT;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2ExitInitializationMode", P_INIT);
+    if (model_init(i->values, i->model, LOG(i)) != 0) return fmi2Error;   /* stays in init: fix and retry */
+    i->phase = P_STEP;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2Terminate", P_STEP | P_ERROR);
+    i->phase = P_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2Reset", P_ANY);
+    set_defaults(i);
+    memset(i->model, 0, model_state_size());
+    i->phase = P_INSTANTIATED;
+    i->last_time = 0.0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior_state)
+{
+    Instance *i = c;
+    (void)no_set_prior_state;
+    ALLOWED(i, "fmi2DoStep", P_STEP);
+    if (!fmi2_step_ok(LOG(i), t, h)) return fmi2Error;
+    if (model_step(i->values, i->model, t, h, LOG(i)) != 0) return fmi2Error;
+    i->last_time = t + h;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2CancelStep", P_STEP);
+    FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2CancelStep: steps are synchronous, there is nothing to cancel");
+    return fmi2Error;
+}
+
+/* ---- variables -------------------------------------------------------------------------------- */
+static const char *type_name(VarType t)
+{
+    return t == V_REAL ? "Real" : t == V_INTEGER ? "Integer" : "Boolean";
+}
+
+/* 1 when every reference is a variable of ``type`` (and, for a set, settable now); else logs the first
+ * offender and returns 0. */
+static int refs_ok(Instance *i, const char *call, const fmi2ValueReference vr[], size_t n, VarType type, int set)
+{
+    if (n > 0 && !vr) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "%s: %zu value references asked, but the array is NULL", call, n);
+        return 0;
+    }
+    for (size_t k = 0; k < n; k++) {
+        const char *why = NULL;
+        unsigned r = vr[k];
+        if (r >= NVARS) why = "is not a variable of this FMU";
+        else if (MODEL_VARS[r].type != type) why = "is not of this call's type";
+        else if (set && MODEL_VARS[r].causality == V_OUTPUT) why = "is an output: it cannot be set";
+        else if (set && MODEL_VARS[r].causality == V_PARAMETER && !MODEL_VARS[r].tunable && i->phase == P_STEP)
+            why = "is a fixed parameter: it cannot be set after initialisation";
+        if (why) {
+            FMI2_SAY(LOG(i), fmi2Error, "error", "%s: value reference %u%s%s%s %s (%s call)", call, r,
+                     r < NVARS ? " (" : "", r < NVARS ? MODEL_VARS[r].name : "", r < NVARS ? ")" : "", why,
+                     type_name(type));
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* A parameter's value against its port's rule. */
+static int value_ok(Instance *i, unsigned vr, double x)
+{
+    const VarInfo *v = &MODEL_VARS[vr];
+    if (v->causality != V_PARAMETER || v->type == V_BOOLEAN) return 1;
+    const char *rule = NULL;
+    if (!isfinite(x)) rule = "must be finite";
+    else if ((v->has_min && (x < v->min || (v->min_exclusive && x == v->min))) || (v->has_max && x > v->max))
+        rule = v->rule;
+    if (!rule) return 1;
+    FMI2_SAY(LOG(i), fmi2Error, "error", "%s = %.17g: %s", v->name, x, rule);
+    return 0;
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2GetReal", P_GETTABLE);
+    if (!refs_ok(i, "fmi2GetReal", vr, n, V_REAL, 0)) return fmi2Error;
+    for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]];
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2GetInteger", P_GETTABLE);
+    if (!refs_ok(i, "fmi2GetInteger", vr, n, V_INTEGER, 0)) return fmi2Error;
+    for (size_t k = 0; k < n; k++) v[k] = (fmi2Integer)i->values[vr[k]];
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2GetBoolean", P_GETTABLE);
+    if (!refs_ok(i, "fmi2GetBoolean", vr, n, V_BOOLEAN, 0)) return fmi2Error;
+    for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]] != 0.0 ? fmi2True : fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[])
+{
+    Instance *i = c;
+    (void)v;
+    ALLOWED(i, "fmi2GetString", P_GETTABLE);
+    if (n == 0) return fmi2OK;
+    FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2GetString: value reference %u is not a variable of this FMU "
+             "(it has no String variables)", vr ? vr[0] : 0u);
+    return fmi2Error;
+}
+
+/* Sets are all-or-nothing: every value is checked before any is stored. */
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SetReal", P_SETTABLE);
+    if (!refs_ok(i, "fmi2SetReal", vr, n, V_REAL, 1)) return fmi2Error;
+    for (size_t k = 0; k < n; k++)
+        if (!value_ok(i, vr[k], v[k])) return fmi2Error;
+    for (size_t k = 0; k < n; k++) i->values[vr[k]] = v[k];
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SetInteger", P_SETTABLE);
+    if (!refs_ok(i, "fmi2SetInteger", vr, n, V_INTEGER, 1)) return fmi2Error;
+    for (size_t k = 0; k < n; k++)
+        if (!value_ok(i, vr[k], (double)v[k])) return fmi2Error;
+    for (size_t k = 0; k < n; k++) i->values[vr[k]] = (double)v[k];
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[])
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SetBoolean", P_SETTABLE);
+    if (!refs_ok(i, "fmi2SetBoolean", vr, n, V_BOOLEAN, 1)) return fmi2Error;
+    for (size_t k = 0; k < n; k++) i->values[vr[k]] = v[k] ? 1.0 : 0.0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
+{
+    Instance *i = c;
+    (void)v;
+    ALLOWED(i, "fmi2SetString", P_SETTABLE);
+    if (n == 0) return fmi2OK;
+    FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SetString: value reference %u is not a variable of this FMU "
+             "(it has no String variables)", vr ? vr[0] : 0u);
+    return fmi2Error;
+}
+
+/* ---- FMU state -------------------------------------------------------------------------------- */
+static size_t state_bytes(void) { return sizeof(State) + model_state_size(); }
+
+/* The state ``s`` if this instance handed it out and it is not freed; else NULL (never dereferenced). */
+static State *live_state(Instance *i, fmi2FMUstate s)
+{
+    for (State *k = i->states; k; k = k->next)
+        if ((void *)k == s) return k;
+    return NULL;
+}
+
+static void capture(Instance *i, State *s)
+{
+    s->phase = i->phase;
+    s->last_time = i->last_time;
+    memcpy(s->values, i->values, sizeof s->values);
+    memcpy(s->model, i->model, model_state_size());
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *out)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2GetFMUstate", P_STATEFUL);
+    if (!out) return fmi2Error;
+    State *s = *out ? live_state(i, *out) : NULL;       /* FMI: a given state is overwritten */
+    if (!s) {
+        s = mem_alloc(i, state_bytes());
+        if (!s) {
+            FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2GetFMUstate: out of memory");
+            return fmi2Error;
+        }
+        s->magic = STATE_MAGIC;
+        s->owner = i;
+        s->next = i->states;
+        i->states = s;
+    }
+    capture(i, s);
+    *out = s;
+    return fmi2OK;
+}
+
+/* Put a state record into the instance; a record that does not pass model_restore leaves the
+ * instance as it was. */
+static fmi2Status restore(Instance *i, const State *s, const char *call)
+{
+    double values[NVARS];
+    memcpy(values, i->values, sizeof values);
+    unsigned char *saved = mem_alloc(i, model_state_size());
+    if (!saved) return fmi2Error;
+    memcpy(saved, i->model, model_state_size());
+    memcpy(i->values, s->values, sizeof values);
+    memcpy(i->model, s->model, model_state_size());
+    if (model_restore(i->values, i->model, LOG(i)) != 0) {
+        memcpy(i->values, values, sizeof values);
+        memcpy(i->model, saved, model_state_size());
+        mem_free(i, saved);
+        FMI2_SAY(LOG(i), fmi2Error, "error", "%s: the state was refused; the instance is unchanged", call);
+        return fmi2Error;
+    }
+    mem_free(i, saved);
+    i->phase = s->phase;
+    i->last_time = s->last_time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SetFMUstate", P_STATEFUL | P_INSTANTIATED);
+    State *s = state ? live_state(i, state) : NULL;
+    if (!s) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SetFMUstate: %p is not a live FMU state of this instance "
+                 "(freed, of another instance or FMU, or never made)", state);
+        return fmi2Error;
+    }
+    return restore(i, s, "fmi2SetFMUstate");
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    Instance *i = c;
+    if (!i) return fmi2Error;
+    if (!state || !*state) return fmi2OK;
+    for (State **p = &i->states; *p; p = &(*p)->next) {
+        if ((void *)*p == *state) {
+            State *s = *p;
+            *p = s->next;
+            s->magic = 0;
+            mem_free(i, s);
+            *state = NULL;
+            return fmi2OK;
+        }
+    }
+    FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2FreeFMUstate: %p is not a live FMU state of this instance "
+             "(freed twice?)", *state);
+    return fmi2Error;
+}
+
+/* The serialized form: a header that names the format, the model and its build, then the plain data.
+ *   "NCFMU-FMUSTATE-1\0" | model identifier [32] | build [64] | u32 nvars | u32 model bytes |
+ *   i32 phase | f64 last time | f64 values[nvars] | model state bytes                          */
+#define SER_MAGIC "NCFMU-FMUSTATE-1"
+typedef struct {
+    char magic[17];
+    char model[32];
+    char build[64];
+    uint32_t nvars, model_bytes;
+    int32_t phase;
+    double last_time;
+} SerHeader;
+
+static size_t ser_size(void) { return sizeof(SerHeader) + NVARS * sizeof(double) + model_state_size(); }
+
+static void ser_header(SerHeader *h)
+{
+    memset(h, 0, sizeof *h);
+    memcpy(h->magic, SER_MAGIC, sizeof SER_MAGIC);
+    snprintf(h->model, sizeof h->model, "%s", MODEL_IDENTIFIER);
+    snprintf(h->build, sizeof h->build, "%s", MODEL_BUILD);
+    h->nvars = NVARS;
+    h->model_bytes = (uint32_t)model_state_size();
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SerializedFMUstateSize", P_ANY);
+    if (!size || !live_state(i, state)) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SerializedFMUstateSize: %p is not a live FMU state of this "
+                 "instance", state);
+        return fmi2Error;
+    }
+    *size = ser_size();
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2SerializeFMUstate", P_ANY);
+    State *s = live_state(i, state);
+    if (!s || !bytes || size < ser_size()) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SerializeFMUstate: %s", !s ? "not a live FMU state of this "
+                 "instance" : "the buffer is smaller than fmi2SerializedFMUstateSize said");
+        return fmi2Error;
+    }
+    SerHeader h;
+    ser_header(&h);
+    h.phase = s->phase;
+    h.last_time = s->last_time;
+    memcpy(bytes, &h, sizeof h);
+    memcpy(bytes + sizeof h, s->values, NVARS * sizeof(double));
+    memcpy(bytes + sizeof h + NVARS * sizeof(double), s->model, model_state_size());
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *out)
+{
+    Instance *i = c;
+    ALLOWED(i, "fmi2DeSerializeFMUstate", P_ANY);
+    if (!out) return fmi2Error;
+    const char *why = NULL;
+    SerHeader h, want;
+    ser_header(&want);
+    if (!bytes || size < sizeof h) why = "too short to be an FMU state";
+    else {
+        memcpy(&h, bytes, sizeof h);
+        if (memcmp(h.magic, want.magic, sizeof h.magic) != 0) why = "not an ncfmu FMU state (format " SER_MAGIC ")";
+        else if (memcmp(h.model, want.model, sizeof h.model) != 0) why = "a state of another model";
+        else if (memcmp(h.build, want.build, sizeof h.build) != 0) why = "a state of another build of this model";
+        else if (h.nvars != want.nvars || h.model_bytes != want.model_bytes || size != ser_size())
+            why = "its size does not match this build";
+        else if (!(h.phase == P_INIT || h.phase == P_STEP || h.phase == P_TERMINATED) || !isfinite(h.last_time))
+            why = "its FMI state is not one a state is taken in";
+    }
+    State *s = NULL;
+    if (!why) {
+        s = mem_alloc(i, state_bytes());
+        if (!s) why = "out of memory";
+    }
+    if (!why) {
+        memcpy(s->values, bytes + sizeof h, NVARS * sizeof(double));
+        memcpy(s->model, bytes + sizeof h + NVARS * sizeof(double), model_state_size());
+        s->phase = h.phase;
+        s->last_time = h.last_time;
+        for (unsigned vr = 0; vr < NVARS && !why; vr++) {
+            double x = s->values[vr];
+            const VarInfo *v = &MODEL_VARS[vr];
+            if (v->type == V_BOOLEAN && x != 0.0 && x != 1.0) why = "a Boolean that is neither 0 nor 1";
+            else if (v->type == V_INTEGER && !(isfinite(x) && x == (double)(int32_t)x)) why = "an Integer out of range";
+            else if (v->causality == V_PARAMETER && !value_ok(i, vr, x)) why = "a parameter outside its rule";
+        }
+    }
+    if (why) {
+        if (s) mem_free(i, s);
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2DeSerializeFMUstate: %zu bytes refused: %s", size, why);
+        *out = NULL;
+        return fmi2Error;
+    }
+    /* Check the model's part now, on a scratch instance copy, so a bad state is refused here. */
+    double values[NVARS];
+    memcpy(values, s->values, sizeof values);
+    ModelState *scratch = mem_alloc(i, model_state_size());
+    int bad = !scratch;
+    if (scratch) {
+        memcpy(scratch, s->model, model_state_size());
+        bad = model_restore(values, scratch, LOG(i)) != 0;
+        mem_free(i, scratch);
+    }
+    if (bad) {
+        mem_free(i, s);
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2DeSerializeFMUstate: %zu bytes refused: the model's state "
+                 "is not consistent", size);
+        *out = NULL;
+        return fmi2Error;
+    }
+    s->magic = STATE_MAGIC;
+    s->owner = i;
+    s->next = i->states;
+    i->states = s;
+    *out = s;
+    return fmi2OK;
+}
+
+/* ---- what this FMU does not offer: refused with a reason, never Fatal --------------------------- */
+static fmi2Status not_offered(fmi2Component c, const char *call, const char *why)
+{
+    Instance *i = c;
+    if (i) FMI2_SAY(LOG(i), fmi2Error, "error", "%s: %s", call, why);
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[])
+{
+    (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz;
+    return not_offered(c, "fmi2GetDirectionalDerivative", "not provided (providesDirectionalDerivative=false)");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real v[])
+{
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_offered(c, "fmi2SetRealInputDerivatives", "not supported (canInterpolateInputs=false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer order[], fmi2Real v[])
+{
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_offered(c, "fmi2GetRealOutputDerivatives", "not supported (maxOutputDerivativeOrder=0)");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v)
+{
+    (void)k; (void)v;
+    return not_offered(c, "fmi2GetStatus", "steps are synchronous: there is no pending status");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
+{
+    Instance *i = c;
+    if (i && k == fmi2LastSuccessfulTime && v) { *v = i->last_time; return fmi2OK; }
+    return not_offered(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime is available");
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v)
+{
+    (void)k; (void)v;
+    return not_offered(c, "fmi2GetIntegerStatus", "no Integer status is available");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v)
+{
+    Instance *i = c;
+    if (i && k == fmi2Terminated && v) { *v = fmi2False; return fmi2OK; }
+    return not_offered(c, "fmi2GetBooleanStatus", "only fmi2Terminated is available");
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v)
+{
+    (void)k; (void)v;
+    return not_offered(c, "fmi2GetStringStatus", "no String status is available");
+}

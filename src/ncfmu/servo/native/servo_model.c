@@ -1,0 +1,471 @@
+/*
+ * ncfmu ServoAxis: the equations of one feed axis, in C (the FMI plumbing is fmi2_native.c).
+ *
+ * The executable specification is the Python stepper ncfmu.servo.axis.ServoAxis, and the design is
+ * python-control's (ncfmu.servo.model): this file computes the same continuous models from the
+ * parameters -- the closed loop of servo_axis() and the drive plant of drive_plant() -- discretises
+ * them exactly (zero-order hold, matrix exponential by scaling and squaring of a Pade approximant,
+ * as scipy's expm does) and steps them as the Python stepper does, operation for operation. Tests
+ * hold the two to 1e-9, and the margins computed here to control.margin.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fmi2_model.h"
+#define NCFMU_VAR_TABLE         /* the rules, for the check after a state comes back */
+#include "model_vars.h"
+
+#define PI 3.14159265358979323846
+#define MIN_PHASE_MARGIN 30.0
+
+struct ModelState {
+    /* derived from the parameters (model_derive) */
+    double kp, ki, rad_per_mm, t_per_acc, v_max, quantum;
+    double A[4][4], B[4][3];             /* servo_axis(): states integral, torque, pos, vel */
+    double Ap[3][3], Bp[3][2];           /* drive_plant(): states torque, pos, vel; inputs torque_cmd, friction */
+    double ideal_dt, F[4][4], G[4][4];   /* the ideal step map for one communication step (cached) */
+    double plant_h, Ad[3][3], Bd[3][2];  /* the plant's ZOH map for one sub-step (cached) */
+    /* the dynamic state */
+    double x[4];                         /* integral, torque, pos, vel */
+    double p_meas, p_last, pos_cmd, cmd_prev, vel_ff, vff_prev;
+    double dt_nominal;                   /* the drive's cycle (ServoAxis._nominal_step) */
+    int limited, fault;
+};
+
+size_t model_state_size(void) { return sizeof(struct ModelState); }
+
+/* ---- small dense linear algebra ---------------------------------------------------------------- */
+#define NMAX 8
+
+static void mat_mul(int n, const double a[NMAX][NMAX], const double b[NMAX][NMAX], double c[NMAX][NMAX])
+{
+    double t[NMAX][NMAX];
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            double s = 0.0;
+            for (int k = 0; k < n; k++) s += a[i][k] * b[k][j];
+            t[i][j] = s;
+        }
+    memcpy(c, t, sizeof t);
+}
+
+/* Solve D X = N in place (N becomes X) by Gaussian elimination with partial pivoting. */
+static int solve(int n, double d[NMAX][NMAX], double x[NMAX][NMAX])
+{
+    for (int col = 0; col < n; col++) {
+        int p = col;
+        for (int r = col + 1; r < n; r++)
+            if (fabs(d[r][col]) > fabs(d[p][col])) p = r;
+        if (d[p][col] == 0.0) return -1;
+        if (p != col)
+            for (int k = 0; k < n; k++) {
+                double t = d[p][k]; d[p][k] = d[col][k]; d[col][k] = t;
+                t = x[p][k]; x[p][k] = x[col][k]; x[col][k] = t;
+            }
+        for (int r = col + 1; r < n; r++) {
+            double f = d[r][col] / d[col][col];
+            if (f == 0.0) continue;
+            for (int k = col; k < n; k++) d[r][k] -= f * d[col][k];
+            for (int k = 0; k < n; k++) x[r][k] -= f * x[col][k];
+        }
+    }
+    for (int col = n - 1; col >= 0; col--)
+        for (int k = 0; k < n; k++) {
+            double s = x[col][k];
+            for (int j = col + 1; j < n; j++) s -= d[col][j] * x[j][k];
+            x[col][k] = s / d[col][col];
+        }
+    return 0;
+}
+
+/* exp(M) by scaling and squaring with the (8, 8) Pade approximant (|M|/2^s <= 0.5: error below
+ * double rounding). */
+static int expm(int n, const double m[NMAX][NMAX], double e[NMAX][NMAX])
+{
+    double norm = 0.0;
+    for (int i = 0; i < n; i++) {
+        double row = 0.0;
+        for (int j = 0; j < n; j++) row += fabs(m[i][j]);
+        if (row > norm) norm = row;
+    }
+    if (!isfinite(norm)) return -1;
+    int s = 0;
+    while (norm > 0.5 && s < 1000) { norm *= 0.5; s++; }
+    double scale = ldexp(1.0, -s);
+    double a[NMAX][NMAX], p[NMAX][NMAX], num[NMAX][NMAX], den[NMAX][NMAX];
+    memset(num, 0, sizeof num); memset(den, 0, sizeof den); memset(p, 0, sizeof p);
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j < n; j++) a[i][j] = m[i][j] * scale;
+        p[i][i] = num[i][i] = den[i][i] = 1.0;
+    }
+    const int q = 8;
+    double c = 1.0;
+    for (int k = 1; k <= q; k++) {
+        c *= (double)(q - k + 1) / (double)(k * (2 * q - k + 1));
+        mat_mul(n, p, a, p);                       /* p = a^k */
+        double sign = (k % 2) ? -1.0 : 1.0;
+        for (int i = 0; i < n; i++)
+            for (int j = 0; j < n; j++) {
+                num[i][j] += c * p[i][j];
+                den[i][j] += sign * c * p[i][j];
+            }
+    }
+    if (solve(n, den, num) != 0) return -1;
+    for (int k = 0; k < s; k++) mat_mul(n, num, num, num);
+    memcpy(e, num, sizeof num);
+    return 0;
+}
+
+/* Zero-order hold of (A, B) (nx states, nu inputs) over h: Ad = e^{Ah}, Bd = int_0^h e^{As} ds B. */
+static int zoh(int nx, int nu, const double *A, const double *B, double h, double *Ad, double *Bd)
+{
+    double m[NMAX][NMAX] = {{0}}, e[NMAX][NMAX];
+    for (int i = 0; i < nx; i++) {
+        for (int j = 0; j < nx; j++) m[i][j] = A[i * nx + j] * h;
+        for (int j = 0; j < nu; j++) m[i][nx + j] = B[i * nu + j] * h;
+    }
+    if (expm(nx + nu, m, e) != 0) return -1;
+    for (int i = 0; i < nx; i++) {
+        for (int j = 0; j < nx; j++) Ad[i * nx + j] = e[i][j];
+        for (int j = 0; j < nu; j++) Bd[i * nu + j] = e[i][nx + j];
+    }
+    return 0;
+}
+
+/* ---- the models, from the parameters ----------------------------------------------------------- */
+#define P(vr) (values[vr])
+
+static void derive(const double *values, struct ModelState *m)
+{
+    double J = P(VR_J), pitch = P(VR_pitch), b = P(VR_b_visc), tau = P(VR_tau_current);
+    double bw = P(VR_vel_bandwidth), kv = P(VR_Kv), kff = P(VR_kff);
+    m->rad_per_mm = 2.0 * PI / pitch;
+    m->t_per_acc = J * m->rad_per_mm;
+    m->kp = J * m->rad_per_mm * bw;
+    m->ki = m->kp * bw / 4.0;
+    m->v_max = P(VR_speed_max) * pitch / 60.0;
+    m->quantum = pitch / P(VR_counts_per_rev);
+    double ka = P(VR_kaff) * m->t_per_acc, jk = J * m->rad_per_mm;
+    /* servo_axis(): integral' = vel_cmd - vel, torque' = (torque_cmd - torque)/tau,
+     * pos' = vel, vel' = torque/(J k) - b/J vel, with vel_cmd = Kv (pos_cmd - pos) + kff vel_ff and
+     * torque_cmd = Kp (vel_cmd - vel) + Ki integral + Ka acc_ff. */
+    double A[4][4] = {{0.0, 0.0, -kv, -1.0},
+                      {m->ki / tau, -1.0 / tau, -m->kp * kv / tau, -m->kp / tau},
+                      {0.0, 0.0, 0.0, 1.0},
+                      {0.0, 1.0 / jk, 0.0, -b / J}};
+    double B[4][3] = {{kv, kff, 0.0},
+                      {m->kp * kv / tau, m->kp * kff / tau, ka / tau},
+                      {0.0, 0.0, 0.0},
+                      {0.0, 0.0, 0.0}};
+    double Ap[3][3] = {{-1.0 / tau, 0.0, 0.0}, {0.0, 0.0, 1.0}, {1.0 / jk, 0.0, -b / J}};
+    double Bp[3][2] = {{1.0 / tau, 0.0}, {0.0, 0.0}, {0.0, -1.0 / jk}};
+    memcpy(m->A, A, sizeof A); memcpy(m->B, B, sizeof B);
+    memcpy(m->Ap, Ap, sizeof Ap); memcpy(m->Bp, Bp, sizeof Bp);
+    m->ideal_dt = m->plant_h = 0.0;      /* caches empty */
+}
+
+/* ---- design: margins of the two loops (ncfmu.servo.model.design) ------------------------------- */
+typedef struct { double kv, bw, a, tau; int position; } Loop;
+
+/* L_v(jw) = bw (1 + bw/(4 jw)) / ((jw + a)(tau jw + 1)); L_p = Kv/(jw) L_v/(1 + L_v). */
+static void loop_at(const Loop *l, double w, double *re, double *im)
+{
+    /* complex arithmetic by hand: (x + iy) */
+    double nr = l->bw, ni = -l->bw * l->bw / (4.0 * w);          /* bw (1 + bw/(4 i w)) */
+    double d1r = l->a, d1i = w, d2r = 1.0, d2i = l->tau * w;       /* (i w + a)(tau i w + 1) */
+    double dr = d1r * d2r - d1i * d2i, di = d1r * d2i + d1i * d2r;
+    double dd = dr * dr + di * di;
+    double lr = (nr * dr + ni * di) / dd, li = (ni * dr - nr * di) / dd;
+    if (l->position) {
+        double sr = 1.0 + lr, si = li, ss = sr * sr + si * si;   /* T = L / (1 + L) */
+        double tr = (lr * sr + li * si) / ss, ti = (li * sr - lr * si) / ss;
+        /* Kv / (i w) * T = Kv (ti - i tr) / w */
+        lr = l->kv * ti / w;
+        li = -l->kv * tr / w;
+    }
+    *re = lr; *im = li;
+}
+
+static double loop_log_gain(const Loop *l, double w)
+{
+    double re, im;
+    loop_at(l, w, &re, &im);
+    return log(hypot(re, im));
+}
+
+/* The phase margin as control.margin gives it: over the gain crossovers, PM = (phase mod 360) - 180,
+ * the one of smallest magnitude. Crossovers found on a log grid and refined by bisection. */
+static double phase_margin(const Loop *l)
+{
+    const int n = 4000;
+    const double w0 = 1e-3, w1 = 1e9;
+    double best = INFINITY;
+    double wa = w0, ga = loop_log_gain(l, wa);
+    for (int k = 1; k <= n; k++) {
+        double wb = w0 * pow(w1 / w0, (double)k / n), gb = loop_log_gain(l, wb);
+        if ((ga > 0.0) != (gb > 0.0)) {
+            double lo = wa, hi = wb, glo = ga;
+            for (int it = 0; it < 200 && hi - lo > 1e-14 * hi; it++) {
+                double mid = sqrt(lo * hi), gm = loop_log_gain(l, mid);
+                if ((gm > 0.0) == (glo > 0.0)) { lo = mid; glo = gm; } else hi = mid;
+            }
+            double re, im;
+            loop_at(l, sqrt(lo * hi), &re, &im);
+            double phase = atan2(im, re) * 180.0 / PI;
+            double pm = fmod(fmod(phase, 360.0) + 360.0, 360.0) - 180.0;
+            if (fabs(pm) < fabs(best)) best = pm;
+        }
+        wa = wb; ga = gb;
+    }
+    return best;
+}
+
+/* Routh-Hurwitz for the closed loop tau s^4 + (1 + tau a) s^3 + (a + bw) s^2 + (bw^2/4 + Kv bw) s
+ * + Kv bw^2/4 (the characteristic polynomial of servo_axis()). */
+static int stable(const Loop *l)
+{
+    double a4 = l->tau, a3 = 1.0 + l->tau * l->a, a2 = l->a + l->bw, a1 = l->bw * l->bw / 4.0 + l->kv * l->bw;
+    double a0 = l->kv * l->bw * l->bw / 4.0;
+    return a4 > 0 && a3 > 0 && a2 > 0 && a1 > 0 && a0 > 0 && a3 * a2 > a4 * a1
+        && a3 * a2 * a1 > a4 * a1 * a1 + a3 * a3 * a0;
+}
+
+/* The same refusals, in the same order, with the same words as LoopDesign.refusal. */
+static int design_ok(const double *values, const Fmi2Log *log)
+{
+    Loop l = {P(VR_Kv), P(VR_vel_bandwidth), P(VR_b_visc) / P(VR_J), P(VR_tau_current), 0};
+    double pm_v = phase_margin(&l);
+    l.position = 1;
+    double pm_p = phase_margin(&l);
+    if (!(pm_v >= MIN_PHASE_MARGIN)) {
+        FMI2_SAY(log, fmi2Error, "error", "vel_bandwidth = %.17g: gives the velocity loop a phase margin of %.1f "
+                 "deg (< %g deg) with tau_current = %g s; lower vel_bandwidth", P(VR_vel_bandwidth), pm_v,
+                 MIN_PHASE_MARGIN, P(VR_tau_current));
+        return 0;
+    }
+    if (!(pm_p >= MIN_PHASE_MARGIN)) {
+        FMI2_SAY(log, fmi2Error, "error", "Kv = %.17g: gives the position loop a phase margin of %.1f deg (< %g "
+                 "deg) with vel_bandwidth = %g rad/s; lower Kv", P(VR_Kv), pm_p, MIN_PHASE_MARGIN,
+                 P(VR_vel_bandwidth));
+        return 0;
+    }
+    if (!stable(&l)) {
+        FMI2_SAY(log, fmi2Error, "error", "Kv = %.17g: the closed loop is unstable; lower Kv or vel_bandwidth",
+                 P(VR_Kv));
+        return 0;
+    }
+    return 1;
+}
+
+/* Cross-parameter rules (each parameter's own range is its port's, checked when it is set). */
+static int parameters_ok(const double *values, const Fmi2Log *log)
+{
+    for (unsigned vr = 0; vr < NVARS; vr++) {
+        const VarInfo *v = &MODEL_VARS[vr];
+        if (v->causality != V_PARAMETER || v->type == V_BOOLEAN) continue;
+        double x = values[vr];
+        if (!isfinite(x) || (v->has_min && (x < v->min || (v->min_exclusive && x == v->min)))
+            || (v->has_max && x > v->max)) {
+            FMI2_SAY(log, fmi2Error, "error", "%s = %.17g: %s", v->name, x, isfinite(x) ? v->rule : "must be finite");
+            return 0;
+        }
+    }
+    /* The velocity loop is sampled every substep: a crossover above 0.5 rad per sample is no design. */
+    if (!(P(VR_vel_bandwidth) * P(VR_substep) <= 0.5)) {
+        FMI2_SAY(log, fmi2Error, "error", "vel_bandwidth = %.17g: must be <= 0.5 / substep = %g rad/s (the "
+                 "velocity loop is sampled every substep = %g s)", P(VR_vel_bandwidth), 0.5 / P(VR_substep),
+                 P(VR_substep));
+        return 0;
+    }
+    return design_ok(values, log);
+}
+
+/* ---- stepping (ServoAxis.step / _digital, operation for operation) ----------------------------- */
+static double quantise(const double *values, const struct ModelState *m, double pos)
+{
+    return P(VR_ideal) != 0.0 ? pos : nearbyint(pos / m->quantum) * m->quantum;
+}
+
+static int substeps(const double *values, double dt)
+{
+    double n = ceil(dt / P(VR_substep) - 1e-9);
+    return n < 1.0 ? 1 : (int)n;
+}
+
+static void publish(double *values, const struct ModelState *m, double pos, double vel, double torque)
+{
+    double fe = m->pos_cmd - pos;
+    values[VR_pos] = pos;
+    values[VR_vel] = vel;
+    values[VR_following_error] = fe;
+    values[VR_in_position] = fabs(fe) <= P(VR_inpos_band);
+    values[VR_torque] = torque;
+    values[VR_limited] = m->limited;
+}
+
+static int ideal_matrices(const double *values, struct ModelState *m, double dt)
+{
+    if (m->ideal_dt == dt) return 0;
+    int n = substeps(values, dt);
+    double ad[4][4], bd[4][3];
+    if (zoh(4, 3, &m->A[0][0], &m->B[0][0], dt / n, &ad[0][0], &bd[0][0]) != 0) return -1;
+    double f[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}, g[4][4] = {{0}};
+    for (int i = 0; i < n; i++) {
+        double w = (double)(i + 1) / n;
+        double u[3][4] = {{1 - w, w, 0.0, 0.0}, {0.0, 0.0, 1 - w, w}, {0.0, 0.0, -1.0 / dt, 1.0 / dt}};
+        double f2[4][4], g2[4][4];
+        for (int r = 0; r < 4; r++)
+            for (int c = 0; c < 4; c++) {
+                double sf = 0.0, sg = 0.0;
+                for (int k = 0; k < 4; k++) { sf += ad[r][k] * f[k][c]; sg += ad[r][k] * g[k][c]; }
+                for (int k = 0; k < 3; k++) sg += bd[r][k] * u[k][c];
+                f2[r][c] = sf; g2[r][c] = sg;
+            }
+        memcpy(f, f2, sizeof f); memcpy(g, g2, sizeof g);
+    }
+    memcpy(m->F, f, sizeof f); memcpy(m->G, g, sizeof g);
+    m->ideal_dt = dt;
+    return 0;
+}
+
+static int plant_matrices(struct ModelState *m, double h)
+{
+    if (m->plant_h == h) return 0;
+    if (zoh(3, 2, &m->Ap[0][0], &m->Bp[0][0], h, &m->Ad[0][0], &m->Bd[0][0]) != 0) return -1;
+    m->plant_h = h;
+    return 0;
+}
+
+static void digital(const double *values, struct ModelState *m, double dt, int enabled)
+{
+    int n = substeps(values, dt), ideal = P(VR_ideal) != 0.0;
+    double h = dt / n;
+    double (*ad)[3] = m->Ad, (*bd)[2] = m->Bd;
+    double xi = m->x[0], torque = m->x[1], pos = m->x[2], vel = m->x[3];
+    double kv = P(VR_Kv), kff = P(VR_kff), kp = m->kp, ki = m->ki;
+    double v_max = m->v_max, t_max = P(VR_torque_max), tc = P(VR_tau_coulomb), q = m->quantum;
+    double cmd0 = m->cmd_prev, d_cmd = (m->pos_cmd - m->cmd_prev) / n;
+    double vff0 = m->vff_prev, d_vff = (m->vel_ff - m->vff_prev) / n;
+    double t_ff = P(VR_kaff) * m->t_per_acc * (m->vel_ff - m->vff_prev) / dt;
+    double p_meas = m->p_last;
+    int limited = 0;
+    for (int i = 0; i < n; i++) {
+        double pos_cmd = cmd0 + d_cmd * (i + 1), vel_ff = vff0 + d_vff * (i + 1), t_cmd;
+        double p_prev = p_meas;
+        p_meas = ideal ? pos : nearbyint(pos / q) * q;
+        if (enabled) {
+            double v_meas = ideal ? vel : (p_meas - p_prev) / h;
+            double v_cmd = kv * (pos_cmd - p_meas) + kff * vel_ff;
+            int speed_limited = !ideal && fabs(v_cmd) > v_max;
+            if (speed_limited) v_cmd = copysign(v_max, v_cmd);
+            double e = v_cmd - v_meas;
+            t_cmd = kp * e + ki * xi + t_ff;
+            int torque_limited = !ideal && fabs(t_cmd) > t_max;
+            if (torque_limited) t_cmd = copysign(t_max, t_cmd);
+            if (speed_limited || torque_limited) limited = 1;   /* conditional integration: no windup */
+            else xi += e * h;
+        } else {
+            t_cmd = 0.0;
+            xi = 0.0;
+        }
+        double t_fr;
+        if (ideal || tc == 0.0) t_fr = 0.0;
+        else if (vel != 0.0) t_fr = copysign(tc, vel);
+        else t_fr = fmin(fmax(torque, -tc), tc);
+        double torque_n = ad[0][0] * torque + ad[0][1] * pos + ad[0][2] * vel + bd[0][0] * t_cmd + bd[0][1] * t_fr;
+        double pos_n = ad[1][0] * torque + ad[1][1] * pos + ad[1][2] * vel + bd[1][0] * t_cmd + bd[1][1] * t_fr;
+        double vel_n = ad[2][0] * torque + ad[2][1] * pos + ad[2][2] * vel + bd[2][0] * t_cmd + bd[2][1] * t_fr;
+        torque = torque_n;
+        if (t_fr != 0.0) {
+            if (vel == 0.0 && fabs(torque) <= tc) {
+                pos_n = pos; vel_n = 0.0;                          /* stick */
+            } else if (vel * vel_n < 0.0) {
+                /* friction only brakes: stop where uniform deceleration from vel takes the axis */
+                double s_stop = vel / (vel - vel_n);
+                pos_n = pos + 0.5 * vel * s_stop * h;
+                vel_n = 0.0;
+            }
+        }
+        pos = pos_n; vel = vel_n;
+    }
+    m->x[0] = xi; m->x[1] = torque; m->x[2] = pos; m->x[3] = vel;
+    m->p_last = p_meas;
+    m->p_meas = ideal ? pos : nearbyint(pos / q) * q;
+    m->limited = limited;
+}
+
+/* ---- the model interface ----------------------------------------------------------------------- */
+int model_init(double *values, ModelState *m, const Fmi2Log *log)
+{
+    if (!parameters_ok(values, log)) return -1;
+    memset(m, 0, sizeof *m);
+    derive(values, m);
+    double p0 = P(VR_pos_start);
+    m->x[2] = p0;
+    m->p_meas = m->p_last = quantise(values, m, p0);
+    m->pos_cmd = m->cmd_prev = p0;
+    publish(values, m, p0, 0.0, 0.0);
+    return 0;
+}
+
+int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log *log)
+{
+    /* A step within 1e-9 of the previous one is the previous one: hosts that count time in integers
+     * (libcosim: ns) hand over t(k+1) - t(k), which wanders by ulps; the drive must not re-discretise
+     * (nor the encoder flip a count) on arithmetic noise. */
+    if (m->dt_nominal > 0.0 && fabs(dt - m->dt_nominal) <= 1e-9 * m->dt_nominal) dt = m->dt_nominal;
+    else m->dt_nominal = dt;
+    double cmd = P(VR_pos_cmd), vff = P(VR_vel_ff);
+    int bad = !isfinite(cmd) || !isfinite(vff);
+    if (bad && !m->fault)   /* never act on a NaN: hold the last good command, say why once */
+        FMI2_SAY(log, fmi2Warning, "warning", "t = %.4f s: %s = %g is not finite; holding the last command", t,
+                 !isfinite(cmd) ? "pos_cmd" : "vel_ff", !isfinite(cmd) ? cmd : vff);
+    m->fault = bad;
+    m->cmd_prev = m->pos_cmd;
+    m->vff_prev = m->vel_ff;
+    if (!bad) { m->pos_cmd = cmd; m->vel_ff = vff; }
+    double p0 = m->p_meas;
+    int enabled = P(VR_enable) != 0.0, ideal = P(VR_ideal) != 0.0;
+    if (ideal && enabled) {
+        if (ideal_matrices(values, m, dt) != 0) goto numeric;
+        double u[4] = {m->cmd_prev, m->pos_cmd, m->vff_prev, m->vel_ff}, x[4];
+        for (int r = 0; r < 4; r++) {
+            double s = 0.0, g = 0.0;
+            for (int k = 0; k < 4; k++) s += m->F[r][k] * m->x[k];
+            for (int k = 0; k < 4; k++) g += m->G[r][k] * u[k];
+            x[r] = s + g;
+        }
+        memcpy(m->x, x, sizeof x);
+        m->p_meas = m->x[2];
+        m->limited = 0;
+    } else {
+        if (plant_matrices(m, dt / substeps(values, dt)) != 0) goto numeric;
+        digital(values, m, dt, enabled);
+    }
+    double vel = ideal ? m->x[3] : (m->p_meas - p0) / dt;
+    if (!isfinite(m->p_meas) || !isfinite(vel) || !isfinite(m->x[1])) goto numeric;
+    publish(values, m, m->p_meas, vel, m->x[1]);
+    return 0;
+numeric:
+    FMI2_SAY(log, fmi2Error, "error", "t = %.4f s: the axis model left the finite numbers (step %g s)", t, dt);
+    return -1;
+}
+
+int model_restore(double *values, ModelState *m, const Fmi2Log *log)
+{
+    if (!parameters_ok(values, log)) return -1;
+    derive(values, m);                       /* never trust derived data from a state record */
+    double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->p_meas, m->p_last, m->pos_cmd, m->cmd_prev,
+                    m->vel_ff, m->vff_prev, m->dt_nominal};
+    for (size_t k = 0; k < sizeof dyn / sizeof dyn[0]; k++)
+        if (!isfinite(dyn[k]) || fabs(dyn[k]) > 1e12) {
+            FMI2_SAY(log, fmi2Error, "error", "FMU state: the axis state holds %g, not a finite axis value", dyn[k]);
+            return -1;
+        }
+    if ((m->limited != 0 && m->limited != 1) || (m->fault != 0 && m->fault != 1)) {
+        FMI2_SAY(log, fmi2Error, "error", "FMU state: a flag of the axis state is neither 0 nor 1");
+        return -1;
+    }
+    return 0;
+}
