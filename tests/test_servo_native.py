@@ -3,8 +3,8 @@
 - the digital drive through FMI agrees with ``ncfmu.servo.axis.ServoAxis`` to 1e-9 on random command
   sequences with the torque and speed limits, Coulomb friction and encoder quantisation active;
 - its margin check agrees with python-control (``control.margin``) on random parameter sets;
-- friction never moves the axis, whatever ``tau_coulomb``;
-- it runs in a C host with an empty environment: no Python anywhere.
+- friction never moves the axis, whatever ``tau_coulomb``.
+(Without Python, in a C host: tests/test_native_hosts.py.)
 """
 
 from __future__ import annotations
@@ -181,59 +181,3 @@ def test_friction_only_brakes_a_moving_axis():
     out = axis.step(0.2, DT, {"pos_cmd": 10.0, "vel_ff": 50.0, "enable": True})
     assert before <= out["pos"] <= before + abs(v) * DT + 2 * axis.quantum
     assert axis.x[3] == 0.0
-
-
-# -- no Python at run time ------------------------------------------------------------------------
-C_HOST = r'''
-#include <dlfcn.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include "fmi2Functions.h"
-static void logger(fmi2ComponentEnvironment e, fmi2String n, fmi2Status s, fmi2String c, fmi2String m, ...)
-{ (void)e; (void)n; (void)s; (void)c; printf("LOG %s\n", m); }
-int main(int argc, char **argv)
-{
-    void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (!h) { printf("DLOPEN %s\n", dlerror()); return 1; }
-#define F(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(h, "fmi2" #name)
-    F(Instantiate); F(SetupExperiment); F(EnterInitializationMode); F(ExitInitializationMode); F(SetReal);
-    F(DoStep); F(GetReal); F(Terminate); F(FreeInstance);
-    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = Instantiate("x", fmi2CoSimulation, argv[2], argv[3], &cb, fmi2False, fmi2False);
-    if (!c) return 2;
-    SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
-    EnterInitializationMode(c); if (ExitInitializationMode(c) != fmi2OK) return 3;
-    fmi2ValueReference in[2] = {atoi(argv[4]), atoi(argv[5])}, out = atoi(argv[6]);
-    double pos = 0.0;
-    for (int i = 0; i < 1000; i++) {
-        double u[2] = {0.01 * (i + 1), 10.0};
-        SetReal(c, in, 2, u);
-        if (DoStep(c, i * 1e-3, 1e-3, fmi2True) != fmi2OK) return 4;
-    }
-    GetReal(c, &out, 1, &pos);
-    printf("POS %.9f\n", pos);
-    Terminate(c); FreeInstance(c);
-    return 0;
-}
-'''
-
-
-def test_runs_in_a_c_host_with_an_empty_environment(fmus, tmp_path):
-    from fmpy import extract, read_model_description
-
-    from ncfmu.fmi.builder import fmi_headers
-    md = read_model_description(str(fmus["ServoAxis"]))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    (tmp_path / "host.c").write_text(C_HOST)
-    subprocess.run(["cc", "-O1", f"-I{fmi_headers()}", "-o", str(tmp_path / "host"), str(tmp_path / "host.c"),
-                    "-ldl"], check=True)
-    unpacked = extract(str(fmus["ServoAxis"]), unzipdir=str(tmp_path / "fmu"))
-    binary = f"{unpacked}/binaries/linux64/ServoAxis.so"
-    proc = subprocess.run(["env", "-i", str(tmp_path / "host"), binary, md.guid, f"file://{unpacked}/resources",
-                           str(vr["pos_cmd"]), str(vr["vel_ff"]), str(vr["pos"])],
-                          capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    pos = float(re.search(r"POS (\S+)", proc.stdout).group(1))
-    # the command ramps at 10 mm/s to 10 mm; with full feed-forward the axis follows within microns
-    assert pos == pytest.approx(10.0, abs=0.01)
-    assert "python" not in subprocess.run(["ldd", binary], capture_output=True, text=True).stdout.lower()

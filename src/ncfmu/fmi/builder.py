@@ -53,8 +53,9 @@ def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
 def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
     """Digest of the model script and every module the FMU carries (12 hex digits)."""
     h = hashlib.sha256()
-    for path in [script, *_package_files(package_dir)]:
-        h.update(str(path.relative_to(path.parents[0] if path == script else package_dir)).encode())
+    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h"]:
+        h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
+                                      else package_dir)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:12]
 

@@ -129,7 +129,6 @@ class ServoAxis(Controller):
         self.fault = None
         self.pos_cmd = self.cmd_prev = self.pos_start
         self.vel_ff = self.vff_prev = 0.0
-        self._dt_nominal = 0.0
         self._outputs: dict[str, object] = {}
         self._publish(self.pos_start, 0.0, 0.0)
 
@@ -172,21 +171,7 @@ class ServoAxis(Controller):
         return round(pos / self.quantum) * self.quantum
 
     # -- stepping -------------------------------------------------------------------------------
-    def _nominal_step(self, dt: float) -> float:
-        """The step, as the drive's cycle: a step within 1e-9 of the previous one is the previous one.
-
-        Hosts that count time in integers (libcosim: ns) hand over ``t(k+1) - t(k)`` in doubles, which
-        wanders by a few ulps from step to step; the drive must not re-discretise (and a quantised
-        encoder must not flip a count) on arithmetic noise, so the result is the same in every host.
-        """
-        last = self._dt_nominal
-        if last and abs(dt - last) <= 1e-9 * last:
-            return last
-        self._dt_nominal = dt
-        return dt
-
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        dt = self._nominal_step(dt)
         bad = finite_inputs(inputs, ("pos_cmd", "vel_ff"))
         if bad:
             # Never act on a NaN: hold the last good command, say why once.

@@ -178,6 +178,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_se
     (void)no_set_prior_state;
     ALLOWED(i, "fmi2DoStep", P_STEP);
     if (!fmi2_step_ok(LOG(i), t, h)) return fmi2Error;
+    /* Tools count time in integer nanoseconds (libcosim) and their conversion to seconds differs in the
+     * last bit from step to step; whole nanoseconds make every tool's step equal (as the Python FMUs'
+     * adapter does), so the same SSP gives the same trajectories in every host. */
+    double step = nearbyint(h * 1e9) * 1e-9;
+    if (!(step > 0.0)) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
+        return fmi2Error;
+    }
+    h = step;
     if (model_step(i->values, i->model, t, h, LOG(i)) != 0) return fmi2Error;
     i->last_time = t + h;
     return fmi2OK;

@@ -370,6 +370,19 @@ static int python_runtime(const char *fmu_binary)
 
 static void *inner = NULL;
 static void *sym(const char *name);
+
+/* pythonfmu 0.7 defect: its global std::shared_ptr<PyState> is released twice at process exit -- by its
+ * static destructor, then again by its __attribute__((destructor)) finalizePythonInterpreter, which
+ * reads the freed control block (valgrind: "Invalid read ... finalizePythonInterpreter", then
+ * "free(): corrupted unsorted chunks", rc 134, in about 1 run of 3 of a native host). Calling that
+ * function first, from an exit handler registered after pythonfmu's library is loaded (so it runs
+ * before pythonfmu's static destructors), releases the state once and leaves both later releases
+ * nothing to do. */
+static void (*pythonfmu_release)(void) = NULL;
+static void release_pythonfmu_state(void)
+{
+    if (pythonfmu_release) pythonfmu_release();
+}
 #define INNER_(ret, name, params) static ret(*inner_##name) params = NULL; \
     if (!inner_##name) inner_##name = (ret(*) params)sym(#name);
 
@@ -388,6 +401,10 @@ static void *sym(const char *name)
         memcpy(path, info.dli_fname, stem);
         strcpy(path + stem, ".pythonfmu.so");
         inner = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
+        if (inner) {
+            pythonfmu_release = (void (*)(void))dlsym(inner, "finalizePythonInterpreter");
+            if (pythonfmu_release) atexit(release_pythonfmu_state);
+        }
         if (!inner) {
             snprintf(python_problem, sizeof python_problem, "ncfmu status shim: cannot load %s: %s", path, dlerror());
             fprintf(stderr, "%s\n", python_problem);

@@ -29,7 +29,6 @@ struct ModelState {
     /* the dynamic state */
     double x[4];                         /* integral, torque, pos, vel */
     double p_meas, p_last, pos_cmd, cmd_prev, vel_ff, vff_prev;
-    double dt_nominal;                   /* the drive's cycle (ServoAxis._nominal_step) */
     int limited, fault;
 };
 
@@ -411,11 +410,6 @@ int model_init(double *values, ModelState *m, const Fmi2Log *log)
 
 int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log *log)
 {
-    /* A step within 1e-9 of the previous one is the previous one: hosts that count time in integers
-     * (libcosim: ns) hand over t(k+1) - t(k), which wanders by ulps; the drive must not re-discretise
-     * (nor the encoder flip a count) on arithmetic noise. */
-    if (m->dt_nominal > 0.0 && fabs(dt - m->dt_nominal) <= 1e-9 * m->dt_nominal) dt = m->dt_nominal;
-    else m->dt_nominal = dt;
     double cmd = P(VR_pos_cmd), vff = P(VR_vel_ff);
     int bad = !isfinite(cmd) || !isfinite(vff);
     if (bad && !m->fault)   /* never act on a NaN: hold the last good command, say why once */
@@ -457,7 +451,7 @@ int model_restore(double *values, ModelState *m, const Fmi2Log *log)
     if (!parameters_ok(values, log)) return -1;
     derive(values, m);                       /* never trust derived data from a state record */
     double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->p_meas, m->p_last, m->pos_cmd, m->cmd_prev,
-                    m->vel_ff, m->vff_prev, m->dt_nominal};
+                    m->vel_ff, m->vff_prev};
     for (size_t k = 0; k < sizeof dyn / sizeof dyn[0]; k++)
         if (!isfinite(dyn[k]) || fabs(dyn[k]) > 1e12) {
             FMI2_SAY(log, fmi2Error, "error", "FMU state: the axis state holds %g, not a finite axis value", dyn[k]);

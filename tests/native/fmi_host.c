@@ -1,0 +1,70 @@
+/*
+ * A minimal native FMI 2.0 co-simulation host, for the tests: no Python in it.
+ *
+ *   fmi_host <binary.so> <guid> <resources-uri> <instances> <steps> <out-vr> [<in-vr>=<value> ...]
+ *
+ * Each input is "<vr>=<value>" (held) or "<vr>+=<slope>" (a ramp: slope x step number).
+ * Instantiates <instances> instances, sets the Real inputs, steps each <steps> times by 1 ms, prints
+ * "OUT <k> <value>" for the Real output <out-vr> of every instance, frees them, exits 0. The FMU's log
+ * goes to stdout as "LOG <status> <message>". Exit codes: 1 cannot load, 2 instantiation failed,
+ * 3 initialisation failed, 4 a step failed.
+ */
+#include <dlfcn.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include "fmi2Functions.h"
+
+static void logger(fmi2ComponentEnvironment e, fmi2String n, fmi2Status s, fmi2String c, fmi2String m, ...)
+{
+    (void)e; (void)n; (void)c;
+    va_list ap;
+    va_start(ap, m);
+    printf("LOG %d ", (int)s);
+    vprintf(m, ap);
+    printf("\n");
+    va_end(ap);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 7) { fprintf(stderr, "usage: fmi_host so guid uri instances steps out-vr [vr=value ...]\n"); return 64; }
+    void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    if (!h) { printf("DLOPEN %s\n", dlerror()); return 1; }
+#define F(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(h, "fmi2" #name)
+    F(Instantiate); F(SetupExperiment); F(EnterInitializationMode); F(ExitInitializationMode); F(SetReal);
+    F(DoStep); F(GetReal); F(Terminate); F(FreeInstance);
+    int count = atoi(argv[4]), steps = atoi(argv[5]);
+    fmi2ValueReference out = (fmi2ValueReference)atoi(argv[6]);
+    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
+    fmi2Component c[16];
+    if (count < 1 || count > 16) return 64;
+    for (int k = 0; k < count; k++) {
+        char name[16];
+        snprintf(name, sizeof name, "i%d", k);
+        c[k] = Instantiate(name, fmi2CoSimulation, argv[2], argv[3], &cb, fmi2False, fmi2True);
+        if (!c[k]) return 2;
+        SetupExperiment(c[k], fmi2False, 0.0, 0.0, fmi2False, 0.0);
+        if (EnterInitializationMode(c[k]) != fmi2OK || ExitInitializationMode(c[k]) != fmi2OK) return 3;
+    }
+    for (int i = 0; i < steps; i++)
+        for (int k = 0; k < count; k++) {
+            for (int a = 7; a < argc; a++) {
+                fmi2ValueReference vr = (fmi2ValueReference)atoi(argv[a]);
+                const char *eq = argv[a];
+                while (*eq && *eq != '=') eq++;
+                int ramp = eq > argv[a] && eq[-1] == '+';
+                double v = ramp ? atof(eq + 1) * (i + 1) : atof(eq + 1);
+                SetReal(c[k], &vr, 1, &v);
+            }
+            if (DoStep(c[k], i * 1e-3, 1e-3, fmi2True) != fmi2OK) return 4;
+        }
+    for (int k = 0; k < count; k++) {
+        double v = 0.0;
+        GetReal(c[k], &out, 1, &v);
+        printf("OUT %d %.9f\n", k, v);
+        Terminate(c[k]);
+        FreeInstance(c[k]);
+    }
+    return 0;
+}
