@@ -3,6 +3,7 @@
 Every case runs in its own process against the built FMU, so a crash is a failure, not a lost run.
 """
 
+import re
 import subprocess
 import sys
 import textwrap
@@ -50,8 +51,14 @@ SCRIPT = textwrap.dedent('''
     elif case == "other_model":
         other, _ = open_fmu(other_path, "other")
         blob = bytes(other.serializeFMUstate(other.getFMUstate()))
+    elif case == "other_build" and good.startswith(b"NCFMU-FMUSTATE-1"):      # the native format
+        at = good.index(b"+", 17 + 32)                                # the build's digest after "0.1.0+"
+        blob = good[:at + 1] + bytes([good[at + 1] ^ 1]) + good[at + 2:]
     elif case == "other_build":
         blob = good.replace(b'"build":"', b'"build":"x', 1)
+    elif case == "nan_values":                                        # the native format's plain doubles
+        import struct
+        blob = good[:-8] + struct.pack("d", float("nan"))
     elif case == "object_tag":
         blob = good.replace(b'"logic":{', b'"logic":{"evil":{"o":"os:system","v":{}},', 1)
     elif case == "good":
@@ -87,6 +94,72 @@ def test_bad_state_bytes_are_an_error_and_run_no_code(fmus, tmp_path, case):
     assert status == "Error", log
     assert not executed
     assert "fmi2DeSerializeFMUstate refused" in log
+
+
+@pytest.mark.parametrize("case", ["garbage", "pickle", "truncated", "empty", "other_model", "other_build",
+                                  "nan_values"])
+def test_native_servo_refuses_bad_state_bytes(fmus, tmp_path, case):
+    status, executed, log = run_case(fmus["ServoAxis"], case, tmp_path, other=fmus["CutSequencer"])
+    assert status == "Error", log
+    assert not executed
+    assert re.search(r"fmi2DeSerializeFMUstate: \d+ bytes refused", log), log
+
+
+FREED = textwrap.dedent('''
+    import ctypes, sys, tempfile
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi1 import FMICallException
+
+    path = sys.argv[1]
+    md = read_model_description(path)
+    folder = extract(path, tempfile.mkdtemp())
+
+    def make(name):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=name)
+        fmu.instantiate(loggingOn=True)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        return fmu
+
+    def status(call, *args):
+        try:
+            call(*args)
+            return "OK"
+        except FMICallException as err:
+            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
+
+    a, b = make("a"), make("b")
+    a.doStep(0.0, 1e-3)
+    state = a.getFMUstate()
+    freed = ctypes.c_void_p(state.value)                   # the pointer, kept (fmpy zeroes its own on free)
+    a.freeFMUstate(state)
+    of_b = b.getFMUstate()
+    results = [status(a.setFMUstate, freed), status(a.serializeFMUstate, freed), status(a.freeFMUstate, freed),
+               status(a.setFMUstate, of_b)]
+    live = a.getFMUstate()                                 # the instance lives on, and its own states work
+    results.append(status(a.setFMUstate, live))
+    a.freeFMUstate(live)
+    b.freeFMUstate(of_b)
+    a.doStep(1e-3, 1e-3)
+    for fmu in (a, b):
+        fmu.terminate()
+        fmu.freeInstance()
+    print("RESULT", *results)
+''')
+
+
+@pytest.mark.parametrize("model", ["CutSequencer", "ServoAxis"])
+def test_a_freed_or_foreign_state_is_an_error(fmus, model):
+    """A state used after fmi2FreeFMUstate, or another instance's, is refused (never dereferenced)."""
+    proc = subprocess.run([sys.executable, "-c", FREED, str(fmus[model])], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = [ln.split()[1:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == ["Error", "Error", "Error", "Error", "OK"], proc.stdout[-2000:]
+    assert "is not a live FMU state of this instance" in proc.stdout
 
 
 def test_a_good_state_round_trips_in_a_fresh_process(fmus, tmp_path):

@@ -84,6 +84,8 @@ typedef struct Inst {
     fmi2CallbackLogger logger;
     fmi2ComponentEnvironment env;
     struct Fast *fast;                    /* the fast path, once the adapter is found (NULL before) */
+    void **states;                        /* the FMU states this instance handed out and not freed */
+    size_t n_states, cap_states;
     struct Inst *next;
 } Inst;
 static Inst *inst_list = NULL;
@@ -107,7 +109,7 @@ static void inst_drop(fmi2Component c)
     fast_drop(c);
     pthread_mutex_lock(&inst_lock);
     for (Inst **p = &inst_list; *p; p = &(*p)->next)
-        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i); break; }
+        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i->states); free(i); break; }
     pthread_mutex_unlock(&inst_lock);
 }
 
@@ -435,10 +437,6 @@ FWD(const char *, "cs", fmi2GetTypesPlatform, (void), ())
 FWD(const char *, "2.0", fmi2GetVersion, (void), ())
 FWD(fmi2Status, fmi2Fatal, fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]), (c, on, n, cats))
 FWD(fmi2Status, fmi2Fatal, fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]), (c, vr, n, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
-FWD(fmi2Status, fmi2Fatal, fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
-FWD(fmi2Status, fmi2Fatal, fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size))
-FWD(fmi2Status, fmi2Fatal, fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size), (c, s, b, size))
 FWD(fmi2Status, fmi2Fatal, fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference u[], size_t nu, const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]), (c, u, nu, z, nz, dv, dz))
 FWD(fmi2Status, fmi2Fatal, fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], const fmi2Real v[]), (c, vr, n, order, v))
 FWD(fmi2Status, fmi2Fatal, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], fmi2Real v[]), (c, vr, n, order, v))
@@ -535,8 +533,78 @@ static int call_refused(fmi2Component c)
     return get_integer && get_integer(c, &vr, 1, &refused) == fmi2OK && refused;
 }
 
+/* ---- FMU states: only the live ones of this instance reach pythonfmu ------------------------------
+ * pythonfmu dereferences whatever pointer it is given: a freed state, one of another instance, or a
+ * made-up pointer crashed the host. The shim keeps the states each instance handed out and not yet
+ * freed, and refuses any other with fmi2Error (the pointer is never dereferenced). */
+static int state_index(Inst *i, void *s)
+{
+    for (size_t k = 0; i && k < i->n_states; k++)
+        if (i->states[k] == s) return (int)k;
+    return -1;
+}
+
+static void state_add(Inst *i, void *s)
+{
+    if (!i || !s || state_index(i, s) >= 0) return;
+    if (i->n_states == i->cap_states) {
+        size_t cap = i->cap_states ? 2 * i->cap_states : 8;
+        void **grown = realloc(i->states, cap * sizeof *grown);
+        if (!grown) return;
+        i->states = grown;
+        i->cap_states = cap;
+    }
+    i->states[i->n_states++] = s;
+}
+
+static int state_live(Inst *i, const char *call, void *s)
+{
+    if (!i || state_index(i, s) >= 0) return 1;        /* not our instance: pythonfmu answers as before */
+    if (i->logger)
+        i->logger(i->env, i->name, fmi2Error, "error", "%s: %p is not a live FMU state of this instance "
+                  "(freed, of another instance or FMU, or never made)", call, s);
+    return 0;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
+{
+    INNER_(fmi2Status, fmi2GetFMUstate, (fmi2Component, fmi2FMUstate *))
+    Inst *i = inst_find(c);
+    if (!s) return fmi2Error;
+    if (*s && !state_live(i, "fmi2GetFMUstate", *s)) return fmi2Error;
+    fmi2Status st = inner_fmi2GetFMUstate ? inner_fmi2GetFMUstate(c, s) : fmi2Fatal;
+    if (st <= fmi2Warning) state_add(i, *s);
+    return st;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
+{
+    INNER_(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))
+    Inst *i = inst_find(c);
+    if (!s || !*s) return fmi2OK;
+    if (!state_live(i, "fmi2FreeFMUstate", *s)) return fmi2Error;
+    int k = state_index(i, *s);
+    if (k >= 0) i->states[k] = i->states[--i->n_states];
+    return inner_fmi2FreeFMUstate ? inner_fmi2FreeFMUstate(c, s) : fmi2Fatal;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size)
+{
+    INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
+    if (!state_live(inst_find(c), "fmi2SerializedFMUstateSize", s)) return fmi2Error;
+    return inner_fmi2SerializedFMUstateSize ? inner_fmi2SerializedFMUstateSize(c, s, size) : fmi2Fatal;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size)
+{
+    INNER_(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte[], size_t))
+    if (!state_live(inst_find(c), "fmi2SerializeFMUstate", s)) return fmi2Error;
+    return inner_fmi2SerializeFMUstate ? inner_fmi2SerializeFMUstate(c, s, b, size) : fmi2Fatal;
+}
+
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
 {
+    if (!state_live(inst_find(c), "fmi2SetFMUstate", s)) return fmi2Error;
     static fmi2Status (*f)(fmi2Component, fmi2FMUstate) = NULL;
     if (!f) f = (fmi2Status(*)(fmi2Component, fmi2FMUstate))sym("fmi2SetFMUstate");
     if (!f) return fmi2Fatal;
@@ -558,6 +626,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
         *s = NULL;
         return fmi2Error;
     }
+    if (status <= fmi2Warning) state_add(inst_find(c), *s);
     return status;
 }
 
