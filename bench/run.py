@@ -4,8 +4,10 @@ Every comparison interleaves its contenders (A, B, A, B, ...) and reports median
 system (``--quick``: the first pass only, 13 s of simulated time, which still runs SC1..SC4).
 
 - servo_step_speedup       the Python servo stepper (ncfmu.servo.axis.ServoAxis, the specification) us/step /
-                           the native ServoAxis FMU us/step through fmpy's FMI calls (set inputs, doStep,
-                           get outputs: what a master does). Goal >= 20.
+                           the native ServoAxis FMU us/step through FMI (set inputs, doStep, get outputs)
+                           from a C host (tests/native/fmi_host.c). Goal >= 20.
+                           servo_step_speedup_via_ctypes: the same FMU driven from Python as ncfmu's master
+                           drives it (FmuSlave, ctypes arrays bound once): what a Python master can see.
 - speedup_vs_python_loop   the same controller and servo Python objects stepped directly in one loop with the
                            same step / ncfmu's master running the FMUs. Goal >= 3.
 - fmi_overhead_ratio       its inverse (kept for the history in results-*.json).
@@ -97,29 +99,55 @@ def ecos(archive: Path, stop_time: float) -> float:
     return float(line[-1].split()[1])
 
 
-def servo_steps(n: int) -> tuple[float, float]:
-    """(Python stepper, native FMU through FMI) seconds for ``n`` 1 ms steps of a moving axis."""
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
+def servo_steps_c_host(n: int) -> float:
+    """Seconds for ``n`` 1 ms steps of the native FMU driven from C (tests/native/fmi_host.c): the FMI
+    calls alone, without Python's ctypes in between."""
+    import re
+    import subprocess
 
-    from ncfmu.servo.axis import ServoAxis
+    from fmpy import extract, read_model_description
+
+    from ncfmu.fmi.builder import fmi_headers
     fmu = HERE.parent / "fmus" / "ServoAxis.fmu"
-    md = read_model_description(str(fmu))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu)), modelIdentifier="ServoAxis", instanceName="b")
-    slave.instantiate()
-    slave.setupExperiment(startTime=0.0)
-    slave.enterInitializationMode()
-    slave.exitInitializationMode()
-    ins, outs = [vr["pos_cmd"], vr["vel_ff"]], [vr["pos"], vr["vel"], vr["following_error"], vr["torque"]]
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = Path(tmp) / "fmi_host"
+        subprocess.run(["cc", "-O2", f"-I{fmi_headers()}", "-o", str(exe), str(HERE.parent / "tests" / "native" /
+                        "fmi_host.c"), "-ldl"], check=True)
+        md = read_model_description(str(fmu))
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        folder = extract(str(fmu), unzipdir=str(Path(tmp) / "fmu"))
+        proc = subprocess.run([str(exe), f"{folder}/binaries/linux64/ServoAxis.so", md.guid,
+                               f"file://{folder}/resources", "1", str(n), str(vr["pos"]),
+                               f"{vr['pos_cmd']}+=0.02", f"{vr['vel_ff']}=20.0"],
+                              capture_output=True, text=True, check=True)
+        return float(re.search(r"STEPPING (\S+)", proc.stdout).group(1))
+
+
+def servo_steps(n: int) -> tuple[float, float]:
+    """(Python stepper, native FMU through FMI) seconds for ``n`` 1 ms steps of a moving axis.
+
+    The FMU is driven as ncfmu's master drives it (``ncfmu.cosim.fmu.FmuSlave``: fmi2SetReal of the inputs,
+    fmi2DoStep, fmi2GetReal of the outputs, every step, on ctypes arrays bound once).
+    """
+    import numpy as np
+
+    from ncfmu.cosim.fmu import FmuSlave, unpacked_fmu
+    from ncfmu.servo.axis import ServoAxis
+    unpacked = unpacked_fmu(HERE.parent / "fmus" / "ServoAxis.fmu")
+    slave = FmuSlave(unpacked, "bench")
+    slave.initialize(0.0, n * 1e-3)
+    vr = {v.name: v.valueReference for v in unpacked.model_description.modelVariables}
+    inputs, outputs = np.zeros(2), np.zeros(4)
+    slave.bind("Real", inputs, [vr["pos_cmd"], vr["vel_ff"]], outputs,
+               [vr["pos"], vr["vel"], vr["following_error"], vr["torque"]])
     t0 = time.perf_counter()
     for i in range(n):
-        slave.setReal(ins, [0.02 * i, 20.0])
-        slave.doStep(i * 1e-3, 1e-3)
-        slave.getReal(outs)
+        inputs[0], inputs[1] = 0.02 * i, 20.0
+        slave.write_inputs()
+        slave.do_step(i * 1e-3, 1e-3)
+        slave.read_outputs()
     native = time.perf_counter() - t0
     slave.terminate()
-    slave.freeInstance()
     axis = ServoAxis()
     t0 = time.perf_counter()
     for i in range(n):
@@ -164,11 +192,13 @@ def main() -> dict:
     repeats = 3 if args.quick else 5
     out: dict[str, object] = {"cores": os.cpu_count(), "quick": args.quick, "stop_time_s": stop}
 
-    servo = [servo_steps(2000 if args.quick else 10000) for _ in range(repeats)]
-    py_s, native_s = statistics.median(s[0] for s in servo), statistics.median(s[1] for s in servo)
-    n_servo = 2000 if args.quick else 10000
-    out["servo_step_speedup"] = py_s / native_s
-    out["servo_python_us"], out["servo_native_us"] = py_s / n_servo * 1e6, native_s / n_servo * 1e6
+    n_servo = 5000 if args.quick else 20000
+    servo = [(*servo_steps(n_servo), servo_steps_c_host(n_servo)) for _ in range(repeats)]
+    py_s, ctypes_s, c_s = (statistics.median(s[k] for s in servo) for k in range(3))
+    out["servo_step_speedup"] = py_s / c_s
+    out["servo_step_speedup_via_ctypes"] = py_s / ctypes_s
+    out["servo_python_us"], out["servo_native_us"] = py_s / n_servo * 1e6, c_s / n_servo * 1e6
+    out["servo_native_via_ctypes_us"] = ctypes_s / n_servo * 1e6
 
     t = interleaved({"master": lambda: ncfmu_master(taper, stop), "direct": lambda: direct_loop("lathe_taper", stop)},
                     repeats)
@@ -208,7 +238,9 @@ def main() -> dict:
             ok = out[key] <= goal[1] if goal[0] == "<=" else out[key] >= goal[1]
             mark = f"{goal[0]} {goal[1]}  {'met' if ok else 'NOT met'}"
         print(f"{key:28s} {out[key]:10.2f}  {mark}")
-    print(f"  servo step: Python {out['servo_python_us']:.1f} us, native FMU through FMI {out['servo_native_us']:.1f} us")
+    print(f"  servo step: Python stepper {out['servo_python_us']:.1f} us; native FMU through FMI from C "
+          f"{out['servo_native_us']:.2f} us, from Python via ctypes (ncfmu's FmuSlave) "
+          f"{out['servo_native_via_ctypes_us']:.2f} us (speedup {out['servo_step_speedup_via_ctypes']:.1f})")
     print(f"  master {out['master_s']:.2f} s, direct {out['direct_s']:.2f} s, fmpy simulate_ssp {out['fmpy_ssp_s']:.2f} s, "
           f"libcosim {out['libcosim_s']:.2f} s, ecos {out['ecos_s']:.2f} s, sweep serial {serial:.1f} s vs 2 workers "
           f"{parallel:.1f} s")

@@ -38,6 +38,11 @@ CASES = {
                            "seq.pass_no", "seq.busy", "panel.start"]),
     "grinder_feed": (11.0, ["x_axis.pos", "x_axis.following_error", "feed.x_cmd", "feed.x_vff",
                             "feed.dwell_left", "feed.pc", "feed.busy", "panel.start"]),
+    # the other systems, shorter: every .ssp runs in ecos with its parameters, as in ncfmu's Jacobi mode
+    "lathe_roughing": (6.0, ["x_axis.pos", "z_axis.pos", "seq.x_cmd", "seq.z_cmd", "seq.subcycle",
+                             "limiter.ref_cmd"]),
+    "grinder_envelope": (6.0, ["x_axis.pos", "y_axis.pos", "feed.x_cmd", "feed.y_cmd", "limiter.ref_cmd"]),
+    "mill_contour": (4.0, ["x_axis.pos", "y_axis.pos", "contour.x_cmd", "contour.y_cmd", "contour.x_vff"]),
 }
 #: How far each system's axes must travel in the compared window (mm): the runs are not standing still.
 TRAVEL = {"lathe_taper": {"x_axis.pos": 1.5, "z_axis.pos": 40.0}, "grinder_feed": {"x_axis.pos": 4.1}}
