@@ -96,6 +96,7 @@ def test_readme_example_test_file_passes(project, pytester):
 
 def test_progress_bar_shows_done_failed_remaining_on_a_terminal():
     import io
+    import re
     from ncfmu.batch import Progress
 
     class Terminal(io.StringIO):
@@ -103,9 +104,13 @@ def test_progress_bar_shows_done_failed_remaining_on_a_terminal():
             return True
     term = Terminal()
     bar = Progress(4, stream=term)
-    bar.update(True)
-    bar.update(False)
-    assert term.getvalue().rsplit("\r", 1)[-1].strip().endswith("done 1  failed 1  remaining 2")
+    bar.update("ok")
+    bar.update("failed")
+    bar.update("timeout")
+    bar.close()
+    last = term.getvalue().rsplit("\r", 1)[-1]
+    # 3 of 4 done, elapsed < ETA, and the counts by status
+    assert re.search(r"3/4 \[\d\d:\d\d<\d\d:\d\d, .*done=1, failed=1, timeout=1\]", last), last
     pipe = io.StringIO()                       # not a terminal: silent
-    Progress(4, stream=pipe).update(True)
+    Progress(4, stream=pipe).update("ok")
     assert pipe.getvalue() == ""

@@ -1,15 +1,25 @@
-"""Parameter sweeps on dask.distributed.
+"""Parameter sweeps on dask.distributed, with workers that share no files with the client.
 
     from ncfmu.batch import sweep
-    summary = sweep("lathe_roughing", {"seq.block[1].Xd": [0.4, 0.5, 0.6]}, out="sweep_xd", workers=2)
+    rows = sweep("lathe_roughing", {"seq.block[1].Xd": [0.4, 0.5, 0.6]}, out="sweep_xd", workers=2)
 
-The cartesian product of the values runs on a dask LocalCluster of worker *processes* (pythonfmu
-FMUs hold the GIL, threads would not run in parallel) or on an existing cluster (``scheduler``).
-Each worker opens a system once -- its FMUs instantiated once -- and resets them (``fmi2Reset``)
-between variants. Each variant writes ``DIR/variants/<key>.csv``; ``DIR/summary.csv`` has one row per
-variant: the varied values, ``status`` (ok / failed), ``error`` and the system's summary metrics. A
-failing variant is recorded and the others complete; running the same sweep again skips the variants
-already in the summary.
+What goes where:
+
+- The client reads the system's ``.ssp`` once and ships its bytes to the workers (scattered once, to
+  every worker). A worker keeps them in its own cache (``<its temp dir>/ncfmu-sweep-<uid>/<digest>.ssp``,
+  by content digest), opens the system once per process (FMUs instantiated once, ``fmi2Reset`` between
+  variants) and sends back the variant's row (status, error, wall time, metrics) and its recorded
+  trajectories. A worker needs ncfmu installed and nothing else: no path of the client's, no shared folder.
+- The client alone writes ``out``: ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
+  per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename).
+- Results that scale: ``record`` names the variables kept (default: the axes' positions and what the summary
+  metrics read), ``output_interval`` keeps every k-th step.
+- Nothing lost: a sweep into an existing ``out`` merges into its summary (rows of other variants are kept);
+  a variant whose row and trajectory file (with the row count the summary says) are there is not run again;
+  leftovers of an interrupted run (``*.part``) are removed; a variant without a row is run again. Values are
+  canonical: ``8`` and ``8.0`` are one variant, duplicates are dropped.
+- ``timeout`` (s) per variant: the worker's master stops at the deadline (checked every 64 steps), the
+  variant is recorded as ``timeout`` and the worker goes on with the next one.
 """
 
 from __future__ import annotations
@@ -18,19 +28,30 @@ import csv
 import hashlib
 import itertools
 import json
+import math
+import os
 import sys
+import tempfile
 import time
+import zipfile
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .checks import path_distance
-from .errors import NcfmuError, SystemDefinitionError
+from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 
 SUMMARY = "summary.csv"
+STATUSES = ("ok", "failed", "timeout")
 
 # -- metrics per system ----------------------------------------------------------------------------
+AXES = ("x_axis", "y_axis", "z_axis")
+#: The variables :func:`metrics` reads (besides the axes' positions): recorded by default.
+METRIC_VARIABLES = (*(f"{a}.following_error" for a in AXES), "seq.subcycle", "seq.done", "seq.alarm",
+                    "limiter.alarm", "feed.pc", "feed.run", "feed.emergency_active", "feed.alarm",
+                    "contour.segment", "contour.done", "contour.alarm")
 
 
 def _first_time(result, mask) -> float:
@@ -40,8 +61,7 @@ def _first_time(result, mask) -> float:
 def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str, float]:
     """Summary numbers of a run, by what the system contains."""
     out: dict[str, float] = {"sim_time": float(result.time[-1]), "wall_time": float(result.wall_time)}
-    fe = [abs(result[f"{a}.following_error"]).max() for a in ("x_axis", "y_axis", "z_axis")
-          if f"{a}.following_error" in result]
+    fe = [abs(result[f"{a}.following_error"]).max() for a in AXES if f"{a}.following_error" in result]
     if fe:
         out["max_following_error_mm"] = float(max(fe))
     if "seq.subcycle" in result:
@@ -69,39 +89,66 @@ def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str,
     return out
 
 
+def default_record(names: Sequence[str]) -> list[str]:
+    """The axes' positions and what :func:`metrics` reads, of the variables ``names`` a system has."""
+    have = set(names)
+    return [n for n in (*(f"{a}.pos" for a in AXES), *METRIC_VARIABLES) if n in have]
+
+
 # -- the worker side -------------------------------------------------------------------------------
-_OPEN: dict[str, object] = {}      # per worker process: archive -> OpenSystem, FMUs instantiated once
+_OPEN: dict[str, object] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
 
 
-def run_variant(archive: str, variant: Mapping[str, object], stop_time: float | None, out_csv: str) -> dict:
-    """Run one variant in this process, reusing the opened system; never raises."""
+def _cached_archive(digest: str, data: bytes) -> Path:
+    """The archive in this process's own cache (written once per content digest, atomically)."""
+    folder = Path(tempfile.gettempdir()) / f"ncfmu-sweep-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{digest}.ssp"
+    if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+        part = path.with_suffix(f".{os.getpid()}.part")
+        part.write_bytes(data)
+        part.replace(path)
+    return path
+
+
+def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_time: float | None,
+                record: Sequence[str] | None, every: int, timeout: float | None) -> dict:
+    """Run one variant in this process; never raises.
+
+    Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": structured array or None}``.
+    """
     from .project import OpenSystem
     t0 = time.perf_counter()
     row: dict[str, object] = {}
-    opened = _OPEN.get(archive)
+    trajectory = None
+    opened = _OPEN.get(digest)
     try:
         if opened is None:
-            opened = _OPEN[archive] = OpenSystem(Path(archive))
+            opened = _OPEN[digest] = OpenSystem(_cached_archive(digest, ssp))
         else:
             for slave in opened.slaves:
                 slave.reset()
         base = {f"{c.name}.{k}": v for c in opened.system.components for k, v in c.parameters.items()}
-        result = opened.run(stop_time=stop_time, start_values=dict(variant))
-        result.to_csv(Path(out_csv))
-        row.update(status="ok", error="")
+        deadline = None if timeout is None else time.perf_counter() + timeout
+        result = opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline)
+        keep = list(record) if record is not None else default_record(result.names)
+        trajectory = result.data[["time", *keep]][::every].copy()
+        row.update(status="ok", error="", rows=len(trajectory))
         row.update(metrics(result, {**base, **variant}))
+    except SimulationTimeout as err:
+        row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
     except NcfmuError as err:
         row.update(status="failed", error=str(err))
-        _discard(archive)              # an instance after fmi2Fatal is unusable: open afresh next time
+        _discard(digest)               # an instance after fmi2Fatal is unusable: open afresh next time
     except Exception as err:           # a crash in one variant must not end the sweep
         row.update(status="failed", error=f"{type(err).__name__}: {err}")
-        _discard(archive)
+        _discard(digest)
     row["wall_time"] = round(time.perf_counter() - t0, 4)
-    return row
+    return {"row": row, "trajectory": trajectory}
 
 
-def _discard(archive: str) -> None:
-    opened = _OPEN.pop(archive, None)
+def _discard(digest: str) -> None:
+    opened = _OPEN.pop(digest, None)
     if opened is not None:
         try:
             opened.close()
@@ -109,22 +156,41 @@ def _discard(archive: str) -> None:
             pass
 
 
-# -- the sweep -------------------------------------------------------------------------------------
+# -- variants --------------------------------------------------------------------------------------
+def canonical(value: object) -> object:
+    """The value that identifies a variant: numbers as floats (``8`` and ``8.0`` are one), text as text."""
+    if isinstance(value, bool) or isinstance(value, str):
+        return value
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        x = float(value)
+        if not math.isfinite(x):
+            raise SystemDefinitionError(f"sweep value {value!r}: must be finite")
+        return x
+    raise SystemDefinitionError(f"sweep value {value!r}: must be a number, true/false or text")
+
+
 def variant_key(variant: Mapping[str, object]) -> str:
-    text = json.dumps({k: variant[k] for k in sorted(variant)}, sort_keys=True)
+    text = json.dumps({k: canonical(variant[k]) for k in sorted(variant)}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:10]
 
 
 def product(vary: Mapping[str, Sequence[object]]) -> list[dict[str, object]]:
+    """The cartesian product of ``vary``, each list first rid of duplicates (by canonical value)."""
     names = list(vary)
+    unique: dict[str, list[object]] = {}
     for name in names:
         if "." not in name:
             raise SystemDefinitionError(f"--vary {name!r}: expected INSTANCE.VARIABLE")
         if not vary[name]:
             raise SystemDefinitionError(f"--vary {name}: no values")
-    return [dict(zip(names, values)) for values in itertools.product(*(vary[n] for n in names))]
+        seen: dict[object, object] = {}
+        for v in vary[name]:
+            seen.setdefault(canonical(v), v)
+        unique[name] = list(seen.values())
+    return [dict(zip(names, values)) for values in itertools.product(*(unique[n] for n in names))]
 
 
+# -- the client's files ----------------------------------------------------------------------------
 def _read_summary(path: Path) -> list[dict[str, str]]:
     if not path.is_file():
         return []
@@ -132,100 +198,168 @@ def _read_summary(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _write_summary(path: Path, rows: list[dict[str, object]], varied: list[str]) -> None:
+def _write_atomic_csv(path: Path, columns: list[str], rows: list[Mapping[str, object]]) -> None:
+    part = path.with_name(path.name + ".part")
+    with open(part, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row.get(k, "") for k in columns})
+        f.flush()
+        os.fsync(f.fileno())
+    part.replace(path)
+
+
+def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[str]) -> None:
     columns = ["key", *varied, "status", "error"]
     for row in rows:
         for k in row:
             if k not in columns:
                 columns.append(k)
-    partial = path.with_suffix(".csv.part")
-    with open(partial, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: row.get(k, "") for k in columns})
-    partial.replace(path)
+    _write_atomic_csv(path, columns, rows)
+
+
+def _write_trajectory(path: Path, data: np.ndarray) -> None:
+    from fmpy.util import write_csv
+    # Booleans as 0/1: fmpy writes numpy bools as "False", which its own read_csv cannot parse.
+    dtype = [(n, np.int32 if data.dtype[n] == np.bool_ else data.dtype[n]) for n in data.dtype.names]
+    part = path.with_name(path.name + ".part")
+    write_csv(str(part), data.astype(dtype))
+    part.replace(path)
+
+
+def _complete(path: Path, rows: str) -> bool:
+    """The trajectory file is there with the number of rows its summary row says (header + rows lines)."""
+    try:
+        expected = int(rows)
+        with open(path, "rb") as f:
+            return sum(1 for _ in f) == expected + 1
+    except (OSError, ValueError):
+        return False
+
+
+def output_names(archive: Path) -> list[str]:
+    """``INSTANCE.VARIABLE`` of every output in the archive (read from the SSD and the FMUs' modelDescriptions)."""
+    from .cosim.ssp import read_ssp
+    system = read_ssp(archive)
+    names = []
+    with zipfile.ZipFile(archive) as z:
+        for comp in system.components:
+            with zipfile.ZipFile(z.open(comp.source)) as fmu:
+                root = ET.fromstring(fmu.read("modelDescription.xml"))
+            names += [f"{comp.name}.{sv.get('name')}" for sv in root.iter("ScalarVariable")
+                      if sv.get("causality") == "output"]
+    return names
 
 
 class Progress:
-    """done / failed / remaining on one terminal line (silent when not on a terminal)."""
+    """A tqdm bar with done / failed / timeout and an ETA, on a terminal only."""
 
     def __init__(self, total: int, stream=sys.stderr) -> None:
-        self.total, self.done, self.failed, self.stream = total, 0, 0, stream
-        self.tty = hasattr(stream, "isatty") and stream.isatty()
-        self.show()
+        self.bar = None
+        self.counts = {s: 0 for s in STATUSES}
+        if total and hasattr(stream, "isatty") and stream.isatty():
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, file=stream, unit="variant", dynamic_ncols=True)
 
-    def update(self, ok: bool) -> None:
-        self.done += ok
-        self.failed += not ok
-        self.show()
-
-    def show(self) -> None:
-        if not self.tty:
-            return
-        n = self.done + self.failed
-        width = 30
-        filled = int(width * n / self.total) if self.total else width
-        self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] done {self.done}  failed {self.failed}  "
-                          f"remaining {self.total - n} ")
-        self.stream.flush()
+    def update(self, status: str) -> None:
+        self.counts[status] = self.counts.get(status, 0) + 1
+        if self.bar is not None:
+            self.bar.set_postfix(done=self.counts["ok"], failed=self.counts["failed"],
+                                 timeout=self.counts["timeout"], refresh=False)
+            self.bar.update(1)
 
     def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
+        if self.bar is not None:
+            self.bar.close()
 
 
 def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers: int = 2,
-          scheduler: str | None = None, stop_time: float | None = None, root: Path | None = None,
-          progress: bool = True, on_done: Callable[[dict], None] | None = None) -> list[dict[str, object]]:
-    """Run the cartesian product of ``vary`` on ``system``; return the summary rows.
+          scheduler: str | None = None, scheduler_file: str | None = None, stop_time: float | None = None,
+          root: Path | None = None, record: Sequence[str] | None = None, output_interval: float | None = None,
+          timeout: float | None = None, progress: bool = True,
+          on_done: Callable[[dict], None] | None = None) -> list[dict[str, object]]:
+    """Run the cartesian product of ``vary`` on ``system`` (a name or an ``.ssp`` path); return its summary rows.
 
-    ``workers = 0`` runs the variants serially in this process (no dask).
+    ``workers = 0`` runs the variants serially in this process (no dask); ``scheduler`` (an address) or
+    ``scheduler_file`` runs them on an existing dask cluster, else on a LocalCluster of ``workers`` processes.
     """
+    from .cosim.ssp import read_ssp
     from .project import system_archive
     out = Path(out)
-    (out / "variants").mkdir(parents=True, exist_ok=True)
-    archive = str(system_archive(system, root).resolve())
+    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+        raise SystemDefinitionError(f"--timeout {timeout!r}: must be a number of seconds > 0")
+    archive = system_archive(system, root).resolve()
+    data = archive.read_bytes()
+    digest = hashlib.sha256(data).hexdigest()
+    step = read_ssp(archive).step_size
+    every = 1
+    if output_interval is not None:
+        ratio = output_interval / step
+        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) <= 1e-9 * ratio):
+            raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
+                                        f"system's step {step:g} s")
+        every = int(round(ratio))
+    if record is not None:
+        known = set(output_names(archive))
+        unknown = [n for n in record if n not in known]
+        if unknown:
+            raise SystemDefinitionError(f"--record {unknown[0]!r}: not an output of {archive.name} "
+                                        f"(outputs are INSTANCE.VARIABLE, e.g. x_axis.pos)")
+        record = list(dict.fromkeys(record))
     variants = product(vary)
     varied = list(vary)
+
+    (out / "variants").mkdir(parents=True, exist_ok=True)
+    for leftover in [*out.glob("*.part"), *(out / "variants").glob("*.part")]:
+        leftover.unlink()                               # an interrupted write: never trusted
     summary_path = out / SUMMARY
-    previous = {row["key"]: row for row in _read_summary(summary_path)}
-    rows: dict[str, dict[str, object]] = {}
+    rows: dict[str, dict[str, object]] = {r["key"]: dict(r) for r in _read_summary(summary_path) if r.get("key")}
+    order = list(rows)
     todo = []
     for v in variants:
         key = variant_key(v)
-        if key in previous:
-            rows[key] = previous[key]
-        else:
+        old = rows.get(key)
+        done = old is not None and old.get("status") in STATUSES and (
+            old["status"] != "ok" or _complete(out / "variants" / f"{key}.csv", old.get("rows", "")))
+        if not done:
             todo.append((key, v))
-    bar = Progress(len(todo)) if progress and todo else None
+        if key not in rows:
+            order.append(key)
+    bar = Progress(len(todo)) if progress else None
 
-    def record(key, variant, row):
+    def record_result(key: str, variant: Mapping[str, object], answer: dict) -> None:
+        row = answer["row"]
+        if answer["trajectory"] is not None:
+            _write_trajectory(out / "variants" / f"{key}.csv", answer["trajectory"])
         rows[key] = {"key": key, **variant, **row}
-        _write_summary(summary_path, [rows[k] for k in (variant_key(v) for v in variants) if k in rows], varied)
+        _write_summary(summary_path, [rows[k] for k in order if k in rows], varied)
         if bar:
-            bar.update(row["status"] == "ok")
+            bar.update(row["status"])
         if on_done:
             on_done(rows[key])
 
-    if todo and (workers == 0 and scheduler is None):
+    args = (stop_time, record, every, timeout)
+    if todo and workers == 0 and scheduler is None and scheduler_file is None:
         for key, v in todo:
-            record(key, v, run_variant(archive, v, stop_time, str(out / "variants" / f"{key}.csv")))
+            record_result(key, v, run_variant(data, digest, v, *args))
     elif todo:
         from dask.distributed import Client, LocalCluster, as_completed
         cluster = None
-        if scheduler is None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            client = Client(cluster)
-        else:
+        if scheduler is not None:
             client = Client(scheduler)
+        elif scheduler_file is not None:
+            client = Client(scheduler_file=scheduler_file)
+        else:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            client = Client(cluster)
         try:
-            futures = {client.submit(run_variant, archive, v, stop_time, str(out / "variants" / f"{key}.csv"),
-                                     pure=False): (key, v) for key, v in todo}
+            shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
+            futures = {client.submit(run_variant, shipped, digest, v, *args, pure=False): (key, v)
+                       for key, v in todo}
             for future in as_completed(futures):
                 key, v = futures[future]
-                record(key, v, future.result())
+                record_result(key, v, future.result())
         finally:
             client.close()
             if cluster is not None:

@@ -141,14 +141,21 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
 
 def cmd_sweep(args) -> int:
     from .batch import sweep
-    rows = sweep(args.system, _parse_vary(args.vary), Path(args.out), workers=args.workers,
-                 scheduler=args.scheduler, stop_time=args.stop_time, root=args.root)
-    ok = sum(r["status"] == "ok" for r in rows)
-    print(f"{args.system}: {len(rows)} variants, {ok} ok, {len(rows) - ok} failed -> {Path(args.out) / 'summary.csv'}")
+    for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
+                        ("--stop-time", args.stop_time)):
+        if value is not None and not (value > 0 and value < float("inf")):
+            raise NcfmuError(f"{name} {value!r}: must be a number > 0")
+    vary = _parse_vary(args.vary)
+    rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
+                 scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
+                 output_interval=args.output_interval, timeout=args.timeout)
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "failed", "timeout")}
+    print(f"{args.system}: {len(rows)} variants, {counts['ok']} ok, {counts['failed']} failed, "
+          f"{counts['timeout']} timeout -> {Path(args.out) / 'summary.csv'}")
     for r in rows:
         if r["status"] != "ok":
-            varied = ", ".join(f"{k}={r[k]}" for k in _parse_vary(args.vary))
-            print(f"  failed: {varied}: {r['error']}")
+            varied = ", ".join(f"{k}={r[k]}" for k in vary)
+            print(f"  {r['status']}: {varied}: {r['error']}")
     return 0
 
 
@@ -209,9 +216,11 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
-                       description="Run every combination of the --vary values. Each variant writes "
-                                   "OUT/variants/<key>.csv and a row of OUT/summary.csv (status, error, metrics). "
-                                   "Running the same command again skips the variants already done.",
+                       description="Run every combination of the --vary values on dask workers (they need ncfmu "
+                                   "installed, nothing else: the system is shipped to them, results come back). "
+                                   "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
+                                   "ok/failed/timeout, error, wall time, metrics), atomically. A sweep into an "
+                                   "existing OUT merges into it; variants already done are not run again.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")
@@ -222,8 +231,17 @@ def main(argv: list[str] | None = None) -> int:
                        help="worker processes of a local dask cluster (default 2; 0: serial, no dask)")
     group.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="address of a running dask scheduler, e.g. tcp://127.0.0.1:8786")
+    group.add_argument("--scheduler-file", default=None, metavar="FILE",
+                       help="the scheduler file of a running dask scheduler (dask scheduler --scheduler-file FILE)")
     p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
     p.add_argument("--out", required=True, help="folder for summary.csv and variants/")
+    p.add_argument("--record", nargs="+", default=None, metavar="NAME",
+                   help="outputs kept per variant, INSTANCE.VARIABLE (default: the axes' positions and what the "
+                        "summary metrics read)")
+    p.add_argument("--output-interval", type=float, default=None, metavar="S",
+                   help="keep every S seconds of the trajectories (a whole multiple of the system's step)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv")

@@ -32,6 +32,10 @@ class SimulationError(NcfmuError, RuntimeError):
     """An FMU refused a call during a simulation."""
 
 
+class SimulationTimeout(SimulationError):
+    """A run passed its wall-clock deadline (a sweep's ``--timeout``)."""
+
+
 class BuildError(NcfmuError, RuntimeError):
     """Building or post-processing an FMU failed."""
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SystemDefinitionError
+from ..errors import SimulationTimeout, SystemDefinitionError
 from .result import Result
 from .slave import DTYPES, KINDS, Slave
 from .ssp import System
@@ -134,10 +134,14 @@ class Master:
     # -- the run --------------------------------------------------------------------------------
     def run(self, stop_time: float | None = None, step_size: float | None = None,
             start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None,
-            start_time: float = 0.0, progress: Callable[[float], None] | None = None) -> Result:
-        """Initialise every slave, step to ``stop_time`` and return the recorded outputs."""
+            start_time: float = 0.0, progress: Callable[[float], None] | None = None,
+            deadline: float | None = None) -> Result:
+        """Initialise every slave, step to ``stop_time`` and return the recorded outputs.
+
+        ``deadline`` (a ``time.perf_counter()`` value): past it the run stops with :class:`SimulationTimeout`.
+        """
         run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
-        wall = self._loop(run, 0, run.n_steps, progress)
+        wall = self._loop(run, 0, run.n_steps, progress, deadline)
         return self._assemble(run, run.rec, wall)
 
     def run_branches(self, branch_time: float, variants: list[Mapping[str, object]],
@@ -247,7 +251,7 @@ class Master:
         input_times = inputs.time if inputs is not None else np.empty(0)
         return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec)
 
-    def _loop(self, run: "_Run", first: int, last: int, progress=None) -> float:
+    def _loop(self, run: "_Run", first: int, last: int, progress=None, deadline: float | None = None) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time."""
         values, plan, rec, n_rec, h = run.values, run.plan, run.rec, run.n_rec, run.h
         times = run.times.tolist()
@@ -289,6 +293,9 @@ class Master:
                 table[row] = vector
             if progress is not None and row % report_every == 0:
                 progress(row / run.n_steps)
+            if deadline is not None and row % 64 == 0 and _time.perf_counter() > deadline:
+                raise SimulationTimeout(f"stopped at t = {t + h:.3f} s of {times[-1]:.3f} s: over the time "
+                                        f"allowed ({_time.perf_counter() - wall0:.1f} s of wall time)")
         return _time.perf_counter() - wall0
 
     def _assemble(self, run: "_Run", rec, wall: float) -> Result:

@@ -1,0 +1,175 @@
+"""Sweeps that scale out (issue 16): workers that share no files with the client, nothing lost, timeouts."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ncfmu.batch import sweep
+from ncfmu.cli import main
+from ncfmu.cosim.result import Result
+
+from conftest import ROOT
+
+D3 = {"feed.D3": [4.0, 3.0, 3.5]}
+
+
+def summary(out: Path) -> list[dict[str, str]]:
+    with open(out / "summary.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def by_d3(out: Path) -> dict[float, dict[str, str]]:
+    return {float(r["feed.D3"]): r for r in summary(out)}
+
+
+# -- a real dask scheduler and worker, in processes and folders of their own ---------------------------
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """``dask scheduler`` and ``dask worker`` started by hand, each in a working directory of its own (the
+    worker's temp dir too), as another user on another machine would: they see none of the client's files."""
+    sched_dir, worker_dir = tmp_path / "scheduler", tmp_path / "worker"
+    for d in (sched_dir, worker_dir, worker_dir / "tmp"):
+        d.mkdir()
+    scheduler_file = sched_dir / "scheduler.json"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NCFMU")}
+    bin_dir = Path(sys.executable).parent
+    procs = [subprocess.Popen([str(bin_dir / "dask"), "scheduler", "--scheduler-file", str(scheduler_file),
+                               "--host", "127.0.0.1", "--port", "0", "--no-dashboard"], cwd=sched_dir, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    deadline = time.time() + 60
+    while not scheduler_file.exists() and time.time() < deadline:
+        time.sleep(0.2)
+    assert scheduler_file.exists(), "the dask scheduler did not start"
+    procs.append(subprocess.Popen([str(bin_dir / "dask"), "worker", "--scheduler-file", str(scheduler_file),
+                                   "--nworkers", "1", "--nthreads", "1", "--local-directory", str(worker_dir),
+                                   "--no-dashboard"], cwd=worker_dir, env={**env, "TMPDIR": str(worker_dir / "tmp")},
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+    from dask.distributed import Client
+    with Client(scheduler_file=str(scheduler_file), timeout=60) as client:
+        client.wait_for_workers(1, timeout=60)
+    yield scheduler_file, worker_dir
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        p.wait(timeout=30)
+
+
+def test_a_sweep_through_a_hand_started_scheduler_and_worker(project, tmp_path, dask_cluster):
+    scheduler_file, worker_dir = dask_cluster
+    client_dir = tmp_path / "client"
+    client_dir.mkdir()
+    archive = client_dir / "grinder.ssp"                    # the client's own copy, by path
+    archive.write_bytes((ROOT / "ssp" / "grinder_feed.ssp").read_bytes())
+    out = client_dir / "out"
+    assert main(["sweep", str(archive), "--vary", "feed.D3=4.0,3.0", "--stop-time", "3", "--scheduler-file",
+                 str(scheduler_file), "--out", str(out)]) == 0
+    rows = summary(out)
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    deepest = {float(r["feed.D3"]): float(r["deepest_x_mm"]) for r in rows}
+    assert deepest[4.0] - deepest[3.0] == pytest.approx(1.0, abs=0.003)   # the physics came back
+    for r in rows:                                           # the trajectories came back, the client wrote them
+        traj = Result.from_csv(out / "variants" / f"{r['key']}.csv")
+        assert len(traj.time) == int(r["rows"]) == 3001 and "x_axis.pos" in traj.names
+    # the worker got the system by value: its own cache holds the archive, by content digest
+    cached = list((worker_dir / "tmp").glob("ncfmu-sweep-*/*.ssp"))
+    assert len(cached) == 1 and cached[0].read_bytes() == archive.read_bytes()
+    assert not list(worker_dir.rglob("summary.csv")) and not list(worker_dir.rglob("*.csv"))
+
+
+# -- nothing lost --------------------------------------------------------------------------------------
+def test_a_second_sweep_merges_into_the_summary(project, tmp_path):
+    sweep("grinder_feed", {"feed.D3": [4.0, 3.0]}, tmp_path, workers=0, stop_time=2.0, progress=False)
+    calls = []
+    sweep("grinder_feed", {"feed.D3": [3.0, 3.5, 2.5]}, tmp_path, workers=0, stop_time=2.0, progress=False,
+          on_done=calls.append)
+    assert sorted(float(c["feed.D3"]) for c in calls) == [2.5, 3.5]           # 3.0 was done already
+    assert sorted(by_d3(tmp_path)) == [2.5, 3.0, 3.5, 4.0]                     # no row dropped
+    assert len(list((tmp_path / "variants").glob("*.csv"))) == 4
+
+
+def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tmp_path):
+    sweep("grinder_feed", D3, tmp_path, workers=0, stop_time=2.0, progress=False)
+    rows = by_d3(tmp_path)
+    truncated = tmp_path / "variants" / f"{rows[3.0]['key']}.csv"
+    lines = truncated.read_text().splitlines(keepends=True)
+    truncated.write_text("".join(lines[: len(lines) // 2]))                   # killed while writing (not ours)
+    (tmp_path / "variants" / "abc.csv.part").write_text("time,x\n0,")           # a temp file left behind
+    calls = []
+    again = sweep("grinder_feed", D3, tmp_path, workers=0, stop_time=2.0, progress=False, on_done=calls.append)
+    assert [float(c["feed.D3"]) for c in calls] == [3.0]                        # only the damaged one re-ran
+    assert [r["status"] for r in again] == ["ok", "ok", "ok"]
+    assert len(truncated.read_text().splitlines()) == int(by_d3(tmp_path)[3.0]["rows"]) + 1 == 2002
+    assert not list(tmp_path.rglob("*.part"))
+
+
+def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
+    rows = sweep("grinder_feed", {"feed.D3": [4, 4.0, 3.5, 4, 3.50]}, tmp_path, workers=0, stop_time=1.0,
+                 progress=False)
+    assert len(rows) == 2 and len(summary(tmp_path)) == 2
+    calls = []
+    sweep("grinder_feed", {"feed.D3": [4.0, 3.5]}, tmp_path, workers=0, stop_time=1.0, progress=False,
+          on_done=calls.append)
+    assert calls == []                                                          # 4 and 4.0: the same variant
+
+
+def test_record_and_output_interval_keep_what_is_asked(project, tmp_path):
+    rows = sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=2.0, progress=False,
+                 record=["x_axis.pos", "feed.x_cmd"], output_interval=0.01)
+    traj = Result.from_csv(tmp_path / "variants" / f"{rows[0]['key']}.csv")
+    assert traj.names == ["x_axis.pos", "feed.x_cmd"]
+    assert np.allclose(np.diff(traj.time), 0.01) and len(traj.time) == 201
+    # the default: the axis position and what the metrics read, every step
+    rows = sweep("grinder_feed", {"feed.D3": [3.0]}, tmp_path / "default", workers=0, stop_time=2.0,
+                 progress=False)
+    traj = Result.from_csv(tmp_path / "default" / "variants" / f"{rows[0]['key']}.csv")
+    assert {"x_axis.pos", "x_axis.following_error", "feed.pc", "feed.alarm"} <= set(traj.names)
+    assert len(traj.names) < 12 and len(traj.time) == 2001
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--record", "x_axis.nope"], "--record 'x_axis.nope': not an output"),
+    (["--output-interval", "0.0015"], "--output-interval 0.0015: must be a whole multiple"),
+    (["--timeout", "-1"], "--timeout -1.0: must be a number > 0"),
+])
+def test_bad_sweep_options_are_one_line_and_exit_2(project, tmp_path, args, says):
+    proc = subprocess.run([sys.executable, "-m", "ncfmu.cli", "sweep", "grinder_feed", "--vary", "feed.D3=4.0",
+                           "--workers", "0", "--out", str(tmp_path), *args], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and says in lines[0], proc.stderr
+
+
+# -- timeouts ------------------------------------------------------------------------------------------
+@pytest.fixture
+def servo_only(project, tmp_path):
+    """A system of one native servo axis and nothing else: a sub-step of 1 µs makes a variant ~10x slower."""
+    from ncfmu.cosim.ssp import System, pack, write_system
+    from ncfmu.systems import _component
+    system = System("servo_only", [_component("x_axis", "ServoAxis", pos_start=0.0)], [], stop_time=20.0)
+    folder = write_system(system, tmp_path / "systems")
+    return pack(folder, ROOT / "fmus", tmp_path / "servo_only.ssp")
+
+
+def test_a_variant_over_its_timeout_is_recorded_and_the_sweep_goes_on(servo_only, tmp_path):
+    # how long a plain variant takes here, now (the second: the system already open), and a slow one: the
+    # timeout sits between them, in the geometric middle (the slow one costs ~5x)
+    probe = sweep(str(servo_only), {"x_axis.substep": [1.5e-4, 1e-4, 1e-6]}, tmp_path / "probe", workers=0,
+                  progress=False)
+    plain, slow = float(probe[1]["wall_time"]), float(probe[2]["wall_time"])
+    assert slow > 3 * plain, (plain, slow)
+    rows = sweep(str(servo_only), {"x_axis.substep": [1e-4, 1e-6, 2e-4]}, tmp_path / "out", workers=1,
+                 progress=False, timeout=(plain * slow) ** 0.5)
+    assert [r["status"] for r in rows] == ["ok", "timeout", "ok"], rows
+    assert "over the time allowed" in rows[1]["error"]
+    assert not (tmp_path / "out" / "variants" / f"{rows[1]['key']}.csv").exists()
+    # the worker was usable after the timeout: the variant after it ran to the end
+    assert float(rows[2]["sim_time"]) == pytest.approx(20.0)
