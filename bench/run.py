@@ -14,6 +14,8 @@ system (``--quick``: the first pass only, 13 s of simulated time, which still ru
 - vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 1.5.
 - vs_libcosim_speedup      libcosim (libcosimpy) on the same .ssp / ncfmu's master. Goal >= 2.5.
 - vs_ecos_speedup          ecos (ecospy, its step_until) on the same .ssp / ncfmu's master. Goal >= 1.
+- sweep_overhead_pct       per-variant scheduling overhead (ship, schedule, return, write) in % of a short
+                           variant's run (2 s of lathe_taper) on a started 1-worker cluster. Goal < 5.
 - sweep_speedup_2_workers  a 16-variant sweep of whole lathe_taper cycles run serially / the same on a
                            2-worker dask LocalCluster, cluster start-up included. Goal >= 1.7.
 - rtf_lathe                simulated seconds per wall-clock second of the full lathe_roughing cycle.
@@ -179,6 +181,26 @@ def sweep_speedup(quick: bool) -> tuple[float, float, float]:
     return serial / parallel, serial, parallel
 
 
+def sweep_overhead() -> tuple[float, float]:
+    """(scheduling overhead, run time) per short variant, s: 16 variants of 2 s of lathe_taper on a started
+    1-worker cluster (system already opened on the worker); overhead = elapsed - the variants' own wall time."""
+    from dask.distributed import LocalCluster
+
+    from ncfmu.batch import sweep
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            tempfile.TemporaryDirectory() as tmp:
+        address = cluster.scheduler_address
+        sweep("lathe_taper", {"seq.block[1].Xd": [0.5]}, Path(tmp) / "warm", scheduler=address, stop_time=2.0,
+              progress=False)
+        values = [round(0.3 + 0.01 * i, 2) for i in range(16)]
+        t0 = time.perf_counter()
+        rows = sweep("lathe_taper", {"seq.block[1].Xd": values}, Path(tmp) / "run", scheduler=address,
+                     stop_time=2.0, progress=False)
+        elapsed = time.perf_counter() - t0
+    work = sum(float(r["wall_time"]) for r in rows)
+    return (elapsed - work) / len(rows), work / len(rows)
+
+
 def main() -> dict:
     parser = argparse.ArgumentParser(description="ncfmu benchmarks (ratios measured side by side)")
     parser.add_argument("--quick", action="store_true", help="the first lathe_taper pass only (13 s simulated)")
@@ -216,6 +238,9 @@ def main() -> dict:
 
     speedup, serial, parallel = sweep_speedup(args.quick)
     out["sweep_speedup_2_workers"], out["sweep_serial_s"], out["sweep_2_workers_s"] = speedup, serial, parallel
+    overhead, variant = sweep_overhead()
+    out["sweep_overhead_per_variant_s"], out["sweep_short_variant_s"] = overhead, variant
+    out["sweep_overhead_pct"] = 100.0 * overhead / variant
 
     if args.quick:
         out["rtf_lathe"] = 13.0 / ncfmu_master(root / "ssp" / "lathe_roughing.ssp", 13.0)
@@ -227,11 +252,12 @@ def main() -> dict:
     out.update(limiter_lookup.main())
 
     goals = {"servo_step_speedup": (">=", 20), "speedup_vs_python_loop": (">=", 3), "vs_fmpy_ssp_speedup": (">=", 3),
-             "vs_libcosim_speedup": (">=", 2.5), "vs_ecos_speedup": (">=", 1), "sweep_speedup_2_workers": (">=", 1.8)}
+             "vs_libcosim_speedup": (">=", 2.5), "vs_ecos_speedup": (">=", 1), "sweep_speedup_2_workers": (">=", 1.8),
+             "sweep_overhead_pct": ("<=", 5)}
     print(f"\nncfmu benchmarks ({'quick' if args.quick else 'full'}, {out['cores']} cores), medians of interleaved runs")
     print(f"{'metric':28s} {'value':>10s}  goal")
     for key in ("servo_step_speedup", "speedup_vs_python_loop", "vs_fmpy_ssp_speedup", "vs_libcosim_speedup",
-                "vs_ecos_speedup", "sweep_speedup_2_workers", "rtf_lathe"):
+                "vs_ecos_speedup", "sweep_speedup_2_workers", "sweep_overhead_pct", "rtf_lathe"):
         goal = goals.get(key)
         mark = ""
         if goal:

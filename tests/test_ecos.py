@@ -45,7 +45,10 @@ CASES = {
     "mill_contour": (4.0, ["x_axis.pos", "y_axis.pos", "contour.x_cmd", "contour.y_cmd", "contour.x_vff"]),
 }
 #: How far each system's axes must travel in the compared window (mm): the runs are not standing still.
-TRAVEL = {"lathe_taper": {"x_axis.pos": 1.5, "z_axis.pos": 40.0}, "grinder_feed": {"x_axis.pos": 4.1}}
+TRAVEL = {"lathe_taper": {"x_axis.pos": 1.5, "z_axis.pos": 40.0}, "grinder_feed": {"x_axis.pos": 4.1},
+          "lathe_roughing": {"x_axis.pos": 1.4, "z_axis.pos": 20.0},
+          "grinder_envelope": {"x_axis.pos": 140.0, "y_axis.pos": 390.0},
+          "mill_contour": {"x_axis.pos": 9.0, "y_axis.pos": 9.0}}
 
 
 @pytest.fixture(scope="session")

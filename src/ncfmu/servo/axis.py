@@ -30,7 +30,14 @@ import numpy as np
 from ..controllers.base import Controller, finite_inputs
 from ..errors import ConfigError, require
 from ..ports import boolean, integer, real
-from .model import AxisParameters, design, discretize, drive_plant, servo_axis
+from .parameters import AxisParameters
+
+
+def _model():
+    """python-control's models, imported when an axis is configured (importing control costs ~1 s, and
+    the system definitions, the master and the sweep workers only need the ports)."""
+    from . import model
+    return model
 
 
 class ServoAxis(Controller):
@@ -94,12 +101,12 @@ class ServoAxis(Controller):
         require(self.p.vel_bandwidth * self.substep <= 0.5, "vel_bandwidth", self.p.vel_bandwidth,
                 f"must be <= 0.5 / substep = {0.5 / self.substep:g} rad/s (the velocity loop is sampled every "
                 f"substep = {self.substep:g} s)")
-        self.design = design(self.p)
+        self.design = _model().design(self.p)
         refusal = self.design.refusal(self.p)
         if refusal:
             raise ConfigError(*refusal)
-        self.linear = servo_axis(self.p)
-        self.plant = drive_plant(self.p)
+        self.linear = _model().servo_axis(self.p)
+        self.plant = _model().drive_plant(self.p)
         self.kp, self.ki = self.p.velocity_gains
         self.v_max = self.speed_max * self.p.pitch / 60.0       # mm/s
         self.quantum = self.p.pitch / self.counts_per_rev       # mm per encoder count
@@ -118,7 +125,7 @@ class ServoAxis(Controller):
 
     def _models(self):
         if self.linear is None:
-            self.linear, self.plant = servo_axis(self.p), drive_plant(self.p)
+            self.linear, self.plant = _model().servo_axis(self.p), _model().drive_plant(self.p)
         return self.linear, self.plant
 
     def reset(self) -> None:
@@ -142,7 +149,7 @@ class ServoAxis(Controller):
         m = self._ideal_cache.get(dt)
         if m is None:
             n = self._substeps(dt)
-            d = discretize(self._models()[0], dt / n)
+            d = _model().discretize(self._models()[0], dt / n)
             ad, bd = np.asarray(d.A), np.asarray(d.B)
             f = np.eye(4)
             g = np.zeros((4, 4))
@@ -161,7 +168,7 @@ class ServoAxis(Controller):
     def _plant_coefficients(self, h: float):
         c = self._plant_cache.get(h)
         if c is None:
-            d = discretize(self._models()[1], h)
+            d = _model().discretize(self._models()[1], h)
             c = self._plant_cache[h] = (tuple(map(tuple, np.asarray(d.A))), tuple(map(tuple, np.asarray(d.B))))
         return c
 
