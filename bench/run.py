@@ -254,7 +254,8 @@ def main() -> dict:
     goals = {"servo_step_speedup": (">=", 20), "speedup_vs_python_loop": (">=", 3), "vs_fmpy_ssp_speedup": (">=", 3),
              "vs_libcosim_speedup": (">=", 2.5), "vs_ecos_speedup": (">=", 1), "sweep_speedup_2_workers": (">=", 1.8),
              "sweep_overhead_pct": ("<=", 5)}
-    print(f"\nncfmu benchmarks ({'quick' if args.quick else 'full'}, {out['cores']} cores), medians of interleaved runs")
+    print(f"\nncfmu benchmarks ({'quick' if args.quick else 'full'}, {out['cores']} cores), "
+          "medians of interleaved runs")
     print(f"{'metric':28s} {'value':>10s}  goal")
     for key in ("servo_step_speedup", "speedup_vs_python_loop", "vs_fmpy_ssp_speedup", "vs_libcosim_speedup",
                 "vs_ecos_speedup", "sweep_speedup_2_workers", "sweep_overhead_pct", "rtf_lathe"):
@@ -267,7 +268,8 @@ def main() -> dict:
     print(f"  servo step: Python stepper {out['servo_python_us']:.1f} us; native FMU through FMI from C "
           f"{out['servo_native_us']:.2f} us, from Python via ctypes (ncfmu's FmuSlave) "
           f"{out['servo_native_via_ctypes_us']:.2f} us (speedup {out['servo_step_speedup_via_ctypes']:.1f})")
-    print(f"  master {out['master_s']:.2f} s, direct {out['direct_s']:.2f} s, fmpy simulate_ssp {out['fmpy_ssp_s']:.2f} s, "
+    print(f"  master {out['master_s']:.2f} s, direct {out['direct_s']:.2f} s, "
+          f"fmpy simulate_ssp {out['fmpy_ssp_s']:.2f} s, "
           f"libcosim {out['libcosim_s']:.2f} s, ecos {out['ecos_s']:.2f} s, sweep serial {serial:.1f} s vs 2 workers "
           f"{parallel:.1f} s")
     if args.json:

@@ -2,8 +2,6 @@
 
 import csv
 
-import numpy as np
-
 from ncfmu.cli import main
 
 

@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
-from physics import contour_error
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from physics import contour_error
 
 from ncfmu.controllers.contour import ContourInterpolator, GeometryError, offset_path
 from ncfmu.errors import ConfigError

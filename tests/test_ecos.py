@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from ncfmu.cosim.ssp import PARAMETER_SET, read_ssp
 from ncfmu.project import simulate
-
-from conftest import ROOT
 
 STEP = 1e-3
 TOL = 2e-6   # ecos writes reals with 6 decimals (std::to_string): 5e-7 rounding, nothing else allowed
@@ -208,7 +207,8 @@ def test_lathe_taper_parameters_differ_from_the_fmu_defaults(ecos_runs):
     run = ecos_runs("lathe_taper")
     differing = []
     for comp in system.components:
-        defaults = {v.name: v.start for v in read_model_description(str(ROOT / "fmus" / f"{comp.model}.fmu")).modelVariables}
+        md = read_model_description(str(ROOT / "fmus" / f"{comp.model}.fmu"))
+        defaults = {v.name: v.start for v in md.modelVariables}
         for k, v in comp.parameters.items():
             if isinstance(v, str):
                 continue

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from ncfmu.controllers.feed import ProgrammableFeed, ProgramError, parse_program
+from ncfmu.controllers.feed import ProgramError, ProgrammableFeed, parse_program
 from ncfmu.errors import ConfigError
 from ncfmu.servo.axis import ServoAxis
 
@@ -22,7 +22,8 @@ class Grinder:
         self.axis = ServoAxis(pos_start=self.feed.x_origin)
         self.t = 0.0
         self.inputs = {"start": False, "wear_start": False, "emergency": False, "mfin": False, "alarm_in": False,
-                       "x_pos": self.feed.x_origin, "y_pos": self.feed.y_origin, "x_in_position": True, "feed_hold": False, "feed_override": 1.0,
+                       "x_pos": self.feed.x_origin, "y_pos": self.feed.y_origin, "x_in_position": True,
+                       "feed_hold": False, "feed_override": 1.0,
                        "y_in_position": True}
         self.mfin_delay, self.m_for = mfin_delay, 0.0
         self.log = []

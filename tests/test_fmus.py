@@ -23,7 +23,8 @@ def test_model_description_carries_units_and_initial_unknowns(fmus):
     assert {"mm", "mm/s", "N.m"} <= units
     pos = next(v for v in md.modelVariables if v.name == "pos")
     assert pos.unit == "mm" and pos.description
-    assert {u.variable.name for u in md.initialUnknowns} == {v.name for v in md.modelVariables if v.causality == "output"}
+    assert {u.variable.name for u in md.initialUnknowns} == {v.name for v in md.modelVariables
+                                                             if v.causality == "output"}
     assert md.defaultExperiment.stepSize == "0.001"
 
 

@@ -4,13 +4,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
+from conftest import ROOT
+from physics import CHECKS
 
 from ncfmu.cosim.libcosim import run_ssp
 from ncfmu.project import simulate
 from ncfmu.systems import SYSTEMS, get_system
-
-from conftest import ROOT
-from physics import CHECKS
 
 
 @pytest.fixture(scope="session")

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from ncfmu.controllers.limiter import LIM_MINUS, LIM_PLUS, REF_PLUS, AreaLimiter, find_region
 from ncfmu.controllers.motion import LinearMove
-from ncfmu.controllers.limiter import LIM_MINUS, LIM_PLUS, REF_MINUS, REF_PLUS, AreaLimiter, find_region
 from ncfmu.errors import ConfigError
 from ncfmu.servo.axis import ServoAxis
 
@@ -29,7 +29,8 @@ class Drive:
         self.ref_cmd += v_ref * DT
         self.lim_cmd += v_lim * DT
         o = self.lim.step(self.t, DT, {"ref_cmd_in": self.ref_cmd, "lim_cmd_in": self.lim_cmd, "ref_vff_in": v_ref,
-                                       "lim_vff_in": v_lim, "ref_pos": self.out["ref_cmd"], "lim_pos": self.out["lim_cmd"]})
+                                       "lim_vff_in": v_lim, "ref_pos": self.out["ref_cmd"],
+                                       "lim_pos": self.out["lim_cmd"]})
         self.out = dict(o)
         self.t += DT
         return self.out
@@ -145,7 +146,7 @@ def test_predictive_ramp_inside_the_envelope_is_followed():
     """Issue 11, 1: Y held at 100 (X <= 250), X ramped 50 -> 240 mm in 1 s: never a deadlock."""
     d = Drive(GRINDER, ref=100.0, lim=50.0, predictive=True, use_actual=True)
     trace = [d.out]
-    for k in range(3000):
+    for _k in range(3000):
         v = 190.0 if d.lim_cmd < 240.0 else 0.0
         d.lim_cmd = min(d.lim_cmd + v * DT, 240.0) - v * DT
         trace.append(d.step(v_lim=v))

@@ -62,6 +62,7 @@ def test_every_archive_is_schema_valid_and_flat(project):
 def test_fmus_the_master_cannot_run_are_named(tmp_path, version, kind, says):
     """An SSP may reference an FMI 3.0 or a model-exchange-only FMU: a clear error, not a KeyError."""
     import zipfile
+
     from ncfmu.cosim.fmu import UnpackedFmu
     from ncfmu.errors import SystemDefinitionError
     variables = ('<ModelVariables><Float64 name="time" valueReference="1" causality="independent"/>'

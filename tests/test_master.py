@@ -1,6 +1,5 @@
 """The master algorithm against fake slaves: call order, Gauss-Seidel vs Jacobi, connection checks."""
 
-import numpy as np
 import pytest
 
 from ncfmu.cosim.master import Master

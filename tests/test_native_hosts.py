@@ -63,6 +63,15 @@ def test_controller_fmu_loads_python_itself_and_exits_cleanly(fmus, fmi_host, tm
         assert "cannot load" not in proc.stderr and "undefined symbol" not in proc.stderr
 
 
+def test_the_recorded_python_is_used_whatever_python_is_on_path(fmus, fmi_host, tmp_path):
+    """A host with an ordinary PATH: the embedded interpreter must not take /usr/bin/python3's library."""
+    binary, guid, vr = unpack(fmus["AreaLimiter"], tmp_path / "fmu")
+    proc = run_host(fmi_host, binary, guid, 1, 50, vr["ref_cmd"],
+                    env={"PATH": "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"})
+    assert proc.returncode == 0, proc.stdout[-1500:] + proc.stderr[-800:]
+    assert "ModuleNotFoundError" not in proc.stdout
+
+
 def test_no_python_runtime_is_one_clear_message(fmus, fmi_host, tmp_path):
     binary, guid, vr = unpack(fmus["OperatorPanel"], tmp_path / "fmu")
     proc = run_host(fmi_host, binary, guid, 1, 10, 0, env={"NCFMU_LIBPYTHON": "/nonexistent/libpython3.so"})

@@ -97,6 +97,7 @@ def test_readme_example_test_file_passes(project, pytester):
 def test_progress_bar_shows_done_failed_remaining_on_a_terminal():
     import io
     import re
+
     from ncfmu.batch import Progress
 
     class Terminal(io.StringIO):

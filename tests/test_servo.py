@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ncfmu.servo.axis import ServoAxis
-from ncfmu.servo.model import AxisParameters, discretize, servo_axis
+from ncfmu.servo.model import discretize, servo_axis
 
 DT = 1e-3
 

@@ -115,9 +115,9 @@ def native_verdict(fmu, values: dict[str, float]) -> tuple[str, str]:
     return status, proc.stdout
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(kv=st.floats(5.0, 1500.0), bw=st.floats(50.0, 4500.0), tau=st.floats(1e-4, 2e-3),
-       b=st.floats(0.0, 0.05), j=st.floats(1e-4, 0.05))
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kv=st.floats(-2.5, 3.2).map(lambda e: 10 ** e), bw=st.floats(-2.3, 3.65).map(lambda e: 10 ** e),
+       tau=st.floats(1e-5, 2e-3), b=st.floats(0.0, 0.05), j=st.floats(1e-4, 0.05))
 def test_margin_check_agrees_with_python_control(fmus, kv, bw, tau, b, j):
     values = dict(Kv=kv, vel_bandwidth=bw, tau_current=tau, b_visc=b, J=j, substep=1e-4)
     if bw * 1e-4 > 0.5:

@@ -6,7 +6,6 @@ from fmpy import read_model_description
 
 from ncfmu.cli import main
 from ncfmu.project import OpenSystem, simulate, simulate_branches, system_archive
-from ncfmu.systems import SYSTEMS
 
 
 def test_capability_flags_tell_the_truth(fmus):
@@ -64,4 +63,5 @@ def test_emergency_at_different_instants_from_one_state(project, tmp_path, capsy
     assert main(["run", "grinder_feed", "--branch-at", "10", "--branch-set", "panel.emergency_at=12,21",
                  "--stop-time", "23", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "branch 0 from t = 10.0 s (panel.emergency_at=12)" in out and (tmp_path / "grinder_feed_branch1.csv").is_file()
+    assert "branch 0 from t = 10.0 s (panel.emergency_at=12)" in out
+    assert (tmp_path / "grinder_feed_branch1.csv").is_file()

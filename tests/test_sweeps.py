@@ -11,12 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from ncfmu.batch import sweep
 from ncfmu.cli import main
 from ncfmu.cosim.result import Result
-
-from conftest import ROOT
 
 D3 = {"feed.D3": [4.0, 3.0, 3.5]}
 

@@ -33,8 +33,8 @@ import os
 import sys
 import tempfile
 import time
-import zipfile
 import xml.etree.ElementTree as ET
+import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -68,13 +68,15 @@ def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str,
         cut = result["seq.subcycle"] == 2
         out["final_radius_mm"] = float(result["x_axis.pos"][cut].min()) if cut.any() else float("nan")
         out["cycle_time_s"] = _first_time(result, result["seq.done"])
-        out["alarms"] = int(result["seq.alarm"].any()) + int("limiter.alarm" in result and result["limiter.alarm"].any())
+        out["alarms"] = int(result["seq.alarm"].any()) + int("limiter.alarm" in result
+                                                              and result["limiter.alarm"].any())
     if "feed.pc" in result:
         out["deepest_x_mm"] = float(result["x_axis.pos"].max())
         active = result["feed.run"] | result["feed.emergency_active"]
         out["cycle_time_s"] = float(result.time[np.flatnonzero(active)[-1] + 1]) if active.any() and not active[-1] \
             else float("nan")
-        out["alarms"] = int(result["feed.alarm"].any()) + int("limiter.alarm" in result and result["limiter.alarm"].any())
+        out["alarms"] = int(result["feed.alarm"].any()) + int("limiter.alarm" in result
+                                                               and result["limiter.alarm"].any())
     if "contour.segment" in result:
         from .controllers.contour import ContourInterpolator
         names = {p.name for p in ContourInterpolator.ports("parameter")}

@@ -10,9 +10,9 @@ import numpy as np
 
 from .errors import NcfmuError
 
-EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. Instances: lathe "
-          "panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; mill panel, contour, "
-          "x_axis, y_axis.")
+EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
+          "Instances: lathe panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; "
+          "mill panel, contour, x_axis, y_axis.")
 
 
 def _parse_set(items: list[str]) -> dict[str, object]:
@@ -61,12 +61,14 @@ def _summary(result) -> str:
         lines.append(f"  contour done: {end}; segments: {int(result['contour.segment'].max())}; "
                      f"alarm: {'yes' if result['contour.alarm'].any() else 'no'}")
     if "limiter.alarm" in result:
-        lines.append(f"  area limiter: {'ALARM, blocked mask ' + str(result['limiter.blocked'].max()) if result['limiter.alarm'].any() else 'no violation'}")
+        verdict = ("ALARM, blocked mask " + str(result["limiter.blocked"].max()) if result["limiter.alarm"].any()
+                   else "no violation")
+        lines.append(f"  area limiter: {verdict}")
     for axis in ("x_axis", "z_axis", "y_axis"):
         if f"{axis}.following_error" in result:
             fe = result[f"{axis}.following_error"]
             lines.append(f"  {axis}: max |following error| {abs(fe).max() * 1000:.2f} um")
-    for inst, msgs in result.messages.items():
+    for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):
                 lines.append(f"  [{level}] {text}")
@@ -119,8 +121,9 @@ def cmd_run(args) -> int:
     print(f"  results: {csv}")
     if args.plot:
         try:
-            from .plots import plot_result
             import matplotlib  # noqa: F401
+
+            from .plots import plot_result
         except ImportError:
             raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
         print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
@@ -132,7 +135,8 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     for item in items or []:
         name, eq, raw = item.partition("=")
         if not eq or not raw:
-            raise NcfmuError(f"--vary {item!r}: expected INSTANCE.VARIABLE=V1,V2,... e.g. --vary seq.block[1].Xd=0.4,0.5")
+            raise NcfmuError(f"--vary {item!r}: expected INSTANCE.VARIABLE=V1,V2,... "
+                             "e.g. --vary seq.block[1].Xd=0.4,0.5")
         vary[name] = [next(iter(_parse_set([f"{name}={v}"]).values())) for v in raw.split(",")]
     if not vary:
         raise NcfmuError("sweep needs at least one --vary INSTANCE.VARIABLE=V1,V2,...")

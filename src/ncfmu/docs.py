@@ -62,6 +62,7 @@ def fmu_html(md_xml: bytes, logic, built_with: str = "pythonfmu", extra: str = "
                                                                        "start", "range", "description")) + "</tr>"
         for r in rows)
     exp = root.find("DefaultExperiment")
+    version = html.escape(root.get("version", ""))
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{logic.MODEL_NAME}</title>
 <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{border-bottom:1px solid #ddd;
@@ -69,7 +70,7 @@ padding:2px 6px;text-align:left;vertical-align:top}}table{{border-collapse:colla
 </head><body>
 <h1>{logic.MODEL_NAME}</h1>
 <p>{html.escape(logic.DESCRIPTION)}</p>
-<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {html.escape(root.get("version", ""))} with {html.escape(built_with)}.
+<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
 Default experiment: step {exp.get("stepSize")} s, stop {exp.get("stopTime")} s.
 Capabilities: canGetAndSetFMUstate = {root.find("CoSimulation").get("canGetAndSetFMUstate")}.</p>
 <h2>Behaviour</h2>

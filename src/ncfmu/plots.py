@@ -36,7 +36,8 @@ def _table(params: dict[str, object]) -> list[tuple[float, float, float]]:
 
 def _commands(result, axis: str) -> str | None:
     for src in ("limiter", "seq", "feed", "contour"):
-        name = f"{src}.{'lim_cmd' if src == 'limiter' and axis == 'x' else 'ref_cmd' if src == 'limiter' else axis + '_cmd'}"
+        port = "lim_cmd" if src == "limiter" and axis == "x" else "ref_cmd" if src == "limiter" else axis + "_cmd"
+        name = f"{src}.{port}"
         if name in result:
             return name
     return None
@@ -119,7 +120,7 @@ def _plane(ax, result, system: str, params: dict) -> None:
             names = ["dresser", "headstock", "work", "tailstock"]
             left = min(y.min(), 0.0)
             top = max(max(h for _, _, h in table), x.max()) + 50
-            for i, (ref_max, lo, hi) in enumerate(table):
+            for i, (ref_max, _lo, hi) in enumerate(table):
                 ax.fill_between([left, ref_max], hi, top, color="tab:red", alpha=0.15,
                                 label="forbidden" if i == 0 else None)
                 ax.hlines(hi, left, ref_max, color="tab:red", lw=1)

@@ -94,7 +94,7 @@ class OpenSystem:
         finally:
             shutil.rmtree(self._tmp, ignore_errors=True)
 
-    def __enter__(self) -> "OpenSystem":
+    def __enter__(self) -> OpenSystem:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -89,7 +89,8 @@ def _lathe(name: str, description: str, stop_time: float, blocks: dict[str, obje
 
 def lathe_roughing() -> System:
     """Rough series (Xf 1.0, Xd 0.5, N 6) then finish series (Xf 4.0, Xd 0.1, N 1): final radius 25.9 mm."""
-    return _lathe("lathe_roughing", "Lathe: sequencer -> area limiter -> X and Z servos; 6 roughing passes, 1 finishing pass",
+    return _lathe("lathe_roughing",
+                  "Lathe: sequencer -> area limiter -> X and Z servos; 6 roughing passes, 1 finishing pass",
                   95.0, _blocks(dict(Xf=1.0, Xd=0.5, Xp=0.0, Zp=42.0, N=6, feed=4.0, rapid=50.0),
                                 dict(Xf=4.0, Xd=0.1, Xp=0.0, Zp=42.0, N=1, feed=2.0, rapid=50.0)))
 

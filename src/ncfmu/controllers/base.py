@@ -59,7 +59,7 @@ class Controller:
         return {p.name: p.start for p in cls.ports("input")}
 
     @classmethod
-    def from_parameters(cls, values: Mapping[str, object]) -> "Controller":
+    def from_parameters(cls, values: Mapping[str, object]) -> Controller:
         """Build from flat FMI parameter names (``block[1].Xd``); unknown names are refused."""
         return cls(**dict(values))
 

@@ -38,7 +38,6 @@ At the edges, as a control does:
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass

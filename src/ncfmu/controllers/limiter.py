@@ -36,9 +36,8 @@ input is rejoined.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Mapping, Sequence
-
 import math
+from collections.abc import Mapping, Sequence
 
 from ..errors import require
 from ..ports import boolean, integer, real
@@ -64,7 +63,8 @@ def _table_ports():
     for i in range(1, MAX_REGIONS + 1):
         ref_max, lo, hi = DEFAULT_TABLE[i - 1] if i <= len(DEFAULT_TABLE) else (BIG + i, -BIG, BIG)
         ports += [
-            real(f"region[{i}].ref_max", "parameter", ref_max, "mm", f"region {i}: upper boundary on the reference axis"),
+            real(f"region[{i}].ref_max", "parameter", ref_max, "mm",
+                 f"region {i}: upper boundary on the reference axis"),
             real(f"region[{i}].lim_min", "parameter", lo, "mm", f"region {i}: lowest allowed limited-axis position"),
             real(f"region[{i}].lim_max", "parameter", hi, "mm", f"region {i}: highest allowed limited-axis position"),
         ]
@@ -81,14 +81,17 @@ class AreaLimiter(Controller):
     STOP_TIME = 1.0
 
     PORTS = (
-        integer("n_regions", "parameter", len(DEFAULT_TABLE), "number of regions in the limit table", min=1, max=MAX_REGIONS),
+        integer("n_regions", "parameter", len(DEFAULT_TABLE), "number of regions in the limit table",
+                min=1, max=MAX_REGIONS),
         *_table_ports(),
         real("monitor_period", "parameter", 0.005, "s", "monitor period (the seed's 5 ms interrupt)", min=0.0),
         boolean("predictive", "parameter", False, "govern the speed so that each axis can still stop 'margin' before "
                 "the boundary at 'decel': the command stops at the boundary, the actual axis never crosses"),
         boolean("use_actual", "parameter", False, "also judge the servo feedback ref_pos/lim_pos (the stricter)"),
-        real("ref_start", "parameter", 0.0, "mm", "reference-axis command before the first step (the axis's start position)"),
-        real("lim_start", "parameter", 0.0, "mm", "limited-axis command before the first step (the axis's start position)"),
+        real("ref_start", "parameter", 0.0, "mm",
+             "reference-axis command before the first step (the axis's start position)"),
+        real("lim_start", "parameter", 0.0, "mm",
+             "limited-axis command before the first step (the axis's start position)"),
         real("decel", "parameter", 500.0, "mm/s2", "deceleration of every controlled stop and rejoin, and the one "
              "assumed for the stopping distance (predictive)", min=0.0),
         real("max_speed", "parameter", 500.0, "mm/s", "fastest the axes can move: a larger feed-forward, or a command "
@@ -136,7 +139,7 @@ class AreaLimiter(Controller):
         self.lim_start = real_param(values, "lim_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
 
     @classmethod
-    def with_table(cls, table: Sequence[tuple[float, float, float]], **parameters: object) -> "AreaLimiter":
+    def with_table(cls, table: Sequence[tuple[float, float, float]], **parameters: object) -> AreaLimiter:
         """Build from ``(ref_max, lim_min, lim_max)`` rows."""
         flat: dict[str, object] = {"n_regions": len(table)}
         for i, (b, lo, hi) in enumerate(table, start=1):

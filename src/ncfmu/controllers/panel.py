@@ -18,21 +18,28 @@ from .base import Controller, real_param
 
 class OperatorPanel(Controller):
     MODEL_NAME = "OperatorPanel"
-    DESCRIPTION = "Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; MFIN after a delay"
+    DESCRIPTION = ("Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; "
+                   "MFIN after a delay")
     SEED = "programmable-feed-JPS6043522.txt"
     STOP_TIME = 10.0
     # The button times and dials are tunable: a run can branch from a saved state with other times.
 
     PORTS = (
-        real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never", variability="tunable"),
+        real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never",
+             variability="tunable"),
         real("restart_at", "parameter", -1.0, "s", "time of a second cycle-start push (a restart, e.g. after an "
              "alarm); negative: never", variability="tunable"),
-        real("wear_start_at", "parameter", -1.0, "s", "time of the wear-compensation start push (START2); negative: never", variability="tunable"),
-        real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never", variability="tunable"),
-        real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never", variability="tunable"),
-        real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never", variability="tunable"),
+        real("wear_start_at", "parameter", -1.0, "s",
+             "time of the wear-compensation start push (START2); negative: never", variability="tunable"),
+        real("emergency_at", "parameter", -1.0, "s", "time of the emergency push (EMB); negative: never",
+             variability="tunable"),
+        real("hold_at", "parameter", -1.0, "s", "feed hold pressed at this time; negative: never",
+             variability="tunable"),
+        real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never",
+             variability="tunable"),
         real("pulse", "parameter", 0.01, "s", "length of a push-button pulse", min=0.0),
-        real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word", min=0.0, variability="tunable"),
+        real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word",
+             min=0.0, variability="tunable"),
         real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5, variability="tunable"),
         integer("m_active", "input", 0, "active M function number (0 none), from the controller"),
         boolean("start", "output", None, "cycle start push button (START1)"),

@@ -34,11 +34,10 @@ NC does after a stop it did not command) and approaches the start point safely.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ..errors import ConfigError, require
+from ..errors import require
 from ..ports import boolean, integer, real
 from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
@@ -79,9 +78,11 @@ def _block_ports():
         b = DEFAULT_BLOCKS[k - 1] if k <= len(DEFAULT_BLOCKS) else Block()
         p = f"block[{k}]"
         ports += [
-            real(f"{p}.Xf", "parameter", b.Xf, "mm", f"block {k}: offset of STP from the stock outline (register Xf)", min=0.0),
+            real(f"{p}.Xf", "parameter", b.Xf, "mm", f"block {k}: offset of STP from the stock outline (register Xf)",
+                 min=0.0),
             real(f"{p}.Xd", "parameter", b.Xd, "mm", f"block {k}: depth of cut per pass (register Xd)", min=0.0),
-            real(f"{p}.Xp", "parameter", b.Xp, "mm", f"block {k}: X component of the cut, taper (register Xp; 0 = cylinder)"),
+            real(f"{p}.Xp", "parameter", b.Xp, "mm",
+                 f"block {k}: X component of the cut, taper (register Xp; 0 = cylinder)"),
             real(f"{p}.Zp", "parameter", b.Zp, "mm", f"block {k}: cut length (register Zp)", min=0.0),
             integer(f"{p}.N", "parameter", b.N, f"block {k}: number of passes (pass counter preset)", min=1, max=10000),
             real(f"{p}.feed", "parameter", b.feed, "mm/s", f"block {k}: cutting feed of SC2", min=0.0),
@@ -119,7 +120,8 @@ class CutSequencer(Controller):
         real("feed_override", "input", 1.0, "1", "feed override of the cutting feed (SC2)", min=0.0, max=1.5),
         boolean("alarm_in", "input", False, "external alarm (area limiter): latch alarm, decelerate to rest"),
         *servo_ports(("x", 30.0), ("z", 2.0)),
-        integer("subcycle", "output", None, "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
+        integer("subcycle", "output", None,
+                "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
         integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
         integer("passes_left", "output", None, "the seed's pass down-counter (counts down at SC3 -> SC4)"),
         integer("block_no", "output", None, "block being run (0 idle)"),
@@ -162,7 +164,7 @@ class CutSequencer(Controller):
         self.stps = stps
 
     @classmethod
-    def with_blocks(cls, blocks: list[Block] | tuple[Block, ...], **parameters: object) -> "CutSequencer":
+    def with_blocks(cls, blocks: list[Block] | tuple[Block, ...], **parameters: object) -> CutSequencer:
         """Build from :class:`Block` records instead of flat ``block[k].*`` names."""
         flat: dict[str, object] = {"n_blocks": len(blocks)}
         require(1 <= len(blocks) <= MAX_BLOCKS, "n_blocks", len(blocks), f"must be in 1..{MAX_BLOCKS}")

@@ -19,8 +19,13 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 from fmpy.fmi1 import calloc, free
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 
 from ..errors import SimulationError, SystemDefinitionError
 from .slave import Variable
@@ -54,11 +59,11 @@ def safe_extract(archive: Path, target: Path) -> Path:
     return target
 
 
-_UNPACKED: dict[str, "UnpackedFmu"] = {}
+_UNPACKED: dict[str, UnpackedFmu] = {}
 _CACHE_ROOT: list[Path] = []
 
 
-def unpacked_fmu(path: Path) -> "UnpackedFmu":
+def unpacked_fmu(path: Path) -> UnpackedFmu:
     """The FMU at ``path`` unpacked once per process, keyed by its content.
 
     Every run of a system used to unpack its FMUs afresh and load their binaries from the new folder: each
@@ -134,7 +139,7 @@ class FmuSlave:
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         try:
-            from fmpy.logging import addLoggerProxy   # formats the variadic message in C
+            from fmpy.logging import addLoggerProxy  # formats the variadic message in C
             addLoggerProxy(ctypes.byref(self._callbacks))
         except Exception:  # pragma: no cover - older fmpy without the proxy: messages stay unformatted
             pass
@@ -185,8 +190,10 @@ class FmuSlave:
     def initialize(self, start_time: float, stop_time: float) -> None:
         for what, call in (("fmi2SetupExperiment", lambda: self._dll.fmi2SetupExperiment(
                                 self._component, 0, 0.0, start_time, 1, stop_time)),
-                           ("fmi2EnterInitializationMode", lambda: self._dll.fmi2EnterInitializationMode(self._component)),
-                           ("fmi2ExitInitializationMode", lambda: self._dll.fmi2ExitInitializationMode(self._component))):
+                           ("fmi2EnterInitializationMode",
+                            lambda: self._dll.fmi2EnterInitializationMode(self._component)),
+                           ("fmi2ExitInitializationMode",
+                            lambda: self._dll.fmi2ExitInitializationMode(self._component))):
             self._check(what, call())
 
     def bind(self, kind: str, inputs: np.ndarray, input_vrs: list[int],

@@ -53,7 +53,7 @@ class InputTable:
     columns: dict[str, np.ndarray] = field(default_factory=dict)
 
     @classmethod
-    def from_csv(cls, path) -> "InputTable":
+    def from_csv(cls, path) -> InputTable:
         from fmpy.util import read_csv
         data = read_csv(str(path))
         if "time" not in data.dtype.names:
@@ -181,7 +181,7 @@ class Master:
                 s.free_state(state)
         return results
 
-    def _prepare(self, stop_time, step_size, start_values, inputs, start_time) -> "_Run":
+    def _prepare(self, stop_time, step_size, start_values, inputs, start_time) -> _Run:
         stop = self.system.stop_time if stop_time is None else float(stop_time)
         h = self.system.step_size if step_size is None else float(step_size)
         if not (math.isfinite(h) and h > 0):
@@ -251,14 +251,15 @@ class Master:
         input_times = inputs.time if inputs is not None else np.empty(0)
         return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec)
 
-    def _loop(self, run: "_Run", first: int, last: int, progress=None, deadline: float | None = None) -> float:
+    def _loop(self, run: _Run, first: int, last: int, progress=None, deadline: float | None = None) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time."""
         values, plan, rec, n_rec, h = run.values, run.plan, run.rec, run.n_rec, run.h
         times = run.times.tolist()
         # the rows to record and the slices of the output vectors they copy, prepared once
         record = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
         ext_updates, input_times = run.ext_updates, run.input_times
-        next_change = int(np.searchsorted(input_times, times[first] + 1e-12, side="right")) - 1 if len(input_times) else 0
+        next_change = (int(np.searchsorted(input_times, times[first] + 1e-12, side="right")) - 1
+                       if len(input_times) else 0)
         if len(input_times) and next_change >= 0:
             for arr, slot, col in ext_updates:
                 arr[slot] = col[next_change]
@@ -273,7 +274,7 @@ class Master:
                     arr[slot] = col[next_change]
                 next_change += 1
             if jacobi:
-                for s, gathers in plan:
+                for _s, gathers in plan:
                     for buf, take, idx in gathers:
                         take(idx, out=buf)
                 for s, _ in plan:
@@ -298,7 +299,7 @@ class Master:
                                         f"allowed ({_time.perf_counter() - wall0:.1f} s of wall time)")
         return _time.perf_counter() - wall0
 
-    def _assemble(self, run: "_Run", rec, wall: float) -> Result:
+    def _assemble(self, run: _Run, rec, wall: float) -> Result:
         dtype = [("time", np.float64)]
         for k in KINDS:
             dtype += [(q, np.float64 if k == "Real" else (np.bool_ if k == "Boolean" else np.int32))

@@ -54,6 +54,6 @@ class Result:
         return path
 
     @classmethod
-    def from_csv(cls, path: Path) -> "Result":
+    def from_csv(cls, path: Path) -> Result:
         from fmpy.util import read_csv
         return cls(read_csv(str(path)))

@@ -150,7 +150,8 @@ def ssd_document(system: System) -> bytes:
                 base["factor"] = repr(spec["factor"])
             ET.SubElement(u, _q("ssc:BaseUnit"), base)
     exp = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(float(system.stop_time)))
-    ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"), type="com.opensimulationplatform")
+    ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"),
+                        type="com.opensimulationplatform")
     algo = ET.SubElement(ann, _q("osp:Algorithm"))
     ET.SubElement(algo, _q("osp:FixedStepAlgorithm"), baseStepSize=repr(float(system.step_size)))
     ET.indent(root)
@@ -271,7 +272,8 @@ def read_ssd(path: Path, read_file=None) -> System:
             for k, v in values.items():
                 params[k[len(prefix):] if prefix and k.startswith(prefix) else k] = v
         components.append(Component(name, model, params, connectors))
-    connections = [Connection(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
+    connections = [Connection(c.get("startElement"), c.get("startConnector"),
+                              c.get("endElement"), c.get("endConnector"))
                    for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
     exp = root.find(_q("ssd:DefaultExperiment"))
     stop = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else math.nan

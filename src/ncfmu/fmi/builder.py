@@ -90,9 +90,11 @@ def status_shim() -> bytes | None:
                                   capture_output=True, text=True)
             if proc.returncode == 0:
                 return out.read_bytes()
-            warnings.warn(f"ncfmu: compiling the status shim with {cc} failed: {proc.stderr.strip()[:300]}")
+            warnings.warn(f"ncfmu: compiling the status shim with {cc} failed: {proc.stderr.strip()[:300]}",
+                          stacklevel=2)
             return None
-    warnings.warn("ncfmu: no C compiler found; FMUs report refused parameters as fmi2Fatal, not fmi2Error")
+    warnings.warn("ncfmu: no C compiler found; FMUs report refused parameters as fmi2Fatal, not fmi2Error",
+                  stacklevel=2)
     return None
 
 
@@ -165,13 +167,14 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
 
 
 def python_runtime_record() -> str:
-    """``resources/ncfmu_python.txt``: the libpython this FMU was built with (full path, then soname),
-    which the status shim loads in a native host (see status_shim.c; ``NCFMU_LIBPYTHON`` overrides)."""
+    """``resources/ncfmu_python.txt``: the libpython this FMU was built with (full path, then soname) and its
+    home (``sys.base_prefix``), which the status shim loads and starts in a native host (see status_shim.c;
+    ``NCFMU_LIBPYTHON`` overrides)."""
     import sysconfig
     libdir, soname = sysconfig.get_config_var("LIBDIR") or "", sysconfig.get_config_var("INSTSONAME") or ""
     if not sysconfig.get_config_var("Py_ENABLE_SHARED") or not soname:
         return ""                  # a static Python: native hosts need NCFMU_LIBPYTHON
-    return f"{Path(libdir) / soname}\n{soname}\n"
+    return f"{Path(libdir) / soname}\n{soname}\n{sys.base_prefix}\n"
 
 
 RUNTIME_HTML = """<h2>Runtime requirements</h2>
@@ -219,7 +222,8 @@ def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> lis
     built = []
     for native in native_models():
         target = Path(dest_dir) / f"{native.name}.fmu"
-        if only_stale and target.exists() and fmu_version(target) == native.version() and has_binary(target, native.name):
+        if (only_stale and target.exists() and fmu_version(target) == native.version()
+                and has_binary(target, native.name)):
             built.append(target)
             continue
         built.append(build_native_fmu(native, dest_dir))

@@ -27,6 +27,8 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
+from ..errors import NcfmuError
+
 try:     # numpy is optional: the controller FMUs run on the standard library alone
     import numpy as np
 except ImportError:  # pragma: no cover - exercised where numpy is absent
@@ -35,8 +37,6 @@ _NP_INTEGER = (np.integer,) if np else ()
 _NP_FLOATING = (np.floating,) if np else ()
 _NP_BOOL = (np.bool_,) if np else ()
 _NP_ARRAY = (np.ndarray,) if np else ()
-
-from ..errors import NcfmuError
 
 FORMAT = "ncfmu-fmu-state"
 VERSION = 1
@@ -180,7 +180,8 @@ def loads(data: bytes, logic_class: type, build_logic) -> tuple[object, dict, di
     try:
         parameters, inputs = _decode(doc.get("parameters"), "parameters"), _decode(doc.get("inputs"), "inputs")
         saved = doc.get("logic")
-        if not isinstance(parameters, dict) or not isinstance(inputs, dict) or not isinstance(saved, (dict, type(None))):
+        if (not isinstance(parameters, dict) or not isinstance(inputs, dict)
+                or not isinstance(saved, (dict, type(None)))):
             raise StateError("parameters, inputs or logic missing")
         expected = set(logic_class.default_parameters()), set(logic_class.default_inputs())
         if set(parameters) != expected[0] or set(inputs) != expected[1]:

@@ -176,5 +176,14 @@ def design(p: AxisParameters = AxisParameters()) -> LoopDesign:
     _, pm_v, _, wc_v = ct.margin(lv)
     _, pm_p, _, wc_p = ct.margin(lp)
     stable = bool(np.all(np.real(ct.poles(servo_axis(p))) < 0))
-    return LoopDesign(float(pm_v), float(wc_v), float(ct.bandwidth(ct.feedback(lv, 1))),
-                      float(pm_p), float(wc_p), float(ct.bandwidth(ct.feedback(lp, 1))), stable)
+    return LoopDesign(float(pm_v), float(wc_v), _bandwidth(ct.feedback(lv, 1)),
+                      float(pm_p), float(wc_p), _bandwidth(ct.feedback(lp, 1)), stable)
+
+
+def _bandwidth(closed) -> float:
+    """The -3 dB bandwidth, or NaN where python-control's search finds no bracket (a loop whose mechanics are
+    far faster than its control, e.g. J/b_visc of nanoseconds): a design figure only, the checks use margins."""
+    try:
+        return float(ct.bandwidth(closed))
+    except ValueError:
+        return float("nan")

@@ -21,7 +21,7 @@ enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8, P_ERROR = 1
 #define P_SETUP      P_INSTANTIATED                                   /* fmi2SetupExperiment, EnterInit */
 #define P_SETTABLE   (P_INSTANTIATED | P_INIT | P_STEP)              /* fmi2Set* (inputs in step mode) */
 #define P_GETTABLE   (P_INIT | P_STEP | P_TERMINATED | P_ERROR)      /* fmi2Get* */
-#define P_STATEFUL   (P_INIT | P_STEP | P_TERMINATED | P_ERROR)      /* FMU-state calls */
+#define P_STATEFUL   (P_INSTANTIATED | P_INIT | P_STEP | P_TERMINATED | P_ERROR)   /* FMU-state calls */
 #define P_ANY        (P_INSTANTIATED | P_INIT | P_STEP | P_TERMINATED | P_ERROR)
 
 static inline const char *fmi2_phase_name(int phase)

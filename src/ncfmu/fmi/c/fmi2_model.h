@@ -42,7 +42,8 @@ int model_init(double *values, ModelState *m, const Fmi2Log *log);
 int model_step(double *values, ModelState *m, double t, double h, const Fmi2Log *log);
 
 /* After a state record came back (fmi2SetFMUstate, fmi2DeSerializeFMUstate): derive again what is
- * derived from the parameters and check the dynamic state is sane. 0 when fine, else logs and -1. */
-int model_restore(double *values, ModelState *m, const Fmi2Log *log);
+ * derived from the parameters and check the dynamic state is sane; ``judged``: the parameters are ones
+ * model_init already accepted (their checks may be skipped). 0 when fine, else logs and -1. */
+int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log);
 
 #endif

@@ -30,6 +30,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
     double values[NVARS];
     ModelState *model;
+    ModelState *before;                 /* the model before the step in progress: a failed step is undone */
     State *states;                      /* the FMU states this instance handed out and not freed */
 } Instance;
 
@@ -85,7 +86,8 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     if (!i) return NULL;
     *i = tmp;
     i->model = mem_alloc(i, model_state_size());
-    if (!i->model) { mem_free(i, i); return NULL; }
+    i->before = mem_alloc(i, model_state_size());
+    if (!i->model || !i->before) { mem_free(i, i->model); mem_free(i, i->before); mem_free(i, i); return NULL; }
     snprintf(i->name, sizeof i->name, "%s", name ? name : "");
     i->log.logger = i->cb.logger;
     i->log.env = i->cb.componentEnvironment;
@@ -105,6 +107,7 @@ void fmi2FreeInstance(fmi2Component c)
         mem_free(i, s);
     }
     mem_free(i, i->model);
+    mem_free(i, i->before);
     fmi2CallbackFreeMemory free_memory = i->cb.freeMemory;
     if (free_memory) free_memory(i); else free(i);
 }
@@ -187,7 +190,14 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_se
         return fmi2Error;
     }
     h = step;
-    if (model_step(i->values, i->model, t, h, LOG(i)) != 0) return fmi2Error;
+    double outputs[NVARS];
+    memcpy(outputs, i->values, sizeof outputs);
+    memcpy(i->before, i->model, model_state_size());
+    if (model_step(i->values, i->model, t, h, LOG(i)) != 0) {
+        memcpy(i->model, i->before, model_state_size());   /* the instance stays where it was */
+        memcpy(i->values, outputs, sizeof outputs);
+        return fmi2Error;
+    }
     i->last_time = t + h;
     return fmi2OK;
 }
@@ -208,10 +218,12 @@ static const char *type_name(VarType t)
 
 /* 1 when every reference is a variable of ``type`` (and, for a set, settable now); else logs the first
  * offender and returns 0. */
-static int refs_ok(Instance *i, const char *call, const fmi2ValueReference vr[], size_t n, VarType type, int set)
+static int refs_ok(Instance *i, const char *call, const fmi2ValueReference vr[], size_t n, VarType type, int set,
+                   const void *values)
 {
-    if (n > 0 && !vr) {
-        FMI2_SAY(LOG(i), fmi2Error, "error", "%s: %zu value references asked, but the array is NULL", call, n);
+    if (n > 0 && (!vr || !values)) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "%s: %zu values asked, but the %s array is NULL", call, n,
+                 !vr ? "value reference" : "value");
         return 0;
     }
     for (size_t k = 0; k < n; k++) {
@@ -250,7 +262,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 {
     Instance *i = c;
     ALLOWED(i, "fmi2GetReal", P_GETTABLE);
-    if (!refs_ok(i, "fmi2GetReal", vr, n, V_REAL, 0)) return fmi2Error;
+    if (!refs_ok(i, "fmi2GetReal", vr, n, V_REAL, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]];
     return fmi2OK;
 }
@@ -259,7 +271,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     Instance *i = c;
     ALLOWED(i, "fmi2GetInteger", P_GETTABLE);
-    if (!refs_ok(i, "fmi2GetInteger", vr, n, V_INTEGER, 0)) return fmi2Error;
+    if (!refs_ok(i, "fmi2GetInteger", vr, n, V_INTEGER, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = (fmi2Integer)i->values[vr[k]];
     return fmi2OK;
 }
@@ -268,7 +280,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     Instance *i = c;
     ALLOWED(i, "fmi2GetBoolean", P_GETTABLE);
-    if (!refs_ok(i, "fmi2GetBoolean", vr, n, V_BOOLEAN, 0)) return fmi2Error;
+    if (!refs_ok(i, "fmi2GetBoolean", vr, n, V_BOOLEAN, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]] != 0.0 ? fmi2True : fmi2False;
     return fmi2OK;
 }
@@ -284,15 +296,25 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return fmi2Error;
 }
 
+/* A parameter set in initialization mode: the initial outputs (initial unknowns) follow it, when the
+ * parameters allow (quietly: they are judged at fmi2ExitInitializationMode). */
+static void parameters_changed(Instance *i, const fmi2ValueReference vr[], size_t n)
+{
+    if (i->phase != P_INIT) return;
+    for (size_t k = 0; k < n; k++)
+        if (MODEL_VARS[vr[k]].causality == V_PARAMETER) { model_init(i->values, i->model, NULL); return; }
+}
+
 /* Sets are all-or-nothing: every value is checked before any is stored. */
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[])
 {
     Instance *i = c;
     ALLOWED(i, "fmi2SetReal", P_SETTABLE);
-    if (!refs_ok(i, "fmi2SetReal", vr, n, V_REAL, 1)) return fmi2Error;
+    if (!refs_ok(i, "fmi2SetReal", vr, n, V_REAL, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++)
         if (!value_ok(i, vr[k], v[k])) return fmi2Error;
     for (size_t k = 0; k < n; k++) i->values[vr[k]] = v[k];
+    parameters_changed(i, vr, n);
     return fmi2OK;
 }
 
@@ -300,10 +322,11 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     Instance *i = c;
     ALLOWED(i, "fmi2SetInteger", P_SETTABLE);
-    if (!refs_ok(i, "fmi2SetInteger", vr, n, V_INTEGER, 1)) return fmi2Error;
+    if (!refs_ok(i, "fmi2SetInteger", vr, n, V_INTEGER, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++)
         if (!value_ok(i, vr[k], (double)v[k])) return fmi2Error;
     for (size_t k = 0; k < n; k++) i->values[vr[k]] = (double)v[k];
+    parameters_changed(i, vr, n);
     return fmi2OK;
 }
 
@@ -311,8 +334,9 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     Instance *i = c;
     ALLOWED(i, "fmi2SetBoolean", P_SETTABLE);
-    if (!refs_ok(i, "fmi2SetBoolean", vr, n, V_BOOLEAN, 1)) return fmi2Error;
+    if (!refs_ok(i, "fmi2SetBoolean", vr, n, V_BOOLEAN, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) i->values[vr[k]] = v[k] ? 1.0 : 0.0;
+    parameters_changed(i, vr, n);
     return fmi2OK;
 }
 
@@ -368,6 +392,13 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *out)
     return fmi2OK;
 }
 
+static int params_equal(const double *a, const double *b)
+{
+    for (unsigned vr = 0; vr < NVARS; vr++)
+        if (MODEL_VARS[vr].causality == V_PARAMETER && memcmp(&a[vr], &b[vr], sizeof a[vr]) != 0) return 0;
+    return 1;
+}
+
 /* Put a state record into the instance; a record that does not pass model_restore leaves the
  * instance as it was. */
 static fmi2Status restore(Instance *i, const State *s, const char *call)
@@ -377,9 +408,12 @@ static fmi2Status restore(Instance *i, const State *s, const char *call)
     unsigned char *saved = mem_alloc(i, model_state_size());
     if (!saved) return fmi2Error;
     memcpy(saved, i->model, model_state_size());
+    /* The parameters were judged when this instance left initialization mode: a state with the same ones
+     * needs no new judgement (the design check costs ~0.4 ms; a restore should cost a copy). */
+    int judged = (i->phase == P_STEP || i->phase == P_TERMINATED) && params_equal(values, s->values);
     memcpy(i->values, s->values, sizeof values);
     memcpy(i->model, s->model, model_state_size());
-    if (model_restore(i->values, i->model, LOG(i)) != 0) {
+    if (model_restore(i->values, i->model, judged, LOG(i)) != 0) {
         memcpy(i->values, values, sizeof values);
         memcpy(i->model, saved, model_state_size());
         mem_free(i, saved);
@@ -499,7 +533,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
         else if (memcmp(h.build, want.build, sizeof h.build) != 0) why = "a state of another build of this model";
         else if (h.nvars != want.nvars || h.model_bytes != want.model_bytes || size != ser_size())
             why = "its size does not match this build";
-        else if (!(h.phase == P_INIT || h.phase == P_STEP || h.phase == P_TERMINATED) || !isfinite(h.last_time))
+        else if (!(h.phase == P_INSTANTIATED || h.phase == P_INIT || h.phase == P_STEP || h.phase == P_TERMINATED)
+                 || !isfinite(h.last_time))
             why = "its FMI state is not one a state is taken in";
     }
     State *s = NULL;
@@ -533,7 +568,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
     int bad = !scratch;
     if (scratch) {
         memcpy(scratch, s->model, model_state_size());
-        bad = model_restore(values, scratch, LOG(i)) != 0;
+        bad = model_restore(values, scratch, 0, LOG(i)) != 0;
         mem_free(i, scratch);
     }
     if (bad) {

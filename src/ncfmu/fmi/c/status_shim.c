@@ -282,11 +282,10 @@ static int fast_step(Fast *f, fmi2Real t, fmi2Real h, fmi2Status *st, int *flush
  * which call is allowed in which phase, a step size that is not a positive finite number, and the
  * time of the last successful step (fmi2LastSuccessfulTime). A refused call logs why (through the
  * host's logger) and returns fmi2Error; the instance stays usable (fmi2Reset) and freeable. */
-/* 1 when ``call`` is allowed in the instance's phase (fmi2_machine.h); else logs and returns 0.
- * Unknown instances (not made by this shim) pass: pythonfmu answers them as before. */
+/* 1 when ``call`` is allowed in the instance's phase (fmi2_machine.h); else logs and returns 0. */
 static int allowed(Inst *i, const char *call, int phases)
 {
-    if (!i) return 1;
+    if (!i) return 0;                      /* NULL, freed, or not made here: never handed to pythonfmu */
     Fmi2Log log = {i->logger, i->env, i->name};
     return fmi2_allowed(&log, i->phase, call, phases);
 }
@@ -321,7 +320,7 @@ static int python_runtime(const char *fmu_binary)
     if (state) return state > 0;
     int (*is_init)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
     if (is_init) { state = 1; return 1; }  /* a Python host: its interpreter */
-    char recorded[2][1024] = {"", ""}, path[4096], tried[2048] = "";
+    char recorded[3][1024] = {"", "", ""}, path[4096], tried[2048] = "";
     const char *env = getenv("NCFMU_LIBPYTHON");
     /* resources/ncfmu_python.txt, next to binaries/<platform>/ */
     snprintf(path, sizeof path, "%s", fmu_binary);
@@ -331,7 +330,7 @@ static int python_runtime(const char *fmu_binary)
         strcat(path, "/resources/ncfmu_python.txt");
         FILE *f = fopen(path, "r");
         if (f) {
-            for (int k = 0; k < 2 && fgets(recorded[k], sizeof recorded[k], f); k++)
+            for (int k = 0; k < 3 && fgets(recorded[k], sizeof recorded[k], f); k++)
                 recorded[k][strcspn(recorded[k], "\r\n")] = 0;
             fclose(f);
         }
@@ -363,6 +362,15 @@ static int python_runtime(const char *fmu_binary)
         return 0;
     }
     if (!is_init()) {
+        /* The interpreter's home is the one recorded at build time (line 3 of ncfmu_python.txt): left to
+         * itself, an embedded Python looks for "python3" on PATH and may take another installation's
+         * standard library. $PYTHONHOME, when the host sets it, still wins. */
+        void (*set_home)(const wchar_t *) = (void (*)(const wchar_t *))dlsym(lib, "Py_SetPythonHome");
+        wchar_t *(*decode)(const char *, size_t *) = (wchar_t *(*)(const char *, size_t *))dlsym(lib, "Py_DecodeLocale");
+        if (!getenv("PYTHONHOME") && !env && recorded[2][0] && set_home && decode) {
+            wchar_t *home = decode(recorded[2], NULL);   /* kept for the interpreter's life, as the API asks */
+            if (home) set_home(home);
+        }
         init_ex(0);                         /* 0: leave the host's signal handlers alone */
         save_thread();                      /* release the GIL: every call takes it with PyGILState_Ensure */
     }
@@ -372,6 +380,7 @@ static int python_runtime(const char *fmu_binary)
 
 static void *inner = NULL;
 static void *sym(const char *name);
+static void *sym_locked(const char *name, int *failed);
 
 /* pythonfmu 0.7 defect: its global std::shared_ptr<PyState> is released twice at process exit -- by its
  * static destructor, then again by its __attribute__((destructor)) finalizePythonInterpreter, which
@@ -388,15 +397,26 @@ static void release_pythonfmu_state(void)
 #define INNER_(ret, name, params) static ret(*inner_##name) params = NULL; \
     if (!inner_##name) inner_##name = (ret(*) params)sym(#name);
 
+static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
+
 static void *sym(const char *name)
 {
     static int inner_failed = 0;           /* say a load failure once, not on every call */
+    /* Hosts instantiate on several threads: the runtime and pythonfmu's library are loaded once, under a lock. */
+    pthread_mutex_lock(&load_lock);
+    void *loaded = sym_locked(name, &inner_failed);
+    pthread_mutex_unlock(&load_lock);
+    return loaded;
+}
+
+static void *sym_locked(const char *name, int *failed)
+{
     if (!inner) {
         Dl_info info;
         char path[4096];
-        if (inner_failed) return NULL;
+        if (*failed) return NULL;
         if (!dladdr((void *)&sym, &info) || !info.dli_fname) return NULL;
-        if (!python_runtime(info.dli_fname)) { inner_failed = 1; return NULL; }
+        if (!python_runtime(info.dli_fname)) { *failed = 1; return NULL; }
         const char *dot = strrchr(info.dli_fname, '.');
         size_t stem = dot ? (size_t)(dot - info.dli_fname) : strlen(info.dli_fname);
         if (stem + 32 >= sizeof path) return NULL;
@@ -410,7 +430,7 @@ static void *sym(const char *name)
         if (!inner) {
             snprintf(python_problem, sizeof python_problem, "ncfmu status shim: cannot load %s: %s", path, dlerror());
             fprintf(stderr, "%s\n", python_problem);
-            inner_failed = 1;
+            *failed = 1;
             return NULL;
         }
     }
@@ -569,9 +589,16 @@ static int state_live(Inst *i, const char *call, void *s)
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
 {
     INNER_(fmi2Status, fmi2GetFMUstate, (fmi2Component, fmi2FMUstate *))
+    INNER_(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))
     Inst *i = inst_find(c);
-    if (!s) return fmi2Error;
+    if (!allowed(i, "fmi2GetFMUstate", P_ANY) || !s) return fmi2Error;
     if (*s && !state_live(i, "fmi2GetFMUstate", *s)) return fmi2Error;
+    if (*s) {                              /* FMI: a given state is overwritten -- pythonfmu makes a new one */
+        int k = state_index(i, *s);
+        if (k >= 0) i->states[k] = i->states[--i->n_states];
+        if (inner_fmi2FreeFMUstate) inner_fmi2FreeFMUstate(c, s);
+        *s = NULL;
+    }
     fmi2Status st = inner_fmi2GetFMUstate ? inner_fmi2GetFMUstate(c, s) : fmi2Fatal;
     if (st <= fmi2Warning) state_add(i, *s);
     return st;
@@ -581,6 +608,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
 {
     INNER_(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))
     Inst *i = inst_find(c);
+    if (!allowed(i, "fmi2FreeFMUstate", P_ANY)) return fmi2Error;
     if (!s || !*s) return fmi2OK;
     if (!state_live(i, "fmi2FreeFMUstate", *s)) return fmi2Error;
     int k = state_index(i, *s);
@@ -591,19 +619,35 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size)
 {
     INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
-    if (!state_live(inst_find(c), "fmi2SerializedFMUstateSize", s)) return fmi2Error;
+    Inst *i = inst_find(c);
+    if (!allowed(i, "fmi2SerializedFMUstateSize", P_ANY) || !size) return fmi2Error;
+    if (!state_live(i, "fmi2SerializedFMUstateSize", s)) return fmi2Error;
     return inner_fmi2SerializedFMUstateSize ? inner_fmi2SerializedFMUstateSize(c, s, size) : fmi2Fatal;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size)
 {
     INNER_(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte[], size_t))
-    if (!state_live(inst_find(c), "fmi2SerializeFMUstate", s)) return fmi2Error;
-    return inner_fmi2SerializeFMUstate ? inner_fmi2SerializeFMUstate(c, s, b, size) : fmi2Fatal;
+    INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
+    Inst *i = inst_find(c);
+    if (!allowed(i, "fmi2SerializeFMUstate", P_ANY)) return fmi2Error;
+    if (!state_live(i, "fmi2SerializeFMUstate", s)) return fmi2Error;
+    /* pythonfmu copies ``size`` bytes out of its state, whatever its length: only the exact size passes. */
+    size_t needed = 0;
+    if (!inner_fmi2SerializedFMUstateSize || inner_fmi2SerializedFMUstateSize(c, s, &needed) > fmi2Warning)
+        return fmi2Error;
+    if (!b || size < needed) {
+        if (i->logger)
+            i->logger(i->env, i->name, fmi2Error, "error", "fmi2SerializeFMUstate: %s (%zu bytes given, %zu needed)",
+                      !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
+        return fmi2Error;
+    }
+    return inner_fmi2SerializeFMUstate ? inner_fmi2SerializeFMUstate(c, s, b, needed) : fmi2Fatal;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
 {
+    if (!allowed(inst_find(c), "fmi2SetFMUstate", P_ANY)) return fmi2Error;
     if (!state_live(inst_find(c), "fmi2SetFMUstate", s)) return fmi2Error;
     static fmi2Status (*f)(fmi2Component, fmi2FMUstate) = NULL;
     if (!f) f = (fmi2Status(*)(fmi2Component, fmi2FMUstate))sym("fmi2SetFMUstate");
@@ -619,7 +663,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
     static fmi2Status (*free_state)(fmi2Component, fmi2FMUstate *) = NULL;
     if (!f) f = (fmi2Status(*)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *))sym("fmi2DeSerializeFMUstate");
     if (!free_state) free_state = (fmi2Status(*)(fmi2Component, fmi2FMUstate *))sym("fmi2FreeFMUstate");
-    if (!f || !s) return fmi2Fatal;
+    if (!allowed(inst_find(c), "fmi2DeSerializeFMUstate", P_ANY) || !s || (size && !b)) return fmi2Error;
+    if (!f) return fmi2Fatal;
     fmi2Status status = f(c, b, size, s);
     if (status <= fmi2Warning && call_refused(c)) {
         if (free_state && *s) free_state(c, s);
@@ -645,6 +690,10 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
                        python_problem[0] ? python_problem : "ncfmu: pythonfmu's library could not be loaded");
         return NULL;
     }
+    /* The adapter announces itself in one global (_ncfmu_fast.last): instantiations are serialised so that
+     * each instance's fast path binds to its own adapter, whatever threads the host uses. */
+    static pthread_mutex_t instantiate_lock = PTHREAD_MUTEX_INITIALIZER;
+    pthread_mutex_lock(&instantiate_lock);
     fmi2Component c = inner_fmi2Instantiate(name, type, guid, res, cb, vis, log);
     if (c) {
         Inst *i = calloc(1, sizeof *i);
@@ -661,6 +710,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
         }
     }
     if (c && name) fast_register(c, name);
+    pthread_mutex_unlock(&instantiate_lock);
     return c;
 }
 
@@ -722,11 +772,22 @@ static int check_refs(Inst *i, const char *call, const fmi2ValueReference vr[], 
     return 1;
 }
 
+/* n values asked: both arrays must be there. */
+static int arrays_ok(Inst *i, const char *call, const fmi2ValueReference vr[], size_t n, const void *v)
+{
+    if (n == 0 || (vr && v)) return 1;
+    if (i && i->logger)
+        i->logger(i->env, i->name, fmi2Error, "error", "%s: %zu values asked, but the %s array is NULL", call, n,
+                  !vr ? "value reference" : "value");
+    return 0;
+}
+
 #define GETTER(name, type, kind)                                                                  \
     fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, type v[])           \
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, type[]))      \
         Inst *i = inst_find(c);                                                                   \
+        if (!allowed(i, #name, P_GETTABLE) || !arrays_ok(i, #name, vr, n, v)) return fmi2Error;   \
         if (fast_get(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
         if (!check_refs(i, #name, vr, n, kind, 0)) return fmi2Error;                              \
         return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
@@ -736,7 +797,7 @@ static int check_refs(Inst *i, const char *call, const fmi2ValueReference vr[], 
     {                                                                                             \
         INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, const type[]))\
         Inst *i = inst_find(c);                                                                   \
-        if (!allowed(i, #name, P_SETTABLE)) return fmi2Error;                                     \
+        if (!allowed(i, #name, P_SETTABLE) || !arrays_ok(i, #name, vr, n, v)) return fmi2Error;   \
         if (fast_set(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
         if (!check_refs(i, #name, vr, n, kind, 1)) return fmi2Error;                              \
         fmi2Status st = inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                     \

@@ -78,10 +78,42 @@ static int solve(int n, double d[NMAX][NMAX], double x[NMAX][NMAX])
     return 0;
 }
 
-/* exp(M) by scaling and squaring with the (8, 8) Pade approximant (|M|/2^s <= 0.5: error below
- * double rounding). */
-static int expm(int n, const double m[NMAX][NMAX], double e[NMAX][NMAX])
+/* Balance m in place by a diagonal similarity of powers of two (Parlett-Reinsch, as LAPACK's gebal without
+ * permutations): d[i] holds the scale, m becomes D^-1 m D. The closed loop's matrix mixes entries of 1e-3
+ * and 1e7; unbalanced, its norm (not its eigenvalues) would set the number of squarings and cost accuracy. */
+static void balance(int n, double m[NMAX][NMAX], double d[NMAX])
 {
+    for (int i = 0; i < n; i++) d[i] = 1.0;
+    for (int sweep = 0, done = 0; !done && sweep < 100; sweep++) {
+        done = 1;
+        for (int i = 0; i < n; i++) {
+            double c = 0.0, r = 0.0;
+            for (int j = 0; j < n; j++)
+                if (j != i) { c += fabs(m[j][i]); r += fabs(m[i][j]); }
+            if (c == 0.0 || r == 0.0) continue;
+            double f = 1.0, g = r / 2.0, total = c + r;
+            while (c < g) { f *= 2.0; c *= 4.0; }
+            g = r * 2.0;
+            while (c >= g) { f /= 2.0; c /= 4.0; }
+            if ((c + r) / f < 0.95 * total) {
+                done = 0;
+                d[i] *= f;
+                for (int j = 0; j < n; j++) { m[i][j] /= f; m[j][i] *= f; }
+            }
+        }
+    }
+}
+
+/* exp(M) by balancing, then scaling and squaring with the (8, 8) Pade approximant (|M|/2^s <= 0.5: error
+ * below double rounding). */
+static int expm(int n, const double m_in[NMAX][NMAX], double e[NMAX][NMAX])
+{
+    double m[NMAX][NMAX], d[NMAX];
+    memcpy(m, m_in, sizeof m);
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            if (!isfinite(m[i][j])) return -1;
+    balance(n, m, d);
     double norm = 0.0;
     for (int i = 0; i < n; i++) {
         double row = 0.0;
@@ -112,7 +144,8 @@ static int expm(int n, const double m[NMAX][NMAX], double e[NMAX][NMAX])
     }
     if (solve(n, den, num) != 0) return -1;
     for (int k = 0; k < s; k++) mat_mul(n, num, num, num);
-    memcpy(e, num, sizeof num);
+    for (int i = 0; i < n; i++)                       /* undo the balancing: e = D exp(B) D^-1 */
+        for (int j = 0; j < n; j++) e[i][j] = num[i][j] * d[i] / d[j];
     return 0;
 }
 
@@ -198,11 +231,14 @@ static double loop_log_gain(const Loop *l, double w)
 static double phase_margin(const Loop *l)
 {
     const int n = 4000;
-    const double w0 = 1e-3, w1 = 1e9;
+    double w0 = 1e-3, w1 = 1e9;
+    /* both loops are integrators at low frequency: start where the gain is above 1, so no crossover is missed */
+    while (loop_log_gain(l, w0) <= 0.0 && w0 > 1e-12) w0 /= 10.0;
     double best = INFINITY;
     double wa = w0, ga = loop_log_gain(l, wa);
     for (int k = 1; k <= n; k++) {
         double wb = w0 * pow(w1 / w0, (double)k / n), gb = loop_log_gain(l, wb);
+        if (isnan(gb)) continue;
         if ((ga > 0.0) != (gb > 0.0)) {
             double lo = wa, hi = wb, glo = ga;
             for (int it = 0; it < 200 && hi - lo > 1e-14 * hi; it++) {
@@ -286,10 +322,12 @@ static double quantise(const double *values, const struct ModelState *m, double 
     return P(VR_ideal) != 0.0 ? pos : nearbyint(pos / m->quantum) * m->quantum;
 }
 
+/* Sub-steps per communication step; 0 when there would be more than MAX_SUBSTEPS (refused by model_step). */
+#define MAX_SUBSTEPS 10000000
 static int substeps(const double *values, double dt)
 {
     double n = ceil(dt / P(VR_substep) - 1e-9);
-    return n < 1.0 ? 1 : (int)n;
+    return n < 1.0 ? 1 : n > MAX_SUBSTEPS ? 0 : (int)n;
 }
 
 static void publish(double *values, const struct ModelState *m, double pos, double vel, double torque)
@@ -410,6 +448,11 @@ int model_init(double *values, ModelState *m, const Fmi2Log *log)
 
 int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log *log)
 {
+    if (substeps(values, dt) == 0) {
+        FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: more than %d sub-steps of "
+                 "substep = %g s in one step; take shorter steps", dt, MAX_SUBSTEPS, P(VR_substep));
+        return -1;
+    }
     double cmd = P(VR_pos_cmd), vff = P(VR_vel_ff);
     int bad = !isfinite(cmd) || !isfinite(vff);
     if (bad && !m->fault)   /* never act on a NaN: hold the last good command, say why once */
@@ -446,9 +489,9 @@ numeric:
     return -1;
 }
 
-int model_restore(double *values, ModelState *m, const Fmi2Log *log)
+int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log)
 {
-    if (!parameters_ok(values, log)) return -1;
+    if (!judged && !parameters_ok(values, log)) return -1;
     derive(values, m);                       /* never trust derived data from a state record */
     double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->p_meas, m->p_last, m->pos_cmd, m->cmd_prev,
                     m->vel_ff, m->vff_prev};
