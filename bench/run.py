@@ -182,8 +182,9 @@ def sweep_speedup(quick: bool) -> tuple[float, float, float]:
 
 
 def sweep_overhead() -> tuple[float, float]:
-    """(scheduling overhead, run time) per short variant, s: 16 variants of 2 s of lathe_taper on a started
-    1-worker cluster (system already opened on the worker); overhead = elapsed - the variants' own wall time."""
+    """(scheduling overhead, run time) per short variant, s: 48 variants of 2 s of lathe_taper on a started
+    1-worker cluster (system already opened on the worker); overhead = elapsed - the variants' own wall time
+    (the client's connection and the one scatter of the archive included, spread over the 48)."""
     from dask.distributed import LocalCluster
 
     from ncfmu.batch import sweep
@@ -192,7 +193,7 @@ def sweep_overhead() -> tuple[float, float]:
         address = cluster.scheduler_address
         sweep("lathe_taper", {"seq.block[1].Xd": [0.5]}, Path(tmp) / "warm", scheduler=address, stop_time=2.0,
               progress=False)
-        values = [round(0.3 + 0.01 * i, 2) for i in range(16)]
+        values = [round(0.3 + 0.005 * i, 3) for i in range(48)]
         t0 = time.perf_counter()
         rows = sweep("lathe_taper", {"seq.block[1].Xd": values}, Path(tmp) / "run", scheduler=address,
                      stop_time=2.0, progress=False)

@@ -208,8 +208,6 @@ def _write_atomic_csv(path: Path, columns: list[str], rows: list[Mapping[str, ob
         writer.writeheader()
         for row in rows:
             writer.writerow({k: row.get(k, "") for k in columns})
-        f.flush()
-        os.fsync(f.fileno())
     part.replace(path)
 
 
@@ -243,8 +241,6 @@ def _write_bytes(path: Path, data: bytes) -> None:
     part = path.with_name(path.name + ".part")
     with open(part, "wb") as f:
         f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
     part.replace(path)
 
 
@@ -292,6 +288,29 @@ class Progress:
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+
+
+def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
+                 scheduler_file: str | None, record_result: Callable) -> None:
+    from dask.distributed import Client, LocalCluster, as_completed
+    cluster = None
+    if scheduler is not None:
+        client = Client(scheduler)
+    elif scheduler_file is not None:
+        client = Client(scheduler_file=scheduler_file)
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
+        futures = {client.submit(run_variant, shipped, digest, v, *args, pure=False): (key, v) for key, v in todo}
+        for future in as_completed(futures):
+            key, v = futures[future]
+            record_result(key, v, future.result())
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers: int = 2,
@@ -348,42 +367,36 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             order.append(key)
     bar = Progress(len(todo)) if progress else None
 
+    # The summary is rewritten at most once a second and at the end (also when interrupted): a variant whose
+    # row did not make it is simply run again next time; its trajectory file is replaced atomically.
+    last_write, dirty = [0.0], [False]
+
+    def flush_summary(force: bool = False) -> None:
+        if dirty[0] and (force or time.monotonic() - last_write[0] >= 1.0):
+            _write_summary(summary_path, [rows[k] for k in order if k in rows], varied)
+            last_write[0], dirty[0] = time.monotonic(), False
+
     def record_result(key: str, variant: Mapping[str, object], answer: dict) -> None:
         row = answer["row"]
         if answer["trajectory"] is not None:
             _write_bytes(out / "variants" / f"{key}.csv", answer["trajectory"])
         rows[key] = {"key": key, **variant, **row}
-        _write_summary(summary_path, [rows[k] for k in order if k in rows], varied)
+        dirty[0] = True
+        flush_summary()
         if bar:
             bar.update(row["status"])
         if on_done:
             on_done(rows[key])
 
     args = (stop_time, record, every, timeout)
-    if todo and workers == 0 and scheduler is None and scheduler_file is None:
-        for key, v in todo:
-            record_result(key, v, run_variant(data, digest, v, *args))
-    elif todo:
-        from dask.distributed import Client, LocalCluster, as_completed
-        cluster = None
-        if scheduler is not None:
-            client = Client(scheduler)
-        elif scheduler_file is not None:
-            client = Client(scheduler_file=scheduler_file)
-        else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-            client = Client(cluster)
-        try:
-            shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
-            futures = {client.submit(run_variant, shipped, digest, v, *args, pure=False): (key, v)
-                       for key, v in todo}
-            for future in as_completed(futures):
-                key, v = futures[future]
-                record_result(key, v, future.result())
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+    try:
+        if todo and workers == 0 and scheduler is None and scheduler_file is None:
+            for key, v in todo:
+                record_result(key, v, run_variant(data, digest, v, *args))
+        elif todo:
+            _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, record_result)
+    finally:
+        flush_summary(force=True)
     if bar:
         bar.close()
     return [rows[variant_key(v)] for v in variants]
