@@ -102,6 +102,9 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
 def cmd_run(args) -> int:
     from .project import simulate, simulate_branches
     if args.branch_at is not None:
+        if args.input:
+            raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
+                             "CSV; run the input without --branch-at, or branch with --branch-set")
         variants = _parse_branches(args.branch_set)
         results = simulate_branches(args.system, args.branch_at, variants, stop_time=args.stop_time,
                                     start_values=_parse_set(args.set), mode=args.mode, root=args.root)

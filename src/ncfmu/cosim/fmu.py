@@ -11,6 +11,7 @@ import atexit
 import ctypes
 import hashlib
 import itertools
+import math
 import shutil
 import tempfile
 import zipfile
@@ -27,7 +28,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from ..errors import SimulationError, SystemDefinitionError
+from ..errors import ConfigError, SimulationError, SystemDefinitionError
 from .slave import Variable
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
@@ -47,10 +48,46 @@ def _dispatch(env, instance, status, category, message) -> None:
 _LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
 
 
+INT32 = (-2 ** 31, 2 ** 31 - 1)
+#: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
+MAX_UNPACKED = 2 ** 30
+
+
+def typed_value(qualified: str, fmi_type: str, value: object) -> object:
+    """``value`` as an FMI ``fmi_type`` value, or :class:`ConfigError` -- never rounded, wrapped or guessed."""
+    if fmi_type == "Real":
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ConfigError(qualified, value, "must be a number")
+        return float(value)
+    if fmi_type in ("Integer", "Enumeration"):
+        whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool) or (
+            isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer())
+        if not whole:
+            raise ConfigError(qualified, value, "must be a whole number")
+        if not INT32[0] <= int(value) <= INT32[1]:
+            raise ConfigError(qualified, value, f"must be a whole number in {INT32[0]}..{INT32[1]} (fmi2Integer)")
+        return int(value)
+    if fmi_type == "Boolean":
+        if isinstance(value, (bool, np.bool_)) or value in (0, 1):
+            return bool(value)
+        raise ConfigError(qualified, value, "must be true or false")
+    if not isinstance(value, str):
+        raise ConfigError(qualified, value, "must be text")
+    return value
+
+
 def safe_extract(archive: Path, target: Path) -> Path:
     """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths)."""
     target = Path(target).resolve()
-    with zipfile.ZipFile(archive) as z:
+    try:
+        z = zipfile.ZipFile(archive)
+    except (zipfile.BadZipFile, OSError) as err:
+        raise SystemDefinitionError(f"{archive}: not an SSP archive (a zip file): {err}") from None
+    with z:
+        total = sum(info.file_size for info in z.infolist())
+        if total > MAX_UNPACKED:
+            raise SystemDefinitionError(f"{archive}: unpacks to more than {MAX_UNPACKED / 2 ** 30:g} GiB "
+                                        f"({total / 2 ** 30:.1f} GiB): refused")
         for name in z.namelist():
             dest = (target / name).resolve()
             if name.startswith(("/", "\\")) or (dest != target and target not in dest.parents):
@@ -176,15 +213,16 @@ class FmuSlave:
         v = self.variables.get(name)
         if v is None:
             raise SystemDefinitionError(f"{self.name} has no variable {name!r}")
+        value = typed_value(f"{self.name}.{name}", v.type, value)
         vr = (ctypes.c_uint * 1)(v.vr)
         if v.type == "Real":
-            status = self._dll.fmi2SetReal(self._component, vr, 1, (ctypes.c_double * 1)(float(value)))
+            status = self._dll.fmi2SetReal(self._component, vr, 1, (ctypes.c_double * 1)(value))
         elif v.type in ("Integer", "Enumeration"):
-            status = self._dll.fmi2SetInteger(self._component, vr, 1, (ctypes.c_int * 1)(int(value)))
+            status = self._dll.fmi2SetInteger(self._component, vr, 1, (ctypes.c_int * 1)(value))
         elif v.type == "Boolean":
             status = self._dll.fmi2SetBoolean(self._component, vr, 1, (ctypes.c_int * 1)(1 if value else 0))
         else:
-            status = self._dll.fmi2SetString(self._component, vr, 1, (ctypes.c_char_p * 1)(str(value).encode()))
+            status = self._dll.fmi2SetString(self._component, vr, 1, (ctypes.c_char_p * 1)(value.encode()))
         self._check(f"setting {name} = {value!r}", status)
 
     def initialize(self, start_time: float, stop_time: float) -> None:

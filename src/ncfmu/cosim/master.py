@@ -29,6 +29,10 @@ from .ssp import System
 MODES = ("gauss-seidel", "jacobi")
 
 
+#: The most a run may record in memory: a stop time that needs more is a mistake, not a run.
+MAX_RECORD_BYTES = 8 * 2 ** 30
+
+
 @dataclass
 class _Run:
     """Everything one run needs inside the loop, prepared once."""
@@ -54,14 +58,44 @@ class InputTable:
 
     @classmethod
     def from_csv(cls, path) -> InputTable:
-        from fmpy.util import read_csv
-        data = read_csv(str(path))
-        if "time" not in data.dtype.names:
+        """Read fmpy's CSV layout (``time``, then ``INSTANCE.VARIABLE`` columns, numbers; names may be quoted).
+        Every mistake is a :class:`SystemDefinitionError` naming the file, the line and what is wrong."""
+        import csv
+        try:
+            with open(path, newline="") as f:
+                lines = list(csv.reader(f))
+        except (OSError, UnicodeDecodeError, csv.Error) as err:
+            raise SystemDefinitionError(f"{path}: cannot read the input CSV: {err}") from None
+        if not lines or not any(cell.strip() for cell in lines[0]):
+            raise SystemDefinitionError(f"{path}: the input CSV is empty "
+                                        "(expected a header time,INSTANCE.VARIABLE,...)")
+        header = [h.strip() for h in lines[0]]
+        if header[0] != "time":
             raise SystemDefinitionError(f"{path}: an input CSV needs a first column 'time'")
-        t = np.asarray(data["time"], dtype=float)
+        seen = set()
+        for name in header:
+            if name in seen:
+                raise SystemDefinitionError(f"{path}: line 1: column {name!r} twice")
+            seen.add(name)
+        rows = [(k, r) for k, r in enumerate(lines[1:], start=2) if any(cell.strip() for cell in r)]
+        if not rows:
+            raise SystemDefinitionError(f"{path}: the input CSV has a header and no rows")
+        table = np.empty((len(rows), len(header)))
+        for i, (k, row) in enumerate(rows):
+            if len(row) != len(header):
+                raise SystemDefinitionError(f"{path}: line {k}: {len(row)} values for {len(header)} columns")
+            for j, cell in enumerate(row):
+                try:
+                    table[i, j] = float(cell)
+                except ValueError:
+                    raise SystemDefinitionError(f"{path}: line {k}: {header[j]} = {cell!r}: not a number") from None
+        t = table[:, 0]
+        if not np.all(np.isfinite(t)):
+            k = rows[int(np.flatnonzero(~np.isfinite(t))[0])][0]
+            raise SystemDefinitionError(f"{path}: line {k}: time must be finite")
         if np.any(np.diff(t) < 0):
             raise SystemDefinitionError(f"{path}: the time column must not decrease")
-        return cls(t, {n: np.asarray(data[n]) for n in data.dtype.names if n != "time"})
+        return cls(t, {n: table[:, j] for j, n in enumerate(header) if j > 0})
 
 
 def _output_slots(slaves, kind, ext_names):
@@ -189,6 +223,13 @@ class Master:
         if not (math.isfinite(stop) and stop > start_time):
             raise SystemDefinitionError(f"stop time = {stop!r}: must be after the start time {start_time}")
         n_steps = int(round((stop - start_time) / h))
+        if n_steps < 1:
+            raise SystemDefinitionError(f"stop time {stop:g} s is shorter than one step ({h:g} s) after the start "
+                                        f"time {start_time:g} s: nothing would run")
+        recorded = sum(len(s.variables) for s in self.slaves) + 1
+        if (n_steps + 1) * recorded * 8 > MAX_RECORD_BYTES:
+            raise SystemDefinitionError(f"stop time {stop:g} s at a step of {h:g} s is {n_steps} steps: recording "
+                                        f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
 
         # Start values: the system's parameter sets, then the caller's overrides.
         for comp in self.system.components:
@@ -196,6 +237,11 @@ class Master:
                 self.by_name[comp.name].set_start(name, value)
         for qualified, value in (start_values or {}).items():
             slave, v = self.variable(qualified)
+            for c in self.system.connections:
+                if c.end_element == slave.name and c.end_connector == v.name:
+                    raise SystemDefinitionError(f"{qualified} is driven by the connection {c}: a start value would be "
+                                                f"overwritten every step (set {c.start_element}.{c.start_connector} "
+                                                "instead)")
             slave.set_start(v.name, value)
 
         ext = {}

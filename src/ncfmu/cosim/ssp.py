@@ -219,6 +219,17 @@ def _parameter_set(root: ET.Element, where: str) -> dict[str, object]:
     return values
 
 
+def _time_attribute(path: Path, element: ET.Element, name: str) -> float:
+    raw = element.get(name)
+    try:
+        value = float(raw)
+    except (TypeError, ValueError):
+        raise SystemDefinitionError(f"{path}: {name}={raw!r}: must be a time in seconds") from None
+    if not math.isfinite(value) or value < 0:
+        raise SystemDefinitionError(f"{path}: {name}={raw!r}: must be a finite time >= 0")
+    return value
+
+
 def read_ssd(path: Path, read_file=None) -> System:
     """Read a system from an .ssd file (or, with ``read_file``, from inside an archive).
 
@@ -246,6 +257,8 @@ def read_ssd(path: Path, read_file=None) -> System:
     if root.tag != _q("ssd:SystemStructureDescription"):
         raise SystemDefinitionError(f"{path}: root element is {root.tag}, expected ssd:SystemStructureDescription")
     sys_el = root.find(_q("ssd:System"))
+    if sys_el is None or sys_el.find(_q("ssd:Elements")) is None:
+        raise SystemDefinitionError(f"{path}: no ssd:System with ssd:Elements (the components) in it")
     components = []
     for comp in sys_el.find(_q("ssd:Elements")).findall(_q("ssd:Component")):
         name, source = comp.get("name"), comp.get("source", "")
@@ -276,11 +289,13 @@ def read_ssd(path: Path, read_file=None) -> System:
                               c.get("endElement"), c.get("endConnector"))
                    for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
     exp = root.find(_q("ssd:DefaultExperiment"))
-    stop = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else math.nan
+    stop = _time_attribute(path, exp, "stopTime") if exp is not None and exp.get("stopTime") else math.nan
     step = 1e-3
     fixed = root.find(f".//{_q('osp:FixedStepAlgorithm')}")
     if fixed is not None:
-        step = float(fixed.get("baseStepSize"))
+        step = _time_attribute(path, fixed, "baseStepSize")
+        if not step > 0:
+            raise SystemDefinitionError(f"{path}: baseStepSize = {step!r}: must be > 0")
     return System(root.get("name"), components, connections, stop, step, sys_el.get("description", ""))
 
 
@@ -289,7 +304,11 @@ def read_ssp(archive: Path) -> System:
     archive = Path(archive)
     if not archive.is_file():
         raise SystemDefinitionError(f"SSP archive not found: {archive}")
-    with zipfile.ZipFile(archive) as z:
+    try:
+        z = zipfile.ZipFile(archive)
+    except (zipfile.BadZipFile, OSError) as err:
+        raise SystemDefinitionError(f"{archive}: not an SSP archive (a zip file): {err}") from None
+    with z:
         names = set(z.namelist())
 
         def read_file(rel: str) -> bytes:
