@@ -24,6 +24,8 @@ from conftest import ROOT
 from ncfmu.cosim.ssp import PARAMETER_SET, read_ssp
 from ncfmu.project import simulate
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 STEP = 1e-3
 TOL = 2e-6   # ecos writes reals with 6 decimals (std::to_string): 5e-7 rounding, nothing else allowed
 

@@ -5,6 +5,8 @@ import pytest
 
 from ncfmu.project import simulate
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 BAND = 0.005
 
 

@@ -11,6 +11,8 @@ from ncfmu.cosim.libcosim import run_ssp
 from ncfmu.project import simulate
 from ncfmu.systems import SYSTEMS, get_system
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 
 @pytest.fixture(scope="session")
 def libcosim_runs(project):

@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 X0, Z0 = 30.0, 2.0
 BAND = 0.005
 

@@ -9,6 +9,8 @@ SCRIPT = textwrap.dedent('''
     import sys
     from ncfmu.project import simulate
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
     def rss_mb():
         with open("/proc/self/status") as f:
             return next(int(line.split()[1]) for line in f if line.startswith("VmRSS")) / 1024

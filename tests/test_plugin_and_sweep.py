@@ -8,6 +8,8 @@ import pytest
 from ncfmu.batch import sweep
 from ncfmu.cli import main
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 USER_TEST = '''
 from ncfmu.systems import GRINDER_TABLE
 

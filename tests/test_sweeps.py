@@ -17,6 +17,8 @@ from ncfmu.batch import sweep
 from ncfmu.cli import main
 from ncfmu.cosim.result import Result
 
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 D3 = {"feed.D3": [4.0, 3.0, 3.5]}
 
 
