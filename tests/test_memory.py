@@ -5,11 +5,13 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
+pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
+
 SCRIPT = textwrap.dedent('''
     import sys
     from ncfmu.project import simulate
-
-pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
     def rss_mb():
         with open("/proc/self/status") as f:
