@@ -1,9 +1,10 @@
-"""Contour interpolator with cutter compensation (GB 1,175,423): offset-segment intersection, DDA interpolation, feed override."""
+"""Contour interpolator with cutter compensation (GB 1,175,423): offset-segment intersection,
+DDA interpolation, feed override."""
 
 from pythonfmu import Fmi2Slave
 
-from ncfmu.fmi.adapter import fmu_slave
 from ncfmu.controllers.contour import ContourInterpolator as Logic
+from ncfmu.fmi.adapter import fmu_slave
 
 
 @fmu_slave(Logic)

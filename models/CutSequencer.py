@@ -2,8 +2,8 @@
 
 from pythonfmu import Fmi2Slave
 
-from ncfmu.fmi.adapter import fmu_slave
 from ncfmu.controllers.sequencer import CutSequencer as Logic
+from ncfmu.fmi.adapter import fmu_slave
 
 
 @fmu_slave(Logic)
