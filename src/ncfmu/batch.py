@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -201,23 +202,18 @@ def _read_summary(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _write_atomic_csv(path: Path, columns: list[str], rows: list[Mapping[str, object]]) -> None:
-    part = path.with_name(path.name + ".part")
-    with open(part, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: row.get(k, "") for k in columns})
-    part.replace(path)
-
-
 def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[str]) -> None:
     columns = ["key", *varied, "status", "error"]
     for row in rows:
         for k in row:
             if k not in columns:
                 columns.append(k)
-    _write_atomic_csv(path, columns, rows)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: row.get(k, "") for k in columns})
+    _write_bytes(path, text.getvalue().encode())
 
 
 def trajectory_csv(data: np.ndarray) -> bytes:

@@ -153,7 +153,7 @@ def build_description(m: NativeModel) -> str:
 
 def _design_html(m: NativeModel, stage: Path) -> str:
     """Design figures of the default parameters, and a Bode plot, for the FMU's documentation."""
-    from ..servo.model import MIN_PHASE_MARGIN, design, position_loop, velocity_loop
+    from ..servo.model import MIN_PHASE_MARGIN, position_loop, velocity_loop
     logic = m.logic()
     d, p = logic.design, logic.p
     rows = [("velocity loop: phase margin", f"{d.velocity_margin:.1f} deg"),
@@ -179,7 +179,6 @@ def _design_html(m: NativeModel, stage: Path) -> str:
         figure = '<p><img src="bode.png" alt="Bode plot of the open velocity and position loops"></p>'
     except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
         pass
-    assert design is not None
     return f"""<h2>Design (python-control, default parameters)</h2>
 <p>At fmi2ExitInitializationMode the FMU computes the phase margins of both loops from the parameters
 (the continuous models of ncfmu.servo.model) and refuses, with fmi2Error naming the parameter, a closed loop

@@ -14,21 +14,20 @@
 #include "fmi2Functions.h"
 
 /* The states of an instance (FMI 2.0 co-simulation, section 4.2.4), as bits so a call lists the
- * states it is allowed in. */
-enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8, P_ERROR = 16 };
+ * states it is allowed in. A refused call leaves the instance in its state (it stays usable), so the
+ * standard's error state is never entered. */
+enum { P_INSTANTIATED = 1, P_INIT = 2, P_STEP = 4, P_TERMINATED = 8 };
 
 /* Which calls are allowed where. */
 #define P_SETUP      P_INSTANTIATED                                   /* fmi2SetupExperiment, EnterInit */
 #define P_SETTABLE   (P_INSTANTIATED | P_INIT | P_STEP)              /* fmi2Set* (inputs in step mode) */
-#define P_GETTABLE   (P_INIT | P_STEP | P_TERMINATED | P_ERROR)      /* fmi2Get* */
-#define P_STATEFUL   (P_INSTANTIATED | P_INIT | P_STEP | P_TERMINATED | P_ERROR)   /* FMU-state calls */
-#define P_ANY        (P_INSTANTIATED | P_INIT | P_STEP | P_TERMINATED | P_ERROR)
+#define P_GETTABLE   (P_INIT | P_STEP | P_TERMINATED)                /* fmi2Get* */
+#define P_ANY        (P_INSTANTIATED | P_INIT | P_STEP | P_TERMINATED) /* Reset, FMU-state calls */
 
 static inline const char *fmi2_phase_name(int phase)
 {
     return phase == P_INSTANTIATED ? "instantiated" : phase == P_INIT ? "initialization mode"
-         : phase == P_STEP ? "step mode" : phase == P_TERMINATED ? "terminated"
-         : phase == P_ERROR ? "error" : "unknown";
+         : phase == P_STEP ? "step mode" : phase == P_TERMINATED ? "terminated" : "unknown";
 }
 
 /* The host's logger, as an instance keeps it. */

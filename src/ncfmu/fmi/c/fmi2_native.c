@@ -159,7 +159,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 fmi2Status fmi2Terminate(fmi2Component c)
 {
     Instance *i = c;
-    ALLOWED(i, "fmi2Terminate", P_STEP | P_ERROR);
+    ALLOWED(i, "fmi2Terminate", P_STEP);
     i->phase = P_TERMINATED;
     return fmi2OK;
 }
@@ -373,7 +373,7 @@ static void capture(Instance *i, State *s)
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *out)
 {
     Instance *i = c;
-    ALLOWED(i, "fmi2GetFMUstate", P_STATEFUL);
+    ALLOWED(i, "fmi2GetFMUstate", P_ANY);
     if (!out) return fmi2Error;
     State *s = *out ? live_state(i, *out) : NULL;       /* FMI: a given state is overwritten */
     if (!s) {
@@ -429,7 +429,7 @@ static fmi2Status restore(Instance *i, const State *s, const char *call)
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     Instance *i = c;
-    ALLOWED(i, "fmi2SetFMUstate", P_STATEFUL | P_INSTANTIATED);
+    ALLOWED(i, "fmi2SetFMUstate", P_ANY);
     State *s = state ? live_state(i, state) : NULL;
     if (!s) {
         FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SetFMUstate: %p is not a live FMU state of this instance "
@@ -615,23 +615,11 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return not_offered(c, "fmi2GetRealOutputDerivatives", "not supported (maxOutputDerivativeOrder=0)");
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v)
-{
-    (void)k; (void)v;
-    return not_offered(c, "fmi2GetStatus", "steps are synchronous: there is no pending status");
-}
-
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
 {
     Instance *i = c;
     if (i && k == fmi2LastSuccessfulTime && v) { *v = i->last_time; return fmi2OK; }
     return not_offered(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime is available");
-}
-
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v)
-{
-    (void)k; (void)v;
-    return not_offered(c, "fmi2GetIntegerStatus", "no Integer status is available");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v)
@@ -641,8 +629,13 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boo
     return not_offered(c, "fmi2GetBooleanStatus", "only fmi2Terminated is available");
 }
 
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v)
-{
-    (void)k; (void)v;
-    return not_offered(c, "fmi2GetStringStatus", "no String status is available");
-}
+/* Steps are synchronous: there is no pending step whose status could be asked. */
+#define NO_STATUS(name, type)                                                              \
+    fmi2Status name(fmi2Component c, const fmi2StatusKind k, type *v)                      \
+    {                                                                                      \
+        (void)k; (void)v;                                                                  \
+        return not_offered(c, #name, "steps are synchronous: there is no such status");    \
+    }
+NO_STATUS(fmi2GetStatus, fmi2Status)
+NO_STATUS(fmi2GetIntegerStatus, fmi2Integer)
+NO_STATUS(fmi2GetStringStatus, fmi2String)

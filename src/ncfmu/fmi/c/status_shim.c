@@ -478,22 +478,26 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real to
     return inner_fmi2SetupExperiment ? inner_fmi2SetupExperiment(c, tol_def, tol, start, stop_def, stop) : fmi2Fatal;
 }
 
+/* A state transition: allowed from ``from``, forwarded, and in ``to`` when pythonfmu agrees. */
+static fmi2Status transition(fmi2Component c, const char *call, int from, int to, fmi2Status (*inner_call)(fmi2Component))
+{
+    Inst *i = inst_find(c);
+    if (!allowed(i, call, from)) return fmi2Error;
+    fmi2Status s = inner_call ? inner_call(c) : fmi2Fatal;
+    if (s <= fmi2Warning) i->phase = to;
+    return s;
+}
+
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     INNER_(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))
-    if (!allowed(inst_find(c), "fmi2EnterInitializationMode", P_SETUP)) return fmi2Error;
-    fmi2Status s = inner_fmi2EnterInitializationMode ? inner_fmi2EnterInitializationMode(c) : fmi2Fatal;
-    if (s <= fmi2Warning) inst_phase(c, P_INIT);
-    return s;
+    return transition(c, "fmi2EnterInitializationMode", P_SETUP, P_INIT, inner_fmi2EnterInitializationMode);
 }
 
 fmi2Status fmi2Terminate(fmi2Component c)
 {
     INNER_(fmi2Status, fmi2Terminate, (fmi2Component))
-    if (!allowed(inst_find(c), "fmi2Terminate", P_STEP)) return fmi2Error;
-    fmi2Status s = inner_fmi2Terminate ? inner_fmi2Terminate(c) : fmi2Fatal;
-    if (s <= fmi2Warning) inst_phase(c, P_TERMINATED);
-    return s;
+    return transition(c, "fmi2Terminate", P_STEP, P_TERMINATED, inner_fmi2Terminate);
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
@@ -579,11 +583,17 @@ static void state_add(Inst *i, void *s)
 
 static int state_live(Inst *i, const char *call, void *s)
 {
-    if (!i || state_index(i, s) >= 0) return 1;        /* not our instance: pythonfmu answers as before */
+    if (state_index(i, s) >= 0) return 1;
     if (i->logger)
         i->logger(i->env, i->name, fmi2Error, "error", "%s: %p is not a live FMU state of this instance "
                   "(freed, of another instance or FMU, or never made)", call, s);
     return 0;
+}
+
+/* A call on the state ``s``: a known instance, and one of its live states. */
+static int state_call_ok(Inst *i, const char *call, void *s)
+{
+    return allowed(i, call, P_ANY) && state_live(i, call, s);
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
@@ -620,8 +630,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *s
 {
     INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
     Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2SerializedFMUstateSize", P_ANY) || !size) return fmi2Error;
-    if (!state_live(i, "fmi2SerializedFMUstateSize", s)) return fmi2Error;
+    if (!state_call_ok(i, "fmi2SerializedFMUstateSize", s) || !size) return fmi2Error;
     return inner_fmi2SerializedFMUstateSize ? inner_fmi2SerializedFMUstateSize(c, s, size) : fmi2Fatal;
 }
 
@@ -630,8 +639,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], 
     INNER_(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte[], size_t))
     INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
     Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2SerializeFMUstate", P_ANY)) return fmi2Error;
-    if (!state_live(i, "fmi2SerializeFMUstate", s)) return fmi2Error;
+    if (!state_call_ok(i, "fmi2SerializeFMUstate", s)) return fmi2Error;
     /* pythonfmu copies ``size`` bytes out of its state, whatever its length: only the exact size passes. */
     size_t needed = 0;
     if (!inner_fmi2SerializedFMUstateSize || inner_fmi2SerializedFMUstateSize(c, s, &needed) > fmi2Warning)
@@ -647,8 +655,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], 
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
 {
-    if (!allowed(inst_find(c), "fmi2SetFMUstate", P_ANY)) return fmi2Error;
-    if (!state_live(inst_find(c), "fmi2SetFMUstate", s)) return fmi2Error;
+    if (!state_call_ok(inst_find(c), "fmi2SetFMUstate", s)) return fmi2Error;
     static fmi2Status (*f)(fmi2Component, fmi2FMUstate) = NULL;
     if (!f) f = (fmi2Status(*)(fmi2Component, fmi2FMUstate))sym("fmi2SetFMUstate");
     if (!f) return fmi2Fatal;
