@@ -105,63 +105,6 @@ def test_native_servo_refuses_bad_state_bytes(fmus, tmp_path, case):
     assert re.search(r"fmi2DeSerializeFMUstate: \d+ bytes refused", log), log
 
 
-FREED = textwrap.dedent('''
-    import ctypes, sys, tempfile
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-    from fmpy.fmi1 import FMICallException
-
-    path = sys.argv[1]
-    md = read_model_description(path)
-    folder = extract(path, tempfile.mkdtemp())
-
-    def make(name):
-        fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName=name)
-        fmu.instantiate(loggingOn=True)
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        return fmu
-
-    def status(call, *args):
-        try:
-            call(*args)
-            return "OK"
-        except FMICallException as err:
-            return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
-
-    a, b = make("a"), make("b")
-    a.doStep(0.0, 1e-3)
-    state = a.getFMUstate()
-    freed = ctypes.c_void_p(state.value)                   # the pointer, kept (fmpy zeroes its own on free)
-    a.freeFMUstate(state)
-    of_b = b.getFMUstate()
-    results = [status(a.setFMUstate, freed), status(a.serializeFMUstate, freed), status(a.freeFMUstate, freed),
-               status(a.setFMUstate, of_b)]
-    live = a.getFMUstate()                                 # the instance lives on, and its own states work
-    results.append(status(a.setFMUstate, live))
-    a.freeFMUstate(live)
-    b.freeFMUstate(of_b)
-    a.doStep(1e-3, 1e-3)
-    for fmu in (a, b):
-        fmu.terminate()
-        fmu.freeInstance()
-    print("RESULT", *results)
-''')
-
-
-@pytest.mark.parametrize("model", ["CutSequencer", "ServoAxis"])
-def test_a_freed_or_foreign_state_is_an_error(fmus, model):
-    """A state used after fmi2FreeFMUstate, or another instance's, is refused (never dereferenced)."""
-    proc = subprocess.run([sys.executable, "-c", FREED, str(fmus[model])], capture_output=True, text=True,
-                          timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    result = [ln.split()[1:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
-    assert result == ["Error", "Error", "Error", "Error", "OK"], proc.stdout[-2000:]
-    assert "is not a live FMU state of this instance" in proc.stdout
-
-
 def test_a_good_state_round_trips_in_a_fresh_process(fmus, tmp_path):
     for model in ("CutSequencer", "ServoAxis", "ProgrammableFeed"):
         status, executed, log = run_case(fmus[model], "good", tmp_path)
@@ -194,6 +137,45 @@ PREAMBLE = textwrap.dedent('''
         except FMICallException as err:
             return {1: "Warning", 2: "Discard", 3: "Error", 4: "Fatal"}.get(err.status, str(err.status))
 ''')
+
+
+FREED = PREAMBLE + textwrap.dedent('''
+    def started(name):
+        fmu = make(name)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        return fmu
+
+    a, b = started("a"), started("b")
+    a.doStep(0.0, 1e-3)
+    state = a.getFMUstate()
+    freed = ctypes.c_void_p(state.value)                   # the pointer, kept (fmpy zeroes its own on free)
+    a.freeFMUstate(state)
+    of_b = b.getFMUstate()
+    results = [status(a.setFMUstate, freed), status(a.serializeFMUstate, freed), status(a.freeFMUstate, freed),
+               status(a.setFMUstate, of_b)]
+    live = a.getFMUstate()                                 # the instance lives on, and its own states work
+    results.append(status(a.setFMUstate, live))
+    a.freeFMUstate(live)
+    b.freeFMUstate(of_b)
+    a.doStep(1e-3, 1e-3)
+    for fmu in (a, b):
+        fmu.terminate()
+        fmu.freeInstance()
+    print("RESULT", *results)
+''')
+
+
+@pytest.mark.parametrize("model", ["CutSequencer", "ServoAxis"])
+def test_a_freed_or_foreign_state_is_an_error(fmus, model):
+    """A state used after fmi2FreeFMUstate, or another instance's, is refused (never dereferenced)."""
+    proc = subprocess.run([sys.executable, "-c", FREED, str(fmus[model]), "freed"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = [ln.split()[1:] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == ["Error", "Error", "Error", "Error", "OK"], proc.stdout[-2000:]
+    assert "is not a live FMU state of this instance" in proc.stdout
 
 
 MACHINE = PREAMBLE + textwrap.dedent('''
@@ -400,3 +382,69 @@ def test_fmus_built_without_a_c_compiler_work_and_refuse_as_documented(project):
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "REFUSED Fatal" in proc.stdout
     assert "pulse = -1.0: must be > 0" in proc.stdout + proc.stderr
+
+
+HOST_MISUSE = PREAMBLE + textwrap.dedent('''
+    fmu = make()
+    refs = (ctypes.c_uint * 1)(vr[md.modelVariables[-1].name] if case == "get_before_init" else 0)
+    if case == "get_before_init":                          # fmi2GetReal is not allowed before initialisation
+        out = (ctypes.c_double * 1)()
+        real_out = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"][0]
+        refs[0] = real_out.valueReference
+        print("RESULT", status(fmu.fmi2GetReal, fmu.component, refs, 1, out))
+        sys.exit()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    if case == "init_outputs":                             # outputs follow a parameter set in initialization mode
+        fmu.setReal([vr["pos_start"]], [5.0])
+        print("RESULT", fmu.getReal([vr["pos"]])[0])
+        sys.exit()
+    if case == "big_step":
+        fmu.setReal([vr["substep"]], [1e-6])
+    fmu.exitInitializationMode()
+    real_in = [v for v in md.modelVariables if v.causality == "input" and v.type == "Real"][0]
+    refs[0] = real_in.valueReference
+    if case == "null_values":
+        result = status(fmu.fmi2SetReal, fmu.component, refs, 1, None)
+    elif case == "null_refs":
+        result = status(fmu.fmi2GetReal, fmu.component, None, 1, (ctypes.c_double * 1)())
+    elif case == "big_step":                               # 3e9 sub-steps in one step
+        result = status(fmu.doStep, 0.0, 3000.0)
+    elif case in ("serialize_short", "serialize_long"):
+        state = fmu.getFMUstate()
+        size = ctypes.c_size_t()
+        fmu.fmi2SerializedFMUstateSize(fmu.component, state, ctypes.byref(size))
+        n = 16 if case == "serialize_short" else size.value + 2 ** 20
+        buffer = (ctypes.c_char * n)()
+        result = status(fmu.fmi2SerializeFMUstate, fmu.component, state, buffer, n)
+        if result == "OK":                                 # the exact state, whatever the buffer's size
+            blob = bytes(buffer[:size.value])
+            assert bytes(fmu.serializeFMUstate(state)) == blob
+        fmu.freeFMUstate(state)
+    fmu.doStep(0.0, 1e-3)                                  # the instance lives on
+    fmu.terminate()
+    fmu.freeInstance()
+    print("RESULT", result)
+''')
+
+
+@pytest.mark.parametrize("model", ["CutSequencer", "ServoAxis"])
+@pytest.mark.parametrize("case, expected", [
+    ("null_values", "Error"), ("null_refs", "Error"), ("get_before_init", "Error"), ("serialize_short", "Error"),
+    ("serialize_long", "OK"),
+])
+def test_host_misuse_is_an_error_not_a_crash(fmus, model, case, expected):
+    proc = subprocess.run([sys.executable, "-c", HOST_MISUSE, str(fmus[model]), case], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    result = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == expected, proc.stdout[-2000:]
+
+
+@pytest.mark.parametrize("case, expected", [("big_step", "Error"), ("init_outputs", "5.0")])
+def test_native_servo_refuses_a_runaway_step_and_shows_its_initial_outputs(fmus, case, expected):
+    proc = subprocess.run([sys.executable, "-c", HOST_MISUSE, str(fmus["ServoAxis"]), case], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    result = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("RESULT")][-1]
+    assert result == expected, proc.stdout[-2000:]

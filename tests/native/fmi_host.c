@@ -4,6 +4,7 @@
  *   fmi_host <binary.so> <guid> <resources-uri> <instances> <steps> <out-vr> [<in-vr>=<value> ...]
  *
  * Each input is "<vr>=<value>" (held) or "<vr>+=<slope>" (a ramp: slope x step number).
+ * A negative <instances> instantiates that many on as many threads at once (a host such as ecos does).
  * Instantiates <instances> instances, sets the Real inputs, steps each <steps> times by 1 ms, prints
  * "OUT <k> <value>" for the Real output <out-vr> of every instance, frees them, exits 0. The FMU's log
  * goes to stdout as "LOG <status> <message>"; "STEPPING <s>" is the wall time of the stepping loop (set the
@@ -11,6 +12,7 @@
  * 3 initialisation failed, 4 a step failed.
  */
 #include <dlfcn.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -28,6 +30,23 @@ static void logger(fmi2ComponentEnvironment e, fmi2String n, fmi2Status s, fmi2S
     va_end(ap);
 }
 
+typedef struct {
+    fmi2InstantiateTYPE *instantiate;
+    const char *guid, *uri;
+    fmi2CallbackFunctions *cb;
+    pthread_barrier_t *go;
+    char name[16];
+    fmi2Component c;
+} Start;
+
+static void *start_on_thread(void *arg)
+{
+    Start *s = arg;
+    pthread_barrier_wait(s->go);
+    s->c = s->instantiate(s->name, fmi2CoSimulation, s->guid, s->uri, s->cb, fmi2False, fmi2True);
+    return NULL;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 7) { fprintf(stderr, "usage: fmi_host so guid uri instances steps out-vr [vr=value ...]\n"); return 64; }
@@ -36,15 +55,27 @@ int main(int argc, char **argv)
 #define F(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(h, "fmi2" #name)
     F(Instantiate); F(SetupExperiment); F(EnterInitializationMode); F(ExitInitializationMode); F(SetReal);
     F(DoStep); F(GetReal); F(Terminate); F(FreeInstance);
-    int count = atoi(argv[4]), steps = atoi(argv[5]);
+    int count = atoi(argv[4]), steps = atoi(argv[5]), threaded = count < 0;
+    if (threaded) count = -count;
     fmi2ValueReference out = (fmi2ValueReference)atoi(argv[6]);
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     fmi2Component c[16];
     if (count < 1 || count > 16) return 64;
+    Start starts[16];
+    pthread_t threads[16];
+    pthread_barrier_t go;
+    pthread_barrier_init(&go, NULL, (unsigned)count);
     for (int k = 0; k < count; k++) {
-        char name[16];
-        snprintf(name, sizeof name, "i%d", k);
-        c[k] = Instantiate(name, fmi2CoSimulation, argv[2], argv[3], &cb, fmi2False, fmi2True);
+        starts[k] = (Start){Instantiate, argv[2], argv[3], &cb, &go, "", NULL};
+        snprintf(starts[k].name, sizeof starts[k].name, "i%d", k);
+        if (threaded) pthread_create(&threads[k], NULL, start_on_thread, &starts[k]);
+    }
+    for (int k = 0; k < count; k++) {
+        if (threaded) pthread_join(threads[k], NULL);
+        else starts[k].c = Instantiate(starts[k].name, fmi2CoSimulation, argv[2], argv[3], &cb, fmi2False, fmi2True);
+    }
+    for (int k = 0; k < count; k++) {
+        c[k] = starts[k].c;
         if (!c[k]) return 2;
         SetupExperiment(c[k], fmi2False, 0.0, 0.0, fmi2False, 0.0);
         if (EnterInitializationMode(c[k]) != fmi2OK || ExitInitializationMode(c[k]) != fmi2OK) return 3;
