@@ -87,7 +87,7 @@ def contour_error(r, path) -> np.ndarray:
 def check_mill_contour(r) -> None:
     from ncfmu.controllers.contour import ContourInterpolator
     c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
-    assert contour_error(r, c.path).max() <= 0.050
+    assert contour_error(r, [m.element for m in c.tool_path]).max() <= 0.050
     assert r["x_axis.pos"].max() == pytest.approx(60.2, abs=BAND)
     assert r["y_axis.pos"].max() == pytest.approx(40.2, abs=BAND)
     assert r["x_axis.pos"][-1] == pytest.approx(-0.2, abs=BAND) and r["y_axis.pos"][-1] == pytest.approx(-0.2, abs=BAND)

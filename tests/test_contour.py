@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from physics import contour_error
 
-from ncfmu.controllers.contour import ContourInterpolator, GeometryError, offset_path
+from ncfmu.controllers.contour import ContourInterpolator, point_contour
+from ncfmu.controllers.geometry import Arc, CornerError, Line, compensate
 from ncfmu.errors import ConfigError
 
 DT = 1e-3
@@ -28,38 +29,49 @@ def segment_distance(p, a, b):
     return math.hypot(p[0] - a[0] - t * ax, p[1] - a[1] - t * ay)
 
 
+def offset_lines(points, r, closed):
+    """The compensated pieces of a point path; every piece must be a line (corners of at most 90 degrees)."""
+    pieces = compensate(point_contour(points, closed), r, closed)
+    assert all(isinstance(e, Line) for e, _ in pieces)
+    return pieces
+
+
 @pytest.mark.parametrize("r", [0.2, -0.2, 1.5])
 @pytest.mark.parametrize("closed", [True, False])
 def test_corners_at_the_correction_from_both_neighbouring_segments(r, closed):
     pts = MILL if closed else MILL[:-1]
-    c = offset_path(pts, r, closed)
-    distinct = MILL[:-1]
-    n = len(distinct)
-    for i, p in enumerate(c):
-        neighbours = []
-        if closed or i > 0:
-            neighbours.append((distinct[(i - 1) % n], distinct[i]))
-        if closed or i < n - 1:
-            neighbours.append((distinct[i], distinct[(i + 1) % n]))
-        for a, b in neighbours:
-            assert line_distance(p, a, b) == pytest.approx(r, abs=1e-9)
+    pieces = offset_lines(pts, r, closed)
+    assert len(pieces) == (5 if closed else 4)
+    for piece, k in pieces:
+        a, b = MILL[k], MILL[k + 1]
+        assert line_distance(piece.start, a, b) == pytest.approx(r, abs=1e-9)
+        assert line_distance(piece.end, a, b) == pytest.approx(r, abs=1e-9)
+    # consecutive pieces meet: the corner is the intersection of both offsets (the seed's corner)
+    ends = [(pieces[i][0].end, pieces[(i + 1) % len(pieces)][0].start) for i in range(len(pieces) - (not closed))]
+    for end, start in ends:
+        assert math.dist(end, start) < 1e-12
 
 
 def test_convex_and_concave_corners():
     # (20,40) -> (0,20): the corner at (0,20) is convex; a notch makes a concave one
     notch = [(0.0, 0.0), (30.0, 0.0), (30.0, 10.0), (40.0, 10.0), (40.0, 0.0), (60.0, 0.0), (60.0, 30.0), (0.0, 30.0)]
     for r in (0.5, -0.5):
-        c = offset_path(notch, r, True)
-        for i, p in enumerate(c):
-            for a, b in ((notch[i - 1], notch[i]), (notch[i], notch[(i + 1) % len(notch)])):
-                assert line_distance(p, a, b) == pytest.approx(r, abs=1e-9)
+        for piece, k in offset_lines(notch, r, True):
+            a, b = notch[k], notch[(k + 1) % len(notch)]
+            assert line_distance(piece.start, a, b) == pytest.approx(r, abs=1e-9)
+            assert line_distance(piece.end, a, b) == pytest.approx(r, abs=1e-9)
 
 
-def test_reversing_and_folding_paths_are_reported():
-    with pytest.raises(GeometryError, match="reverses"):
-        offset_path([(0, 0), (10, 0), (0, 0.0)], 0.1, False)
-    with pytest.raises(GeometryError, match="segment 2"):
-        offset_path([(0, 0), (10, 0), (10, 0.5), (0, 0.5)], 1.0, False)     # 0.5 mm step, 2 mm tool change
+def test_a_reversal_is_rounded_around_its_tip_and_a_fold_is_reported():
+    # the path turns back on itself: the cutter goes around the tip on a half circle of radius r
+    pieces = compensate(point_contour([(0, 0), (10, 0), (0, 0.0)], False), 0.1, False)
+    (first, _), (tip, k), (back, _) = pieces
+    assert isinstance(tip, Arc) and k == 1 and tip.center == (10.0, 0.0) and tip.radius == pytest.approx(0.1)
+    assert abs(tip.sweep) == pytest.approx(math.pi) and tip.point(tip.length / 2) == pytest.approx((10.1, 0.0))
+    assert first.end == pytest.approx((10.0, 0.1)) and back.start == pytest.approx((10.0, -0.1))
+    with pytest.raises(CornerError) as err:                 # 0.5 mm step, 2 mm tool change: segment 2 folds
+        compensate(point_contour([(0, 0), (10, 0), (10, 0.5), (0, 0.5)], False), 1.0, False)
+    assert err.value.index == 1 and "run backwards" in err.value.reason
     c = ContourInterpolator(n_points=4, closed=False, diameter_delta=2.0, side=1,
                             **{"point[1].x": 0, "point[1].y": 0, "point[2].x": 10, "point[2].y": 0,
                                "point[3].x": 10, "point[3].y": 0.5, "point[4].x": 0, "point[4].y": 0.5})
@@ -121,27 +133,27 @@ def run_contour(override=1.0, hold=None, **parameters):
 
 def test_dda_points_on_the_corrected_segments_within_one_unit():
     c, log = run_contour()
-    path = c.path
-    unit = c.dda_unit
+    lines = {m.label: m.element for m in c.tool_path}
+    assert sorted(lines) == [1, 2, 3, 4, 5] and all(isinstance(e, Line) for e in lines.values())
     for o in log:
         k = o["segment"]
         if k == 0:
             continue
-        a, b = path[k - 1], path[k]
-        assert segment_distance((o["x_cmd"], o["y_cmd"]), a, b) <= unit * 1.0000001
+        a, b = lines[k].start, lines[k].end
+        assert segment_distance((o["x_cmd"], o["y_cmd"]), a, b) <= c.dda_unit * 1.0000001
 
 
 @pytest.mark.parametrize("override", [1.0, 0.5, 1.5])
 def test_vector_speed_is_feed_times_override(override):
     c, log = run_contour(override=override)
-    for k in range(1, len(c.path)):
+    for move in c.tool_path:
+        k = move.label
         rows = [o for o in log if o["segment"] == k]
-        (a, b) = c.path[k - 1], c.path[k]
-        length = math.hypot(b[0] - a[0], b[1] - a[1])
-        if k in (1, len(c.path) - 1):
+        if k in (1, len(c.tool_path)):
             continue      # the first and last segments include the start and the final stop
         duration = rows[-1]["t"] - rows[0]["t"] + DT
-        assert length / duration == pytest.approx(5.0 * override, rel=0.01)
+        # exact stop at both corners: the start and the stop each cost feed / (2 accel) of time
+        assert move.element.length / duration == pytest.approx(5.0 * override, rel=0.01)
 
 
 def test_hold_stops_on_the_path_and_resumes():
@@ -168,19 +180,25 @@ def convex_polygons(draw):
 @settings(max_examples=100, deadline=None)
 @given(poly=convex_polygons(), r=st.floats(-2.0, 2.0).filter(lambda r: abs(r) > 1e-3))
 def test_property_corrected_polygon_is_the_offset_polygon(poly, r):
-    c = offset_path(poly, r, True)
+    pieces = compensate(point_contour(poly, True), r, True)
     n = len(poly)
-    for k in range(n):
+    for piece, k in pieces:
         a, b = poly[k], poly[(k + 1) % n]
-        ca, cb = c[k], c[(k + 1) % n]
-        # parallel to the programmed edge ...
+        if isinstance(piece, Arc):
+            # a corner sharper than 90 degrees (outside): rounded around the programmed corner at distance r
+            assert piece.center in (a, b) and piece.radius == pytest.approx(abs(r), abs=1e-12)
+            continue
+        # parallel to the programmed edge, in the same direction ...
         u = (b[0] - a[0], b[1] - a[1])
-        v = (cb[0] - ca[0], cb[1] - ca[1])
+        v = (piece.end[0] - piece.start[0], piece.end[1] - piece.start[1])
         cross = (u[0] * v[1] - u[1] * v[0]) / (math.hypot(*u) * math.hypot(*v))
         assert abs(cross) < 1e-9 and u[0] * v[0] + u[1] * v[1] > 0
         # ... at the correction distance
-        assert line_distance(ca, a, b) == pytest.approx(r, abs=1e-9)
-        assert line_distance(cb, a, b) == pytest.approx(r, abs=1e-9)
+        assert line_distance(piece.start, a, b) == pytest.approx(r, abs=1e-9)
+        assert line_distance(piece.end, a, b) == pytest.approx(r, abs=1e-9)
+    # the pieces join up into one closed path
+    for (p, _), (q, _) in zip(pieces, pieces[1:] + pieces[:1]):
+        assert math.dist(p.end, q.start) < 1e-9
 
 
 # -- through the FMUs (the contour check itself is physics.check_mill_contour, run in test_interop) ----
@@ -202,7 +220,7 @@ def test_hold_stops_and_resumes_on_the_path(project):
     from ncfmu.project import simulate
     r = simulate("mill_contour", stop_time=45.0, start_values={"panel.hold_at": 15.0, "panel.release_at": 17.0})
     c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
-    assert contour_error(r, c.path).max() <= 0.050
+    assert contour_error(r, [m.element for m in c.tool_path]).max() <= 0.050
     held = (r.time > 15.3) & (r.time < 17.0)
     assert np.ptp(r["x_axis.pos"][held]) < 1e-3 and np.ptp(r["y_axis.pos"][held]) < 1e-3
     assert r["contour.done"][-1]

@@ -133,7 +133,7 @@ def test_contour_end_not_reached_raises_the_in_position_alarm():
         inputs["start"] = k == 1
         out = c.step(k * DT, DT, inputs)
         inputs["x_pos"] = out["x_cmd"]
-        inputs["y_pos"] = out["y_cmd"] if c._seg is not None else out["y_cmd"] - 0.1   # Y held short at the end
+        inputs["y_pos"] = out["y_cmd"] - 0.1                 # Y lags 0.1 mm: short of the end point at the end
     assert out["alarm"] and not out["done"] and not out["busy"]
     assert any("in-position" in m for _, m in c.take_messages())
 

@@ -83,7 +83,7 @@ def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str,
         names = {p.name for p in ContourInterpolator.ports("parameter")}
         values = {k.split(".", 1)[1]: v for k, v in (parameters or {}).items()
                   if k.startswith("contour.") and k.split(".", 1)[1] in names}
-        path = ContourInterpolator(**values).path
+        path = [move.element for move in ContourInterpolator(**values).tool_path]
         on = result["contour.segment"] >= 1
         best = path_distance(result["x_axis.pos"][on], result["y_axis.pos"][on], path)
         out["max_contour_error_mm"] = float(best.max()) if len(best) else float("nan")

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .controllers.geometry import Arc, Element, Line
+
 
 def _window(result, between: tuple[float, float] | None) -> np.ndarray:
     t = result.time
@@ -71,21 +73,42 @@ def assert_inside_envelope(result, ref: str, lim: str, table: Sequence[tuple[flo
                              f"({int(bad.sum())} samples outside)")
 
 
-def path_distance(x: np.ndarray, y: np.ndarray, path: Sequence[tuple[float, float]]) -> np.ndarray:
-    """Distance of each point (x, y) from the polyline ``path`` (e.g. a corrected contour)."""
-    pts = np.column_stack([np.asarray(x, float), np.asarray(y, float)])
-    best = np.full(len(pts), np.inf)
-    for a, b in zip(path[:-1], path[1:]):
-        a, b = np.asarray(a, float), np.asarray(b, float)
+def element_distance(x: np.ndarray, y: np.ndarray, element: Element) -> np.ndarray:
+    """Exact distance of each point (x, y) from a line segment or an arc."""
+    px, py = np.asarray(x, float), np.asarray(y, float)
+    if isinstance(element, Line):
+        a, b = np.asarray(element.start), np.asarray(element.end)
         d = b - a
-        s = np.clip(((pts - a) @ d) / (d @ d), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(pts - a - s[:, None] * d, axis=1))
+        s = np.clip(((px - a[0]) * d[0] + (py - a[1]) * d[1]) / (d @ d), 0.0, 1.0)
+        return np.hypot(px - a[0] - s * d[0], py - a[1] - s * d[1])
+    cx, cy = element.center
+    # within the arc's angular range the nearest point is radial, else an end point
+    turn = np.arctan2(py - cy, px - cx) - element.a0
+    along = np.mod(turn if element.sweep > 0 else -turn, 2 * np.pi)
+    radial = np.abs(np.hypot(px - cx, py - cy) - element.radius)
+    (sx, sy), (ex, ey) = element.start, element.end
+    ends = np.minimum(np.hypot(px - sx, py - sy), np.hypot(px - ex, py - ey))
+    return np.where(along <= abs(element.sweep), radial, ends)
+
+
+def path_distance(x: np.ndarray, y: np.ndarray, path: Sequence[Element] | Sequence[tuple[float, float]]) -> np.ndarray:
+    """Distance of each point (x, y) from a path: lines and arcs (e.g. a contour's ``tool_path`` elements),
+    or a polyline given as points."""
+    if all(isinstance(e, Line | Arc) for e in path):
+        elements = list(path)
+    else:                                                           # a polyline's points
+        points = [(float(p[0]), float(p[1])) for p in path]  # type: ignore[index]
+        elements = [Line(a, b) for a, b in zip(points[:-1], points[1:])]
+    best = np.full(np.shape(x), np.inf)
+    for element in elements:
+        best = np.minimum(best, element_distance(x, y, element))
     return best
 
 
-def assert_on_path(result, x: str, y: str, path: Sequence[tuple[float, float]], tolerance: float,
-                   between: tuple[float, float] | None = None) -> float:
-    """The point (``x``, ``y``) stays within ``tolerance`` of the polyline ``path``; returns the largest distance."""
+def assert_on_path(result, x: str, y: str, path: Sequence[Element] | Sequence[tuple[float, float]],
+                   tolerance: float, between: tuple[float, float] | None = None) -> float:
+    """The point (``x``, ``y``) stays within ``tolerance`` of ``path`` (lines and arcs, or a polyline's points);
+    returns the largest distance."""
     w = _window(result, between)
     dist = path_distance(result[x][w], result[y][w], path)
     worst = float(dist.max()) if len(dist) else 0.0

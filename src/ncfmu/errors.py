@@ -24,6 +24,14 @@ class ConfigError(NcfmuError, ValueError):
         super().__init__(f"{variable} = {value!r}: {rule}")
 
 
+class ProgramError(ConfigError):
+    """A line of a program parameter breaks its grammar; names the line, the column and the reason."""
+
+    def __init__(self, line_no: int, column: int, text: str, reason: str):
+        self.line_no, self.column = line_no, column
+        super().__init__("program", text, f"line {line_no}, column {column}: {reason}")
+
+
 class SystemDefinitionError(NcfmuError, ValueError):
     """A system (SSP file, connection, instance or variable name) is malformed or unknown."""
 

@@ -94,16 +94,17 @@ def _plane(ax, result, system: str, params: dict) -> None:
         comp = params.get("contour", {})
         c = ContourInterpolator(**comp) if comp else None
         if c is not None:
-            prog = np.array(c.points)
-            ax.plot(prog[:, 0], prog[:, 1], "k-", lw=1.0, label="programmed (nominal cutter centre)")
-            cor = np.array(c.path)
+            from .controllers.geometry import sample
+            prog = np.array(sample(c.contour, 0.2))
+            ax.plot(prog[:, 0], prog[:, 1], "k-", lw=1.0, label="programmed contour")
+            cor = np.array(sample([m.element for m in c.tool_path], 0.05))
             ax.plot(cor[:, 0], cor[:, 1], "g--", lw=1.0, label=f"corrected ({c.diameter_delta:+g} mm diameter)")
         ax.plot(result["x_axis.pos"], result["y_axis.pos"], lw=0.6, color="tab:blue", label="cutter centre (actual)")
         ax.set_aspect("equal")
         ax.set(title="contour in the X-Y plane", xlabel="X [mm]", ylabel="Y [mm]")
         if c is not None:
             # the correction is a fraction of a millimetre: zoom on the corner farthest from the origin
-            cx, cy = max(c.points, key=lambda p: p[0] + p[1])
+            cx, cy = max((e.start for e in c.contour), key=lambda p: p[0] + p[1])
             zoom = ax.inset_axes([1.05, 0.05, 0.6, 0.9])
             zoom.plot(prog[:, 0], prog[:, 1], "k-", lw=1.0)
             zoom.plot(cor[:, 0], cor[:, 1], "g--", lw=1.0)

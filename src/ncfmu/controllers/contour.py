@@ -1,97 +1,124 @@
 """Contour interpolator with cutter compensation (seed: GB 1,175,423, Cincinnati Milling).
 
-The programmed path is the nominal cutter-centre path (terminal points ``point[i]``). When the actual
-cutter differs from the nominal one by ``diameter_delta``, the centre path moves sideways by the
-correction ``r = diameter_delta / 2`` (to the left of travel for ``side = +1``, to the right for -1).
+The contour comes as a part program (``program``, an RS274/NGC subset: :mod:`.rs274`) or, when
+``program`` is empty, as the seed's terminal points ``point[i]`` (the nominal cutter-centre path,
+offset by ``r = side * diameter_delta / 2``, left of travel for ``side = +1``). Both become one
+representation inside -- a chain of lines and arcs -- compensated by one function
+(:func:`.geometry.compensate`) and run by one interpolator.
 
-Compensation, as the seed: at every terminal point a compensation vector -- built from the unit
-vectors of the two segments meeting there -- is scaled by the correction and added to the point,
-giving the intersection of the two segments offset perpendicular by ``r``::
+Compensation: the seed's offset-segment intersection at corners between lines that turn by at most
+90 degrees (the corner moves at most ``r*sqrt(2)``); an arc of radius ``r`` around every other outside
+corner; inside corners trimmed to the intersection of the offsets, and an alarm naming the segment
+(or program line) where the cutter does not fit. A program's G41/G42 starts with a straight lead-in
+to the offset start of the contour, G40 ends with a straight lead-out (LinuxCNC, Fanuc type A).
 
-    C = P + r * (n1 + n2) / (1 + u1 . u2)        (u: unit directions, n: their left normals * side)
+Interpolation: on lines, as the seed, a DDA per axis (iterative additions with carry, computed in
+closed form -- after k of N = 2^bits iterations an axis with span |d| has emitted
+floor((N/2 + k*|d|) / N) pulses) moves all axes at once in units of ``dda_unit``; on arcs, the exact
+point on the circle at the path length reached, rounded to whole ``dda_unit`` per axis (each axis still
+moves in whole increments; the command is within half an increment per axis of the circle). The
+vector feed is constant: the path length advances at the feed.
 
-At the ends of an open path the point is offset along its one segment's normal. Reversing segments
-(1 + u1.u2 ~ 0) and a correction that would make a corrected segment vanish or run backwards are
-reported (alarm + message) and the cycle does not start -- never a silent loop.
-
-Interpolation, as the seed: a DDA per axis (iterative additions with carry) moves all axes at once
-from corrected point to corrected point in units of ``dda_unit``; the iteration rate goes with
-1/segment length, so the vector feed is constant. It is computed in closed form -- after k iterations
-an axis with span |d| over N = 2^bits iterations has emitted floor((N/2 + k*|d|) / N) pulses, exactly
-what the iterative additions give. The path speed follows ``feed * feed_override`` (0..1.5) and feed
-hold within ``accel``, so neither acts as a jump. Segment 0 is the approach from the present position
-to the first corrected point.
-
+Path planning (the speed along the path): exact stop at every corner, i.e. the speed comes to 0
+wherever the direction is not continuous, so no axis is asked for a velocity step; speed carries
+through tangent junctions. On a path of lines the path acceleration is ``accel``; on a path with arcs
+the tangential acceleration is held to 0.8 ``accel`` and the speed on an arc of radius R to
+sqrt(0.55 ``accel`` R), so the vector acceleration (tangential and centripetal) stays below ``accel``
+(0.975 ``accel``). A look-ahead (computed once, backwards from every exact stop) brings the speed down in
+time. ``feed * feed_override`` (0..1.5) and feed hold act online within the same limits.
 A bad input (NaN, a position beyond any machine, a position jump no axis can make) raises the alarm
-and brings the path to a controlled stop: it decelerates along the contour at ``accel`` and rests
-there; an override outside 0..1.5 is clamped and said once.
+and brings the path to a controlled stop along the contour; an override outside 0..1.5 is clamped and
+said once.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
-from ..errors import ConfigError, require
-from ..ports import boolean, integer, real
+from ..errors import ConfigError, ProgramError, require
+from ..ports import boolean, integer, real, string
+from . import rs274
 from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
+from .motion import stop_speed
 
 MAX_POINTS = 64
 #: The contour ends when the actual axes are this close to its last command (mm).
 IN_POSITION = 0.005
 #: mill_contour (SPEC 5).
 DEFAULT_PATH = ((0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0))
+#: On a path with arcs: tangential acceleration and centripetal acceleration, as fractions of ``accel``
+#: (sqrt(0.8**2 + 0.55**2) = 0.97 < 1, room for the discrete steps).
+ARC_TANGENTIAL = 0.8
+ARC_CENTRIPETAL = 0.55
 
 
 class GeometryError(ConfigError):
-    """The corrected path cannot be built (reversing segments, a segment that vanishes or reverses)."""
+    """The corrected path cannot be built (a gouging inside corner, an element that vanishes or reverses)."""
 
 
-def offset_path(points: Sequence[tuple[float, float]], r: float, closed: bool) -> list[tuple[float, float]]:
-    """Corrected terminal points of a path offset by ``r`` to the left of travel (negative: right).
+@dataclass(frozen=True)
+class ToolMove:
+    """One element of the cutter-centre path and how it is run."""
+
+    element: Element
+    rapid: bool          # at ``approach_feed`` (G00, the approach), not ``feed``
+    feed: float          # mm/s
+    label: int           # the ``segment`` output: segment number (point path) or program line
+
+
+def point_contour(points: Sequence[tuple[float, float]], closed: bool) -> list[Line]:
+    """The lines through ``points`` (back to the first for a ``closed`` path)."""
+    pts = [(float(x), float(y)) for x, y in points]
+    if closed and len(pts) > 2 and pts[0] == pts[-1]:
+        pts = pts[:-1]
+    lines = [Line(a, b) for a, b in zip(pts, pts[1:])]
+    if closed:
+        lines.append(Line(pts[-1], pts[0]))
+    return lines
+
+
+def program_path(moves: Sequence[rs274.Move], r: float, rapid_feed: float) -> list[ToolMove]:
+    """The cutter-centre path of a parsed program; G41 offsets by ``+r``, G42 by ``-r``.
 
     Raises
     ------
-    GeometryError
-        naming the point or segment where no offset corner exists.
+    ProgramError
+        naming the program line where compensation is impossible.
     """
-    pts = [tuple(map(float, p)) for p in points]
-    if closed and len(pts) > 2 and pts[0] == pts[-1]:
-        pts = pts[:-1]
-    n = len(pts)
-    segs = list(range(n if closed else n - 1))
-    units = []
-    for k in segs:
-        (x0, y0), (x1, y1) = pts[k], pts[(k + 1) % n]
-        length = math.hypot(x1 - x0, y1 - y0)
-        units.append(((x1 - x0) / length, (y1 - y0) / length))
-    normals = [(-uy, ux) for ux, uy in units]
-    corrected = []
-    for i in range(n):
-        incoming = (i - 1) % n if closed or i > 0 else None
-        outgoing = i if closed or i < n - 1 else None
-        px, py = pts[i]
-        if incoming is None or outgoing is None:
-            nx, ny = normals[outgoing if incoming is None else incoming]
-            corrected.append((px + r * nx, py + r * ny))
+    out: list[ToolMove] = []
+    i = 0
+    while i < len(moves):
+        m = moves[i]
+        if m.comp_before == m.comp_after == 0:
+            out.append(ToolMove(m.element, m.rapid, rapid_feed if m.rapid else m.feed, m.line))
+            i += 1
             continue
-        u1, u2 = units[incoming], units[outgoing]
-        n1, n2 = normals[incoming], normals[outgoing]
-        denominator = 1.0 + u1[0] * u2[0] + u1[1] * u2[1]
-        if denominator < 1e-6:
-            raise GeometryError(f"point[{i + 1}]", pts[i], "the path reverses here (segments at 180 degrees): "
-                                                           "no offset corner exists")
-        corrected.append((px + r * (n1[0] + n2[0]) / denominator, py + r * (n1[1] + n2[1]) / denominator))
-    # A corrected segment must keep its direction and a length: else the offset has folded the path.
-    for k in segs:
-        (a, b) = corrected[k], corrected[(k + 1) % n]
-        dx, dy = b[0] - a[0], b[1] - a[1]
-        along = dx * units[k][0] + dy * units[k][1]
-        if along <= 1e-9:
-            raise GeometryError(f"point[{k + 1}]", pts[k], f"the correction {r:g} mm makes segment {k + 1} "
-                                f"({'vanish' if abs(along) <= 1e-9 else 'run backwards'}): the offset path would "
-                                "loop; use a smaller correction or a longer segment")
-    return corrected
+        # lead-in m, the contour moves[i+1 .. j-1], lead-out moves[j] (the parser guarantees one)
+        j = i + 1
+        while moves[j].comp_after != 0:
+            j += 1
+        chain, lead_out = moves[i + 1:j], moves[j]
+        d = m.comp_after * r
+        try:
+            pieces = compensate([c.element for c in chain], d, closed=False)
+        except CornerError as err:
+            bad = chain[err.index]
+            code = "G41" if m.comp_after > 0 else "G42"
+            raise ProgramError(bad.line, 1, f"line {bad.line}",
+                               f"cutter compensation ({code}, r = {r:g} mm): {err.reason}") from None
+        entry = pieces[0][0].start if pieces else m.element.offset(d).end
+        exit_ = pieces[-1][0].end if pieces else entry
+        out.append(ToolMove(Line(m.element.start, entry), m.rapid, rapid_feed if m.rapid else m.feed, m.line))
+        for element, k in pieces:
+            c = chain[k]
+            out.append(ToolMove(element, c.rapid, rapid_feed if c.rapid else c.feed, c.line))
+        out.append(ToolMove(Line(exit_, lead_out.element.end), lead_out.rapid,
+                            rapid_feed if lead_out.rapid else lead_out.feed, lead_out.line))
+        i = j + 1
+    return [t for t in out if t.element.length > 0.0]
 
 
 def _point_ports():
@@ -105,45 +132,48 @@ def _point_ports():
 
 class ContourInterpolator(Controller):
     MODEL_NAME = "ContourInterpolator"
-    DESCRIPTION = ("Contour interpolator with cutter compensation: offset-segment intersection, DDA interpolation, "
-                   "constant vector feed, override (GB 1,175,423)")
+    DESCRIPTION = ("Contour interpolator with cutter compensation: part programs (RS274 subset) or terminal points, "
+                   "lines and arcs, offset corners, DDA interpolation, exact stop, feed override (GB 1,175,423)")
     SEED = "cutter-compensation-GB1175423.txt"
     STOP_TIME = 40.0
 
     PORTS = (
-        integer("n_points", "parameter", len(DEFAULT_PATH), "number of terminal points", min=2, max=MAX_POINTS),
+        string("program", "parameter", "", "part program, RS274/NGC subset (G00-G03 with I/J, G17, G21, G90/G91, "
+               "G40-G42, F mm/min, M02/M30), one block per line; empty: the point path"),
+        integer("n_points", "parameter", len(DEFAULT_PATH), "point path: number of terminal points",
+                min=2, max=MAX_POINTS),
         *_point_ports(),
-        boolean("closed", "parameter", True, "the path closes from the last point back to the first"),
-        real("diameter_delta", "parameter", 0.4, "mm", "actual minus nominal cutter diameter"),
-        integer("side", "parameter", -1, "side of the correction: +1 left of travel, -1 right", min=-1, max=1),
-        real("feed", "parameter", 5.0, "mm/s", "vector feed rate", min=0.0),
-        real("approach_feed", "parameter", 5.0, "mm/s", "vector feed of the approach (segment 0)", min=0.0),
-        real("accel", "parameter", 500.0, "mm/s2", "path acceleration for start, stop, override and hold", min=0.0),
+        boolean("closed", "parameter", True, "point path: closes from the last point back to the first"),
+        real("diameter_delta", "parameter", 0.4, "mm", "actual minus nominal cutter diameter (the offset is half)"),
+        integer("side", "parameter", -1, "point path: side of the correction, +1 left of travel, -1 right "
+                "(a program chooses with G41/G42)", min=-1, max=1),
+        real("feed", "parameter", 5.0, "mm/s", "point path: vector feed rate (a program gives F)", min=0.0,
+             min_exclusive=True),
+        real("approach_feed", "parameter", 5.0, "mm/s", "vector feed of the approach (segment 0) and of G00 moves",
+             min=0.0, min_exclusive=True),
+        real("accel", "parameter", 500.0, "mm/s2", "path acceleration limit (start, stop, corners, arcs, "
+             "override, hold)", min=0.0, min_exclusive=True),
         real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "end point this long after the command stopped", min=0.0),
-        real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=0.0),
-        real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position)"),
-        real("y_start", "parameter", -10.0, "mm", "Y command before the cycle (the axis's start position)"),
+             "end point this long after the command stopped", min=0.0, min_exclusive=True),
+        real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=0.0, min_exclusive=True),
+        real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position; a "
+             "program starts here)"),
+        real("y_start", "parameter", -10.0, "mm", "Y command before the cycle (the axis's start position; a "
+             "program starts here)"),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override", min=0.0, max=1.5),
         *servo_ports(("x", 0.0), ("y", 0.0)),
-        integer("segment", "output", None, "segment being interpolated (0: approach)"),
+        integer("segment", "output", None, "point path: segment being interpolated; program: line of the block "
+                "(0: the approach from where the tool stands to the path's start)"),
         boolean("busy", "output", None, "a contour is running"),
         boolean("done", "output", None, "the contour is finished (until the next start)"),
         boolean("alarm", "output", None, "geometry cannot be corrected, or a bad input"),
     )
 
     def configure(self, values: Mapping[str, object]) -> None:
-        n = int_param(values, "n_points", 2, MAX_POINTS)
-        pts = [(real_param(values, f"point[{i}].x"), real_param(values, f"point[{i}].y")) for i in range(1, n + 1)]
-        for i in range(1, n):
-            require(pts[i] != pts[i - 1], f"point[{i + 1}]", pts[i], f"repeats point[{i}]: consecutive points "
-                                                                     "must differ")
+        self.program = str(values["program"])
         self.closed = bool(values["closed"])
-        if self.closed and pts[0] == pts[-1]:
-            require(n >= 4, "n_points", n, "a closed path needs at least 3 distinct points")
-        self.points = pts
         self.diameter_delta = real_param(values, "diameter_delta")
         side = int_param(values, "side")
         require(side in (1, -1), "side", side, "must be +1 (left of travel) or -1 (right)")
@@ -155,15 +185,51 @@ class ContourInterpolator(Controller):
         self.dda_unit = real_param(values, "dda_unit", positive=True)
         self.x_start = real_param(values, "x_start")
         self.y_start = real_param(values, "y_start")
-        self.correction = self.side * self.diameter_delta / 2.0
-        try:
-            corrected = offset_path(pts, self.correction, self.closed)
-            self.geometry_error = None
-        except GeometryError as err:
-            corrected, self.geometry_error = [], str(err)
-        self.corrected = corrected
-        # Tool path: the corrected points, back to the first one for a closed path.
-        self.path = corrected + ([corrected[0]] if self.closed and corrected else [])
+        self.geometry_error: str | None = None
+        if self.program.strip():
+            moves = rs274.parse(self.program, (self.x_start, self.y_start))
+            self.contour: list[Element] = [m.element for m in moves]
+            try:
+                path = program_path(moves, self.diameter_delta / 2.0, self.approach_feed)
+            except ProgramError as err:
+                path, self.geometry_error = [], str(err)
+        else:
+            n = int_param(values, "n_points", 2, MAX_POINTS)
+            pts = [(real_param(values, f"point[{i}].x"), real_param(values, f"point[{i}].y"))
+                   for i in range(1, n + 1)]
+            for i in range(1, n):
+                require(pts[i] != pts[i - 1], f"point[{i + 1}]", pts[i], f"repeats point[{i}]: consecutive points "
+                                                                         "must differ")
+            if self.closed and pts[0] == pts[-1]:
+                require(n >= 4, "n_points", n, "a closed path needs at least 3 distinct points")
+            self.points = pts
+            self.contour = list(point_contour(pts, self.closed))
+            try:
+                pieces = compensate(self.contour, self.side * self.diameter_delta / 2.0, self.closed)
+                path = [ToolMove(e, False, self.feed, k + 1) for e, k in pieces]
+            except CornerError as err:
+                k = err.index
+                path, self.geometry_error = [], str(GeometryError(
+                    f"point[{k + 1}]", self.points[k], f"segment {k + 1} (point[{k + 1}] -> "
+                    f"point[{(k + 1) % len(self.points) + 1}]): {err.reason}"))
+        self.tool_path: list[ToolMove] = path
+        has_arcs = any(isinstance(t.element, Arc) for t in path)
+        self.path_accel = self.accel * (ARC_TANGENTIAL if has_arcs else 1.0)
+        self._caps = [math.sqrt(ARC_CENTRIPETAL * self.accel * t.element.radius)
+                      if isinstance(t.element, Arc) else math.inf for t in path]
+        self._v_end = self._plan(path, self._caps)
+
+    def _plan(self, path: Sequence[ToolMove], caps: Sequence[float]) -> list[float]:
+        """Highest speed at the end of each move: 0 at a corner (exact stop) and at the end; through a tangent
+        junction, what the following moves allow (their arc caps and their own exact stops), backwards."""
+        v_end = [0.0] * len(path)
+        for k in range(len(path) - 2, -1, -1):
+            a, b = path[k].element, path[k + 1].element
+            if abs(turn_angle(a.tangent(a.length), b.tangent(0.0))) > 1e3 * TANGENT:
+                continue
+            entry_next = math.sqrt(v_end[k + 1] ** 2 + 2.0 * self.path_accel * b.length)
+            v_end[k] = min(caps[k], caps[k + 1], entry_next)
+        return v_end
 
     def reset(self) -> None:
         self.cmd = [self.x_start, self.y_start]
@@ -175,8 +241,12 @@ class ContourInterpolator(Controller):
         if self.alarm:
             self.say("error", f"cutter compensation impossible: {self.geometry_error}")
         self.v = 0.0                      # path speed, mm/s
-        self._seg = None                  # (start counts, span counts, N, length mm)
-        self._k = 0.0                     # DDA iterations done in the present segment (fractional carry)
+        self._run: list[ToolMove] = []    # the moves of the running cycle (the approach, then the tool path)
+        self._v_end_run: list[float] = []
+        self._caps_run: list[float] = []
+        self._i = 0                       # index of the move being run; len(_run): the path is finished
+        self._s = 0.0                     # path length done within it, mm
+        self._dda: tuple[tuple[int, int], tuple[int, int], int] | None = None
         self._start_was = False
         self._steps_since_end = 0
         self._halting = False             # controlled stop after an alarm
@@ -185,28 +255,53 @@ class ContourInterpolator(Controller):
         self._outputs: dict[str, object] = {}
         self._publish()
 
-    # -- the DDA ----------------------------------------------------------------------------------
+    # -- starting a cycle ---------------------------------------------------------------------------
+    def _begin_cycle(self) -> None:
+        here = (self.cmd[0], self.cmd[1])
+        first = self.tool_path[0].element.start
+        approach = []
+        if math.hypot(first[0] - here[0], first[1] - here[1]) > 0.5 * self.dda_unit:
+            approach = [ToolMove(Line(here, first), True, self.approach_feed, 0)]
+        self._run = approach + self.tool_path
+        self._caps_run = [math.inf] * len(approach) + self._caps
+        self._v_end_run = [0.0] * len(approach) + self._v_end
+        self._i, self._s, self.v = 0, 0.0, 0.0
+        self._enter(0)
+
+    def _enter(self, i: int) -> None:
+        """Make move ``i`` the present one: the DDA of a line is loaded with its span in whole units."""
+        self._i = i
+        if i >= len(self._run):
+            self._dda = None
+            return
+        move = self._run[i]
+        self.segment = move.label
+        if isinstance(move.element, Line):
+            start = (self._counts(move.element.start[0]), self._counts(move.element.start[1]))
+            span = (self._counts(move.element.end[0]) - start[0], self._counts(move.element.end[1]) - start[1])
+            n_iter = 1 << max(1, max(abs(span[0]), abs(span[1]))).bit_length()    # normalised: MSB set
+            self._dda = (start, span, n_iter)
+        else:
+            self._dda = None
+
+    # -- positions: the DDA on lines, whole increments on arcs ------------------------------------------
     def _counts(self, value: float) -> int:
         return round(value / self.dda_unit)
 
-    def _begin_segment(self, index: int) -> None:
-        """Load the DDA with the span to the corrected point ``path[index]`` (index 0: approach to path[0])."""
-        self.segment = index
-        target = self.path[index]
-        start = (self._counts(self.cmd[0]), self._counts(self.cmd[1]))
-        span = (self._counts(target[0]) - start[0], self._counts(target[1]) - start[1])
-        n_iter = 1 << max(1, max(abs(span[0]), abs(span[1]))).bit_length()    # normalised: MSB set
-        length = math.hypot(span[0], span[1]) * self.dda_unit
-        self._seg = (start, span, n_iter, length)
-
-    def _dda_position(self, k: int) -> tuple[float, float]:
-        (sx, sy), (dx, dy), n, _ = self._seg
-        half = n >> 1                                      # accumulators preset to N/2: rounds the carries
+    def _position(self) -> tuple[float, float]:
+        move = self._run[self._i]
+        if self._dda is None:                                      # an arc
+            x, y = move.element.point(self._s)
+            return self._counts(x) * self.dda_unit, self._counts(y) * self.dda_unit
+        (sx, sy), (dx, dy), n = self._dda
+        length = move.element.length
+        k = n if self._s >= length else int(self._s / length * n)
+        half = n >> 1                                              # accumulators preset to N/2: rounds the carries
         px = sx + (1 if dx >= 0 else -1) * ((half + k * abs(dx)) // n)
         py = sy + (1 if dy >= 0 else -1) * ((half + k * abs(dy)) // n)
         return px * self.dda_unit, py * self.dda_unit
 
-    # -- stepping ---------------------------------------------------------------------------------
+    # -- stepping -------------------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
         bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
         if bad or self._halting:
@@ -214,7 +309,7 @@ class ContourInterpolator(Controller):
                 self.say("error", f"t = {t:.4f} s: {bad}; decelerating to rest on the path, cycle stopped")
             if bad:
                 self.alarm, self.busy = True, False
-                self._halting = self._seg is not None and self.v > 0.0
+                self._halting = self._i < len(self._run) and self.v > 0.0
             if self._halting:
                 self._advance(dt, 0.0, inputs, finishing=False)
                 self._halting = self.v > 0.0
@@ -230,76 +325,62 @@ class ContourInterpolator(Controller):
                 self.say("error", f"t = {t:.4f} s: start refused: {self.geometry_error}")
             else:
                 self.alarm, self.done, self.busy = False, False, True
-                self._k, self.v = 0.0, 0.0
-                self._begin_segment(0)
+                self._begin_cycle()
         self._start_was = start
         if self.busy:
-            override = self._override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
-            rate = self.approach_feed if self.segment == 0 else self.feed
-            self._advance(dt, 0.0 if inputs["feed_hold"] else rate * override, inputs)
+            scale = 0.0 if inputs["feed_hold"] else self._override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+            self._advance(dt, scale, inputs)
         return self._publish()
 
-    def _advance(self, dt: float, target: float, inputs: Mapping[str, object], finishing: bool = True) -> None:
-        # distance left to the end of the whole contour, for the final deceleration
-        remaining = self._remaining()
-        a_dt = self.accel * dt
-        v_old = self.v
-        room = remaining - 0.5 * v_old * dt
-        v_stop = -0.5 * a_dt + math.sqrt(0.25 * a_dt * a_dt + 2 * self.accel * room) if room > 0 else 0.0
-        self.v = max(min(min(max(target, v_old - a_dt), v_old + a_dt), v_stop), 0.0)
-        travel = 0.5 * (v_old + self.v) * dt
-        x0, y0 = self.cmd
-        while self._seg is not None:
-            _, _, n, length = self._seg
-            k_new = self._k + (travel * n / length if length > 0 else n)
-            if k_new < n:
-                self._k = k_new
-                break
-            # segment finished: carry the excess distance into the next one (the speed is continuous)
-            travel = (k_new - n) * length / n if length > 0 else travel
-            self._k = n
-            self.cmd = list(self._dda_position(n))
-            if self.segment + 1 < len(self.path):
-                self._k = 0.0
-                self._begin_segment(self.segment + 1)
-            else:
-                self._seg = None
-        if self._seg is not None:
-            self.cmd = list(self._dda_position(int(self._k)))
-            direction = self._direction()
-            self.vff = [self.v * direction[0], self.v * direction[1]]
-        else:
-            self.vff = [0.0, 0.0]
-            self.v = 0.0
-            if not finishing:
+    def _advance(self, dt: float, scale: float, inputs: Mapping[str, object], finishing: bool = True) -> None:
+        """Advance the path by one step at ``scale`` times the programmed feed (override; 0: hold or halt)."""
+        if self._i < len(self._run):
+            i = self._i
+            move, length = self._run[i], self._run[i].element.length
+            a = self.path_accel
+            a_dt = a * dt
+            v_old = self.v
+            v_end = self._v_end_run[i]
+            remaining = length - self._s
+            v_stop = stop_speed(remaining + v_end * v_end / (2.0 * a), v_old, a, dt)
+            target = min(move.feed * scale, self._caps_run[i])
+            v = max(min(min(max(target, v_old - a_dt), v_old + a_dt), v_stop), 0.0)
+            s = self._s + 0.5 * (v_old + v) * dt
+            while True:
+                length = self._run[self._i].element.length
+                at_rest_short = v == 0.0 and length - s <= 1e-12
+                if s < length - 1e-12 and not at_rest_short:
+                    break
+                if self._v_end_run[self._i] == 0.0 or self._i == len(self._run) - 1:
+                    s, v = 0.0, 0.0                             # exact stop at the corner (or the end)
+                    self._enter(self._i + 1)
+                    break
+                s -= length                                     # tangent junction: the speed carries on
+                self._enter(self._i + 1)
+            self._s, self.v = s, v
+            if self._i < len(self._run):
+                self.cmd = list(self._position())
+                tx, ty = self._run[self._i].element.tangent(self._s)
+                self.vff = [v * tx, v * ty]
                 return
-            self._steps_since_end += 1
-            # the actual axes must stand at this controller's own end point, not only be in position
-            arrived = all(abs(float(inputs[f"{a}_pos"]) - c) <= IN_POSITION  # type: ignore[arg-type]
-                          for a, c in zip("xy", self.cmd))
-            if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"] and arrived:
-                self.busy, self.done, self._steps_since_end = False, True, 0
-            elif self._steps_since_end * dt > self.inpos_timeout:
-                self._steps_since_end = 0
-                self.alarm, self.busy = True, False
-                self.say("error", f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
-                                  f"{float(inputs['y_pos']):.4f}), not at the end point ({self.cmd[0]:.4f}, "  # type: ignore[arg-type]
-                                  f"{self.cmd[1]:.4f}), {self.inpos_timeout:g} s after the command stopped")
-
-    def _direction(self) -> tuple[float, float]:
-        _, (dx, dy), _, _ = self._seg
-        length = math.hypot(dx, dy)
-        return (dx / length, dy / length) if length else (0.0, 0.0)
-
-    def _remaining(self) -> float:
-        if self._seg is None:
-            return 0.0
-        _, _, n, length = self._seg
-        left = length * (1.0 - self._k / n)
-        for i in range(self.segment + 1, len(self.path)):
-            (ax, ay), (bx, by) = self.path[i - 1], self.path[i]
-            left += math.hypot(bx - ax, by - ay)
-        return left
+            end = self._run[-1].element.end
+            self.cmd = [self._counts(end[0]) * self.dda_unit, self._counts(end[1]) * self.dda_unit]
+        self.vff = [0.0, 0.0]
+        self.v = 0.0
+        if not finishing:
+            return
+        self._steps_since_end += 1
+        # the actual axes must stand at this controller's own end point, not only be in position
+        arrived = all(abs(float(inputs[f"{a}_pos"]) - c) <= IN_POSITION  # type: ignore[arg-type]
+                      for a, c in zip("xy", self.cmd))
+        if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"] and arrived:
+            self.busy, self.done, self._steps_since_end = False, True, 0
+        elif self._steps_since_end * dt > self.inpos_timeout:
+            self._steps_since_end = 0
+            self.alarm, self.busy = True, False
+            self.say("error", f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
+                              f"{float(inputs['y_pos']):.4f}), not at the end point ({self.cmd[0]:.4f}, "  # type: ignore[arg-type]
+                              f"{self.cmd[1]:.4f}), {self.inpos_timeout:g} s after the command stopped")
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs

@@ -42,7 +42,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ..errors import ConfigError, require
+from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
@@ -72,14 +72,6 @@ RC_ZERO = 1e-6
 IN_POSITION = 0.005
 #: Time left of a dwell below which it is over (s): steps of dt do not sum exactly to T.
 DWELL_EPS = 1e-9
-
-
-class ProgramError(ConfigError):
-    """A program line breaks the grammar; names the line, the column and the reason."""
-
-    def __init__(self, line_no: int, column: int, text: str, reason: str):
-        self.line_no, self.column = line_no, column
-        super().__init__("program", text, f"line {line_no}, column {column}: {reason}")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,294 @@
+"""Plane geometry of a contour: lines, arcs, their offsets, and cutter compensation.
+
+A contour is a chain of elements (:class:`Line`, :class:`Arc`) in the XY plane, each parametrised by
+its path length ``s`` from its start. Cutter compensation (:func:`compensate`) offsets every element
+sideways by ``d`` (positive: left of travel) and joins the offsets at each corner:
+
+- tangent corners (the direction turns by less than :data:`TANGENT` rad) need nothing;
+- outside corners between two lines turning by at most 90 degrees: the offset lines are extended to
+  their intersection, as the seed (GB 1,175,423) does -- the corner moves at most ``|d|*sqrt(2)``;
+- every other outside corner (sharper, or with an arc on either side): an arc of radius ``|d|`` around
+  the programmed corner is inserted, as LinuxCNC does -- the cutter centre stays exactly ``|d|`` away;
+- inside corners: both offsets are trimmed to their intersection; when there is none, or it lies
+  beyond an element (the cutter does not fit), :class:`CornerError` names the element.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..errors import NcfmuError
+
+Point = tuple[float, float]
+
+#: Junctions whose direction turns by less than this are tangent (rad).
+TANGENT = 1e-9
+#: Lengths below this are zero (mm): an element trimmed to it has vanished.
+EPS = 1e-9
+TWO_PI = 2.0 * math.pi
+
+
+class CornerError(NcfmuError):
+    """The offset contour cannot be built at element ``index`` (0-based), for ``reason``."""
+
+    def __init__(self, index: int, reason: str):
+        self.index, self.reason = index, reason
+        super().__init__(f"element {index}: {reason}")
+
+
+@dataclass(frozen=True)
+class Line:
+    start: Point
+    end: Point
+
+    @property
+    def length(self) -> float:
+        return math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1])
+
+    @property
+    def unit(self) -> Point:
+        length = self.length
+        if length == 0.0:
+            return (0.0, 0.0)
+        return ((self.end[0] - self.start[0]) / length, (self.end[1] - self.start[1]) / length)
+
+    def point(self, s: float) -> Point:
+        ux, uy = self.unit
+        return (self.start[0] + ux * s, self.start[1] + uy * s)
+
+    def tangent(self, s: float) -> Point:
+        return self.unit
+
+    def offset(self, d: float) -> Line:
+        ux, uy = self.unit
+        return Line((self.start[0] - uy * d, self.start[1] + ux * d), (self.end[0] - uy * d, self.end[1] + ux * d))
+
+    def param(self, p: Point) -> float:
+        """Path length from the start to the foot of ``p`` (may be negative or beyond the end)."""
+        ux, uy = self.unit
+        return (p[0] - self.start[0]) * ux + (p[1] - self.start[1]) * uy
+
+    def sub(self, s0: float, s1: float) -> Line:
+        return Line(self.point(s0), self.point(s1))
+
+
+@dataclass(frozen=True)
+class Arc:
+    """Circular arc: ``center``, ``radius``, start angle ``a0`` (rad), signed ``sweep`` (+ counter-clockwise)."""
+
+    center: Point
+    radius: float
+    a0: float
+    sweep: float
+
+    @property
+    def ccw(self) -> bool:
+        return self.sweep > 0
+
+    @property
+    def length(self) -> float:
+        return self.radius * abs(self.sweep)
+
+    @property
+    def start(self) -> Point:
+        return self._at(self.a0)
+
+    @property
+    def end(self) -> Point:
+        return self._at(self.a0 + self.sweep)
+
+    def _at(self, a: float) -> Point:
+        return (self.center[0] + self.radius * math.cos(a), self.center[1] + self.radius * math.sin(a))
+
+    def angle(self, s: float) -> float:
+        return self.a0 + math.copysign(s / self.radius, self.sweep)
+
+    def point(self, s: float) -> Point:
+        return self._at(self.angle(s))
+
+    def tangent(self, s: float) -> Point:
+        a = self.angle(s)
+        sign = 1.0 if self.sweep > 0 else -1.0
+        return (-sign * math.sin(a), sign * math.cos(a))
+
+    def offset(self, d: float) -> Arc:
+        """Left of travel is toward the centre on a counter-clockwise arc: the radius shrinks by ``d``."""
+        return Arc(self.center, self.radius - (d if self.sweep > 0 else -d), self.a0, self.sweep)
+
+    def param(self, p: Point) -> float:
+        """Path length from the start, in the arc's sense, to the direction of ``p``: in [-EPS, 2*pi*R - EPS)."""
+        a = math.atan2(p[1] - self.center[1], p[0] - self.center[0])
+        turn = (a - self.a0) if self.sweep > 0 else (self.a0 - a)
+        s = (turn % TWO_PI) * self.radius
+        return s - TWO_PI * self.radius if s > TWO_PI * self.radius - EPS else s
+
+    def sub(self, s0: float, s1: float) -> Arc:
+        return Arc(self.center, self.radius, self.angle(s0), math.copysign((s1 - s0) / self.radius, self.sweep))
+
+
+Element = Line | Arc
+
+
+def arc_through(start: Point, end: Point, center: Point, ccw: bool) -> Arc:
+    """The arc from ``start`` to ``end`` around ``center`` (full circle when they coincide).
+
+    ``center`` is moved onto the perpendicular bisector of start and end (to the nearest point), so the
+    arc passes through both exactly; the caller checks beforehand that the radii agree.
+    """
+    mx, my = (start[0] + end[0]) / 2, (start[1] + end[1]) / 2
+    cx, cy = center
+    chord = (end[0] - start[0], end[1] - start[1])
+    chord_len = math.hypot(*chord)
+    if chord_len > 0.0:                       # project the centre onto the bisector
+        nx, ny = -chord[1] / chord_len, chord[0] / chord_len
+        along = (cx - mx) * nx + (cy - my) * ny
+        cx, cy = mx + along * nx, my + along * ny
+    radius = math.hypot(start[0] - cx, start[1] - cy)
+    a0 = math.atan2(start[1] - cy, start[0] - cx)
+    a1 = math.atan2(end[1] - cy, end[0] - cx)
+    if ccw:
+        sweep = (a1 - a0) % TWO_PI
+        sweep = TWO_PI if sweep < 1e-12 else sweep
+    else:
+        sweep = -((a0 - a1) % TWO_PI)
+        sweep = -TWO_PI if sweep > -1e-12 else sweep
+    return Arc((cx, cy), radius, a0, sweep)
+
+
+def sample(elements: list[Element], spacing: float) -> list[Point]:
+    """Points along ``elements`` at most ``spacing`` apart (for plots), both ends of each element included."""
+    points: list[Point] = []
+    for e in elements:
+        pieces = max(1, math.ceil(e.length / spacing)) if isinstance(e, Arc) else 1
+        points += [e.point(e.length * i / pieces) for i in range(0 if not points else 1, pieces + 1)]
+    return points
+
+
+def turn_angle(a: Point, b: Point) -> float:
+    """Signed angle from direction ``a`` to direction ``b`` (+: left turn), in (-pi, pi]."""
+    return math.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])
+
+
+# -- intersections of the underlying infinite line / full circle --------------------------------------
+def _line_line(a: Line, b: Line) -> list[Point]:
+    (ux, uy), (vx, vy) = a.unit, b.unit
+    den = ux * vy - uy * vx
+    if abs(den) < 1e-15:
+        return []
+    wx, wy = b.start[0] - a.start[0], b.start[1] - a.start[1]
+    t = (wx * vy - wy * vx) / den
+    return [a.point(t)]
+
+
+def _line_circle(a: Line, c: Arc) -> list[Point]:
+    foot = a.param(c.center)
+    fx, fy = a.point(foot)
+    h2 = c.radius ** 2 - ((fx - c.center[0]) ** 2 + (fy - c.center[1]) ** 2)
+    if h2 < -1e-12 * c.radius ** 2:
+        return []
+    h = math.sqrt(max(h2, 0.0))
+    return [a.point(foot - h), a.point(foot + h)]
+
+
+def _circle_circle(a: Arc, b: Arc) -> list[Point]:
+    dx, dy = b.center[0] - a.center[0], b.center[1] - a.center[1]
+    dist = math.hypot(dx, dy)
+    if dist < 1e-15:
+        return []
+    along = (dist * dist + a.radius ** 2 - b.radius ** 2) / (2 * dist)
+    h2 = a.radius ** 2 - along * along
+    if h2 < -1e-12 * a.radius ** 2:
+        return []
+    h = math.sqrt(max(h2, 0.0))
+    mx, my = a.center[0] + along * dx / dist, a.center[1] + along * dy / dist
+    return [(mx - h * dy / dist, my + h * dx / dist), (mx + h * dy / dist, my - h * dx / dist)]
+
+
+def intersections(a: Element, b: Element) -> list[Point]:
+    if isinstance(a, Line) and isinstance(b, Line):
+        return _line_line(a, b)
+    if isinstance(a, Line):
+        return _line_circle(a, b)  # type: ignore[arg-type]
+    if isinstance(b, Line):
+        return _line_circle(b, a)
+    return _circle_circle(a, b)
+
+
+# -- cutter compensation -------------------------------------------------------------------------------
+def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[Element, int]]:
+    """The cutter-centre path of ``elements`` offset by ``d`` (+ left of travel), with its corners joined.
+
+    Returns ``(element, index)`` pairs: ``index`` is the programmed element the piece belongs to (an
+    inserted corner arc belongs to the element after the corner; the closing corner of a ``closed``
+    chain comes last and belongs to the last element).
+
+    Raises
+    ------
+    CornerError
+        an arc whose offset radius is not positive, an inside corner the cutter cannot reach, or an
+        element that the corrections on both its ends make vanish or run backwards.
+    """
+    n = len(elements)
+    if d == 0.0:
+        return [(e, k) for k, e in enumerate(elements)]
+    offsets: list[Element] = []
+    for k, e in enumerate(elements):
+        o = e.offset(d)
+        if isinstance(o, Arc) and o.radius <= EPS:
+            assert isinstance(e, Arc)
+            raise CornerError(k, f"arc of radius {e.radius:g} mm offset by {abs(d):g} mm toward its centre: "
+                                 f"R - r = {o.radius:g} mm <= 0, the cutter does not fit")
+        offsets.append(o)
+    trim = [[0.0, o.length] for o in offsets]        # the part of each offset element that is kept
+    corner_arcs: dict[int, Arc] = {}                  # junction k (after element k) -> inserted arc
+    junctions = range(n if closed else n - 1)
+    for k in junctions:
+        j = (k + 1) % n
+        a, b, oa, ob = elements[k], elements[j], offsets[k], offsets[j]
+        turn = turn_angle(a.tangent(a.length), b.tangent(0.0))
+        if abs(turn) <= TANGENT:
+            continue
+        corner = a.end if isinstance(a, Line) else b.start
+        if abs(turn) >= math.pi - TANGENT:
+            turn = -math.copysign(math.pi, d)        # a reversal: around the tip, whichever side
+        if turn * d < 0:                             # outside corner
+            if isinstance(a, Line) and isinstance(b, Line) and abs(turn) <= math.pi / 2 + 1e-12:
+                (p,) = _line_line(oa, ob)            # type: ignore[arg-type]
+                trim[k][1], trim[j][0] = oa.param(p), ob.param(p)
+            else:
+                start = oa.point(oa.length)
+                a0 = math.atan2(start[1] - corner[1], start[0] - corner[0])
+                corner_arcs[k] = Arc(corner, abs(d), a0, turn)
+            continue
+        # inside corner: trim both to the intersection nearest the corner (back along a, forward along b)
+        best = None
+        for p in intersections(oa, ob):
+            pa, pb = oa.param(p), ob.param(p)
+            if isinstance(oa, Arc) and pa < trim[k][0] - EPS:
+                pa += TWO_PI * oa.radius                      # an arc's param wraps; the end side counts
+            back, forward = trim[k][1] - pa, pb - trim[j][0]
+            if back < -1e-7 or forward < -1e-7:
+                continue
+            if best is None or back + forward < best[0]:
+                best = (back + forward, pa, pb)
+        if best is None:
+            raise CornerError(j, f"inside corner of {math.degrees(abs(turn)):.4g} deg: the offset elements do "
+                                 f"not meet, a cutter offset by {abs(d):g} mm would gouge the contour")
+        trim[k][1], trim[j][0] = best[1], best[2]
+    for k in range(n):
+        s0, s1 = trim[k]
+        if s1 - s0 <= EPS:
+            raise CornerError(k, f"the correction {abs(d):g} mm makes this element "
+                                 f"({'vanish' if abs(s1 - s0) <= EPS else 'run backwards'}): the offset path "
+                                 "would loop; use a smaller correction or a longer element")
+        if isinstance(offsets[k], Arc) and s1 - s0 > offsets[k].length + 1e-7:
+            raise CornerError(k, f"the correction {abs(d):g} mm trims this arc past its own end")
+    out: list[tuple[Element, int]] = []
+    for k in range(n):
+        if k - 1 in corner_arcs:
+            out.append((corner_arcs[k - 1], k))
+        out.append((offsets[k].sub(*trim[k]), k))
+    if closed and n - 1 in corner_arcs:
+        out.append((corner_arcs[n - 1], n - 1))
+    return out
