@@ -102,13 +102,17 @@ def program_path(moves: Sequence[rs274.Move], r: float, rapid_feed: float) -> li
             j += 1
         chain, lead_out = moves[i + 1:j], moves[j]
         d = m.comp_after * r
+        # a contour that returns to its start is joined there too (the lead-in and the lead-out meet at the
+        # joined corner), so entering a closed contour at a corner leaves no cusp and does not gouge
+        closed = len(chain) > 1 and math.dist(chain[0].element.start, chain[-1].element.end) < 1e-9
         try:
-            pieces = compensate([c.element for c in chain], d, closed=False)
+            pieces = compensate([c.element for c in chain], d, closed=closed)
         except CornerError as err:
             bad = chain[err.index]
             code = "G41" if m.comp_after > 0 else "G42"
+            reason = err.describe(lambda k, lines=tuple(c.line for c in chain): f"the block on line {lines[k]}")
             raise ProgramError(bad.line, 1, f"line {bad.line}",
-                               f"cutter compensation ({code}, r = {r:g} mm): {err.reason}") from None
+                               f"cutter compensation ({code}, r = {r:g} mm): {reason}") from None
         entry = pieces[0][0].start if pieces else m.element.offset(d).end
         exit_ = pieces[-1][0].end if pieces else entry
         out.append(ToolMove(Line(m.element.start, entry), m.rapid, rapid_feed if m.rapid else m.feed, m.line))
@@ -211,7 +215,7 @@ class ContourInterpolator(Controller):
                 k = err.index
                 path, self.geometry_error = [], str(GeometryError(
                     f"point[{k + 1}]", self.points[k], f"segment {k + 1} (point[{k + 1}] -> "
-                    f"point[{(k + 1) % len(self.points) + 1}]): {err.reason}"))
+                    f"point[{(k + 1) % len(self.points) + 1}]): {err.describe(lambda j: f'segment {j + 1}')}"))
         self.tool_path: list[ToolMove] = path
         has_arcs = any(isinstance(t.element, Arc) for t in path)
         self.path_accel = self.accel * (ARC_TANGENTIAL if has_arcs else 1.0)

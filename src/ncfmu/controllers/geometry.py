@@ -10,12 +10,16 @@ sideways by ``d`` (positive: left of travel) and joins the offsets at each corne
 - every other outside corner (sharper, or with an arc on either side): an arc of radius ``|d|`` around
   the programmed corner is inserted, as LinuxCNC does -- the cutter centre stays exactly ``|d|`` away;
 - inside corners: both offsets are trimmed to their intersection; when there is none, or it lies
-  beyond an element (the cutter does not fit), :class:`CornerError` names the element.
+  beyond an element (the cutter does not fit), :class:`CornerError` names the element;
+- finally the whole offset path is measured against the whole contour: where it comes closer than
+  ``|d|`` (a spike or a slot narrower than the cutter), :class:`CornerError` names the element.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..errors import NcfmuError
@@ -30,11 +34,16 @@ TWO_PI = 2.0 * math.pi
 
 
 class CornerError(NcfmuError):
-    """The offset contour cannot be built at element ``index`` (0-based), for ``reason``."""
+    """The offset contour cannot be built at element ``index`` (0-based), for ``reason``; ``other`` is the
+    element it collides with, if any (:meth:`describe` names both in the caller's terms)."""
 
-    def __init__(self, index: int, reason: str):
-        self.index, self.reason = index, reason
-        super().__init__(f"element {index}: {reason}")
+    def __init__(self, index: int, reason: str, other: int | None = None):
+        self.index, self.reason, self.other = index, reason, other
+        super().__init__(self.describe(lambda k: f"element {k}"))
+
+    def describe(self, name: Callable[[int], str]) -> str:
+        """The reason, with the colliding element named by ``name(index)``."""
+        return self.reason.replace("{other}", name(self.other) if self.other is not None else "")
 
 
 @dataclass(frozen=True)
@@ -215,6 +224,80 @@ def intersections(a: Element, b: Element) -> list[Point]:
     return _circle_circle(a, b)
 
 
+# -- distances -------------------------------------------------------------------------------------------
+def point_distance(p: Point, e: Element) -> float:
+    """Distance of ``p`` from the element (a segment or an arc, not the infinite line or full circle)."""
+    if isinstance(e, Line):
+        length = e.length
+        s = min(max(e.param(p), 0.0), length)
+        q = e.point(s)
+        return math.hypot(p[0] - q[0], p[1] - q[1])
+    if e.param(p) <= e.length:
+        return abs(math.hypot(p[0] - e.center[0], p[1] - e.center[1]) - e.radius)
+    return min(math.dist(p, e.start), math.dist(p, e.end))
+
+
+def _on(e: Element, p: Point) -> bool:
+    """``p`` (a point of the element's line or circle) lies within the element."""
+    s = e.param(p)
+    return -EPS <= s <= e.length + EPS
+
+
+def min_distance(a: Element, b: Element) -> float:
+    """Least distance between two elements: 0 where they cross, else at an end point or where the line
+    between them is normal to both (for an arc: along the radius toward the other element)."""
+    if any(_on(a, p) and _on(b, p) for p in intersections(a, b)):
+        return 0.0
+    candidates = [point_distance(a.start, b), point_distance(a.end, b),
+                  point_distance(b.start, a), point_distance(b.end, a)]
+    for arc, other in ((a, b), (b, a)):
+        if not isinstance(arc, Arc):
+            continue
+        if isinstance(other, Line):
+            ux, uy = other.unit
+            towards = [(-uy, ux), (uy, -ux)]                 # radii normal to the line
+        else:
+            dx, dy = other.center[0] - arc.center[0], other.center[1] - arc.center[1]
+            dist = math.hypot(dx, dy)
+            towards = [(dx / dist, dy / dist), (-dx / dist, -dy / dist)] if dist > 0 else []
+        for nx, ny in towards:
+            p = (arc.center[0] + arc.radius * nx, arc.center[1] + arc.radius * ny)
+            if _on(arc, p):
+                candidates.append(point_distance(p, other))
+    return min(candidates)
+
+
+def bounds(e: Element) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) of the element."""
+    xs, ys = [e.start[0], e.end[0]], [e.start[1], e.end[1]]
+    if isinstance(e, Arc):
+        for k in range(4):                                   # the axis extremes the arc passes
+            p = (e.center[0] + e.radius * math.cos(k * math.pi / 2), e.center[1] + e.radius * math.sin(k * math.pi / 2))
+            if _on(e, p):
+                xs.append(p[0])
+                ys.append(p[1])
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def closest_approach(pieces: list[tuple[Element, int]], contour: list[Element],
+                     limit: float) -> tuple[int, int, float] | None:
+    """The first (piece's element, contour element, distance) closer than ``limit``, else None.
+
+    Only pairs whose bounding boxes come within ``limit`` are measured (sorted by X, so a long program
+    is not measured pair by pair)."""
+    boxes = sorted((bounds(e)[0], k, bounds(e)) for k, e in enumerate(contour))
+    lows = [b[0] for b in boxes]
+    for piece, owner in pieces:
+        x0, y0, x1, y1 = bounds(piece)
+        for _, k, (_, ey0, ex1, ey1) in boxes[:bisect.bisect_right(lows, x1 + limit)]:
+            if ex1 < x0 - limit or ey1 < y0 - limit or ey0 > y1 + limit:
+                continue
+            dist = min_distance(piece, contour[k])
+            if dist < limit:
+                return owner, k, dist
+    return None
+
+
 # -- cutter compensation -------------------------------------------------------------------------------
 def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[Element, int]]:
     """The cutter-centre path of ``elements`` offset by ``d`` (+ left of travel), with its corners joined.
@@ -291,4 +374,13 @@ def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[El
         out.append((offsets[k].sub(*trim[k]), k))
     if closed and n - 1 in corner_arcs:
         out.append((corner_arcs[n - 1], n - 1))
+    # the whole cutter-centre path keeps |d| from the whole contour: where the contour is narrower than the
+    # cutter (a thin spike, a slot, two features close together) the offset of one element comes too close
+    # to another, and cutting it would gouge
+    too_close = closest_approach(out, elements, abs(d) * (1.0 - 1e-9) - 1e-9)
+    if too_close is not None:
+        k, other, dist = too_close
+        near = "crosses {other}" if dist == 0.0 else f"comes within {dist:.4g} mm of {{other}}"
+        raise CornerError(k, f"its offset {near} (the correction is {abs(d):g} mm): the contour is narrower "
+                             "than the cutter there, cutting it would gouge", other)
     return out

@@ -40,7 +40,7 @@ _GROUPS = {**{g: "motion (G00-G03)" for g in _MOTION}, 17: "plane (G17)", 21: "u
 _REFUSED_G = {18: "only the XY plane (G17) is in the subset", 19: "only the XY plane (G17) is in the subset",
               20: "inch units are not in the subset: write the program in mm (G21)",
               43: "tool length offsets are not in the subset"}
-_WORD = re.compile(r"([A-Za-z])\s*([+-]?(?:\d+\.?\d*|\.\d+))?")
+_WORD = re.compile(r"([A-Za-z])[ \t]*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))?")
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,10 @@ def _words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
             reason = ("parameters and expressions are not in the subset" if nxt in ("#", "[") else
                       f"word {letter} needs a number")
             raise ProgramError(line_no, col + 1, text.strip(), reason)
-        words.append((letter, float(m.group(2)), m.group(2), col + 1))
+        value = float(m.group(2))
+        if not math.isfinite(value) or abs(value) > 1e15:
+            raise ProgramError(line_no, col + 1, text.strip(), f"{letter}{m.group(2)[:20]}...: number too large")
+        words.append((letter, value, m.group(2), col + 1))
         col = m.end()
     return words
 
@@ -113,7 +116,8 @@ def parse(text: str, start: Point) -> list[Move]:
     """
     if len(text) > MAX_PROGRAM_CHARS:
         raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
-    lines = text.splitlines()
+    # only newlines end a line (str.splitlines would also split at form feeds, U+2028 ...)
+    lines = [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
     moves: list[Move] = []
     motion: int | None = None
     incremental = False
@@ -124,8 +128,9 @@ def parse(text: str, start: Point) -> list[Move]:
     ended_at = 0
     for n, raw in enumerate(lines, start=1):
         if ended_at:
-            if raw.strip() and raw.strip() != "%" and _strip_comments(raw, n).strip():
-                raise ProgramError(n, len(raw) - len(raw.lstrip()) + 1, raw.strip(),
+            rest = _strip_comments(raw, n) if raw.strip() != "%" else ""
+            if rest.strip():
+                raise ProgramError(n, len(rest) - len(rest.lstrip()) + 1, raw.strip(),
                                    f"text after the program end (line {ended_at})")
             continue
         if raw.strip() == "%":
@@ -137,6 +142,7 @@ def parse(text: str, start: Point) -> list[Move]:
         groups: dict[str, int] = {}
         values: dict[str, float] = {}
         new_motion = None
+        motion_col = None
         end_program = False
         for i, (letter, value, spelled, col) in enumerate(words):
             here = f"{letter}{spelled}"
@@ -149,7 +155,7 @@ def parse(text: str, start: Point) -> list[Move]:
                     raise ProgramError(n, col, raw.strip(), "the block number N must be the first word")
                 continue
             if letter == "G":
-                if value != int(value):
+                if value != int(value) or value > 99:
                     raise ProgramError(n, col, raw.strip(), f"{here} is not in the subset")
                 g = int(value)
                 if g in _REFUSED_G:
@@ -163,15 +169,16 @@ def parse(text: str, start: Point) -> list[Move]:
                                                             f"belong to the modal group {group}")
                 groups[group] = g
                 if g in _MOTION:
-                    new_motion = g
+                    new_motion, motion_col = g, col
                 elif g in (90, 91):
                     incremental = g == 91
                 elif g in (40, 41, 42):
                     side = {40: 0, 41: 1, 42: -1}[g]
-                    if side and comp:
+                    if side and (comp or comp_moved):
+                        on = comp or comp_moved
                         raise ProgramError(n, col, raw.strip(), f"{here}: cutter compensation is already on "
-                                                                f"(G{41 if comp > 0 else 42}); turn it off with "
-                                                                "G40 and a move first")
+                                                                f"(G{41 if on > 0 else 42}); turn it off with "
+                                                                "G40 and a lead-out move first")
                     comp = side
                 continue
             if letter == "M":
@@ -199,32 +206,36 @@ def parse(text: str, start: Point) -> list[Move]:
             motion = new_motion
         has_xy = "X" in values or "Y" in values
         has_ij = "I" in values or "J" in values
-        col_of = seen.get
+        xy_col = min((seen[k] for k in "XY" if k in values), default=1)
+        ij_col = min((seen[k] for k in "IJ" if k in values), default=1)
+        move_col = motion_col or xy_col                       # the motion word, or the first coordinate
         if has_ij and motion not in (2, 3):
-            raise ProgramError(n, col_of("I") or col_of("J") or 1, raw.strip(), "I and J belong to G02/G03 arcs")
+            raise ProgramError(n, ij_col, raw.strip(), "I and J belong to G02/G03 arcs")
         if has_xy or has_ij:
             if motion is None:
-                raise ProgramError(n, col_of("X") or col_of("Y") or 1, raw.strip(),
-                                   "a move with no motion mode: give G00, G01, G02 or G03 first")
+                raise ProgramError(n, xy_col, raw.strip(), "a move with no motion mode: give G00, G01, G02 or G03 "
+                                                           "first")
             if motion != 0 and feed == 0.0:
-                raise ProgramError(n, seen.get("G", 1), raw.strip(),
-                                   f"G{motion:02d} with no feed: give F (mm/min) first")
+                raise ProgramError(n, move_col, raw.strip(), f"G{motion:02d} with no feed: give F (mm/min) first")
             tx = (x + values.get("X", 0.0)) if incremental else values.get("X", x)
             ty = (y + values.get("Y", 0.0)) if incremental else values.get("Y", y)
+            if max(abs(tx), abs(ty)) > COORDINATE_LIMIT:
+                raise ProgramError(n, xy_col, raw.strip(), f"the move ends at ({tx:g}, {ty:g}): beyond "
+                                                           f"{COORDINATE_LIMIT:g} mm, no machine is that large")
             element: Element | None = None
             if motion in (2, 3):
                 if not has_ij:
-                    raise ProgramError(n, seen.get("G", 1), raw.strip(),
+                    raise ProgramError(n, move_col, raw.strip(),
                                        f"G{motion:02d} needs the centre as I and/or J (R-format arcs are not in "
                                        "the subset)")
                 cx, cy = x + values.get("I", 0.0), y + values.get("J", 0.0)
                 r_start, r_end = math.hypot(x - cx, y - cy), math.hypot(tx - cx, ty - cy)
                 if r_start < ARC_RADIUS_TOLERANCE:
-                    raise ProgramError(n, col_of("I") or col_of("J") or 1, raw.strip(),
+                    raise ProgramError(n, ij_col, raw.strip(),
                                        f"I{values.get('I', 0.0):g} J{values.get('J', 0.0):g}: the centre is the "
                                        "start point, no circle")
                 if abs(r_start - r_end) > ARC_RADIUS_TOLERANCE:
-                    raise ProgramError(n, col_of("I") or col_of("J") or 1, raw.strip(),
+                    raise ProgramError(n, ij_col, raw.strip(),
                                        f"I/J do not define a circle through start and end: radius {r_start:.4f} mm "
                                        f"to the start, {r_end:.4f} mm to the end (tolerance "
                                        f"{ARC_RADIUS_TOLERANCE:g} mm)")
@@ -234,7 +245,7 @@ def parse(text: str, start: Point) -> list[Move]:
             if element is not None:
                 if comp != comp_moved and isinstance(element, Arc):
                     what = "start" if comp else "end"
-                    raise ProgramError(n, seen.get("G", 1), raw.strip(),
+                    raise ProgramError(n, move_col, raw.strip(),
                                        f"an arc cannot {what} cutter compensation: program a straight "
                                        f"{'lead-in' if comp else 'lead-out'} move (G00/G01)")
                 moves.append(Move(element, motion == 0, feed, n, comp_moved, comp))
@@ -246,8 +257,8 @@ def parse(text: str, start: Point) -> list[Move]:
                                                               "end: end it with G40 and a lead-out move")
             ended_at = n
     if not ended_at:
-        raise ProgramError(max(len(lines), 1), 1, lines[-1].strip() if lines else "",
-                           "the program does not end with M02 or M30")
+        last = max((n for n, line in enumerate(lines, start=1) if line.strip()), default=1)
+        raise ProgramError(last, 1, lines[last - 1].strip(), "the program does not end with M02 or M30")
     if not moves:
         raise ProgramError(ended_at, 1, lines[ended_at - 1].strip(), "the program has no moves")
     return moves
