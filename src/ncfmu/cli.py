@@ -58,8 +58,8 @@ def _summary(result) -> str:
     if "contour.segment" in result:
         done = result["contour.done"]
         end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
-        lines.append(f"  contour done: {end}; segments: {int(result['contour.segment'].max())}; "
-                     f"alarm: {'yes' if result['contour.alarm'].any() else 'no'}")
+        lines.append(f"  contour done: {end}; last segment (point path) or program line: "
+                     f"{int(result['contour.segment'][-1])}; alarm: {'yes' if result['contour.alarm'].any() else 'no'}")
     if "limiter.alarm" in result:
         verdict = ("ALARM, blocked mask " + str(result["limiter.blocked"].max()) if result["limiter.alarm"].any()
                    else "no violation")
@@ -116,8 +116,9 @@ def cmd_run(args) -> int:
             print(_summary(result))
             print(f"  results: {csv}")
         return 0
+    start_values = _parse_set(args.set)
     result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
-                      start_values=_parse_set(args.set), input_csv=args.input, mode=args.mode, root=args.root)
+                      start_values=start_values, input_csv=args.input, mode=args.mode, root=args.root)
     out = Path(args.out)
     csv = result.to_csv(out / f"{result.system}.csv")
     print(_summary(result))
@@ -129,7 +130,7 @@ def cmd_run(args) -> int:
             from .plots import plot_result
         except ImportError:
             raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
-        print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
+        print(f"  plot: {plot_result(result, out / f'{result.system}.png', start_values=start_values)}")
     return 0
 
 

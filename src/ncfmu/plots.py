@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +44,17 @@ def _commands(result, axis: str) -> str | None:
     return None
 
 
-def plot_result(result, path: Path, system: str | None = None) -> Path:
+def plot_result(result, path: Path, system: str | None = None,
+                start_values: Mapping[str, object] | None = None) -> Path:
+    """Plot a run; ``start_values`` (``INSTANCE.VARIABLE``: value, e.g. ``--set``) override the system's
+    parameters, so the envelope or the contour drawn is the one that ran."""
     plt = _plt()
     system = system or result.system
     params = _system_parameters(system)
+    for name, value in (start_values or {}).items():
+        instance, _, variable = name.partition(".")
+        if instance in params:
+            params[instance][variable] = value
     axes = [a for a in ("x_axis", "z_axis", "y_axis") if f"{a}.pos" in result]
     has_plane = len(axes) >= 2
     fig, panels = plt.subplots(3 if has_plane else 2, 1, figsize=(10, 12 if has_plane else 8))
@@ -109,8 +117,9 @@ def _plane(ax, result, system: str, params: dict) -> None:
             zoom.plot(prog[:, 0], prog[:, 1], "k-", lw=1.0)
             zoom.plot(cor[:, 0], cor[:, 1], "g--", lw=1.0)
             zoom.plot(result["x_axis.pos"], result["y_axis.pos"], lw=0.8, color="tab:blue")
-            zoom.set_xlim(cx - 1.0, cx + 0.6)
-            zoom.set_ylim(cy - 1.0, cy + 0.6)
+            span = max(1.0, 1.5 * abs(c.diameter_delta))
+            zoom.set_xlim(cx - span, cx + 0.6 * span)
+            zoom.set_ylim(cy - span, cy + 0.6 * span)
             zoom.set_aspect("equal")
             zoom.set_title(f"corner ({cx:g}, {cy:g}) [mm]", fontsize=8)
             zoom.grid(True, alpha=0.3)
