@@ -131,11 +131,12 @@ def test_property_compensated_path_keeps_r_on_the_requested_side(case):
         assert dist.max() <= r * SQRT2 + 1e-9
 
 
-def run_program(program, feed_override=1.0, accel=500.0, **parameters):
+def run_program(program, feed_override=1.0, accel=500.0, hold=None, **parameters):
     c = ContourInterpolator(**{"program": program, "accel": accel, "x_start": 0.0, "y_start": 0.0, **parameters})
     inputs = dict(c.default_inputs(), start=True, x_pos=c.x_start, y_pos=c.y_start, feed_override=feed_override)
     rows = []
     for k in range(200_000):
+        inputs["feed_hold"] = hold is not None and hold[0] <= k * DT < hold[1]
         o = c.step(k * DT, DT, inputs)
         inputs["start"] = False
         inputs["x_pos"], inputs["y_pos"] = o["x_cmd"], o["y_cmd"]
@@ -146,11 +147,18 @@ def run_program(program, feed_override=1.0, accel=500.0, **parameters):
 
 
 @settings(max_examples=25, deadline=None)
-@given(star_programs(), st.sampled_from([0.5, 1.0, 1.5]), st.sampled_from([200.0, 500.0, 2000.0]))
-def test_property_interpolated_command_never_exceeds_accel(case, override, accel):
+@given(star_programs(), st.sampled_from([0.5, 1.0, 1.5]), st.sampled_from([200.0, 500.0, 2000.0]),
+       st.floats(0.0, 3.0))
+def test_property_interpolated_command_never_exceeds_accel(case, override, accel, hold_at):
     program, r, _ = case
     compensated(program, r)                                   # the same cases as the geometry property
-    c, rows = run_program(program, feed_override=override, accel=accel, diameter_delta=2 * r)
+    hold = (hold_at, hold_at + 0.5)                           # a feed hold somewhere on the path
+    c, rows = run_program(program, feed_override=override, accel=accel, hold=hold, diameter_delta=2 * r)
+    # held: at rest on the path within v / accel of the hold (the stop never asks for more than accel)
+    rest = (np.arange(len(rows)) * DT >= hold[0] + 150.0 / accel + 0.01) & (np.arange(len(rows)) * DT < hold[1])
+    if rest.any():
+        assert np.ptp(rows[rest, 0]) == 0.0 and np.ptp(rows[rest, 1]) == 0.0
+        assert path_distance(rows[rest, 0], rows[rest, 1], [m.element for m in c.tool_path]).max() <= c.dda_unit
     assert rows[-1, 5] == 1 and not rows[:, 6].any()          # done, no alarm
     vff = rows[:, 2:4]
     acc = np.diff(vff, axis=0) / DT
