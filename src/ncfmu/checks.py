@@ -94,10 +94,9 @@ def element_distance(x: np.ndarray, y: np.ndarray, element: Element) -> np.ndarr
 def path_distance(x: np.ndarray, y: np.ndarray, path: Sequence[Element] | Sequence[tuple[float, float]]) -> np.ndarray:
     """Distance of each point (x, y) from a path: lines and arcs (e.g. a contour's ``tool_path`` elements),
     or a polyline given as points."""
-    if all(isinstance(e, Line | Arc) for e in path):
-        elements = list(path)
-    else:                                                           # a polyline's points
-        points = [(float(p[0]), float(p[1])) for p in path]  # type: ignore[index]
+    elements: list[Element] = [e for e in path if isinstance(e, Line | Arc)]
+    if len(elements) < len(path):                                   # a polyline's points
+        points = [(float(p[0]), float(p[1])) for p in path if not isinstance(p, Line | Arc)]
         elements = [Line(a, b) for a, b in zip(points[:-1], points[1:])]
     best = np.full(np.shape(x), np.inf)
     for element in elements:

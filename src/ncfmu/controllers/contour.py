@@ -110,7 +110,7 @@ def program_path(moves: Sequence[rs274.Move], r: float, rapid_feed: float) -> li
         except CornerError as err:
             bad = chain[err.index]
             code = "G41" if m.comp_after > 0 else "G42"
-            reason = err.describe(lambda k, lines=tuple(c.line for c in chain): f"the block on line {lines[k]}")
+            reason = err.describe([f"the block on line {c.line}" for c in chain])
             raise ProgramError(bad.line, 1, f"line {bad.line}",
                                f"cutter compensation ({code}, r = {r:g} mm): {reason}") from None
         entry = pieces[0][0].start if pieces else m.element.offset(d).end
@@ -213,9 +213,10 @@ class ContourInterpolator(Controller):
                 path = [ToolMove(e, False, self.feed, k + 1) for e, k in pieces]
             except CornerError as err:
                 k = err.index
+                reason = err.describe([f"segment {j + 1}" for j in range(len(self.contour))])
                 path, self.geometry_error = [], str(GeometryError(
                     f"point[{k + 1}]", self.points[k], f"segment {k + 1} (point[{k + 1}] -> "
-                    f"point[{(k + 1) % len(self.points) + 1}]): {err.describe(lambda j: f'segment {j + 1}')}"))
+                    f"point[{(k + 1) % len(self.points) + 1}]): {reason}"))
         self.tool_path: list[ToolMove] = path
         has_arcs = any(isinstance(t.element, Arc) for t in path)
         self.path_accel = self.accel * (ARC_TANGENTIAL if has_arcs else 1.0)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..errors import NcfmuError
@@ -35,15 +35,15 @@ TWO_PI = 2.0 * math.pi
 
 class CornerError(NcfmuError):
     """The offset contour cannot be built at element ``index`` (0-based), for ``reason``; ``other`` is the
-    element it collides with, if any (:meth:`describe` names both in the caller's terms)."""
+    element it collides with, if any (:meth:`describe` names it in the caller's terms)."""
 
     def __init__(self, index: int, reason: str, other: int | None = None):
         self.index, self.reason, self.other = index, reason, other
-        super().__init__(self.describe(lambda k: f"element {k}"))
+        super().__init__(f"element {index}: {reason.replace('{other}', f'element {other}')}")
 
-    def describe(self, name: Callable[[int], str]) -> str:
-        """The reason, with the colliding element named by ``name(index)``."""
-        return self.reason.replace("{other}", name(self.other) if self.other is not None else "")
+    def describe(self, names: Sequence[str]) -> str:
+        """The reason, with the colliding element called ``names[other]``."""
+        return self.reason.replace("{other}", names[self.other] if self.other is not None else "")
 
 
 @dataclass(frozen=True)
