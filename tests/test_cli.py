@@ -43,3 +43,32 @@ def test_input_csv_drives_an_unconnected_input(project, tmp_path):
     r = simulate("lathe_taper", stop_time=1.0, input_csv=csv_file)
     t, mfin = r.time, r["panel.mfin"]
     assert not mfin[t < 0.699].any() and mfin[t > 0.701].all()
+
+
+def test_run_changes_no_file_of_the_checkout(project, tmp_path):
+    """Issue 14: a run builds what is missing and nothing else; the checkout (sources, generated SSP and docs,
+    built FMUs and archives) is byte-for-byte and timestamp-for-timestamp as before."""
+    import os
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    skip = {".git", "__pycache__", ".pytest_cache", ".hypothesis", ".ruff_cache", ".mypy_cache"}
+
+    def snapshot():
+        files = {}
+        for dirpath, dirnames, filenames in os.walk(root):
+            dirnames[:] = [d for d in dirnames if d not in skip]
+            for name in filenames:
+                st = os.stat(os.path.join(dirpath, name))
+                files[os.path.join(dirpath, name)] = (st.st_size, st.st_mtime_ns)
+        return files
+
+    before = snapshot()
+    done = subprocess.run([shutil.which("ncfmu"), "run", "mill_contour", "--stop-time", "0.5", "--out", str(tmp_path)],
+                          cwd=root, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    after = snapshot()
+    changed = sorted(p for p in before.keys() | after.keys() if before.get(p) != after.get(p))
+    assert changed == []

@@ -43,6 +43,7 @@ import numpy as np
 
 from .checks import path_distance
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
+from .files import write_atomic
 
 SUMMARY = "summary.csv"
 STATUSES = ("ok", "failed", "timeout")
@@ -234,10 +235,7 @@ def trajectory_csv(data: np.ndarray) -> bytes:
 
 
 def _write_bytes(path: Path, data: bytes) -> None:
-    part = path.with_name(path.name + ".part")
-    with open(part, "wb") as f:
-        f.write(data)
-    part.replace(path)
+    write_atomic(path, data)
 
 
 def _complete(path: Path, rows: str) -> bool:

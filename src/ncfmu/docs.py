@@ -117,6 +117,7 @@ def write_docs(root: Path, fmus: list[Path]) -> list[Path]:
     """Write docs/fmus/*.md from the built FMUs and docs/systems/*.md from the system definitions."""
     import zipfile
 
+    from .files import write_if_changed
     from .systems import MODELS, SYSTEMS, get_system
     written = []
     (root / "docs" / "fmus").mkdir(parents=True, exist_ok=True)
@@ -126,10 +127,10 @@ def write_docs(root: Path, fmus: list[Path]) -> list[Path]:
             md = z.read("modelDescription.xml")
         logic = MODELS[fmu.stem]
         path = root / "docs" / "fmus" / f"{fmu.stem}.md"
-        path.write_text(fmu_markdown(md, logic))
+        write_if_changed(path, fmu_markdown(md, logic).encode())
         written.append(path)
     for name in SYSTEMS:
         path = root / "docs" / "systems" / f"{name}.md"
-        path.write_text(system_markdown(get_system(name)))
+        write_if_changed(path, system_markdown(get_system(name)).encode())
         written.append(path)
     return written

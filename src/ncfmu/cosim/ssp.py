@@ -13,6 +13,7 @@ tools read the same way. Every .ssv carries the same set name, :data:`PARAMETER_
 
 from __future__ import annotations
 
+import io
 import math
 import xml.etree.ElementTree as ET
 import zipfile
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SystemDefinitionError
+from ..files import write_if_changed
 from ..ports import UNITS
 
 NS = {
@@ -162,12 +164,13 @@ def write_system(system: System, folder: Path) -> Path:
     """Write ``folder/<system>/SystemStructure.ssd`` and its .ssv files; return the system folder."""
     out = Path(folder) / system.name
     (out / "resources").mkdir(parents=True, exist_ok=True)
+    write_if_changed(out / SSD_NAME, ssd_document(system))
+    wanted = {f"{comp.name}.ssv": ssv_document(comp.parameters) for comp in system.components if comp.parameters}
     for old in (out / "resources").glob("*.ssv"):
-        old.unlink()
-    (out / SSD_NAME).write_bytes(ssd_document(system))
-    for comp in system.components:
-        if comp.parameters:
-            (out / "resources" / f"{comp.name}.ssv").write_bytes(ssv_document(comp.parameters))
+        if old.name not in wanted:
+            old.unlink()
+    for name, data in wanted.items():
+        write_if_changed(out / "resources" / name, data)
     return out
 
 
@@ -175,8 +178,8 @@ def pack(system_folder: Path, fmus_dir: Path, archive: Path) -> Path:
     """Pack a system folder and the FMUs it uses into an .ssp archive."""
     system_folder, archive = Path(system_folder), Path(archive)
     system = read_ssd(system_folder / SSD_NAME)
-    partial = archive.with_suffix(".ssp.part")
-    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+    packed = io.BytesIO()
+    with zipfile.ZipFile(packed, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(system_folder / SSD_NAME, SSD_NAME)
         for ssv in sorted((system_folder / "resources").glob("*.ssv")):
             z.write(ssv, f"resources/{ssv.name}")
@@ -185,7 +188,8 @@ def pack(system_folder: Path, fmus_dir: Path, archive: Path) -> Path:
             if not fmu.is_file():
                 raise SystemDefinitionError(f"{system.name}: FMU {fmu} is missing (run 'ncfmu build')")
             z.write(fmu, f"resources/{model}.fmu", compress_type=zipfile.ZIP_STORED)
-    partial.replace(archive)
+    # entries carry their files' timestamps: unchanged inputs give the same bytes, and the archive stays as it is
+    write_if_changed(archive, packed.getvalue())
     return archive
 
 
