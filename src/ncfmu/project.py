@@ -15,6 +15,7 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
+from . import __version__
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.result import Result
@@ -24,25 +25,48 @@ from .fmi.builder import PACKAGE_DIR, build_all
 from .systems import SYSTEMS, get_system
 
 
+def _is_checkout(folder: Path) -> bool:
+    return (folder / "models" / "CutSequencer.py").is_file() and (folder / "pyproject.toml").is_file()
+
+
 def project_root() -> Path:
-    """The folder with ``models/``: ``$NCFMU_ROOT``, else the working directory or a parent of it,
-    else the checkout this package was installed from."""
+    """Where models are read and FMUs, systems (and, in a checkout, docs) are written.
+
+    ``$NCFMU_ROOT`` when set; else the ncfmu checkout holding the working directory; else the checkout an
+    editable install points at; else (an installed wheel, anywhere) a per-version user cache,
+    ``$NCFMU_CACHE`` or ``$XDG_CACHE_HOME/ncfmu/<version>`` (``~/.cache/ncfmu/<version>``).
+    """
     env = os.environ.get("NCFMU_ROOT")
-    candidates = [Path(env)] if env else []
+    if env:
+        return Path(env)
     cwd = Path.cwd().resolve()
-    candidates += [cwd, *cwd.parents, PACKAGE_DIR.parents[1]]
-    for c in candidates:
-        if (c / "models" / "CutSequencer.py").is_file():
-            return c
-    raise SystemDefinitionError("cannot find the ncfmu project folder (with models/); set NCFMU_ROOT")
+    for folder in (cwd, *cwd.parents, PACKAGE_DIR.parents[1]):
+        if _is_checkout(folder):
+            return folder
+    cache = os.environ.get("NCFMU_CACHE")
+    if cache:
+        return Path(cache)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "ncfmu" / __version__
+
+
+def models_dir(root: Path) -> Path:
+    """The model scripts: the checkout's ``models/``, else the copy the wheel carries (``ncfmu.models``)."""
+    if (root / "models" / "CutSequencer.py").is_file():
+        return root / "models"
+    import ncfmu.models
+    return Path(ncfmu.models.__file__).parent
 
 
 def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[Path]]:
-    """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``."""
+    """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``;
+    in a checkout also write ``docs/``. Nothing whose content is already right is touched."""
     root = Path(root or project_root())
-    fmus = build_all(root / "models", root / "fmus", only_stale=only_stale)
-    from .docs import write_docs
-    write_docs(root, fmus)
+    (root / "fmus").mkdir(parents=True, exist_ok=True)
+    fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale)
+    if _is_checkout(root):
+        from .docs import write_docs
+        write_docs(root, fmus)
     archives = []
     for name in SYSTEMS:
         folder = write_system(get_system(name), root / "ssp")

@@ -16,14 +16,18 @@ What is written where (one home per fact):
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
+import os
 import re
 import shutil
+import sys
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -193,6 +197,27 @@ platform.</p>"""
 
 
 # -- the build ------------------------------------------------------------------------------------
+@contextlib.contextmanager
+def _output_to(log: Path) -> Iterator[None]:
+    """Send this process's stdout and stderr (file descriptors 1 and 2) to ``log`` meanwhile.
+
+    fmpy.build.build_platform_binary runs cmake with subprocess.check_call, which inherits our stdout: a
+    run that builds the servo would print CMake's chatter between its summary lines. Narrowest fix: the
+    descriptors, for the duration of the call; a failure shows the log's tail instead.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with open(log, "wb") as f:
+        os.dup2(f.fileno(), 1)
+        os.dup2(f.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
 def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
     """Build the native FMU ``m`` into ``dest_dir``; return its path."""
     from fmpy.build import build_platform_binary
@@ -216,14 +241,17 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
         (stage / "documentation").mkdir()
         extra = _design_html(m, stage)
         (stage / "documentation" / "index.html").write_bytes(fmu_html(md, m.logic, "its C sources", extra))
+        log = Path(tmp) / "cmake.log"
         try:
             # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint).
             (Path(tmp) / "build").mkdir()
-            build_platform_binary(stage, build_dir=Path(tmp) / "build",
-                                  cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm",
-                                                 "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
-        except Exception as err:  # fmpy raises CalledProcessError with the compiler's output above it
-            raise BuildError(f"{m.name}: compiling the native FMU failed: {err}") from err
+            with _output_to(log):
+                build_platform_binary(stage, build_dir=Path(tmp) / "build",
+                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm",
+                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
+        except Exception as err:  # fmpy raises CalledProcessError; the compiler's messages are in the log
+            tail = log.read_text(errors="replace").strip().splitlines()[-30:] if log.exists() else []
+            raise BuildError(f"{m.name}: compiling the native FMU failed: {err}\n" + "\n".join(tail)) from err
         target = dest_dir / f"{m.name}.fmu"
         partial = target.with_suffix(".fmu.part")
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:

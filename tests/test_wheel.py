@@ -1,0 +1,45 @@
+"""Issue 14: the wheel works -- installed (not editable) into a fresh venv, `ncfmu run` from a folder outside the
+checkout builds its FMUs into the user cache and runs a system closed loop."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.slow
+def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
+    dist, venv, work, cache = (tmp_path / d for d in ("dist", "venv", "work", "cache"))
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(dist), str(ROOT)],
+                   check=True, timeout=600, capture_output=True)
+    (wheel,) = dist.glob("ncfmu-*.whl")
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(wheel)], check=True, timeout=900,
+                   capture_output=True)
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("NCFMU_", "PYTHON", "VIRTUAL_ENV"))}
+    env["XDG_CACHE_HOME"] = str(cache)
+    done = subprocess.run([str(venv / "bin" / "ncfmu"), "run", "grinder_feed", "--out", "out"],
+                          cwd=work, env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr
+    # the package came from the venv, not from the checkout
+    where = subprocess.run([str(venv / "bin" / "python"), "-c", "import ncfmu; print(ncfmu.__file__)"],
+                           cwd=work, env=env, capture_output=True, text=True, check=True).stdout
+    assert str(venv) in where and str(ROOT) not in where
+    # built artefacts in the documented place: the user cache, per version
+    (built,) = (cache / "ncfmu").iterdir()
+    assert {p.name for p in (built / "fmus").glob("*.fmu")} == {
+        "AreaLimiter.fmu", "ContourInterpolator.fmu", "CutSequencer.fmu", "OperatorPanel.fmu",
+        "ProgrammableFeed.fmu", "ServoAxis.fmu"}
+    assert (built / "ssp" / "grinder_feed.ssp").is_file() and not (built / "docs").exists()
+    # the run itself: the seed's cycle ground to 4.3 mm (rapid 4.0, rough 0.2, fine 0.1) and returned
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("system grinder_feed: simulated")
+    assert "deepest X: 4.3000 mm" in done.stdout and "X at the end 0.0000 mm" in done.stdout
+    assert "alarm: no" in done.stdout
+    assert not any(line.startswith("--") for line in lines)            # no build chatter among the summary
+    assert (work / "out" / "grinder_feed.csv").is_file()
