@@ -38,12 +38,16 @@ import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .checks import path_distance
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
+
+if TYPE_CHECKING:
+    from .project import OpenSystem
 
 SUMMARY = "summary.csv"
 STATUSES = ("ok", "failed", "timeout")
@@ -100,7 +104,7 @@ def default_record(names: Sequence[str]) -> list[str]:
 
 
 # -- the worker side -------------------------------------------------------------------------------
-_OPEN: dict[str, object] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
+_OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
 
 
 def _cached_archive(digest: str, data: bytes) -> Path:
@@ -224,6 +228,7 @@ def trajectory_csv(data: np.ndarray) -> bytes:
     Formatted on the worker (fmpy's ``write_csv`` formats value by value, ~1 µs each, which on the client
     would hold up every other result)."""
     names = data.dtype.names
+    assert names is not None, "a trajectory is a structured array"
     columns = []
     for n in names:
         col = data[n]
@@ -354,7 +359,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         key = variant_key(v)
         old = rows.get(key)
         done = old is not None and old.get("status") in STATUSES and (
-            old["status"] != "ok" or _complete(out / "variants" / f"{key}.csv", old.get("rows", "")))
+            old["status"] != "ok" or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
         if not done:
             todo.append((key, v))
         if key not in rows:

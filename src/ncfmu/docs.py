@@ -16,9 +16,11 @@ from pathlib import Path
 def _variables(md_xml: bytes) -> list[dict[str, str]]:
     root = ET.fromstring(md_xml)
     rows = []
-    for sv in root.find("ModelVariables"):
+    variables = root.find("ModelVariables")
+    assert variables is not None, "a modelDescription has ModelVariables"
+    for sv in variables:
         typed = sv[0]
-        rows.append({"name": sv.get("name"), "causality": sv.get("causality", ""), "type": typed.tag,
+        rows.append({"name": sv.get("name", ""), "causality": sv.get("causality", ""), "type": typed.tag,
                      "unit": typed.get("unit", ""), "start": typed.get("start", ""),
                      "range": " .. ".join(x for x in (typed.get("min", ""), typed.get("max", "")) if x) if
                      (typed.get("min") or typed.get("max")) else "",
@@ -32,7 +34,8 @@ def _behaviour(logic) -> str:
 
 def _compact(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     """Fold indexed ports (block[1..8].Xd) into one row each, so the table stays readable."""
-    out, seen = [], {}
+    out: list[dict[str, str]] = []
+    seen: dict[str, dict[str, str]] = {}
     for r in rows:
         name = r["name"]
         if "[" in name:
@@ -61,7 +64,8 @@ def fmu_html(md_xml: bytes, logic, built_with: str = "pythonfmu", extra: str = "
         "<tr>" + "".join(f"<td>{html.escape(str(r[c]))}</td>" for c in ("name", "causality", "type", "unit",
                                                                        "start", "range", "description")) + "</tr>"
         for r in rows)
-    exp = root.find("DefaultExperiment")
+    exp, cosim = root.find("DefaultExperiment"), root.find("CoSimulation")
+    assert exp is not None and cosim is not None, "an enriched modelDescription has both (modeldesc.enrich)"
     version = html.escape(root.get("version", ""))
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{logic.MODEL_NAME}</title>
@@ -72,7 +76,7 @@ padding:2px 6px;text-align:left;vertical-align:top}}table{{border-collapse:colla
 <p>{html.escape(logic.DESCRIPTION)}</p>
 <p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
 Default experiment: step {exp.get("stepSize")} s, stop {exp.get("stopTime")} s.
-Capabilities: canGetAndSetFMUstate = {root.find("CoSimulation").get("canGetAndSetFMUstate")}.</p>
+Capabilities: canGetAndSetFMUstate = {cosim.get("canGetAndSetFMUstate")}.</p>
 <h2>Behaviour</h2>
 <pre>{html.escape(_behaviour(logic))}</pre>
 <h2>Interface</h2>

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .ports import to_float, to_int
+
 
 def _plt():
     import matplotlib
@@ -29,10 +31,10 @@ def _system_parameters(system: str) -> dict[str, dict[str, object]]:
     return {c.name: dict(c.parameters) for c in get_system(system).components}
 
 
-def _table(params: dict[str, object]) -> list[tuple[float, float, float]]:
-    n = int(params.get("n_regions", 0))
-    return [(float(params[f"region[{i}].ref_max"]), float(params[f"region[{i}].lim_min"]),
-             float(params[f"region[{i}].lim_max"])) for i in range(1, n + 1)]
+def _table(params: Mapping[str, object]) -> list[tuple[float, float, float]]:
+    n = to_int(params.get("n_regions", 0))
+    return [(to_float(params[f"region[{i}].ref_max"]), to_float(params[f"region[{i}].lim_min"]),
+             to_float(params[f"region[{i}].lim_max"])) for i in range(1, n + 1)]
 
 
 def _commands(result, axis: str) -> str | None:
@@ -165,7 +167,7 @@ def plot_sweep(summary_csv: Path, path: Path) -> Path:
     x_name = varied[0]
     fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 2.6 * max(1, len(metrics))), squeeze=False)
     for ax, metric in zip(axes[:, 0], metrics):
-        groups = {}
+        groups: dict[str, list[tuple[float, float]]] = {}
         for r in ok:
             label = ", ".join(f"{v}={r[v]}" for v in varied[1:]) or metric
             try:

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, SupportsFloat, SupportsIndex, SupportsInt
 
 PortType = Literal["Real", "Integer", "Boolean", "String"]
 Causality = Literal["parameter", "input", "output"]
+#: The value of one variable: a Real, Integer, Boolean or String.
+Value = float | int | bool | str
 
 #: Units used by the ports, as (name, SI base-unit exponents, factor) for ``UnitDefinitions``.
 UNITS: dict[str, dict] = {
@@ -46,7 +48,7 @@ class Port:
         FMI name, structured for indexed items (``block[1].Xd``).
     causality : {"parameter", "input", "output"}
     type : {"Real", "Integer", "Boolean", "String"}
-    start : object
+    start : float, int, bool or str
         Start value (required for parameters and inputs).
     unit : str, optional
         Unit of a Real (one of :data:`UNITS`).
@@ -64,7 +66,7 @@ class Port:
     name: str
     causality: Causality
     type: PortType = "Real"
-    start: object = None
+    start: Value | None = None
     unit: str | None = None
     description: str = ""
     min: float | None = None
@@ -98,7 +100,7 @@ class Port:
             return f"must be <= {self.max:g}"
         return "must be finite"
 
-    def check(self, value: object) -> object:
+    def check(self, value: object) -> Value:
         """The value as the port's type, if it keeps the port's rule; else :class:`~ncfmu.errors.ConfigError`.
 
         Nothing is rounded: an Integer must be a whole number, a Boolean a bool (or 0/1).
@@ -113,7 +115,7 @@ class Port:
                 return bool(value)
             raise ConfigError(self.name, value, "must be true or false")
         try:
-            x = float(value)  # type: ignore[arg-type]
+            x = to_float(value)
         except (TypeError, ValueError):
             raise ConfigError(self.name, value, "must be a number") from None
         if not math.isfinite(x):
@@ -125,11 +127,29 @@ class Port:
             raise ConfigError(self.name, value, self.rule())
         return int(x) if self.type == "Integer" else x
 
-    def default(self) -> object:
+    def default(self) -> Value:
         """The start value, or the type's zero for an output without one."""
         if self.start is not None:
             return self.start
-        return {"Real": 0.0, "Integer": 0, "Boolean": False, "String": ""}[self.type]
+        zero: dict[PortType, Value] = {"Real": 0.0, "Integer": 0, "Boolean": False, "String": ""}
+        return zero[self.type]
+
+
+def to_float(value: object) -> float:
+    """``float(value)`` of a value known only as ``object`` (a parameter or an input as a host set it):
+    the same result, and the same TypeError or ValueError, as ``float()``."""
+    if isinstance(value, (float, int, str, bytes, bytearray, SupportsFloat, SupportsIndex)):
+        return float(value)
+    raise TypeError(f"float() argument must be a string or a real number, not '{type(value).__name__}'")
+
+
+def to_int(value: object) -> int:
+    """``int(value)`` of a value known only as ``object``: the same result, and the same TypeError or
+    ValueError, as ``int()``."""
+    if isinstance(value, (int, float, str, bytes, bytearray, SupportsInt, SupportsIndex)):
+        return int(value)
+    raise TypeError(f"int() argument must be a string, a bytes-like object or a real number, "
+                    f"not '{type(value).__name__}'")
 
 
 def real(name: str, causality: Causality, start: float | None = None, unit: str | None = None,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from . import __version__
@@ -170,7 +170,7 @@ def validate(root: Path | None = None) -> list[str]:
     return problems
 
 
-def simulate_branches(system: str, branch_time: float, variants: list[Mapping[str, object]],
+def simulate_branches(system: str, branch_time: float, variants: Sequence[Mapping[str, object]],
                       stop_time: float | None = None, start_values: Mapping[str, object] | None = None,
                       mode: str = "gauss-seidel", root: Path | None = None) -> list[Result]:
     """Run ``system`` to ``branch_time`` once, then every variant from the saved FMU states.

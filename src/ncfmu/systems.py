@@ -12,6 +12,7 @@ from .controllers import AreaLimiter, ContourInterpolator, CutSequencer, Operato
 from .controllers.base import Controller
 from .cosim.ssp import Component, Connection, System
 from .errors import SystemDefinitionError
+from .ports import to_float, to_int
 from .servo.axis import ServoAxis
 
 MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis, AreaLimiter,
@@ -24,9 +25,10 @@ def _component(name: str, model: str, **parameters: object) -> Component:
     for key in parameters:
         if key not in known:
             raise SystemDefinitionError(f"{model} has no parameter {key!r}")
-    connectors = [(p.name, p.causality, p.type, p.unit) for p in logic.PORTS if p.causality in ("input", "output")]
-    typed = {k: (int(v) if known[k].type == "Integer" else bool(v) if known[k].type == "Boolean"
-                 else float(v) if known[k].type == "Real" else v) for k, v in parameters.items()}
+    connectors: list[tuple[str, str, str, str | None]] = [
+        (p.name, p.causality, p.type, p.unit) for p in logic.PORTS if p.causality in ("input", "output")]
+    typed = {k: (to_int(v) if known[k].type == "Integer" else bool(v) if known[k].type == "Boolean"
+                 else to_float(v) if known[k].type == "Real" else v) for k, v in parameters.items()}
     return Component(name, model, typed, connectors)
 
 

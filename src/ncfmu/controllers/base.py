@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError, require
-from ..ports import Port, boolean, real
+from ..ports import Port, boolean, real, to_float, to_int
 
 
 class Controller:
@@ -107,7 +107,7 @@ def real_param(values: Mapping[str, object], name: str, *, positive: bool = Fals
                nonnegative: bool = False, lo: float | None = None, hi: float | None = None) -> float:
     value = values[name]
     try:
-        x = float(value)  # type: ignore[arg-type]
+        x = to_float(value)
     except (TypeError, ValueError):
         raise ConfigError(name, value, "must be a number") from None
     require(math.isfinite(x), name, value, "must be finite")
@@ -127,7 +127,7 @@ def int_param(values: Mapping[str, object], name: str, lo: int | None = None, hi
     if isinstance(value, float):
         require(math.isfinite(value) and value == int(value), name, value, "must be a whole number")
     try:
-        n = int(value)  # type: ignore[arg-type]
+        n = to_int(value)
     except (TypeError, ValueError):
         raise ConfigError(name, value, "must be a whole number") from None
     if lo is not None and hi is not None:

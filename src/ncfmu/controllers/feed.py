@@ -313,8 +313,7 @@ class ProgrammableFeed(Controller):
         self._counting = counting
         self.move.begin(start, end, rate)
 
-    def _word_done(self, inputs: Mapping[str, object]) -> bool:
-        word = self.word
+    def _word_done(self, word: Word, inputs: Mapping[str, object]) -> bool:
         if word.kind in ("feed", "return"):
             self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
             # in-position answers the final command only after one round trip through the master;
@@ -444,7 +443,7 @@ class ProgrammableFeed(Controller):
                 self._mfin_stuck_said = True
                 self.say("warning", f"t = {t:.4f} s: M{word.m} (M{self.pc}) waits for MFIN to drop: it is still "
                                     "high (the auxiliary device has not released the previous answer)")
-            if self._word_done(inputs):
+            if self._word_done(word, inputs):
                 if word.kind == "aux":
                     self.m_active = 0
                 self._waiting = 0.0

@@ -114,7 +114,9 @@ class AreaLimiter(Controller):
 
     def configure(self, values: Mapping[str, object]) -> None:
         n = int_param(values, "n_regions", 1, MAX_REGIONS)
-        bounds, lows, highs = [], [], []
+        bounds: list[float] = []
+        lows: list[float] = []
+        highs: list[float] = []
         for i in range(1, n + 1):
             b = real_param(values, f"region[{i}].ref_max")
             lo = real_param(values, f"region[{i}].lim_min")
@@ -123,7 +125,9 @@ class AreaLimiter(Controller):
                 require(b > bounds[-1], f"region[{i}].ref_max", b,
                         f"boundaries must increase strictly (region[{i - 1}].ref_max = {bounds[-1]:g})")
             require(lo <= hi, f"region[{i}].lim_min", lo, f"must be <= region[{i}].lim_max = {hi:g}")
-            bounds.append(b), lows.append(lo), highs.append(hi)
+            bounds.append(b)
+            lows.append(lo)
+            highs.append(hi)
         self.n_regions = n
         self.ref_max, self.lim_min, self.lim_max = bounds, lows, highs
         self.monitor_period = real_param(values, "monitor_period", positive=True)

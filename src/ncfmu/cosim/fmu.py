@@ -15,6 +15,7 @@ import math
 import shutil
 import tempfile
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from fmpy.fmi2 import (
 )
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError
+from ..ports import Value
 from .slave import Variable
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
@@ -53,20 +55,25 @@ INT32 = (-2 ** 31, 2 ** 31 - 1)
 MAX_UNPACKED = 2 ** 30
 
 
-def typed_value(qualified: str, fmi_type: str, value: object) -> object:
-    """``value`` as an FMI ``fmi_type`` value, or :class:`ConfigError` -- never rounded, wrapped or guessed."""
+def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
+    """``value`` as an FMI ``fmi_type`` value, or :class:`ConfigError` -- never rounded, wrapped or guessed.
+
+    A Real is returned as a float, an Integer or Enumeration as an int, a Boolean as a bool, a String as a str.
+    """
     if fmi_type == "Real":
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise ConfigError(qualified, value, "must be a number")
         return float(value)
     if fmi_type in ("Integer", "Enumeration"):
-        whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool) or (
-            isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer())
-        if not whole:
+        if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+            whole = int(value)
+        elif isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+            whole = int(value)
+        else:
             raise ConfigError(qualified, value, "must be a whole number")
-        if not INT32[0] <= int(value) <= INT32[1]:
+        if not INT32[0] <= whole <= INT32[1]:
             raise ConfigError(qualified, value, f"must be a whole number in {INT32[0]}..{INT32[1]} (fmi2Integer)")
-        return int(value)
+        return whole
     if fmi_type == "Boolean":
         if isinstance(value, (bool, np.bool_)) or value in (0, 1):
             return bool(value)
@@ -95,6 +102,14 @@ def safe_extract(archive: Path, target: Path) -> Path:
         z.extractall(target)
     return target
 
+
+def _parse_boolean(text: object) -> bool:
+    return str(text).lower() in ("true", "1")
+
+
+#: A start value of the modelDescription as the variable's type.
+_START: dict[str, Callable[[str], object]] = {"Real": float, "Integer": int, "Boolean": _parse_boolean,
+                                              "String": str, "Enumeration": int}
 
 _UNPACKED: dict[str, UnpackedFmu] = {}
 _CACHE_ROOT: list[Path] = []
@@ -147,8 +162,7 @@ class UnpackedFmu:
         for v in md.modelVariables:
             start = v.start
             if start is not None:
-                start = {"Real": float, "Integer": int, "Boolean": lambda s: str(s).lower() in ("true", "1"),
-                         "String": str, "Enumeration": int}[v.type](start)
+                start = _START[v.type](start)
             self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
                                               getattr(v, "unit", None), start, v.description or "")
 
@@ -186,9 +200,9 @@ class FmuSlave:
         self._reads: list[tuple] = []
         self._writes: list[tuple] = []
         self._sent: list[bytes | None] = []
-        self._raw = None                       # our own handle of the FMU library (see bind)
-        self._raw_component = None
-        self._raw_step = None
+        self._raw: ctypes.CDLL | None = None   # our own handle of the FMU library (see bind)
+        self._raw_component: ctypes.c_void_p | None = None
+        self._raw_step: Callable[..., int] | None = None
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
@@ -200,7 +214,7 @@ class FmuSlave:
         errors = [msg for lvl, msg in recent if lvl == "error"]
         said = "; ".join(errors) if errors else "; ".join(f"[{lvl}] {msg}" for lvl, msg in recent
                                                               if lvl in ("fatal", "warning"))
-        return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, status).capitalize()}"
+        return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {said}" if said else ""))
 
     def _check(self, what: str, status: int) -> None:
@@ -213,17 +227,21 @@ class FmuSlave:
         v = self.variables.get(name)
         if v is None:
             raise SystemDefinitionError(f"{self.name} has no variable {name!r}")
-        value = typed_value(f"{self.name}.{name}", v.type, value)
+        typed = typed_value(f"{self.name}.{name}", v.type, value)
         vr = (ctypes.c_uint * 1)(v.vr)
+        # typed_value returned a float for a Real, an int for an Integer, a str for a String
         if v.type == "Real":
-            status = self._dll.fmi2SetReal(self._component, vr, 1, (ctypes.c_double * 1)(value))
+            assert isinstance(typed, float)
+            status = self._dll.fmi2SetReal(self._component, vr, 1, (ctypes.c_double * 1)(typed))
         elif v.type in ("Integer", "Enumeration"):
-            status = self._dll.fmi2SetInteger(self._component, vr, 1, (ctypes.c_int * 1)(value))
+            assert isinstance(typed, int)
+            status = self._dll.fmi2SetInteger(self._component, vr, 1, (ctypes.c_int * 1)(typed))
         elif v.type == "Boolean":
-            status = self._dll.fmi2SetBoolean(self._component, vr, 1, (ctypes.c_int * 1)(1 if value else 0))
+            status = self._dll.fmi2SetBoolean(self._component, vr, 1, (ctypes.c_int * 1)(1 if typed else 0))
         else:
-            status = self._dll.fmi2SetString(self._component, vr, 1, (ctypes.c_char_p * 1)(value.encode()))
-        self._check(f"setting {name} = {value!r}", status)
+            assert isinstance(typed, str)
+            status = self._dll.fmi2SetString(self._component, vr, 1, (ctypes.c_char_p * 1)(typed.encode()))
+        self._check(f"setting {name} = {typed!r}", status)
 
     def initialize(self, start_time: float, stop_time: float) -> None:
         for what, call in (("fmi2SetupExperiment", lambda: self._dll.fmi2SetupExperiment(
@@ -241,8 +259,9 @@ class FmuSlave:
         if self._raw is None:
             self._raw = ctypes.CDLL(self._dll._name)
             self._raw_component = ctypes.c_void_p(self._component)
-            self._raw_step = self._raw.fmi2DoStep
-            self._raw_step.restype = ctypes.c_int
+            step = self._raw.fmi2DoStep
+            step.restype = ctypes.c_int
+            self._raw_step = step
             self._t, self._h, self._true = ctypes.c_double(), ctypes.c_double(), ctypes.c_int(1)
         setter = getattr(self._raw, f"fmi2Set{kind}")
         getter = getattr(self._raw, f"fmi2Get{kind}")

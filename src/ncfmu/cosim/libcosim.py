@@ -65,9 +65,9 @@ def _run_here(archive: Path, stop_time: float, step_size: float = 1e-3, outputs_
                 continue
             if outputs_only and v.causality != CosimVariableCausality.OUTPUT.value:
                 continue
-            kind = kinds[v.type]
-            observer.start_time_series(info.index, v.reference, kind[1])
-            watched.append((f"{instance}.{v.name.decode()}", info.index, v.reference, kind))
+            spec = kinds[v.type]
+            observer.start_time_series(info.index, v.reference, spec[1])
+            watched.append((f"{instance}.{v.name.decode()}", info.index, v.reference, spec))
     wall0 = time.perf_counter()
     if not execution.simulate_until(n_steps * step_ns):
         raise SimulationError(f"libcosim stopped before {stop_time} s simulating {archive}")

@@ -16,14 +16,14 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import SimulationTimeout, SystemDefinitionError
 from .result import Result
-from .slave import DTYPES, KINDS, Slave
+from .slave import DTYPES, KINDS, Slave, StatefulSlave
 from .ssp import System
 
 MODES = ("gauss-seidel", "jacobi")
@@ -116,12 +116,12 @@ class Master:
     Parameters
     ----------
     system : System
-    slaves : list of Slave
+    slaves : sequence of Slave
         One per component, in the system's order, already instantiated.
     mode : {"gauss-seidel", "jacobi"}
     """
 
-    def __init__(self, system: System, slaves: list[Slave], mode: str = "gauss-seidel") -> None:
+    def __init__(self, system: System, slaves: Sequence[Slave], mode: str = "gauss-seidel") -> None:
         if mode not in MODES:
             raise SystemDefinitionError(f"mode = {mode!r}: must be one of {', '.join(MODES)}")
         self.system, self.slaves, self.mode = system, slaves, mode
@@ -130,7 +130,7 @@ class Master:
 
     # -- checks before anything runs ------------------------------------------------------------
     def check_connections(self) -> None:
-        seen_inputs = {}
+        seen_inputs: dict[tuple[str, str], str] = {}
         for c in self.system.connections:
             for inst in (c.start_element, c.end_element):
                 if inst not in self.by_name:
@@ -178,7 +178,7 @@ class Master:
         wall = self._loop(run, 0, run.n_steps, progress, deadline)
         return self._assemble(run, run.rec, wall)
 
-    def run_branches(self, branch_time: float, variants: list[Mapping[str, object]],
+    def run_branches(self, branch_time: float, variants: Sequence[Mapping[str, object]],
                      stop_time: float | None = None, step_size: float | None = None,
                      start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None,
                      start_time: float = 0.0) -> list[Result]:
@@ -187,20 +187,21 @@ class Master:
         A variant sets tunable parameters or inputs (``INSTANCE.VARIABLE`` -> value) at the branch
         point, e.g. ``{"panel.emergency_at": 12.5}``. Each result covers the whole run.
         """
+        stateful = [self._stateful(s) for s in self.slaves]
         run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
         k = int(round((branch_time - start_time) / run.h))
         if not 0 < k < run.n_steps:
             raise SystemDefinitionError(f"branch time {branch_time} s must lie inside the run "
                                         f"({start_time}..{start_time + run.n_steps * run.h} s)")
         wall = self._loop(run, 0, k)
-        states = [s.get_state() for s in self.slaves]
+        states = [holder.get_state() for holder in stateful]
         prefix = {kind: run.rec[kind][:k + 1].copy() for kind in KINDS}
         vector = {kind: run.values[kind].copy() for kind in KINDS}
         results = []
         try:
             for variant in variants:
-                for s, state in zip(self.slaves, states):
-                    s.set_state(state)
+                for holder, state in zip(stateful, states):
+                    holder.set_state(state)
                 for kind in KINDS:
                     run.values[kind][:] = vector[kind]
                     run.rec[kind][:k + 1] = prefix[kind]
@@ -211,9 +212,15 @@ class Master:
                     s.read_outputs()
                 results.append(self._assemble(run, run.rec, wall + self._loop(run, k, run.n_steps)))
         finally:
-            for s, state in zip(self.slaves, states):
-                s.free_state(state)
+            for holder, state in zip(stateful, states):
+                holder.free_state(state)
         return results
+
+    @staticmethod
+    def _stateful(slave: Slave) -> StatefulSlave:
+        if not isinstance(slave, StatefulSlave):
+            raise SystemDefinitionError(f"{slave.name} cannot save and restore its state: no branching")
+        return slave
 
     def _prepare(self, stop_time, step_size, start_values, inputs, start_time) -> _Run:
         stop = self.system.stop_time if stop_time is None else float(stop_time)
@@ -346,7 +353,7 @@ class Master:
         return _time.perf_counter() - wall0
 
     def _assemble(self, run: _Run, rec, wall: float) -> Result:
-        dtype = [("time", np.float64)]
+        dtype: list[tuple[str, type[np.generic]]] = [("time", np.float64)]
         for k in KINDS:
             dtype += [(q, np.float64 if k == "Real" else (np.bool_ if k == "Boolean" else np.int32))
                       for q in run.record_names[k]]

@@ -26,8 +26,15 @@ class Result:
         return self.data["time"]
 
     @property
+    def _fields(self) -> tuple[str, ...]:
+        """``time`` and the recorded ``INSTANCE.VARIABLE`` names: the structured array's fields."""
+        fields = self.data.dtype.names
+        assert fields is not None, "a result is a structured array"
+        return fields
+
+    @property
     def names(self) -> list[str]:
-        return list(self.data.dtype.names[1:])
+        return list(self._fields[1:])
 
     def __getitem__(self, name: str) -> np.ndarray:
         try:
@@ -36,7 +43,7 @@ class Result:
             raise KeyError(f"no recorded variable {name!r}; recorded: {', '.join(self.names[:12])}...") from None
 
     def __contains__(self, name: str) -> bool:
-        return name in self.data.dtype.names
+        return name in self._fields
 
     @property
     def realtime_factor(self) -> float:
@@ -49,7 +56,7 @@ class Result:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         # Booleans as 0/1: fmpy writes numpy bools as "False", which its own read_csv cannot parse.
-        dtype = [(n, np.int32 if self.data.dtype[n] == np.bool_ else self.data.dtype[n]) for n in self.data.dtype.names]
+        dtype = [(n, np.int32 if self.data.dtype[n] == np.bool_ else self.data.dtype[n]) for n in self._fields]
         write_csv(str(path), self.data.astype(dtype))
         return path
 

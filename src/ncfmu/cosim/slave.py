@@ -22,7 +22,7 @@ Buffers are float64 for Real and int32 for Integer and Boolean (FMI's fmi2Boolea
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -55,3 +55,12 @@ class Slave(Protocol):
     def do_step(self, t: float, h: float) -> None: ...
     def read_outputs(self) -> None: ...
     def terminate(self) -> None: ...
+
+
+@runtime_checkable
+class StatefulSlave(Slave, Protocol):
+    """A slave that saves and restores its state (FMUs with canGetAndSetFMUstate): what branching needs."""
+
+    def get_state(self) -> object: ...
+    def set_state(self, state: object) -> None: ...
+    def free_state(self, state: object) -> None: ...

@@ -213,21 +213,29 @@ def _parse_value(el: ET.Element, where: str) -> object:
         raise SystemDefinitionError(f"{where}: {raw!r} is not a valid {tag}") from None
 
 
+def _attribute(element: ET.Element, name: str, where: object) -> str:
+    """An attribute the element cannot do without."""
+    value = element.get(name)
+    if value is None:
+        raise SystemDefinitionError(f"{where}: {element.tag.split('}')[-1]} without a {name} attribute")
+    return value
+
+
 def _parameter_set(root: ET.Element, where: str) -> dict[str, object]:
     values = {}
     for p in root.iter(_q("ssv:Parameter")):
         typed = [child for child in p if child.tag.startswith("{" + NS["ssv"])]
         if not typed:
             raise SystemDefinitionError(f"{where}: parameter {p.get('name')!r} has no value element")
-        values[p.get("name")] = _parse_value(typed[0], f"{where}: parameter {p.get('name')}")
+        values[_attribute(p, "name", where)] = _parse_value(typed[0], f"{where}: parameter {p.get('name')}")
     return values
 
 
 def _time_attribute(path: Path, element: ET.Element, name: str) -> float:
     raw = element.get(name)
     try:
-        value = float(raw)
-    except (TypeError, ValueError):
+        value = float(raw if raw is not None else "")     # a missing attribute is refused as an empty one
+    except ValueError:
         raise SystemDefinitionError(f"{path}: {name}={raw!r}: must be a time in seconds") from None
     if not math.isfinite(value) or value < 0:
         raise SystemDefinitionError(f"{path}: {name}={raw!r}: must be a finite time >= 0")
@@ -261,19 +269,22 @@ def read_ssd(path: Path, read_file=None) -> System:
     if root.tag != _q("ssd:SystemStructureDescription"):
         raise SystemDefinitionError(f"{path}: root element is {root.tag}, expected ssd:SystemStructureDescription")
     sys_el = root.find(_q("ssd:System"))
-    if sys_el is None or sys_el.find(_q("ssd:Elements")) is None:
+    elements = sys_el.find(_q("ssd:Elements")) if sys_el is not None else None
+    if sys_el is None or elements is None:
         raise SystemDefinitionError(f"{path}: no ssd:System with ssd:Elements (the components) in it")
     components = []
-    for comp in sys_el.find(_q("ssd:Elements")).findall(_q("ssd:Component")):
-        name, source = comp.get("name"), comp.get("source", "")
+    for comp in elements.findall(_q("ssd:Component")):
+        name, source = _attribute(comp, "name", path), comp.get("source", "")
         if not source.startswith("resources/") or not source.endswith(".fmu"):
             raise SystemDefinitionError(f"{path}: component {name}: source {source!r} must be resources/<Model>.fmu")
         model = source[len("resources/"):-len(".fmu")]
-        connectors = []
+        connectors: list[tuple[str, str, str, str | None]] = []
         for con in comp.iterfind(f"{_q('ssd:Connectors')}/{_q('ssd:Connector')}"):
             typed = list(con)
             typ = typed[0].tag.split("}")[-1] if typed else "Real"
-            connectors.append((con.get("name"), con.get("kind"), typ, typed[0].get("unit") if typed else None))
+            where = f"{path}: component {name}"
+            connectors.append((_attribute(con, "name", where), _attribute(con, "kind", where), typ,
+                               typed[0].get("unit") if typed else None))
         params: dict[str, object] = {}
         for binding in comp.iterfind(f"{_q('ssd:ParameterBindings')}/{_q('ssd:ParameterBinding')}"):
             prefix = binding.get("prefix", "")
@@ -289,8 +300,8 @@ def read_ssd(path: Path, read_file=None) -> System:
             for k, v in values.items():
                 params[k[len(prefix):] if prefix and k.startswith(prefix) else k] = v
         components.append(Component(name, model, params, connectors))
-    connections = [Connection(c.get("startElement"), c.get("startConnector"),
-                              c.get("endElement"), c.get("endConnector"))
+    connections = [Connection(_attribute(c, "startElement", path), _attribute(c, "startConnector", path),
+                              _attribute(c, "endElement", path), _attribute(c, "endConnector", path))
                    for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
     exp = root.find(_q("ssd:DefaultExperiment"))
     stop = _time_attribute(path, exp, "stopTime") if exp is not None and exp.get("stopTime") else math.nan
@@ -300,7 +311,8 @@ def read_ssd(path: Path, read_file=None) -> System:
         step = _time_attribute(path, fixed, "baseStepSize")
         if not step > 0:
             raise SystemDefinitionError(f"{path}: baseStepSize = {step!r}: must be > 0")
-    return System(root.get("name"), components, connections, stop, step, sys_el.get("description", ""))
+    return System(_attribute(root, "name", path), components, connections, stop, step,
+                  sys_el.get("description", ""))
 
 
 def read_ssp(archive: Path) -> System:

@@ -68,8 +68,8 @@ class ControllerSlave(Fmi2Slave):
             repeats = [i for i, p in enumerate(sys.path) if p and Path(p) == Path(resources)][1:]
             for i in reversed(repeats):
                 del sys.path[i]
-        self._status_shim = bool(resources) and sys.platform.startswith("linux") and \
-            Path(resources, "ncfmu_status_shim").is_file()
+        self._status_shim = bool(resources and sys.platform.startswith("linux")
+                                 and Path(resources, "ncfmu_status_shim").is_file())
         type(self)._shim_present = self._status_shim
         for port in logic.PORTS:
             self._register(port)
@@ -79,7 +79,8 @@ class ControllerSlave(Fmi2Slave):
         self._fast_set: dict[tuple, object] = {}
         # The status shim picks this instance up right after pythonfmu created it (fmi2Instantiate,
         # fmi2Reset) and then reads outputs and writes inputs straight from/into these dicts.
-        sys.modules.setdefault("_ncfmu_fast", types.ModuleType("_ncfmu_fast")).last = self
+        fast = sys.modules.setdefault("_ncfmu_fast", types.ModuleType("_ncfmu_fast"))
+        vars(fast)["last"] = self
 
     # -- fast paths for the calls a master makes every step ---------------------------------------
     # pythonfmu's generic get/set check every variable's type and call its getter one by one; a
@@ -88,8 +89,8 @@ class ControllerSlave(Fmi2Slave):
         key = (kind, *vrs)
         fn = self._fast_get.get(key)
         if fn is None:
-            info = [self._causality.get(vr) for vr in vrs]
-            if all(i is not None and i[0] == "output" and i[1] == kind for i in info) and vrs:
+            info = [i for i in (self._causality.get(vr) for vr in vrs) if i is not None]
+            if vrs and len(info) == len(vrs) and all(i[0] == "output" and i[1] == kind for i in info):
                 pick = operator.itemgetter(*(i[2] for i in info))
                 fn = (lambda: [pick(self.out)]) if len(vrs) == 1 else (lambda: list(pick(self.out)))
             else:
@@ -101,8 +102,8 @@ class ControllerSlave(Fmi2Slave):
         key = (kind, *vrs)
         fn = self._fast_set.get(key, False)
         if fn is False:
-            info = [self._causality.get(vr) for vr in vrs]
-            if all(i is not None and i[0] == "input" and i[1] == kind for i in info) and vrs:
+            info = [i for i in (self._causality.get(vr) for vr in vrs) if i is not None]
+            if vrs and len(info) == len(vrs) and all(i[0] == "input" and i[1] == kind for i in info):
                 names = tuple(i[2] for i in info)
                 inputs = self.inputs
 
@@ -187,7 +188,8 @@ class ControllerSlave(Fmi2Slave):
     def _retune(self, name: str) -> bool:
         """Apply a tunable parameter set during the run; False (logged, flagged for the shim) if refused."""
         try:
-            self.logic.configure(self.parameters)                 # type: ignore[union-attr]
+            assert self.logic is not None                         # the setters call this during the run only
+            self.logic.configure(self.parameters)
             return True
         except Exception as err:
             self.log(f"{self.instance_name}: tunable parameter refused, the old value kept: {err}", Fmi2Status.error)
@@ -263,7 +265,8 @@ class ControllerSlave(Fmi2Slave):
         return True
 
     def _flush(self) -> None:
-        for level, text in self.logic.take_messages():           # type: ignore[union-attr]
+        assert self.logic is not None                             # called once the controller is built
+        for level, text in self.logic.take_messages():
             self.log(f"{self.instance_name}: {text}", _LEVEL[level])
 
 

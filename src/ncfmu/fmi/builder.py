@@ -128,7 +128,8 @@ def expected_version(script: Path) -> str:
 def build_fmu(script: Path, dest_dir: Path) -> Path:
     """Build one FMU from a model script into ``dest_dir``; return the FMU's path."""
     if not FmuBuilder.has_binary():
-        raise BuildError(f"pythonfmu at {Path(sys.modules[FmuBuilder.__module__].__file__).parent} has no binary for "
+        where = sys.modules[FmuBuilder.__module__].__file__
+        raise BuildError(f"pythonfmu at {Path(where).parent if where else FmuBuilder.__module__} has no binary for "
                          f"{get_platform()}: reinstall pythonfmu")
     script = Path(script).resolve()
     model = script.stem
@@ -137,8 +138,8 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
     module = f"{model}_{digest}"
     dest_dir = Path(dest_dir)
     dest_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="ncfmu_build_") as tmp:
-        tmp = Path(tmp)
+    with tempfile.TemporaryDirectory(prefix="ncfmu_build_") as tmp_name:
+        tmp = Path(tmp_name)
         stage = tmp / "stage"
         stage.mkdir()
         for path in _package_files():

@@ -28,6 +28,10 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
     ports = {p.name: p for p in logic.PORTS}
     # The adapter's state hooks copy the whole controller: every hidden state round-trips.
     cosim = root.find("CoSimulation")
+    variables = root.find("ModelVariables")
+    structure = root.find("ModelStructure")
+    assert cosim is not None and variables is not None and structure is not None, \
+        "pythonfmu and fmi.native write CoSimulation, ModelVariables and ModelStructure"
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
 
@@ -44,11 +48,11 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
             for display, factor in DISPLAY_UNITS.get(name, []):
                 ET.SubElement(unit, "DisplayUnit", name=display, factor=repr(factor))
         # The schema's order: CoSimulation, UnitDefinitions, TypeDefinitions, LogCategories, ...
-        root.insert(list(root).index(root.find("CoSimulation")) + 1, defs)
+        root.insert(list(root).index(cosim) + 1, defs)
 
     outputs_index = []
-    for index, sv in enumerate(root.find("ModelVariables"), start=1):
-        port = ports[sv.get("name")]
+    for index, sv in enumerate(variables, start=1):
+        port = ports[sv.get("name", "")]
         sv.set("description", port.description)
         sv.set("variability", port.fmi_variability)
         type_node = sv[0]
@@ -64,7 +68,6 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
             type_node.attrib.pop("start", None)
             sv.attrib.pop("initial", None)
 
-    structure = root.find("ModelStructure")
     for child in list(structure):
         structure.remove(child)
     if outputs_index:
@@ -77,7 +80,7 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
     experiment = root.find("DefaultExperiment")
     if experiment is None:
         experiment = ET.Element("DefaultExperiment")
-        root.insert(list(root).index(root.find("ModelVariables")), experiment)
+        root.insert(list(root).index(variables), experiment)
     experiment.set("startTime", "0.0")
     experiment.set("stopTime", _fmt(float(logic.STOP_TIME)))
     experiment.set("stepSize", _fmt(float(logic.PERIOD)))

@@ -30,10 +30,14 @@ import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .. import __version__
 from ..errors import BuildError
 from .modeldesc import enrich
+
+if TYPE_CHECKING:
+    from ..controllers.base import Controller
 
 C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -43,7 +47,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 class NativeModel:
     """A native FMU: its Python logic (ports, description, the executable specification) and its C file."""
 
-    logic: type
+    logic: type[Controller]
     model_c: Path
     #: Python files whose content defines the FMU (ports, design): a change rebuilds it.
     defined_by: tuple[Path, ...]
@@ -157,8 +161,10 @@ def build_description(m: NativeModel) -> str:
 
 def _design_html(m: NativeModel, stage: Path) -> str:
     """Design figures of the default parameters, and a Bode plot, for the FMU's documentation."""
+    from ..servo.axis import ServoAxis
     from ..servo.model import MIN_PHASE_MARGIN, position_loop, velocity_loop
     logic = m.logic()
+    assert isinstance(logic, ServoAxis), "the native models are servo axes"
     d, p = logic.design, logic.p
     rows = [("velocity loop: phase margin", f"{d.velocity_margin:.1f} deg"),
             ("velocity loop: crossover", f"{d.velocity_crossover:.1f} rad/s"),

@@ -24,19 +24,23 @@ from __future__ import annotations
 import json
 import math
 import sys
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ..errors import NcfmuError
 
+if TYPE_CHECKING:
+    from ..controllers.base import Controller
+
 try:     # numpy is optional: the controller FMUs run on the standard library alone
     import numpy as np
+    HAVE_NUMPY = True
 except ImportError:  # pragma: no cover - exercised where numpy is absent
-    np = None
-_NP_INTEGER = (np.integer,) if np else ()
-_NP_FLOATING = (np.floating,) if np else ()
-_NP_BOOL = (np.bool_,) if np else ()
-_NP_ARRAY = (np.ndarray,) if np else ()
+    HAVE_NUMPY = False
+_NP_BOOL: tuple[type[np.bool_], ...] = (np.bool_,) if HAVE_NUMPY else ()
+_NP_ARRAY: tuple[type[np.ndarray], ...] = (np.ndarray,) if HAVE_NUMPY else ()
+_INTEGERS: tuple[type[int] | type[np.integer], ...] = (int, np.integer) if HAVE_NUMPY else (int,)
+_FLOATS: tuple[type[float] | type[np.floating], ...] = (float, np.floating) if HAVE_NUMPY else (float,)
 
 FORMAT = "ncfmu-fmu-state"
 VERSION = 1
@@ -61,9 +65,9 @@ def build_digest(package: str = _PACKAGE) -> str:
 def _encode(value: Any, where: str) -> Any:
     if value is None or isinstance(value, (bool, str)):
         return value
-    if isinstance(value, (int, *_NP_INTEGER)) and not isinstance(value, _NP_BOOL):
+    if isinstance(value, _INTEGERS) and not isinstance(value, _NP_BOOL):
         return int(value)
-    if isinstance(value, (float, *_NP_FLOATING)):
+    if isinstance(value, _FLOATS):
         x = float(value)
         return x if math.isfinite(x) else {"f": repr(x)}
     if isinstance(value, _NP_BOOL):
@@ -107,7 +111,7 @@ def _class(tag: str) -> type:
         raise StateError(f"object tag {tag!r} is not 'module:Class'")
     module = sys.modules.get(f"{_PACKAGE}.{rel}")      # only modules already loaded: nothing is imported
     cls = getattr(module, name, None) if module is not None and not name.startswith("_") else None
-    if not isinstance(cls, type) or cls.__module__ != module.__name__:  # type: ignore[union-attr]
+    if module is None or not isinstance(cls, type) or cls.__module__ != module.__name__:
         raise StateError(f"object tag {tag!r} names no class of this FMU")
     return cls
 
@@ -136,7 +140,7 @@ def _decode(tree: Any, where: str) -> Any:
             out[key] = _decode(pair[1], where)
         return out
     if set(tree) == {"a", "dtype", "shape"}:
-        if np is None:
+        if not HAVE_NUMPY:
             raise StateError(f"{where}: a numpy array, and numpy is not available here")
         if tree["dtype"] not in _DTYPES or not isinstance(tree["a"], list) or not isinstance(tree["shape"], list):
             raise StateError(f"{where}: malformed array")
@@ -145,13 +149,14 @@ def _decode(tree: Any, where: str) -> Any:
         except (TypeError, ValueError) as err:
             raise StateError(f"{where}: malformed array: {err}") from None
     if set(tree) == {"o", "v"} and isinstance(tree["o"], str) and isinstance(tree["v"], dict):
-        obj = object.__new__(_class(tree["o"]))
+        obj: object = object.__new__(_class(tree["o"]))
         vars(obj).update({str(k): _decode(v, f"{where}.{k}") for k, v in tree["v"].items()})
         return obj
     return {str(k): _decode(v, f"{where}[{k!r}]") for k, v in tree.items()}
 
 
-def loads(data: bytes, logic_class: type, build_logic) -> tuple[object, dict, dict]:
+def loads(data: bytes, logic_class: type[Controller], build_logic: Callable[[dict[str, object]], Controller]
+          ) -> tuple[Controller | None, dict[str, object], dict[str, object]]:
     """Check ``data`` against this FMU and decode it: ``(logic, parameters, inputs)``.
 
     ``build_logic(parameters)`` rebuilds the controller from the saved parameters; its dynamic

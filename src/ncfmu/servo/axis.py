@@ -29,7 +29,7 @@ import numpy as np
 
 from ..controllers.base import Controller, finite_inputs
 from ..errors import ConfigError, require
-from ..ports import boolean, integer, real
+from ..ports import boolean, integer, real, to_float
 from .parameters import AxisParameters
 
 
@@ -87,16 +87,18 @@ class ServoAxis(Controller):
 
     def configure(self, values: Mapping[str, object]) -> None:
         v = {port.name: port.check(values[port.name]) for port in self.ports("parameter")}
-        self.p = AxisParameters(Kv=v["Kv"], kff=v["kff"], kaff=v["kaff"], J=v["J"], pitch=v["pitch"],
-                                b_visc=v["b_visc"], tau_current=v["tau_current"], vel_bandwidth=v["vel_bandwidth"])
-        self.tau_coulomb = v["tau_coulomb"]
-        self.torque_max = v["torque_max"]
-        self.speed_max = v["speed_max"]
-        self.counts_per_rev = v["counts_per_rev"]
-        self.inpos_band = v["inpos_band"]
-        self.pos_start = v["pos_start"]
-        self.substep = v["substep"]
-        self.ideal = v["ideal"]
+        # check() returned each value as its port's type already: these conversions change no value
+        self.p = AxisParameters(Kv=float(v["Kv"]), kff=float(v["kff"]), kaff=float(v["kaff"]), J=float(v["J"]),
+                                pitch=float(v["pitch"]), b_visc=float(v["b_visc"]),
+                                tau_current=float(v["tau_current"]), vel_bandwidth=float(v["vel_bandwidth"]))
+        self.tau_coulomb = float(v["tau_coulomb"])
+        self.torque_max = float(v["torque_max"])
+        self.speed_max = float(v["speed_max"])
+        self.counts_per_rev = int(v["counts_per_rev"])
+        self.inpos_band = float(v["inpos_band"])
+        self.pos_start = float(v["pos_start"])
+        self.substep = float(v["substep"])
+        self.ideal = bool(v["ideal"])
         # The velocity loop is sampled every substep: a crossover above 0.5 rad per sample is no design.
         require(self.p.vel_bandwidth * self.substep <= 0.5, "vel_bandwidth", self.p.vel_bandwidth,
                 f"must be <= 0.5 / substep = {0.5 / self.substep:g} rad/s (the velocity loop is sampled every "
@@ -133,7 +135,7 @@ class ServoAxis(Controller):
         self._u = np.zeros(4)                                  # input vector of the ideal step, reused
         self.p_meas = self.p_last = self._quantise(self.pos_start)
         self.limited = False
-        self.fault = None
+        self.fault: str | None = None
         self.pos_cmd = self.cmd_prev = self.pos_start
         self.vel_ff = self.vff_prev = 0.0
         self._outputs: dict[str, object] = {}
@@ -188,7 +190,7 @@ class ServoAxis(Controller):
         self.cmd_prev, self.vff_prev = self.pos_cmd, self.vel_ff
         if not bad:
             self.fault = None
-            self.pos_cmd, self.vel_ff = float(inputs["pos_cmd"]), float(inputs["vel_ff"])
+            self.pos_cmd, self.vel_ff = to_float(inputs["pos_cmd"]), to_float(inputs["vel_ff"])
         p0 = self.p_meas
         if self.ideal and inputs["enable"]:
             f, g = self._ideal_matrices(dt)
