@@ -54,8 +54,9 @@ def models_dir(root: Path) -> Path:
     """The model scripts: the checkout's ``models/``, else the copy the wheel carries (``ncfmu.models``)."""
     if (root / "models" / "CutSequencer.py").is_file():
         return root / "models"
-    import ncfmu.models
-    return Path(ncfmu.models.__file__).parent
+    import importlib
+    packaged = importlib.import_module("ncfmu.models")      # mapped from models/ by pyproject, not in src/
+    return Path(str(packaged.__file__)).parent
 
 
 def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[Path]]:
