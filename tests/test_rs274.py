@@ -78,7 +78,16 @@ def test_arc_radii_within_the_tolerance_pass_exactly_through_start_and_end():
     d = 0.75 * ARC_RADIUS_TOLERANCE
     [arc] = [m.element for m in parse(f"G2 F60 X{10 + d} Y0 I5 J0\nM2", O)]
     assert arc.start == pytest.approx(O, abs=1e-12) and arc.end == pytest.approx((10 + d, 0.0), abs=1e-12)
-    assert arc.center == pytest.approx((5 + d / 2, 0.0), abs=1e-12)     # moved onto the bisector
+    assert arc.center == pytest.approx((5 + d / 2, 0.0), abs=1e-12)     # moved onto the bisector (d/2 <= tol)
+
+
+def test_a_short_chord_keeps_the_centre_and_ends_on_the_circle():
+    # a nearly full circle whose end is 1.5 um inside: the bisector is ~radial, the centre would move far
+    d = 0.75 * ARC_RADIUS_TOLERANCE
+    arc, line = [m.element for m in parse(f"G2 F60 X{d} Y-0.0001 I5 J0\nG1 X20\nM2", O)]
+    assert arc.center == (5.0, 0.0) and arc.radius == 5.0 and arc.sweep < -6.0
+    assert math.dist(arc.end, (d, -0.0001)) <= d + 1e-12                  # ends on its circle, near X/Y
+    assert line.start == arc.end                                         # where the next block starts
     err = refused(f"G2 F60 X{10 + 1.25 * ARC_RADIUS_TOLERANCE} Y0 I5 J0\nM2")
     assert (err.line_no, err.column) == (1, 20)
     assert "do not define a circle" in str(err) and "5.0000 mm to the start, 5.0025 mm to the end" in str(err)
@@ -244,11 +253,13 @@ def test_property_valid_programs_join_end_to_start_and_reach_the_programmed_poin
         return
     moves = parse(text, start)
     assert len(moves) == len(expected)
-    previous = start
+    previous, arcs_so_far = start, 0
     for move, (end, g) in zip(moves, expected):
         assert isinstance(move.element, Line if g == 1 else Arc)
         assert move.element.start == pytest.approx(previous, abs=1e-9)
-        assert move.element.end == pytest.approx(end, abs=1e-9)
+        # an arc ends on its circle: within the radius tolerance of its programmed end (G91: of each end before)
+        arcs_so_far += g != 1
+        assert move.element.end == pytest.approx(end, abs=1e-9 + arcs_so_far * ARC_RADIUS_TOLERANCE)
         if g != 1:
             assert (move.element.sweep > 0) == (g == 3)
         previous = move.element.end

@@ -40,7 +40,16 @@ from dataclasses import dataclass
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
-from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .base import (
+    POSITION_LIMIT,
+    Controller,
+    OverrideDial,
+    PositionGuard,
+    finite_inputs,
+    int_param,
+    real_param,
+    servo_ports,
+)
 from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
 from .motion import stop_speed
 
@@ -52,6 +61,8 @@ DEFAULT_PATH = ((0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0)
 #: On a path with arcs: tangential acceleration and centripetal acceleration, as fractions of ``accel``
 #: (sqrt(0.8**2 + 0.55**2) = 0.97 < 1, room for the discrete steps).
 ARC_TANGENTIAL = 0.8
+#: No cutter differs from its nominal diameter by more than this (mm).
+MAX_DIAMETER_DELTA = 100.0
 ARC_CENTRIPETAL = 0.55
 
 
@@ -129,8 +140,10 @@ def _point_ports():
     ports = []
     for i in range(1, MAX_POINTS + 1):
         x, y = DEFAULT_PATH[i - 1] if i <= len(DEFAULT_PATH) else (0.0, 0.0)
-        ports += [real(f"point[{i}].x", "parameter", x, "mm", f"terminal point {i}: X"),
-                  real(f"point[{i}].y", "parameter", y, "mm", f"terminal point {i}: Y")]
+        ports += [real(f"point[{i}].x", "parameter", x, "mm", f"terminal point {i}: X", min=-POSITION_LIMIT,
+                       max=POSITION_LIMIT),
+                  real(f"point[{i}].y", "parameter", y, "mm", f"terminal point {i}: Y", min=-POSITION_LIMIT,
+                       max=POSITION_LIMIT)]
     return tuple(ports)
 
 
@@ -148,7 +161,8 @@ class ContourInterpolator(Controller):
                 min=2, max=MAX_POINTS),
         *_point_ports(),
         boolean("closed", "parameter", True, "point path: closes from the last point back to the first"),
-        real("diameter_delta", "parameter", 0.4, "mm", "actual minus nominal cutter diameter (the offset is half)"),
+        real("diameter_delta", "parameter", 0.4, "mm", "actual minus nominal cutter diameter (the offset is half)",
+             min=-MAX_DIAMETER_DELTA, max=MAX_DIAMETER_DELTA),
         integer("side", "parameter", -1, "point path: side of the correction, +1 left of travel, -1 right "
                 "(a program chooses with G41/G42)", min=-1, max=1),
         real("feed", "parameter", 5.0, "mm/s", "point path: vector feed rate (a program gives F)", min=0.0,
@@ -159,7 +173,7 @@ class ContourInterpolator(Controller):
              "override, hold)", min=0.0, min_exclusive=True),
         real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
              "end point this long after the command stopped", min=0.0, min_exclusive=True),
-        real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=0.0, min_exclusive=True),
+        real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=1e-6, max=1.0),
         real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position; a "
              "program starts here)"),
         real("y_start", "parameter", -10.0, "mm", "Y command before the cycle (the axis's start position; a "
@@ -178,7 +192,7 @@ class ContourInterpolator(Controller):
     def configure(self, values: Mapping[str, object]) -> None:
         self.program = str(values["program"])
         self.closed = bool(values["closed"])
-        self.diameter_delta = real_param(values, "diameter_delta")
+        self.diameter_delta = real_param(values, "diameter_delta", lo=-MAX_DIAMETER_DELTA, hi=MAX_DIAMETER_DELTA)
         side = int_param(values, "side")
         require(side in (1, -1), "side", side, "must be +1 (left of travel) or -1 (right)")
         self.side = side
@@ -186,9 +200,9 @@ class ContourInterpolator(Controller):
         self.approach_feed = real_param(values, "approach_feed", positive=True)
         self.accel = real_param(values, "accel", positive=True)
         self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
-        self.dda_unit = real_param(values, "dda_unit", positive=True)
-        self.x_start = real_param(values, "x_start")
-        self.y_start = real_param(values, "y_start")
+        self.dda_unit = real_param(values, "dda_unit", lo=1e-6, hi=1.0)
+        self.x_start = real_param(values, "x_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
+        self.y_start = real_param(values, "y_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
         self.geometry_error: str | None = None
         if self.program.strip():
             moves = rs274.parse(self.program, (self.x_start, self.y_start))
@@ -199,7 +213,8 @@ class ContourInterpolator(Controller):
                 path, self.geometry_error = [], str(err)
         else:
             n = int_param(values, "n_points", 2, MAX_POINTS)
-            pts = [(real_param(values, f"point[{i}].x"), real_param(values, f"point[{i}].y"))
+            pts = [(real_param(values, f"point[{i}].x", lo=-POSITION_LIMIT, hi=POSITION_LIMIT),
+                    real_param(values, f"point[{i}].y", lo=-POSITION_LIMIT, hi=POSITION_LIMIT))
                    for i in range(1, n + 1)]
             for i in range(1, n):
                 require(pts[i] != pts[i - 1], f"point[{i + 1}]", pts[i], f"repeats point[{i}]: consecutive points "
@@ -222,11 +237,11 @@ class ContourInterpolator(Controller):
         self.path_accel = self.accel * (ARC_TANGENTIAL if has_arcs else 1.0)
         self._caps = [math.sqrt(ARC_CENTRIPETAL * self.accel * t.element.radius)
                       if isinstance(t.element, Arc) else math.inf for t in path]
-        self._v_end = self._plan(path, self._caps)
 
-    def _plan(self, path: Sequence[ToolMove], caps: Sequence[float]) -> list[float]:
-        """Highest speed at the end of each move: 0 at a corner (exact stop) and at the end; through a tangent
-        junction, what the following moves allow (their arc caps and their own exact stops), backwards."""
+    def _plan(self, path: Sequence[ToolMove], caps: Sequence[float], scale: float | None) -> list[float]:
+        """Highest speed at the end of each move, backwards: 0 at a corner (exact stop) and at the end; through a
+        tangent junction, what the following moves allow -- their arc caps and exact stops (``scale`` None: the
+        hard limits, independent of the override) and also their feeds times ``scale`` (the soft limits)."""
         v_end = [0.0] * len(path)
         for k in range(len(path) - 2, -1, -1):
             a, b = path[k].element, path[k + 1].element
@@ -234,6 +249,8 @@ class ContourInterpolator(Controller):
                 continue
             entry_next = math.sqrt(v_end[k + 1] ** 2 + 2.0 * self.path_accel * b.length)
             v_end[k] = min(caps[k], caps[k + 1], entry_next)
+            if scale is not None:
+                v_end[k] = min(v_end[k], path[k + 1].feed * scale)
         return v_end
 
     def reset(self) -> None:
@@ -247,7 +264,9 @@ class ContourInterpolator(Controller):
             self.say("error", f"cutter compensation impossible: {self.geometry_error}")
         self.v = 0.0                      # path speed, mm/s
         self._run: list[ToolMove] = []    # the moves of the running cycle (the approach, then the tool path)
-        self._v_end_run: list[float] = []
+        self._v_end_hard: list[float] = []  # per move of the cycle: its end speed limit, hard and at the override
+        self._v_end_soft: list[float] = []
+        self._plan_scale = 1.0
         self._caps_run: list[float] = []
         self._i = 0                       # index of the move being run; len(_run): the path is finished
         self._s = 0.0                     # path length done within it, mm
@@ -269,7 +288,8 @@ class ContourInterpolator(Controller):
             approach = [ToolMove(Line(here, first), True, self.approach_feed, 0)]
         self._run = approach + self.tool_path
         self._caps_run = [math.inf] * len(approach) + self._caps
-        self._v_end_run = [0.0] * len(approach) + self._v_end
+        self._v_end_hard = self._plan(self._run, self._caps_run, None)
+        self._v_end_soft = self._plan(self._run, self._caps_run, self._plan_scale)
         self._i, self._s, self.v = 0, 0.0, 0.0
         self._enter(0)
 
@@ -345,18 +365,32 @@ class ContourInterpolator(Controller):
             a = self.path_accel
             a_dt = a * dt
             v_old = self.v
-            v_end = self._v_end_run[i]
+            if scale > 0.0 and scale != self._plan_scale:          # the override moved: the feeds ahead did
+                self._plan_scale = scale
+                self._v_end_soft = self._plan(self._run, self._caps_run, scale)
             remaining = length - self._s
-            v_stop = stop_speed(remaining + v_end * v_end / (2.0 * a), v_old, a, dt)
+            hard, soft = self._v_end_hard[i], self._v_end_soft[i]
+            v_stop = stop_speed(remaining + hard * hard / (2.0 * a), v_old, a, dt)
+            # a lower feed ahead is reached in time, but never by braking harder than accel (after an override
+            # drop the next block may begin above its new feed and slow down within it)
+            v_feed = max(stop_speed(remaining + soft * soft / (2.0 * a), v_old, a, dt), v_old - a_dt)
             target = min(move.feed * scale, self._caps_run[i])
-            v = max(min(min(max(target, v_old - a_dt), v_old + a_dt), v_stop), 0.0)
+            v = max(min(min(max(target, v_old - a_dt), v_old + a_dt), v_stop, v_feed), 0.0)
+            # in exact arithmetic v_stop >= v_old - a_dt (the last step braked in time); rounding must not make it
+            # brake harder than accel
+            v = max(v, v_old - a_dt)
             s = self._s + 0.5 * (v_old + v) * dt
             while True:
                 length = self._run[self._i].element.length
                 at_rest_short = v == 0.0 and length - s <= 1e-12
-                if s < length - 1e-12 and not at_rest_short:
+                if s < length and not at_rest_short:
                     break
-                if self._v_end_run[self._i] == 0.0 or self._i == len(self._run) - 1:
+                if self._v_end_hard[self._i] == 0.0 or self._i == len(self._run) - 1:
+                    if self._i == i and v_old > a_dt:
+                        # rounding in s left a speed above one step's braking: stand at the end and shed it at
+                        # accel, so no axis is asked for more than accel even by the last digits
+                        s, v = length, v_old - a_dt
+                        break
                     s, v = 0.0, 0.0                             # exact stop at the corner (or the end)
                     self._enter(self._i + 1)
                     break

@@ -28,6 +28,8 @@ Point = tuple[float, float]
 
 #: Junctions whose direction turns by less than this are tangent (rad).
 TANGENT = 1e-9
+#: Offset elements whose ends are this close at a nearly tangent junction are joined as they are (mm).
+JOIN = 1e-6
 #: Lengths below this are zero (mm): an element trimmed to it has vanished.
 EPS = 1e-9
 TWO_PI = 2.0 * math.pi
@@ -139,20 +141,25 @@ class Arc:
 Element = Line | Arc
 
 
-def arc_through(start: Point, end: Point, center: Point, ccw: bool) -> Arc:
-    """The arc from ``start`` to ``end`` around ``center`` (full circle when they coincide).
+def arc_through(start: Point, end: Point, center: Point, ccw: bool, max_shift: float) -> Arc:
+    """The arc from ``start`` around ``center`` to ``end`` (a full circle when they coincide), for a centre whose
+    radii to start and end differ a little (the caller bounds the difference).
 
-    ``center`` is moved onto the perpendicular bisector of start and end (to the nearest point), so the
-    arc passes through both exactly; the caller checks beforehand that the radii agree.
+    When moving the centre onto the chord's bisector (to the nearest point) shifts it by at most ``max_shift``,
+    the arc runs exactly through both points and stays within ``max_shift`` of the programmed circle. Else (a
+    short chord: a tiny arc or a nearly full circle) the centre and the radius to the start are kept -- the arc
+    leaves ``start`` in the programmed direction -- and it ends on its circle toward ``end``, at most the radius
+    difference from it.
     """
-    mx, my = (start[0] + end[0]) / 2, (start[1] + end[1]) / 2
     cx, cy = center
-    chord = (end[0] - start[0], end[1] - start[1])
-    chord_len = math.hypot(*chord)
-    if chord_len > 0.0:                       # project the centre onto the bisector
-        nx, ny = -chord[1] / chord_len, chord[0] / chord_len
+    mx, my = (start[0] + end[0]) / 2, (start[1] + end[1]) / 2
+    chord = math.hypot(end[0] - start[0], end[1] - start[1])
+    if chord > 0.0:
+        nx, ny = -(end[1] - start[1]) / chord, (end[0] - start[0]) / chord
         along = (cx - mx) * nx + (cy - my) * ny
-        cx, cy = mx + along * nx, my + along * ny
+        bx, by = mx + along * nx, my + along * ny
+        if math.hypot(bx - cx, by - cy) <= max_shift:
+            cx, cy = bx, by
     radius = math.hypot(start[0] - cx, start[1] - cy)
     a0 = math.atan2(start[1] - cy, start[0] - cx)
     a1 = math.atan2(end[1] - cy, end[0] - cx)
@@ -193,7 +200,8 @@ def _line_line(a: Line, b: Line) -> list[Point]:
 def _line_circle(a: Line, c: Arc) -> list[Point]:
     foot = a.param(c.center)
     fx, fy = a.point(foot)
-    h2 = c.radius ** 2 - ((fx - c.center[0]) ** 2 + (fy - c.center[1]) ** 2)
+    off = math.hypot(fx - c.center[0], fy - c.center[1])
+    h2 = (c.radius - off) * (c.radius + off)          # factored: no cancellation when the line nearly touches
     if h2 < -1e-12 * c.radius ** 2:
         return []
     h = math.sqrt(max(h2, 0.0))
@@ -205,8 +213,8 @@ def _circle_circle(a: Arc, b: Arc) -> list[Point]:
     dist = math.hypot(dx, dy)
     if dist < 1e-15:
         return []
-    along = (dist * dist + a.radius ** 2 - b.radius ** 2) / (2 * dist)
-    h2 = a.radius ** 2 - along * along
+    along = (dist * dist + (a.radius - b.radius) * (a.radius + b.radius)) / (2 * dist)
+    h2 = (a.radius - along) * (a.radius + along)      # factored: no cancellation when the circles nearly touch
     if h2 < -1e-12 * a.radius ** 2:
         return []
     h = math.sqrt(max(h2, 0.0))
@@ -279,6 +287,19 @@ def bounds(e: Element) -> tuple[float, float, float, float]:
     return min(xs), min(ys), max(xs), max(ys)
 
 
+def _ring_gap(arc: Arc, other: Element) -> float:
+    """A lower bound of the distance between ``other`` and the arc's full circle: how far ``other`` stays out of
+    the ring (cheap; it rules out concentric and distant pairs without measuring them)."""
+    c = arc.center
+    if isinstance(other, Line):
+        near = point_distance(c, other)
+        far = max(math.dist(c, other.start), math.dist(c, other.end))
+    else:
+        centres = math.dist(c, other.center)
+        near, far = max(0.0, centres - other.radius), centres + other.radius
+    return max(0.0, near - arc.radius, arc.radius - far)
+
+
 def closest_approach(pieces: list[tuple[Element, int]], contour: list[Element],
                      limit: float) -> tuple[int, int, float] | None:
     """The first (piece's element, contour element, distance) closer than ``limit``, else None.
@@ -292,7 +313,11 @@ def closest_approach(pieces: list[tuple[Element, int]], contour: list[Element],
         for _, k, (_, ey0, ex1, ey1) in boxes[:bisect.bisect_right(lows, x1 + limit)]:
             if ex1 < x0 - limit or ey1 < y0 - limit or ey0 > y1 + limit:
                 continue
-            dist = min_distance(piece, contour[k])
+            element = contour[k]
+            if any(isinstance(arc, Arc) and _ring_gap(arc, other) >= limit
+                   for arc, other in ((piece, element), (element, piece))):
+                continue
+            dist = min_distance(piece, element)
             if dist < limit:
                 return owner, k, dist
     return None
@@ -330,7 +355,9 @@ def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[El
         j = (k + 1) % n
         a, b, oa, ob = elements[k], elements[j], offsets[k], offsets[j]
         turn = turn_angle(a.tangent(a.length), b.tangent(0.0))
-        if abs(turn) <= TANGENT:
+        if abs(turn) <= TANGENT or (abs(turn) < 1e-3 and math.dist(oa.point(oa.length), ob.start) <= JOIN):
+            # tangent, or so nearly (a program's rounded coordinates) that the offsets meet within JOIN: an
+            # intersection of two nearly parallel elements would only amplify the rounding
             continue
         corner = a.end if isinstance(a, Line) else b.start
         if abs(turn) >= math.pi - TANGENT:

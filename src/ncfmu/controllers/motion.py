@@ -19,7 +19,9 @@ def stop_speed(room: float, v_old: float, accel: float, dt: float) -> float:
     rest = room - 0.5 * max(v_old, 0.0) * dt
     if rest <= 0.0:
         return 0.0
-    return -half + math.sqrt(half * half + 2.0 * accel * rest)
+    # the root of v**2 + 2*half*v = 2*accel*rest, written without cancellation (-half + sqrt(...) loses the
+    # digits that decide the last step of a stop when half**2 >> 2*accel*rest)
+    return 2.0 * accel * rest / (half + math.sqrt(half * half + 2.0 * accel * rest))
 
 
 class LinearMove:

@@ -26,8 +26,14 @@ from .geometry import Arc, Element, Line, Point, arc_through
 
 #: Programs longer than this are refused (characters): a part program for one contour is far shorter.
 MAX_PROGRAM_CHARS = 200_000
+#: More moves than this are refused: the gouge check measures the offset path against the whole contour.
+MAX_MOVES = 2000
+#: Points closer than this are one point (mm): a move shorter is no move (rounding of G91 sums).
+POINT_EPS = 1e-9
 #: Radii from the centre to the start and to the end of an arc may differ by this much (mm), as
-#: LinuxCNC's arc check; the centre is then moved onto the chord's bisector.
+#: LinuxCNC's arc check. The centre moves onto the chord's bisector when that is at most this far, so the
+#: arc runs through both points; else (short chords) it keeps its centre and radius and ends on its circle
+#: toward the programmed end point, at most this far from it, and the next block starts there.
 ARC_RADIUS_TOLERANCE = 0.002
 #: A coordinate beyond this is refused (mm): no machine axis is that long.
 COORDINATE_LIMIT = 1.0e5
@@ -239,8 +245,12 @@ def parse(text: str, start: Point) -> list[Move]:
                                        f"I/J do not define a circle through start and end: radius {r_start:.4f} mm "
                                        f"to the start, {r_end:.4f} mm to the end (tolerance "
                                        f"{ARC_RADIUS_TOLERANCE:g} mm)")
-                element = arc_through((x, y), (tx, ty), (cx, cy), ccw=motion == 3)
-            elif (tx, ty) != (x, y):
+                if math.hypot(tx - x, ty - y) <= POINT_EPS:
+                    tx, ty = x, y                        # ends where it starts (up to rounding): a full circle
+                element = arc_through((x, y), (tx, ty), (cx, cy), motion == 3, ARC_RADIUS_TOLERANCE)
+                if math.hypot(element.end[0] - tx, element.end[1] - ty) > 1e-12:
+                    tx, ty = element.end                 # kept its centre: ends on its circle, near X/Y
+            elif math.hypot(tx - x, ty - y) > POINT_EPS:
                 element = Line((x, y), (tx, ty))
             if element is not None:
                 if comp != comp_moved and isinstance(element, Arc):
@@ -248,6 +258,8 @@ def parse(text: str, start: Point) -> list[Move]:
                     raise ProgramError(n, move_col, raw.strip(),
                                        f"an arc cannot {what} cutter compensation: program a straight "
                                        f"{'lead-in' if comp else 'lead-out'} move (G00/G01)")
+                if len(moves) == MAX_MOVES:
+                    raise ProgramError(n, move_col, raw.strip(), f"more than {MAX_MOVES} moves: split the program")
                 moves.append(Move(element, motion == 0, feed, n, comp_moved, comp))
                 comp_moved = comp
                 x, y = tx, ty
