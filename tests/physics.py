@@ -96,3 +96,19 @@ def check_mill_contour(r) -> None:
 CHECKS = {"lathe_roughing": check_lathe_roughing, "lathe_taper": check_lathe_taper,
           "grinder_feed": check_grinder_feed, "grinder_envelope": check_grinder_envelope,
           "mill_contour": check_mill_contour}
+
+
+def drive_contour(c, dt=1e-3, hold=None, feed_override=1.0, steps=400_000) -> np.ndarray:
+    """Run a ContourInterpolator with perfect servos (its command fed back as the position) from a start until
+    done or alarm; rows of (x_cmd, y_cmd, x_vff, y_vff, segment, done, alarm). ``hold``: (from, to) in s."""
+    inputs = dict(c.default_inputs(), start=True, x_pos=c.x_start, y_pos=c.y_start, feed_override=feed_override)
+    rows = []
+    for k in range(steps):
+        inputs["feed_hold"] = hold is not None and hold[0] <= k * dt < hold[1]
+        o = c.step(k * dt, dt, inputs)
+        inputs["start"] = False
+        inputs["x_pos"], inputs["y_pos"] = o["x_cmd"], o["y_cmd"]
+        rows.append((o["x_cmd"], o["y_cmd"], o["x_vff"], o["y_vff"], o["segment"], o["done"], o["alarm"]))
+        if o["done"] or o["alarm"]:
+            break
+    return np.array(rows, float)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from physics import drive_contour
 
 from ncfmu.checks import element_distance, path_distance
 from ncfmu.controllers.contour import ContourInterpolator, program_path
@@ -133,17 +134,7 @@ def test_property_compensated_path_keeps_r_on_the_requested_side(case):
 
 def run_program(program, feed_override=1.0, accel=500.0, hold=None, **parameters):
     c = ContourInterpolator(**{"program": program, "accel": accel, "x_start": 0.0, "y_start": 0.0, **parameters})
-    inputs = dict(c.default_inputs(), start=True, x_pos=c.x_start, y_pos=c.y_start, feed_override=feed_override)
-    rows = []
-    for k in range(200_000):
-        inputs["feed_hold"] = hold is not None and hold[0] <= k * DT < hold[1]
-        o = c.step(k * DT, DT, inputs)
-        inputs["start"] = False
-        inputs["x_pos"], inputs["y_pos"] = o["x_cmd"], o["y_cmd"]
-        rows.append((o["x_cmd"], o["y_cmd"], o["x_vff"], o["y_vff"], o["segment"], o["done"], o["alarm"]))
-        if o["done"] or o["alarm"]:
-            break
-    return c, np.array(rows, float)
+    return c, drive_contour(c, DT, hold=hold, feed_override=feed_override)
 
 
 @settings(max_examples=25, deadline=None)

@@ -4,23 +4,11 @@ import math
 
 import numpy as np
 import pytest
+from physics import drive_contour
 
 from ncfmu.controllers.contour import ContourInterpolator
 from ncfmu.controllers.rs274 import parse
 from ncfmu.errors import ConfigError, ProgramError
-
-
-def run(c, dt=1e-3, steps=400_000):
-    inputs = dict(c.default_inputs(), start=True, x_pos=c.x_start, y_pos=c.y_start)
-    rows = []
-    for k in range(steps):
-        o = c.step(k * dt, dt, inputs)
-        inputs["start"] = False
-        inputs["x_pos"], inputs["y_pos"] = o["x_cmd"], o["y_cmd"]
-        rows.append((o["x_cmd"], o["y_cmd"], o["x_vff"], o["y_vff"], o["segment"], o["done"], o["alarm"]))
-        if o["done"] or o["alarm"]:
-            break
-    return np.array(rows, float)
 
 
 def circle_in_arcs(n, radius, decimals, a0, comp):
@@ -82,7 +70,7 @@ def test_an_arc_ending_where_it_starts_up_to_rounding_is_a_full_circle():
 def test_an_arc_of_rounding_noise_is_a_program_error_not_a_crash():
     program = "F600\nG42 G01 X0.1 Y0\nG91 G01 X0.2\nG90 G03 X0.3 Y0 I10 J0\nG01 X0.3 Y10\nG40 G01 X-10 Y10\nM30"
     c = ContourInterpolator(program=program, diameter_delta=2.0, x_start=0.0, y_start=-10.0)
-    rows = run(c)
+    rows = drive_contour(c)
     assert rows[-1, 5] == 1 or rows[-1, 6] == 1
     assert np.isfinite(rows[:, :4]).all()
 
@@ -93,21 +81,14 @@ def test_an_arc_of_rounding_noise_is_a_program_error_not_a_crash():
 ])
 def test_a_lower_feed_in_the_next_block_is_reached_before_it(program, block_line, feed):
     c = ContourInterpolator(program=program, diameter_delta=0.0, x_start=0.0, y_start=0.0)
-    rows = run(c)
+    rows = drive_contour(c)
     assert rows[-1, 5] == 1
     speed = np.hypot(rows[:, 2], rows[:, 3])
     assert speed[rows[:, 4] == block_line].max() <= feed * (1 + 1e-9)
     # and the override scales it: at 50 % the slower block runs at half its feed
     c = ContourInterpolator(program=program, diameter_delta=0.0, x_start=0.0, y_start=0.0)
-    inputs = dict(c.default_inputs(), start=True, x_pos=0.0, y_pos=0.0, feed_override=0.5)
-    top = 0.0
-    for k in range(400_000):
-        o = c.step(k * 1e-3, 1e-3, inputs)
-        inputs["start"], inputs["x_pos"], inputs["y_pos"] = False, o["x_cmd"], o["y_cmd"]
-        if o["segment"] == block_line:
-            top = max(top, math.hypot(o["x_vff"], o["y_vff"]))
-        if o["done"]:
-            break
+    rows = drive_contour(c, feed_override=0.5)
+    top = np.hypot(rows[:, 2], rows[:, 3])[rows[:, 4] == block_line].max()
     assert top <= 0.5 * feed * (1 + 1e-9)
 
 
@@ -129,12 +110,12 @@ def test_an_exact_stop_never_drops_a_leftover_speed(dt, accel):
     for length in (0.012561258, 0.0314159, 0.049):
         c = ContourInterpolator(program=f"F600\nG01 X{length} Y0\nM30", diameter_delta=0.0, accel=accel,
                                 x_start=0.0, y_start=0.0)
-        rows = run(c, dt=dt)
+        rows = drive_contour(c, dt=dt)
         assert rows[-1, 5] == 1
         assert (np.abs(np.diff(rows[:, 2])) / dt).max() <= accel * (1 + 1e-9)
     c = ContourInterpolator(program="F600 G01 X0 Y0.001\nX0 Y2\nX0.001 Y-1\nM30", diameter_delta=0.0, accel=accel,
                             x_start=0.0, y_start=0.0)
-    rows = run(c, dt=dt)
+    rows = drive_contour(c, dt=dt)
     assert rows[-1, 5] == 1
     assert (np.abs(np.diff(rows[:, 2:4], axis=0)) / dt).max() <= accel * (1 + 1e-9)
 

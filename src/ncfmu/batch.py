@@ -218,7 +218,7 @@ def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[st
     writer.writeheader()
     for row in rows:
         writer.writerow({k: row.get(k, "") for k in columns})
-    _write_bytes(path, text.getvalue().encode())
+    write_atomic(path, text.getvalue().encode())
 
 
 def trajectory_csv(data: np.ndarray) -> bytes:
@@ -237,10 +237,6 @@ def trajectory_csv(data: np.ndarray) -> bytes:
         columns.append(list(map(repr if col.dtype.kind == "f" else str, col.tolist())))
     lines = [",".join(f'"{n}"' for n in names), *map(",".join, zip(*columns))]
     return ("\n".join(lines) + "\n").encode()
-
-
-def _write_bytes(path: Path, data: bytes) -> None:
-    write_atomic(path, data)
 
 
 def _complete(path: Path, rows: str) -> bool:
@@ -378,7 +374,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     def record_result(key: str, variant: Mapping[str, object], answer: dict) -> None:
         row = answer["row"]
         if answer["trajectory"] is not None:
-            _write_bytes(out / "variants" / f"{key}.csv", answer["trajectory"])
+            write_atomic(out / "variants" / f"{key}.csv", answer["trajectory"])
         rows[key] = {"key": key, **variant, **row}
         dirty[0] = True
         flush_summary()

@@ -222,7 +222,7 @@ class ContourInterpolator(Controller):
             if self.closed and pts[0] == pts[-1]:
                 require(n >= 4, "n_points", n, "a closed path needs at least 3 distinct points")
             self.points = pts
-            self.contour = list(point_contour(pts, self.closed))
+            self.contour = list[Element](point_contour(pts, self.closed))
             try:
                 pieces = compensate(self.contour, self.side * self.diameter_delta / 2.0, self.closed)
                 path = [ToolMove(e, False, self.feed, k + 1) for e, k in pieces]

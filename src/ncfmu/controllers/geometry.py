@@ -21,6 +21,7 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 from ..errors import NcfmuError
 
@@ -53,11 +54,11 @@ class Line:
     start: Point
     end: Point
 
-    @property
+    @cached_property
     def length(self) -> float:
         return math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1])
 
-    @property
+    @cached_property
     def unit(self) -> Point:
         length = self.length
         if length == 0.0:
@@ -97,7 +98,7 @@ class Arc:
     def ccw(self) -> bool:
         return self.sweep > 0
 
-    @property
+    @cached_property
     def length(self) -> float:
         return self.radius * abs(self.sweep)
 
