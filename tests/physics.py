@@ -86,7 +86,8 @@ def contour_error(r, path) -> np.ndarray:
 
 def check_mill_contour(r) -> None:
     from ncfmu.controllers.contour import ContourInterpolator
-    c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
+    from ncfmu.systems import parameters
+    c = ContourInterpolator(**parameters("mill_contour", "contour"))
     assert contour_error(r, [m.element for m in c.tool_path]).max() <= 0.050
     assert r["x_axis.pos"].max() == pytest.approx(60.2, abs=BAND)
     assert r["y_axis.pos"].max() == pytest.approx(40.2, abs=BAND)

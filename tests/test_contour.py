@@ -11,9 +11,14 @@ from physics import contour_error
 from ncfmu.controllers.contour import ContourInterpolator, point_contour
 from ncfmu.controllers.geometry import Arc, CornerError, Line, compensate
 from ncfmu.errors import ConfigError
+from ncfmu.systems import parameters
+from ncfmu.systems.mill import CONTOUR
+
+#: mill_contour's point path and correction, from its system definition.
+MILL = parameters("mill_contour", "contour")
 
 DT = 1e-3
-MILL = [(0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0)]
+MILL_PATH = CONTOUR
 
 
 def line_distance(p, a, b):
@@ -39,11 +44,11 @@ def offset_lines(points, r, closed):
 @pytest.mark.parametrize("r", [0.2, -0.2, 1.5])
 @pytest.mark.parametrize("closed", [True, False])
 def test_corners_at_the_correction_from_both_neighbouring_segments(r, closed):
-    pts = MILL if closed else MILL[:-1]
+    pts = MILL_PATH if closed else MILL_PATH[:-1]
     pieces = offset_lines(pts, r, closed)
     assert len(pieces) == (5 if closed else 4)
     for piece, k in pieces:
-        a, b = MILL[k], MILL[k + 1]
+        a, b = MILL_PATH[k], MILL_PATH[k + 1]
         assert line_distance(piece.start, a, b) == pytest.approx(r, abs=1e-9)
         assert line_distance(piece.end, a, b) == pytest.approx(r, abs=1e-9)
     # consecutive pieces meet: the corner is the intersection of both offsets (the seed's corner)
@@ -90,7 +95,7 @@ def test_a_reversal_is_rounded_around_its_tip_and_a_fold_is_reported():
 ])
 def test_bad_input_refused(values, variable, rule):
     with pytest.raises(ConfigError) as err:
-        ContourInterpolator(**values)
+        ContourInterpolator(**{**MILL, **values})
     assert err.value.variable == variable and rule in str(err.value)
 
 
@@ -113,8 +118,8 @@ def test_closed_form_dda_equals_iterative_additions(span):
     assert [(half + k * span) // n for k in range(1, n + 1)] == iterative_dda(span, n)
 
 
-def run_contour(override=1.0, hold=None, **parameters):
-    c = ContourInterpolator(**parameters)
+def run_contour(override=1.0, hold=None, **changes):
+    c = ContourInterpolator(**{**MILL, **changes})
     inp = {"start": True, "feed_hold": False, "feed_override": override, "x_pos": c.x_start, "y_pos": c.y_start,
            "x_in_position": True, "y_in_position": True}
     t, log = 0.0, []
@@ -219,7 +224,7 @@ def test_override_half_doubles_the_contour_time(mill_contour, project):
 def test_hold_stops_and_resumes_on_the_path(project):
     from ncfmu.project import simulate
     r = simulate("mill_contour", stop_time=45.0, start_values={"panel.hold_at": 15.0, "panel.release_at": 17.0})
-    c = ContourInterpolator(n_points=6, closed=True, diameter_delta=0.4, side=-1)
+    c = ContourInterpolator(**MILL)
     assert contour_error(r, [m.element for m in c.tool_path]).max() <= 0.050
     held = (r.time > 15.3) & (r.time < 17.0)
     assert np.ptp(r["x_axis.pos"][held]) < 1e-3 and np.ptp(r["y_axis.pos"][held]) < 1e-3

@@ -9,6 +9,10 @@ from hypothesis import strategies as st
 from ncfmu.controllers.feed import ProgramError, ProgrammableFeed, parse_program
 from ncfmu.errors import ConfigError
 from ncfmu.servo.axis import ServoAxis
+from ncfmu.systems import parameters
+
+#: The grinder_feed settings and the seed's program, from the system definition.
+GRINDER_FEED = parameters("grinder_feed", "feed")
 
 DT = 1e-3
 BAND = 0.005
@@ -17,8 +21,8 @@ BAND = 0.005
 class Grinder:
     """Feed logic + a ServoAxis (the same classes the FMUs run), stepped in plain Python."""
 
-    def __init__(self, mfin_delay=0.5, **parameters):
-        self.feed = ProgrammableFeed(**parameters)
+    def __init__(self, mfin_delay=0.5, **changes):
+        self.feed = ProgrammableFeed(**{**GRINDER_FEED, **changes})
         self.axis = ServoAxis(pos_start=self.feed.x_origin)
         self.t = 0.0
         self.inputs = {"start": False, "wear_start": False, "emergency": False, "mfin": False, "alarm_in": False,
@@ -55,7 +59,7 @@ class Grinder:
 
 
 def test_seed_program_parses():
-    p = parse_program(ProgrammableFeed.default_parameters()["program"])
+    p = parse_program(str(GRINDER_FEED["program"]))
     assert sorted(p) == [0, 1, 2, 3, 4, 5, 41, 42, 43, 44]
     assert (p[0].kind, p[0].axis, p[0].sign, p[0].d, p[0].f) == ("feed", "x", 1, 3, 7)
     assert p[41].kind == "return" and p[43].wear and p[3].kind == "dwell"
@@ -86,7 +90,7 @@ def test_parser_errors_name_line_column_and_reason(text, where, reason):
 ])
 def test_bad_settings_refused_naming_the_item(changes, variable, rule):
     with pytest.raises(ConfigError) as err:
-        ProgrammableFeed(**changes)
+        ProgrammableFeed(**{**GRINDER_FEED, **changes})
     assert err.value.variable == variable and rule in str(err.value)
 
 

@@ -7,6 +7,10 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from ncfmu.errors import SimulationError
+from ncfmu.systems import parameters
+
+#: The lathe's registers and limit table, from its system definition (the FMUs' own defaults are neutral).
+LATHE_SEQ, LATHE_LIMITER = parameters("lathe_roughing", "seq"), parameters("lathe_roughing", "limiter")
 
 
 def test_every_fmu_validates(fmus):
@@ -53,7 +57,7 @@ def test_fmu_runs_the_code_it_was_built_from(fmus, fmu_runner, monkeypatch):
 def test_bad_registers_refused_at_initialisation(fmus, fmu_runner, name, value, rule):
     r = fmu_runner(fmus["CutSequencer"])
     with pytest.raises(SimulationError) as err:
-        r.start(**{name: value})
+        r.start(**{**LATHE_SEQ, name: value})
     text = str(err.value)
     assert "fmi2ExitInitializationMode returned fmi2Error" in text
     assert f"{name} = " in text and rule in text
@@ -108,7 +112,7 @@ def test_two_instances_of_one_fmu_in_one_process(fmus, fmu_runner):
 def test_bad_limit_table_refused_at_initialisation(fmus, fmu_runner, name, value, rule):
     r = fmu_runner(fmus["AreaLimiter"])
     with pytest.raises(SimulationError) as err:
-        r.start(**{name: value})
+        r.start(**{**LATHE_LIMITER, name: value})
     assert "returned fmi2Error" in str(err.value)
     assert f"{name} = " in str(err.value) and rule in str(err.value)
 

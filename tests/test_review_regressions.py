@@ -8,6 +8,10 @@ import pytest
 from ncfmu.controllers import Block, ContourInterpolator, CutSequencer, ProgrammableFeed
 from ncfmu.controllers.limiter import AreaLimiter
 from ncfmu.errors import ConfigError
+from ncfmu.systems import parameters
+
+#: Scenario values from the system definitions (the controllers' own defaults are neutral).
+GRINDER_FEED, MILL = parameters("grinder_feed", "feed"), parameters("mill_contour", "contour")
 
 DT = 1e-3
 TABLE = [(200.0, -100.0, 250.0), (350.0, -100.0, 80.0)]
@@ -84,7 +88,7 @@ def test_sequencer_restart_clears_every_block_before_travelling_in_z():
 
 
 def test_emb_during_the_stop_after_an_alarm_still_returns():
-    f = ProgrammableFeed(F7=100.0)
+    f = ProgrammableFeed(**{**GRINDER_FEED, "F7": 100.0})
     inputs = dict(ProgrammableFeed.default_inputs())
 
     def step(k, **kw):
@@ -103,7 +107,7 @@ def test_emb_during_the_stop_after_an_alarm_still_returns():
 
 
 def test_restart_after_a_held_wear_feed_never_feeds_toward_the_work():
-    f = ProgrammableFeed(F2=0.05)
+    f = ProgrammableFeed(**{**GRINDER_FEED, "F2": 0.05})
     inputs = dict(ProgrammableFeed.default_inputs())
     held, k = True, 0
 
@@ -127,7 +131,7 @@ def test_restart_after_a_held_wear_feed_never_feeds_toward_the_work():
 
 
 def test_contour_end_not_reached_raises_the_in_position_alarm():
-    c = ContourInterpolator(feed=50.0, approach_feed=50.0)
+    c = ContourInterpolator(**{**MILL, "feed": 50.0, "approach_feed": 50.0})
     inputs = dict(ContourInterpolator.default_inputs(), x_pos=c.x_start, y_pos=c.y_start)
     for k in range(10000):
         inputs["start"] = k == 1
@@ -139,7 +143,8 @@ def test_contour_end_not_reached_raises_the_in_position_alarm():
 
 
 def test_mfin_stuck_high_is_said():
-    f = ProgrammableFeed(program="M0: M2; M1: END; M41: XF7S1; M42: END; M43: X+D1F2S4; M44: END")
+    program = "M0: M2; M1: END; M41: XF7S1; M42: END; M43: X+D1F2S4; M44: END"
+    f = ProgrammableFeed(**{**GRINDER_FEED, "program": program})
     inputs = dict(ProgrammableFeed.default_inputs(), mfin=True)
     for k in range(2000):
         inputs["start"] = k == 1

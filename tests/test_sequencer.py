@@ -6,6 +6,10 @@ import pytest
 
 from ncfmu.controllers import Block, CutSequencer
 from ncfmu.errors import ConfigError
+from ncfmu.systems import parameters
+
+#: lathe_roughing's program (rough 6 passes, finish 1 pass), from its system definition.
+ROUGHING = parameters("lathe_roughing", "seq")
 
 DT = 1e-3
 
@@ -101,7 +105,7 @@ def test_taper_end_points():
 
 
 def test_block_change_reloads_xf():
-    seq = CutSequencer()   # default program: rough 6 passes, finish 1 pass
+    seq = CutSequencer(**ROUGHING)
     axes = run_cycle(seq)
     starts = [c for c in cut_points(axes.trace) if c[0] == "start"]
     assert [(c[1], c[2]) for c in starts] == [(1, n) for n in range(1, 7)] + [(2, 1)]
@@ -138,7 +142,7 @@ def test_feed_rate_override_and_hold():
 
 
 def test_commands_never_jump():
-    seq = CutSequencer()
+    seq = CutSequencer(**ROUGHING)
     axes = run_cycle(seq)
     for a, b in zip(axes.trace, axes.trace[1:]):
         for axis in "xz":
@@ -178,7 +182,7 @@ def test_alarm_in_decelerates_along_the_path_and_latches():
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, 1e300])
 def test_absurd_position_raises_alarm_and_stops_under_control(bad):
-    seq = CutSequencer()
+    seq = CutSequencer(**ROUGHING)
     axes = PerfectAxes(seq)
     axes.press_start()
     before = axes.run_until(lambda o: o["subcycle"] == 2 and o["z_cmd"] < -1)

@@ -13,6 +13,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ncfmu.controllers import Block, ContourInterpolator, CutSequencer, OperatorPanel, ProgrammableFeed
+from ncfmu.systems import parameters
+
+#: Scenario values from the system definitions (the controllers' own defaults are neutral).
+GRINDER_FEED, MILL = parameters("grinder_feed", "feed"), parameters("mill_contour", "contour")
 
 DT = 1e-3
 PROPERTY = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -140,8 +144,8 @@ M_PROGRAM = ("M0: X+D3F7; M1: M1; M2: M2; M3: X+D2F1; M4: M3; M5: X+D5F2; M6: T1
 class Grinder:
     """The feed with an axis that stands where commanded and the real OperatorPanel answering M words."""
 
-    def __init__(self, mfin_delay=0.05, **parameters):
-        self.feed = ProgrammableFeed(**parameters)
+    def __init__(self, mfin_delay=0.05, **changes):
+        self.feed = ProgrammableFeed(**{**GRINDER_FEED, **changes})
         self.panel = OperatorPanel(start_at=-1.0, mfin_delay=mfin_delay)
         self.inputs = {"start": False, "wear_start": False, "emergency": False, "mfin": False, "alarm_in": False,
                        "feed_hold": False, "feed_override": 1.0, "x_pos": 0.0, "y_pos": 0.0,
@@ -229,7 +233,7 @@ def test_property_feed_never_feeds_toward_the_work_before_the_origin(pc, delay, 
 @given(at=st.integers(50, 30000), event=st.sampled_from(["hold", "nan", "jump", "override"]),
        feed=st.floats(2.0, 30.0))
 def test_property_contour_stops_along_the_path_within_accel(at, event, feed):
-    c = ContourInterpolator(feed=feed, approach_feed=feed)
+    c = ContourInterpolator(**{**MILL, "feed": feed, "approach_feed": feed})
     inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": c.x_start, "y_pos": c.y_start,
               "x_in_position": True, "y_in_position": True}
     trace = []

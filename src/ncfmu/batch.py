@@ -42,66 +42,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .checks import path_distance
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
+from .systems import report_of
 
 if TYPE_CHECKING:
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
 STATUSES = ("ok", "failed", "timeout")
-
-# -- metrics per system ----------------------------------------------------------------------------
-AXES = ("x_axis", "y_axis", "z_axis")
-#: The variables :func:`metrics` reads (besides the axes' positions): recorded by default.
-METRIC_VARIABLES = (*(f"{a}.following_error" for a in AXES), "seq.subcycle", "seq.done", "seq.alarm",
-                    "limiter.alarm", "feed.pc", "feed.run", "feed.emergency_active", "feed.alarm",
-                    "contour.segment", "contour.done", "contour.alarm")
-
-
-def _first_time(result, mask) -> float:
-    return float(result.time[np.argmax(mask)]) if mask.any() else float("nan")
-
-
-def metrics(result, parameters: Mapping[str, object] | None = None) -> dict[str, float]:
-    """Summary numbers of a run, by what the system contains."""
-    out: dict[str, float] = {"sim_time": float(result.time[-1]), "wall_time": float(result.wall_time)}
-    fe = [abs(result[f"{a}.following_error"]).max() for a in AXES if f"{a}.following_error" in result]
-    if fe:
-        out["max_following_error_mm"] = float(max(fe))
-    if "seq.subcycle" in result:
-        cut = result["seq.subcycle"] == 2
-        out["final_radius_mm"] = float(result["x_axis.pos"][cut].min()) if cut.any() else float("nan")
-        out["cycle_time_s"] = _first_time(result, result["seq.done"])
-        out["alarms"] = int(result["seq.alarm"].any()) + int("limiter.alarm" in result
-                                                              and result["limiter.alarm"].any())
-    if "feed.pc" in result:
-        out["deepest_x_mm"] = float(result["x_axis.pos"].max())
-        active = result["feed.run"] | result["feed.emergency_active"]
-        out["cycle_time_s"] = float(result.time[np.flatnonzero(active)[-1] + 1]) if active.any() and not active[-1] \
-            else float("nan")
-        out["alarms"] = int(result["feed.alarm"].any()) + int("limiter.alarm" in result
-                                                               and result["limiter.alarm"].any())
-    if "contour.segment" in result:
-        from .controllers.contour import ContourInterpolator
-        names = {p.name for p in ContourInterpolator.ports("parameter")}
-        values = {k.split(".", 1)[1]: v for k, v in (parameters or {}).items()
-                  if k.startswith("contour.") and k.split(".", 1)[1] in names}
-        path = [move.element for move in ContourInterpolator(**values).tool_path]
-        on = result["contour.segment"] >= 1
-        best = path_distance(result["x_axis.pos"][on], result["y_axis.pos"][on], path)
-        out["max_contour_error_mm"] = float(best.max()) if len(best) else float("nan")
-        out["cycle_time_s"] = _first_time(result, result["contour.done"])
-        out["alarms"] = int(result["contour.alarm"].any())
-    return out
-
-
-def default_record(names: Sequence[str]) -> list[str]:
-    """The axes' positions and what :func:`metrics` reads, of the variables ``names`` a system has."""
-    have = set(names)
-    return [n for n in (*(f"{a}.pos" for a in AXES), *METRIC_VARIABLES) if n in have]
-
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
@@ -136,14 +85,14 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         else:
             for slave in opened.slaves:
                 slave.reset()
-        base = {f"{c.name}.{k}": v for c in opened.system.components for k, v in c.parameters.items()}
         deadline = None if timeout is None else time.perf_counter() + timeout
         result = opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline)
-        keep = list(record) if record is not None else default_record(result.names)
+        report = report_of(result)
+        keep = list(record) if record is not None else [n for n in report.record() if n in result]
         kept = result.data[["time", *keep]][::every]
         trajectory = trajectory_csv(kept)
         row.update(status="ok", error="", rows=len(kept))
-        row.update(metrics(result, {**base, **variant}))
+        row.update(report.metrics(result, result.parameters))
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
     except NcfmuError as err:

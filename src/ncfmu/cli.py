@@ -6,8 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from .errors import NcfmuError
 
 EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
@@ -33,41 +31,10 @@ def _parse_set(items: list[str]) -> dict[str, object]:
 
 
 def _summary(result) -> str:
+    from .systems import report_of, run_parameters
     lines = [f"system {result.system}: simulated {result.time[-1]:.3f} s in {result.wall_time:.2f} s wall "
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
-    if "seq.subcycle" in result:
-        sub, x, z = result["seq.subcycle"], result["x_axis.pos"], result["z_axis.pos"]
-        cut = sub == 2
-        passes = int(((sub[1:] == 2) & (sub[:-1] != 2)).sum())
-        lines.append(f"  cuts (SC2): {passes}")
-        if cut.any():
-            starts = [i for i in range(1, len(sub)) if sub[i] == 2 and sub[i - 1] != 2]
-            radii = [float(x[i:][sub[i:] == 2][:1][0]) for i in starts]
-            lines.append("  X at the start of each cut [mm]: " + ", ".join(f"{r:.4f}" for r in radii))
-            lines.append(f"  smallest X during the cuts: {x[cut].min():.4f} mm; Z reached {z[cut].min():.4f} mm")
-        done = result["seq.done"]
-        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
-        lines.append(f"  cycle done: {end}; tool at X {x[-1]:.4f}, Z {z[-1]:.4f} mm; "
-                     f"alarm: {'yes' if result['seq.alarm'].any() else 'no'}")
-    if "feed.pc" in result:
-        x, run = result["x_axis.pos"], result["feed.run"] | result["feed.emergency_active"]
-        end = f"{result.time[np.flatnonzero(run)[-1] + 1]:.3f} s" if run.any() and not run[-1] else "not finished"
-        lines.append(f"  deepest X: {x.max():.4f} mm; cycle ended: {end}; X at the end {x[-1]:.4f} mm; "
-                     f"return counter X {result['feed.return_counter_x'][-1]:.4f} mm")
-        lines.append(f"  alarm: {'yes' if result['feed.alarm'].any() else 'no'}")
-    if "contour.segment" in result:
-        done = result["contour.done"]
-        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
-        lines.append(f"  contour done: {end}; last segment (point path) or program line: "
-                     f"{int(result['contour.segment'][-1])}; alarm: {'yes' if result['contour.alarm'].any() else 'no'}")
-    if "limiter.alarm" in result:
-        verdict = ("ALARM, blocked mask " + str(result["limiter.blocked"].max()) if result["limiter.alarm"].any()
-                   else "no violation")
-        lines.append(f"  area limiter: {verdict}")
-    for axis in ("x_axis", "z_axis", "y_axis"):
-        if f"{axis}.following_error" in result:
-            fe = result[f"{axis}.following_error"]
-            lines.append(f"  {axis}: max |following error| {abs(fe).max() * 1000:.2f} um")
+    lines += report_of(result).summary(result, run_parameters(result))
     for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):
@@ -130,7 +97,7 @@ def cmd_run(args) -> int:
             from .plots import plot_result
         except ImportError:
             raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
-        print(f"  plot: {plot_result(result, out / f'{result.system}.png', start_values=start_values)}")
+        print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
     return 0
 
 
@@ -181,8 +148,12 @@ def cmd_plot(args) -> int:
     if src.name == "summary.csv":
         print(plot_sweep(src, out))
     else:
+        from .systems import SYSTEMS
         result = Result.from_csv(src)
         result.system = args.system or src.stem.split("_branch")[0]
+        if result.system not in SYSTEMS:
+            raise NcfmuError(f"{src}: system {result.system!r} unknown (from the file name); give the system the "
+                             f"CSV came from with --system, one of {', '.join(SYSTEMS)}")
         print(plot_result(result, out))
     return 0
 

@@ -57,7 +57,8 @@ MAX_POINTS = 64
 #: The contour ends when the actual axes are this close to its last command (mm).
 IN_POSITION = 0.005
 #: mill_contour (SPEC 5).
-DEFAULT_PATH = ((0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0))
+#: The point path of the FMU's start values: one 10 mm move along X (a system gives its own).
+DEFAULT_PATH = ((0.0, 0.0), (10.0, 0.0))
 #: On a path with arcs: tangential acceleration and centripetal acceleration, as fractions of ``accel``
 #: (sqrt(0.8**2 + 0.55**2) = 0.97 < 1, room for the discrete steps).
 ARC_TANGENTIAL = 0.8
@@ -160,8 +161,8 @@ class ContourInterpolator(Controller):
         integer("n_points", "parameter", len(DEFAULT_PATH), "point path: number of terminal points",
                 min=2, max=MAX_POINTS),
         *_point_ports(),
-        boolean("closed", "parameter", True, "point path: closes from the last point back to the first"),
-        real("diameter_delta", "parameter", 0.4, "mm", "actual minus nominal cutter diameter (the offset is half)",
+        boolean("closed", "parameter", False, "point path: closes from the last point back to the first"),
+        real("diameter_delta", "parameter", 0.0, "mm", "actual minus nominal cutter diameter (the offset is half)",
              min=-MAX_DIAMETER_DELTA, max=MAX_DIAMETER_DELTA),
         integer("side", "parameter", -1, "point path: side of the correction, +1 left of travel, -1 right "
                 "(a program chooses with G41/G42)", min=-1, max=1),

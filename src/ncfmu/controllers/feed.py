@@ -47,23 +47,11 @@ from ..ports import boolean, integer, real, string
 from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
 from .motion import LinearMove
 
-#: The seed's Table 1 (SPEC 3.3).
-SEED_PROGRAM = """\
-M0: X+D3F7
-M1: X+D2F1
-M2: X+D5F2
-M3: T1
-M4: X-D4F7
-M5: END
-M41: XF7S1
-M42: END
-M43: X+D1F2S4
-M44: END
-"""
-
-#: grinder_feed settings (SPEC 5); 0 means "not set".
-DEFAULTS = {"D": (0.02, 0.20, 4.0, 4.30, 0.10, 0.0, 0.0), "F": (0.02, 0.005, 0.0, 0.0, 0.0, 0.0, 10.0),
-            "T": (1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)}
+#: The program store as the FMU starts: empty cycles, and an emergency return of X at F7 (a system or a
+#: host loads its own program, e.g. the seed's Table 1 in ``ncfmu.systems.grinder``).
+EMPTY_PROGRAM = "M0: END; M41: XF7S1; M42: END; M43: END"
+#: Digital switches as the FMU starts: nothing set (0) but the rapid rate F7 of the emergency return.
+SETTINGS = {"D": (0.0,) * 7, "F": (0.0,) * 6 + (10.0,), "T": (0.0,) * 7}
 
 IDLE, RUN, EMERGENCY = 0, 1, 2
 #: A return counter within this of 0 is at the feed origin (mm): float sums of D settings leave ~1e-15.
@@ -162,7 +150,7 @@ def _setting_ports():
     ports = []
     for letter, unit, what in (("D", "mm", "feed amount"), ("F", "mm/s", "feed rate"), ("T", "s", "dwell time")):
         for k in range(1, 8):
-            ports.append(real(f"{letter}{k}", "parameter", DEFAULTS[letter][k - 1], unit,
+            ports.append(real(f"{letter}{k}", "parameter", SETTINGS[letter][k - 1], unit,
                               f"{what} {letter}{k} (digital switch; 0: not set)", min=0.0))
     return tuple(ports)
 
@@ -177,7 +165,7 @@ class ProgrammableFeed(Controller):
     PORTS = (
         *_setting_ports(),
         # one line, ';'-separated: an XML attribute would turn newlines into spaces
-        string("program", "parameter", "; ".join(SEED_PROGRAM.split("\n")).strip("; "),
+        string("program", "parameter", EMPTY_PROGRAM,
                "program store: 'M<address>: <word>' separated by newlines or ';'"),
         integer("start_address", "parameter", 0, "entry of the normal cycle (START1)", min=0),
         integer("wear_address", "parameter", 43, "entry of the wear-compensation cycle (START2)", min=0),

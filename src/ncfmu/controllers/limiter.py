@@ -48,10 +48,6 @@ MAX_REGIONS = 32
 REF_PLUS, REF_MINUS, LIM_PLUS, LIM_MINUS = 1, 2, 4, 8
 BIG = 1.0e6
 
-#: The lathe_roughing table (SPEC 5): reference Z, limited X; X >= 40 for Z <= -45 (the chuck).
-DEFAULT_TABLE = ((-45.0, 40.0, BIG), (BIG, -BIG, BIG))
-
-
 def find_region(boundaries: Sequence[float], ref: float) -> int:
     """1-based region of ``ref`` (``ref <= boundaries[i-1]``, the first such); 0 above the table."""
     i = bisect.bisect_left(boundaries, ref)
@@ -61,7 +57,8 @@ def find_region(boundaries: Sequence[float], ref: float) -> int:
 def _table_ports():
     ports = []
     for i in range(1, MAX_REGIONS + 1):
-        ref_max, lo, hi = DEFAULT_TABLE[i - 1] if i <= len(DEFAULT_TABLE) else (BIG + i, -BIG, BIG)
+        # unset regions lie beyond each other and limit nothing
+        ref_max, lo, hi = BIG + i - 1, -BIG, BIG
         ports += [
             real(f"region[{i}].ref_max", "parameter", ref_max, "mm",
                  f"region {i}: upper boundary on the reference axis"),
@@ -81,7 +78,7 @@ class AreaLimiter(Controller):
     STOP_TIME = 1.0
 
     PORTS = (
-        integer("n_regions", "parameter", len(DEFAULT_TABLE), "number of regions in the limit table",
+        integer("n_regions", "parameter", 1, "number of regions in the limit table",
                 min=1, max=MAX_REGIONS),
         *_table_ports(),
         real("monitor_period", "parameter", 0.005, "s", "monitor period (the seed's 5 ms interrupt)", min=0.0),

@@ -65,17 +65,10 @@ class Block:
     z_stp: float = 2.0
 
 
-#: The lathe_roughing program (SPEC 5): rough series then finish series.
-DEFAULT_BLOCKS = (
-    Block(Xf=1.0, Xd=0.5, Xp=0.0, Zp=42.0, N=6, feed=4.0, rapid=50.0),
-    Block(Xf=4.0, Xd=0.1, Xp=0.0, Zp=42.0, N=1, feed=2.0, rapid=50.0),
-)
-
-
 def _block_ports():
     ports = []
     for k in range(1, MAX_BLOCKS + 1):
-        b = DEFAULT_BLOCKS[k - 1] if k <= len(DEFAULT_BLOCKS) else Block()
+        b = Block()
         p = f"block[{k}]"
         ports += [
             real(f"{p}.Xf", "parameter", b.Xf, "mm", f"block {k}: offset of STP from the stock outline (register Xf)",

@@ -47,6 +47,7 @@ class _Run:
     record_names: dict
     n_rec: dict
     rec: dict
+    start_values: dict      # instance -> variable -> value: the system's parameter sets with the caller's applied
 
 
 @dataclass
@@ -176,7 +177,7 @@ class Master:
         """
         run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
         wall = self._loop(run, 0, run.n_steps, progress, deadline)
-        return self._assemble(run, run.rec, wall)
+        return self._assemble(run, run.rec, wall, run.start_values)
 
     def run_branches(self, branch_time: float, variants: Sequence[Mapping[str, object]],
                      stop_time: float | None = None, step_size: float | None = None,
@@ -205,12 +206,14 @@ class Master:
                 for kind in KINDS:
                     run.values[kind][:] = vector[kind]
                     run.rec[kind][:k + 1] = prefix[kind]
+                applied = {inst: dict(values) for inst, values in run.start_values.items()}
                 for qualified, value in variant.items():
                     slave, v = self.variable(qualified)
                     slave.set_start(v.name, value)
+                    applied[slave.name][v.name] = value
                 for s in self.slaves:
                     s.read_outputs()
-                results.append(self._assemble(run, run.rec, wall + self._loop(run, k, run.n_steps)))
+                results.append(self._assemble(run, run.rec, wall + self._loop(run, k, run.n_steps), applied))
         finally:
             for holder, state in zip(stateful, states):
                 holder.free_state(state)
@@ -239,9 +242,11 @@ class Master:
                                         f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
 
         # Start values: the system's parameter sets, then the caller's overrides.
+        applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
         for comp in self.system.components:
             for name, value in comp.parameters.items():
                 self.by_name[comp.name].set_start(name, value)
+                applied[comp.name][name] = value
         for qualified, value in (start_values or {}).items():
             slave, v = self.variable(qualified)
             for c in self.system.connections:
@@ -250,6 +255,7 @@ class Master:
                                                 f"overwritten every step (set {c.start_element}.{c.start_connector} "
                                                 "instead)")
             slave.set_start(v.name, value)
+            applied[slave.name][v.name] = value
 
         ext = {}
         if inputs is not None:
@@ -302,7 +308,7 @@ class Master:
             rec[k][0] = values[k][:n_rec[k]]
         times = start_time + h * np.arange(n_steps + 1)
         input_times = inputs.time if inputs is not None else np.empty(0)
-        return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec)
+        return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec, applied)
 
     def _loop(self, run: _Run, first: int, last: int, progress=None, deadline: float | None = None) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time."""
@@ -352,7 +358,7 @@ class Master:
                                         f"allowed ({_time.perf_counter() - wall0:.1f} s of wall time)")
         return _time.perf_counter() - wall0
 
-    def _assemble(self, run: _Run, rec, wall: float) -> Result:
+    def _assemble(self, run: _Run, rec, wall: float, applied: dict[str, dict[str, object]]) -> Result:
         dtype: list[tuple[str, type[np.generic]]] = [("time", np.float64)]
         for k in KINDS:
             dtype += [(q, np.float64 if k == "Real" else (np.bool_ if k == "Boolean" else np.int32))
@@ -363,7 +369,8 @@ class Master:
             for j, q in enumerate(run.record_names[k]):
                 data[q] = rec[k][:, j]
         messages = {s.name: list(getattr(s, "messages", [])) for s in self.slaves}
-        return Result(data, self.system.name, wall, messages)
+        return Result(data, self.system.name, wall, messages, parameters=applied,
+                      models={c.name: c.model for c in self.system.components})
 
     def terminate(self) -> None:
         for s in self.slaves:

@@ -11,15 +11,22 @@ class Result:
     """Trajectories of one run.
 
     ``result["x_axis.pos"]`` is a numpy array over ``result.time``; ``result.data`` is the
-    structured array (fmpy's layout); :meth:`to_csv` writes fmpy's CSV layout.
+    structured array (fmpy's layout); :meth:`to_csv` writes fmpy's CSV layout. ``parameters``
+    (instance -> variable -> value) are the start values the run applied: the system's parameter sets
+    with the caller's on top (the rest were the FMUs' defaults); ``models`` maps instance -> FMU model.
+    A result read from a CSV has neither.
     """
 
     def __init__(self, data: np.ndarray, system: str = "", wall_time: float = 0.0,
-                 messages: dict[str, list[tuple[str, str]]] | None = None) -> None:
+                 messages: dict[str, list[tuple[str, str]]] | None = None,
+                 parameters: dict[str, dict[str, object]] | None = None,
+                 models: dict[str, str] | None = None) -> None:
         self.data = data
         self.system = system
         self.wall_time = wall_time
         self.messages = messages or {}
+        self.parameters = parameters or {}
+        self.models = models or {}
 
     @property
     def time(self) -> np.ndarray:

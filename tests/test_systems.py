@@ -1,0 +1,80 @@
+"""Each system defined once: its definition and its report agree, and the controllers carry no scenario."""
+
+import numpy as np
+import pytest
+
+from ncfmu.controllers import AreaLimiter, ContourInterpolator, ProgrammableFeed
+from ncfmu.cosim.result import Result
+from ncfmu.systems import MODELS, SYSTEMS, get_system, parameters, report_for
+from ncfmu.systems.report import Axes
+
+DT = 1e-3
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_every_report_reads_outputs_its_system_has(name):
+    system, report = get_system(name), SYSTEMS[name].report
+    models = {c.name: c.model for c in system.components}
+    for qualified in report.record():
+        instance, _, variable = qualified.partition(".")
+        outputs = {p.name for p in MODELS[models[instance]].ports("output")}
+        assert variable in outputs, f"{name}: the report reads {qualified}, which {models[instance]} does not output"
+    assert set(report.axes) == {i for i, m in models.items() if m == "ServoAxis"}
+    if report.plane is not None:
+        assert {report.plane.horizontal, report.plane.vertical} <= set(report.axes)
+
+
+def test_an_ssp_of_another_make_gets_the_generic_report():
+    models = {c.name: c.model for c in get_system("mill_contour").components}
+    assert report_for("mill_contour", models) is SYSTEMS["mill_contour"].report
+    renamed = {("cnc" if k == "contour" else k): v for k, v in models.items()}
+    generic = report_for("mill_contour", renamed)
+    assert generic.plane is None and generic.record() == ["x_axis.pos", "x_axis.following_error", "y_axis.pos",
+                                                           "y_axis.following_error"]
+    assert [type(p) for p in generic.parts] == [Axes]
+
+
+def test_metrics_and_summary_read_the_parameters_of_the_run():
+    """A perfect-servo run of a 2 mm oversize cutter: its report, given that run's parameters, finds the cutter
+    on its path; given the system's (0.4 mm), it finds it 0.8 mm off."""
+    used = {**parameters("mill_contour", "contour"), "diameter_delta": 2.0}
+    c = ContourInterpolator(**used)
+    inputs = dict(c.default_inputs(), start=True, x_pos=c.x_start, y_pos=c.y_start)
+    rows = []
+    for k in range(60_000):
+        o = c.step(k * DT, DT, inputs)
+        inputs.update(x_pos=o["x_cmd"], y_pos=o["y_cmd"])
+        rows.append(((k + 1) * DT, o["x_cmd"], o["y_cmd"], 0.0, 0.0, o["segment"], o["done"], o["alarm"]))
+        if o["done"]:
+            break
+    names = ["time", "x_axis.pos", "y_axis.pos", "x_axis.following_error", "y_axis.following_error",
+             "contour.segment", "contour.done", "contour.alarm"]
+    data = np.array(rows, dtype=[(n, float) for n in names])
+    report = SYSTEMS["mill_contour"].report
+    ran = report.metrics(Result(data, "mill_contour", 1.0), {"contour": used})
+    assert ran["max_contour_error_mm"] <= c.dda_unit * 1.01 and ran["alarms"] == 0
+    assert ran["cycle_time_s"] == pytest.approx(rows[-1][0])
+    other = report.metrics(Result(data, "mill_contour", 1.0), {"contour": parameters("mill_contour", "contour")})
+    assert other["max_contour_error_mm"] >= 0.8 - 0.01       # 0.8 along the sides, more at the corners
+
+
+def test_controller_defaults_carry_no_system_scenario():
+    """An FMU's start values run no system's scenario: the limiter limits nothing, the feed's cycle is empty
+    (its EMB returns X to the origin), the contour is one 10 mm move; the scenarios live in the systems."""
+    limiter = AreaLimiter()
+    inputs = dict(limiter.default_inputs())
+    for k in range(1, 5001):                       # to Z -500, X -900 at 100 and 180 mm/s: passed through
+        ref, lim = -0.1 * k, -0.18 * k
+        inputs.update(ref_cmd_in=ref, lim_cmd_in=lim, ref_vff_in=-100.0, lim_vff_in=-180.0, ref_pos=ref, lim_pos=lim)
+        o = limiter.step(k * DT, DT, inputs)
+        assert (o["ref_cmd"], o["lim_cmd"], o["alarm"], o["blocked"]) == (ref, lim, False, 0)
+
+    feed = ProgrammableFeed()
+    inputs = dict(feed.default_inputs(), start=True)
+    for k in range(100):
+        o = feed.step(k * DT, DT, inputs)
+        inputs["start"] = False
+    assert o["x_cmd"] == 0.0 and not o["run"] and not o["alarm"]
+
+    contour = ContourInterpolator()
+    assert [(m.element.start, m.element.end) for m in contour.tool_path][-1] == ((0.0, 0.0), (10.0, 0.0))
