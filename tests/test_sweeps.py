@@ -154,8 +154,8 @@ def test_bad_sweep_options_are_one_line_and_exit_2(project, tmp_path, args, says
 def servo_only(project, tmp_path):
     """A system of one native servo axis and nothing else: a sub-step of 1 µs makes a variant ~10x slower."""
     from ncfmu.cosim.ssp import System, pack, write_system
-    from ncfmu.systems import _component
-    system = System("servo_only", [_component("x_axis", "ServoAxis", pos_start=0.0)], [], stop_time=20.0)
+    from ncfmu.systems.compose import component
+    system = System("servo_only", [component("x_axis", "ServoAxis", pos_start=0.0)], [], stop_time=20.0)
     folder = write_system(system, tmp_path / "systems")
     return pack(folder, ROOT / "fmus", tmp_path / "servo_only.ssp")
 
