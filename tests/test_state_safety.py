@@ -264,7 +264,7 @@ BAD_CALLS = PREAMBLE + textwrap.dedent('''
 @pytest.mark.parametrize("case, says", [
     ("unknown_vr_get", "is not a variable of this FMU"), ("unknown_vr_set", "is not a variable of this FMU"),
     ("set_output", "is an output"), ("wrong_type", "is not of this call's type"),
-    ("fixed_after_init", "fixed parameter"), ("tunable_out_of_range", "override = 5.0: must be <= 1.5"),
+    ("fixed_after_init", "fixed parameter"), ("tunable_out_of_range", "override = 5.0: must be in [0, 1.5]"),
 ])
 def test_bad_calls_are_an_error_not_fatal(fmus, case, says):
     proc = subprocess.run([sys.executable, "-c", BAD_CALLS, str(fmus["OperatorPanel"]), case],

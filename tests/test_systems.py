@@ -78,3 +78,31 @@ def test_controller_defaults_carry_no_system_scenario():
 
     contour = ContourInterpolator()
     assert [(m.element.start, m.element.end) for m in contour.tool_path][-1] == ((0.0, 0.0), (10.0, 0.0))
+
+
+def _outside(port):
+    """A value just outside the port's range."""
+    if port.min is not None:
+        return port.min if port.min_exclusive else port.min - max(1.0, abs(port.min))
+    return port.max + max(1.0, abs(port.max))
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+def test_one_rule_per_parameter_in_the_port_the_model_description_and_the_message(model, fmus):
+    """The range a port states is the modelDescription's range, and the rule a value outside it is refused by,
+    with a message naming the parameter, the value and that rule (the same text an FMU logs)."""
+    from fmpy import read_model_description
+
+    from ncfmu.errors import ConfigError
+    logic = MODELS[model]
+    described = {v.name: v for v in read_model_description(str(fmus[model])).modelVariables}
+    ranged = [p for p in logic.ports("parameter") if p.min is not None or p.max is not None]
+    assert ranged
+    for port in ranged:
+        v = described[port.name]
+        assert (None if v.min is None else float(v.min)) == port.min, port.name
+        assert (None if v.max is None else float(v.max)) == port.max, port.name
+        value = _outside(port)
+        with pytest.raises(ConfigError) as err:
+            logic(**{port.name: value})
+        assert err.value.variable == port.name and f"{port.name} = {value!r}: {port.rule()}" in str(err.value)

@@ -89,7 +89,9 @@ class Port:
         return "continuous" if self.type == "Real" else "discrete"
 
     def rule(self) -> str:
-        """The port's range as text, for messages (``must be in (0, 10]``)."""
+        """The port's range as text, for messages (``must be in (0, 10]``, ``must be in 1..8``)."""
+        if self.type == "Integer" and self.min is not None and self.max is not None:
+            return f"must be in {self.min:g}..{self.max:g}"
         lo = None if self.min is None else ("(" if self.min_exclusive else "[") + f"{self.min:g}"
         hi = None if self.max is None else f"{self.max:g}]"
         if lo and hi:

@@ -11,15 +11,16 @@ import math
 from collections.abc import Mapping
 from typing import ClassVar
 
-from ..errors import ConfigError, require
+from ..errors import ConfigError
 from ..ports import Port, boolean, real, to_float, to_int
 
 
 class Controller:
     """Base class of the controller logic behind every ncfmu FMU.
 
-    Subclasses declare ``PORTS`` (parameters, inputs and outputs, once, as data), implement
-    :meth:`configure` (read and check parameters), :meth:`reset` and :meth:`step`.
+    Subclasses declare ``PORTS`` (parameters, inputs and outputs, once, as data, each parameter with its
+    rule), implement :meth:`configure` (read the checked parameters, check how they combine), :meth:`reset`
+    and :meth:`step`.
     """
 
     #: Model name of the FMU built from this controller.
@@ -42,7 +43,7 @@ class Controller:
             raise ConfigError(unknown[0], parameters[unknown[0]],
                               f"not a parameter of {type(self).__name__}")
         values.update(parameters)
-        self.configure(values)
+        self.configure(self.check_parameters(values))
         self.reset()
 
     # -- ports ----------------------------------------------------------------------------------
@@ -57,6 +58,17 @@ class Controller:
     @classmethod
     def default_inputs(cls) -> dict[str, object]:
         return {p.name: p.start for p in cls.ports("input")}
+
+    @classmethod
+    def check_parameters(cls, values: Mapping[str, object]) -> dict[str, object]:
+        """Every parameter by its port's rule (type, range, whole number): one rule per parameter, in one
+        place. :meth:`configure` adds only the rules that tie parameters together (a table's order, a
+        program's addresses)."""
+        return {p.name: p.check(values[p.name]) for p in cls.ports("parameter")}
+
+    def retune(self, values: Mapping[str, object]) -> None:
+        """Apply parameters changed during a run (tunable ones): checked as at construction."""
+        self.configure(self.check_parameters(values))
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, object]) -> Controller:
@@ -102,39 +114,15 @@ def servo_ports(*axes: tuple[str, float]) -> tuple[Port, ...]:
     return (*inputs, *outputs)
 
 
-# -- parameter checks shared by the controllers ------------------------------------------------
-def real_param(values: Mapping[str, object], name: str, *, positive: bool = False,
-               nonnegative: bool = False, lo: float | None = None, hi: float | None = None) -> float:
-    value = values[name]
-    try:
-        x = to_float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(name, value, "must be a number") from None
-    require(math.isfinite(x), name, value, "must be finite")
-    if positive:
-        require(x > 0, name, value, "must be > 0")
-    if nonnegative:
-        require(x >= 0, name, value, "must be >= 0")
-    if lo is not None:
-        require(x >= lo, name, value, f"must be >= {lo:g}")
-    if hi is not None:
-        require(x <= hi, name, value, f"must be <= {hi:g}")
-    return x
+# -- parameter reads: the values arrive checked by their ports (Controller.__init__) -------------
+def real_param(values: Mapping[str, object], name: str) -> float:
+    """A Real parameter, already checked against its port's rule."""
+    return to_float(values[name])
 
 
-def int_param(values: Mapping[str, object], name: str, lo: int | None = None, hi: int | None = None) -> int:
-    value = values[name]
-    if isinstance(value, float):
-        require(math.isfinite(value) and value == int(value), name, value, "must be a whole number")
-    try:
-        n = to_int(value)
-    except (TypeError, ValueError):
-        raise ConfigError(name, value, "must be a whole number") from None
-    if lo is not None and hi is not None:
-        require(lo <= n <= hi, name, value, f"must be in {lo}..{hi}")
-    elif lo is not None:
-        require(n >= lo, name, value, f"must be >= {lo}")
-    return n
+def int_param(values: Mapping[str, object], name: str) -> int:
+    """An Integer parameter, already checked against its port's rule (a whole number in range)."""
+    return to_int(values[name])
 
 
 def finite_inputs(inputs: Mapping[str, object], names: tuple[str, ...]) -> str | None:

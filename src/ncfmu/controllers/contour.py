@@ -176,9 +176,9 @@ class ContourInterpolator(Controller):
              "end point this long after the command stopped", min=0.0, min_exclusive=True),
         real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=1e-6, max=1.0),
         real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position; a "
-             "program starts here)"),
+             "program starts here)", min=-POSITION_LIMIT, max=POSITION_LIMIT),
         real("y_start", "parameter", -10.0, "mm", "Y command before the cycle (the axis's start position; a "
-             "program starts here)"),
+             "program starts here)", min=-POSITION_LIMIT, max=POSITION_LIMIT),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override", min=0.0, max=1.5),
@@ -193,17 +193,17 @@ class ContourInterpolator(Controller):
     def configure(self, values: Mapping[str, object]) -> None:
         self.program = str(values["program"])
         self.closed = bool(values["closed"])
-        self.diameter_delta = real_param(values, "diameter_delta", lo=-MAX_DIAMETER_DELTA, hi=MAX_DIAMETER_DELTA)
+        self.diameter_delta = real_param(values, "diameter_delta")
         side = int_param(values, "side")
         require(side in (1, -1), "side", side, "must be +1 (left of travel) or -1 (right)")
         self.side = side
-        self.feed = real_param(values, "feed", positive=True)
-        self.approach_feed = real_param(values, "approach_feed", positive=True)
-        self.accel = real_param(values, "accel", positive=True)
-        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
-        self.dda_unit = real_param(values, "dda_unit", lo=1e-6, hi=1.0)
-        self.x_start = real_param(values, "x_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
-        self.y_start = real_param(values, "y_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
+        self.feed = real_param(values, "feed")
+        self.approach_feed = real_param(values, "approach_feed")
+        self.accel = real_param(values, "accel")
+        self.inpos_timeout = real_param(values, "inpos_timeout")
+        self.dda_unit = real_param(values, "dda_unit")
+        self.x_start = real_param(values, "x_start")
+        self.y_start = real_param(values, "y_start")
         self.geometry_error: str | None = None
         if self.program.strip():
             moves = rs274.parse(self.program, (self.x_start, self.y_start))
@@ -213,9 +213,9 @@ class ContourInterpolator(Controller):
             except ProgramError as err:
                 path, self.geometry_error = [], str(err)
         else:
-            n = int_param(values, "n_points", 2, MAX_POINTS)
-            pts = [(real_param(values, f"point[{i}].x", lo=-POSITION_LIMIT, hi=POSITION_LIMIT),
-                    real_param(values, f"point[{i}].y", lo=-POSITION_LIMIT, hi=POSITION_LIMIT))
+            n = int_param(values, "n_points")
+            pts = [(real_param(values, f"point[{i}].x"),
+                    real_param(values, f"point[{i}].y"))
                    for i in range(1, n + 1)]
             for i in range(1, n):
                 require(pts[i] != pts[i - 1], f"point[{i + 1}]", pts[i], f"repeats point[{i}]: consecutive points "

@@ -172,13 +172,15 @@ class ProgrammableFeed(Controller):
         integer("emergency_address", "parameter", 41, "entry of the emergency cycle (EMB)", min=0),
         real("x_origin", "parameter", 0.0, "mm", "X feed origin (machine position at start)"),
         real("y_origin", "parameter", 0.0, "mm", "Y feed origin (machine position at start)"),
-        real("accel", "parameter", 500.0, "mm/s2", "acceleration/deceleration limit of every feed", min=0.0),
+        real("accel", "parameter", 500.0, "mm/s2", "acceleration/deceleration limit of every feed", min=0.0,
+             min_exclusive=True),
         real("return_rate", "parameter", 10.0, "mm/s", "rate of the return to the feed origin before a start away "
-             "from it", min=0.0),
+             "from it", min=0.0, min_exclusive=True),
         real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
+             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
+             min_exclusive=True),
         real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axis has not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0),
+             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
@@ -200,19 +202,19 @@ class ProgrammableFeed(Controller):
     )
 
     def configure(self, values: Mapping[str, object]) -> None:
-        self.D = [real_param(values, f"D{k}", nonnegative=True) for k in range(1, 8)]
-        self.F = [real_param(values, f"F{k}", nonnegative=True) for k in range(1, 8)]
-        self.T = [real_param(values, f"T{k}", nonnegative=True) for k in range(1, 8)]
+        self.D = [real_param(values, f"D{k}") for k in range(1, 8)]
+        self.F = [real_param(values, f"F{k}") for k in range(1, 8)]
+        self.T = [real_param(values, f"T{k}") for k in range(1, 8)]
         self.program = parse_program(str(values["program"]))
-        self.start_address = int_param(values, "start_address", lo=0)
-        self.wear_address = int_param(values, "wear_address", lo=0)
-        self.emergency_address = int_param(values, "emergency_address", lo=0)
+        self.start_address = int_param(values, "start_address")
+        self.wear_address = int_param(values, "wear_address")
+        self.emergency_address = int_param(values, "emergency_address")
         self.x_origin = real_param(values, "x_origin")
         self.y_origin = real_param(values, "y_origin")
-        self.accel = real_param(values, "accel", positive=True)
-        self.return_rate = real_param(values, "return_rate", positive=True)
-        self.max_following_error = real_param(values, "max_following_error", positive=True)
-        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
+        self.accel = real_param(values, "accel")
+        self.return_rate = real_param(values, "return_rate")
+        self.max_following_error = real_param(values, "max_following_error")
+        self.inpos_timeout = real_param(values, "inpos_timeout")
         for name in ("start_address", "emergency_address", "wear_address"):
             entry = getattr(self, name)
             require(entry in self.program, name, entry, f"entry address M{entry} is missing from the program")

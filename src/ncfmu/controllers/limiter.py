@@ -81,18 +81,22 @@ class AreaLimiter(Controller):
         integer("n_regions", "parameter", 1, "number of regions in the limit table",
                 min=1, max=MAX_REGIONS),
         *_table_ports(),
-        real("monitor_period", "parameter", 0.005, "s", "monitor period (the seed's 5 ms interrupt)", min=0.0),
+        real("monitor_period", "parameter", 0.005, "s", "monitor period (the seed's 5 ms interrupt)", min=0.0,
+             min_exclusive=True),
         boolean("predictive", "parameter", False, "govern the speed so that each axis can still stop 'margin' before "
                 "the boundary at 'decel': the command stops at the boundary, the actual axis never crosses"),
         boolean("use_actual", "parameter", False, "also judge the servo feedback ref_pos/lim_pos (the stricter)"),
         real("ref_start", "parameter", 0.0, "mm",
-             "reference-axis command before the first step (the axis's start position)"),
+             "reference-axis command before the first step (the axis's start position)", min=-POSITION_LIMIT,
+             max=POSITION_LIMIT),
         real("lim_start", "parameter", 0.0, "mm",
-             "limited-axis command before the first step (the axis's start position)"),
+             "limited-axis command before the first step (the axis's start position)", min=-POSITION_LIMIT,
+             max=POSITION_LIMIT),
         real("decel", "parameter", 500.0, "mm/s2", "deceleration of every controlled stop and rejoin, and the one "
-             "assumed for the stopping distance (predictive)", min=0.0),
+             "assumed for the stopping distance (predictive)", min=0.0, min_exclusive=True),
         real("max_speed", "parameter", 500.0, "mm/s", "fastest the axes can move: a larger feed-forward, or a command "
-             "jump beyond max_speed * dt, is absurd (hold, alarm); rejoins never go faster", min=0.0),
+             "jump beyond max_speed * dt, is absurd (hold, alarm); rejoins never go faster", min=0.0,
+             min_exclusive=True),
         real("margin", "parameter", 0.05, "mm", "predictive: the command stops this far before the boundary", min=0.0),
         real("ref_cmd_in", "input", 0.0, "mm", "reference-axis position command from the controller"),
         real("lim_cmd_in", "input", 0.0, "mm", "limited-axis position command from the controller"),
@@ -110,7 +114,7 @@ class AreaLimiter(Controller):
     )
 
     def configure(self, values: Mapping[str, object]) -> None:
-        n = int_param(values, "n_regions", 1, MAX_REGIONS)
+        n = int_param(values, "n_regions")
         bounds: list[float] = []
         lows: list[float] = []
         highs: list[float] = []
@@ -127,17 +131,17 @@ class AreaLimiter(Controller):
             highs.append(hi)
         self.n_regions = n
         self.ref_max, self.lim_min, self.lim_max = bounds, lows, highs
-        self.monitor_period = real_param(values, "monitor_period", positive=True)
-        self.decel = real_param(values, "decel", positive=True)
-        self.max_speed = real_param(values, "max_speed", positive=True)
-        self.margin = real_param(values, "margin", nonnegative=True)
+        self.monitor_period = real_param(values, "monitor_period")
+        self.decel = real_param(values, "decel")
+        self.max_speed = real_param(values, "max_speed")
+        self.margin = real_param(values, "margin")
         self.predictive = bool(values["predictive"])
         require(self.margin >= 1e-3 or not self.predictive, "margin", self.margin,
                 "must be >= 0.001 mm with predictive (a stop computed to end exactly on the boundary can end a "
                 "rounding past it)")
         self.use_actual = bool(values["use_actual"])
-        self.ref_start = real_param(values, "ref_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
-        self.lim_start = real_param(values, "lim_start", lo=-POSITION_LIMIT, hi=POSITION_LIMIT)
+        self.ref_start = real_param(values, "ref_start")
+        self.lim_start = real_param(values, "lim_start")
 
     @classmethod
     def with_table(cls, table: Sequence[tuple[float, float, float]], **parameters: object) -> AreaLimiter:

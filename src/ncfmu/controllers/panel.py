@@ -37,7 +37,7 @@ class OperatorPanel(Controller):
              variability="tunable"),
         real("release_at", "parameter", -1.0, "s", "feed hold released at this time; negative: never",
              variability="tunable"),
-        real("pulse", "parameter", 0.01, "s", "length of a push-button pulse", min=0.0),
+        real("pulse", "parameter", 0.01, "s", "length of a push-button pulse", min=0.0, min_exclusive=True),
         real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word",
              min=0.0, variability="tunable"),
         real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5, variability="tunable"),
@@ -57,9 +57,9 @@ class OperatorPanel(Controller):
         self.emergency_at = real_param(values, "emergency_at")
         self.hold_at = real_param(values, "hold_at")
         self.release_at = real_param(values, "release_at")
-        self.pulse = real_param(values, "pulse", positive=True)
-        self.mfin_delay = real_param(values, "mfin_delay", nonnegative=True)
-        self.override = real_param(values, "override", lo=0.0, hi=1.5)
+        self.pulse = real_param(values, "pulse")
+        self.mfin_delay = real_param(values, "mfin_delay")
+        self.override = real_param(values, "override")
 
     def reset(self) -> None:
         self.clock = 0.0            # panel time, advanced only by dt

@@ -73,13 +73,17 @@ def _block_ports():
         ports += [
             real(f"{p}.Xf", "parameter", b.Xf, "mm", f"block {k}: offset of STP from the stock outline (register Xf)",
                  min=0.0),
-            real(f"{p}.Xd", "parameter", b.Xd, "mm", f"block {k}: depth of cut per pass (register Xd)", min=0.0),
+            real(f"{p}.Xd", "parameter", b.Xd, "mm", f"block {k}: depth of cut per pass (register Xd)", min=0.0,
+                 min_exclusive=True),
             real(f"{p}.Xp", "parameter", b.Xp, "mm",
                  f"block {k}: X component of the cut, taper (register Xp; 0 = cylinder)"),
-            real(f"{p}.Zp", "parameter", b.Zp, "mm", f"block {k}: cut length (register Zp)", min=0.0),
+            real(f"{p}.Zp", "parameter", b.Zp, "mm", f"block {k}: cut length (register Zp)", min=0.0,
+                 min_exclusive=True),
             integer(f"{p}.N", "parameter", b.N, f"block {k}: number of passes (pass counter preset)", min=1, max=10000),
-            real(f"{p}.feed", "parameter", b.feed, "mm/s", f"block {k}: cutting feed of SC2", min=0.0),
-            real(f"{p}.rapid", "parameter", b.rapid, "mm/s", f"block {k}: rapid rate of SC1, SC3, SC4", min=0.0),
+            real(f"{p}.feed", "parameter", b.feed, "mm/s", f"block {k}: cutting feed of SC2", min=0.0,
+                 min_exclusive=True),
+            real(f"{p}.rapid", "parameter", b.rapid, "mm/s", f"block {k}: rapid rate of SC1, SC3, SC4", min=0.0,
+                 min_exclusive=True),
             boolean(f"{p}.own_stp", "parameter", b.own_stp, f"block {k}: starts from its own start point "
                     f"block[{k}].x_stp/z_stp (else the previous block's; block 1: x_start/z_start)"),
             real(f"{p}.x_stp", "parameter", b.x_stp, "mm", f"block {k}: X of its own start point (with own_stp)"),
@@ -99,14 +103,17 @@ class CutSequencer(Controller):
     PORTS = (
         real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
         real("z_start", "parameter", 2.0, "mm", "Z of the start point STP"),
-        integer("n_blocks", "parameter", 2, "number of blocks read in series", min=1, max=MAX_BLOCKS),
-        real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0),
+        integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
+        real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
+             min_exclusive=True),
         real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0),
+             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
+             min_exclusive=True),
         real("inpos_band", "parameter", 0.005, "mm",
-             "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0),
+             "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0,
+             min_exclusive=True),
         real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0),
+             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
         *_block_ports(),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
@@ -128,22 +135,22 @@ class CutSequencer(Controller):
     def configure(self, values: Mapping[str, object]) -> None:
         self.x_start = real_param(values, "x_start")
         self.z_start = real_param(values, "z_start")
-        self.n_blocks = int_param(values, "n_blocks", 1, MAX_BLOCKS)
-        self.accel = real_param(values, "accel", positive=True)
-        self.max_following_error = real_param(values, "max_following_error", positive=True)
-        self.inpos_band = real_param(values, "inpos_band", positive=True)
-        self.inpos_timeout = real_param(values, "inpos_timeout", positive=True)
+        self.n_blocks = int_param(values, "n_blocks")
+        self.accel = real_param(values, "accel")
+        self.max_following_error = real_param(values, "max_following_error")
+        self.inpos_band = real_param(values, "inpos_band")
+        self.inpos_timeout = real_param(values, "inpos_timeout")
         blocks = []
         for k in range(1, self.n_blocks + 1):
             p = f"block[{k}]"
             blocks.append(Block(
-                Xf=real_param(values, f"{p}.Xf", nonnegative=True),
-                Xd=real_param(values, f"{p}.Xd", positive=True),
+                Xf=real_param(values, f"{p}.Xf"),
+                Xd=real_param(values, f"{p}.Xd"),
                 Xp=real_param(values, f"{p}.Xp"),
-                Zp=real_param(values, f"{p}.Zp", positive=True),
-                N=int_param(values, f"{p}.N", 1, 10000),
-                feed=real_param(values, f"{p}.feed", positive=True),
-                rapid=real_param(values, f"{p}.rapid", positive=True),
+                Zp=real_param(values, f"{p}.Zp"),
+                N=int_param(values, f"{p}.N"),
+                feed=real_param(values, f"{p}.feed"),
+                rapid=real_param(values, f"{p}.rapid"),
                 own_stp=bool(values[f"{p}.own_stp"]),
                 x_stp=real_param(values, f"{p}.x_stp"),
                 z_stp=real_param(values, f"{p}.z_stp"),

@@ -189,7 +189,7 @@ class ControllerSlave(Fmi2Slave):
         """Apply a tunable parameter set during the run; False (logged, flagged for the shim) if refused."""
         try:
             assert self.logic is not None                         # the setters call this during the run only
-            self.logic.configure(self.parameters)
+            self.logic.retune(self.parameters)
             return True
         except Exception as err:
             self.log(f"{self.instance_name}: tunable parameter refused, the old value kept: {err}", Fmi2Status.error)
