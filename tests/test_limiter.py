@@ -262,6 +262,7 @@ class Upstream:
         return {"ref_cmd_in": r, "lim_cmd_in": l, "ref_vff_in": vr, "lim_vff_in": vl, "ref_pos": ar, "lim_pos": al}
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(table=tables(), program=moves)
 def test_property_predictive_commanded_and_actual_never_cross(table, program):
@@ -299,6 +300,7 @@ def inside_tours(draw):
     return table, points
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(tour=inside_tours(), lim_start=st.floats(-5.0, 5.0))
 def test_property_predictive_follows_every_inside_command(tour, lim_start):
@@ -340,6 +342,7 @@ def test_property_predictive_follows_every_inside_command(tour, lim_start):
         assert not o["alarm"] and o["blocked"] == 0
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(table=tables(), program=moves)
 def test_property_overshoot_within_the_documented_bound(table, program):

@@ -6,10 +6,10 @@ import pytest
 from ncfmu.cli import main
 from ncfmu.project import OpenSystem, simulate, simulate_branches, system_archive
 
-
 BRANCH = {"lathe_taper": 12.3456, "grinder_feed": 10.5, "grinder_envelope": 6.789, "mill_contour": 17.25}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(BRANCH))
 def test_restored_state_continues_bit_identically(project, name):
     """Branch twice from a mid-run state with no change: both equal the straight run, bit for bit."""
@@ -43,6 +43,7 @@ def test_serialised_state_round_trips(project, name):
             assert np.array_equal(run.rec[k][1500:], once[k])
 
 
+@pytest.mark.slow
 def test_emergency_at_different_instants_from_one_state(project, tmp_path, capsys):
     """The use case: grind to 10 s once, then strike EMB at 12, 21 and 31 s."""
     results = simulate_branches("grinder_feed", 10.0, [{"panel.emergency_at": t} for t in (12.0, 21.0, 31.0)],
