@@ -7,6 +7,8 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from ncfmu.systems import SYSTEMS
+
 # Property tests are seeded: CI runs the same examples every time (a failure reproduces).
 settings.register_profile("ncfmu", derandomize=True, print_blob=True)
 settings.load_profile("ncfmu")
@@ -28,6 +30,13 @@ def fmus(project) -> dict[str, Path]:
     return {p.stem: p for p in project["fmus"]}
 
 
+@pytest.fixture(scope="session", params=sorted(SYSTEMS))
+def system(request) -> str:
+    """Each system's name in turn (parametrised): for what holds for every system."""
+    return request.param
+
+
+# the default runs of single systems, by name (the plugin runs each once per session)
 @pytest.fixture(scope="session")
 def lathe_roughing(ncfmu_run):
     return ncfmu_run("lathe_roughing")

@@ -2,6 +2,8 @@
 
 import csv
 
+import pytest
+
 from ncfmu.cli import main
 
 
@@ -45,6 +47,7 @@ def test_input_csv_drives_an_unconnected_input(project, tmp_path):
     assert not mfin[t < 0.699].any() and mfin[t > 0.701].all()
 
 
+@pytest.mark.slow
 def test_run_changes_no_file_of_the_checkout(project, tmp_path):
     """Issue 14: a run builds what is missing and nothing else; the checkout (sources, generated SSP and docs,
     built FMUs and archives) is byte-for-byte and timestamp-for-timestamp as before."""

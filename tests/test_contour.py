@@ -207,10 +207,12 @@ def test_property_corrected_polygon_is_the_offset_polygon(poly, r):
 
 
 # -- through the FMUs (the contour check itself is physics.check_mill_contour, run in test_interop) ----
+@pytest.mark.slow
 def test_mill_contour_finishes_without_alarm(mill_contour):
     assert mill_contour["contour.done"][-1] and not mill_contour["contour.alarm"].any()
 
 
+@pytest.mark.slow
 def test_override_half_doubles_the_contour_time(mill_contour, project):
     from ncfmu.project import simulate
     slow = simulate("mill_contour", stop_time=85.0, start_values={"panel.override": 0.5})
@@ -221,6 +223,7 @@ def test_override_half_doubles_the_contour_time(mill_contour, project):
     assert contour_time(slow) == pytest.approx(2 * contour_time(mill_contour), rel=0.01)
 
 
+@pytest.mark.slow
 def test_hold_stops_and_resumes_on_the_path(project):
     from ncfmu.project import simulate
     r = simulate("mill_contour", stop_time=45.0, start_values={"panel.hold_at": 15.0, "panel.release_at": 17.0})

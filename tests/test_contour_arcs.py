@@ -137,6 +137,7 @@ def run_program(program, feed_override=1.0, accel=500.0, hold=None, **parameters
     return c, drive_contour(c, DT, hold=hold, feed_override=feed_override)
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(star_programs(), st.sampled_from([0.5, 1.0, 1.5]), st.sampled_from([200.0, 500.0, 2000.0]),
        st.floats(0.0, 3.0))

@@ -75,6 +75,7 @@ def test_an_arc_of_rounding_noise_is_a_program_error_not_a_crash():
     assert np.isfinite(rows[:, :4]).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("program, block_line, feed", [
     ("G01 F6000 X50 Y0\nF60\nX100\nM30", 3, 1.0),                        # collinear: a tangent junction
     ("G01 F6000 X50 Y0\nG03 F60 X50 Y20 I0 J10\nM30", 2, 1.0),           # into a tangent arc

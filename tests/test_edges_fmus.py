@@ -83,6 +83,7 @@ def chuck_runs(project):
             for predictive in (True, False)}
 
 
+@pytest.mark.slow
 def test_predictive_limiter_stops_the_cut_at_the_chuck_without_a_slam(chuck_runs):
     r = chuck_runs[True]
     z, zc = r["z_axis.pos"], r["limiter.ref_cmd"]
@@ -94,6 +95,7 @@ def test_predictive_limiter_stops_the_cut_at_the_chuck_without_a_slam(chuck_runs
     assert np.abs(r["z_axis.following_error"]).max() < 0.05             # no torque-limit braking
 
 
+@pytest.mark.slow
 def test_non_predictive_limiter_overshoot_within_its_documented_bound(chuck_runs):
     r = chuck_runs[False]
     bound = AreaLimiter().overshoot_bound(40.0, DT)
@@ -116,6 +118,7 @@ def unwired(name, folder):
     return pack(write_system(system, folder), project_root() / "fmus", folder / f"{name}_unwired.ssp")
 
 
+@pytest.mark.slow
 def test_taper_pass_held_in_x_never_ends_short_with_the_alarm_unwired(project, tmp_path):
     """Issue 11, 3: with limiter.alarm -> seq.alarm_in removed and X limited to >= 27.2 (a shoulder), the first
     taper pass (X 28.5 -> 27.0 over the cut) was held at X 27.2 while Z went on, and ended there: 'done',
@@ -132,6 +135,7 @@ def test_taper_pass_held_in_x_never_ends_short_with_the_alarm_unwired(project, t
     assert end_of_command < alarm_at < end_of_command + 2.0 + 0.5       # inpos_timeout = 2 s after it
 
 
+@pytest.mark.slow
 def test_cut_held_at_the_chuck_never_ends_short_with_the_alarm_unwired(project, tmp_path):
     """The same with Z held at the chuck boundary (Zp 50): no sub-cycle after the held cut."""
     r = simulate(unwired("lathe_taper", tmp_path), stop_time=15.0, start_values={"seq.block[1].Zp": 50.0})
@@ -145,6 +149,7 @@ def test_cut_held_at_the_chuck_never_ends_short_with_the_alarm_unwired(project, 
 
 
 # -- 5. ProgrammableFeed restart never plunges the wheel ---------------------------------------------
+@pytest.mark.slow
 def test_grinder_restart_after_an_alarm_returns_to_the_origin_first(project, tmp_path):
     """alarm_in at 3 s stops the rough grind near X 4.05; START again at 5 s."""
     csv_file = tmp_path / "alarm.csv"
@@ -177,6 +182,7 @@ def test_two_m_words_in_a_row_each_wait_for_their_own_mfin(project):
 
 
 # -- 7. dwell_left is exactly 0 after the spark-out ---------------------------------------------------
+@pytest.mark.slow
 def test_dwell_left_is_exactly_zero_after_the_dwell(grinder_feed):
     r = grinder_feed
     dwelling = r["feed.pc"] == 3
@@ -185,6 +191,7 @@ def test_dwell_left_is_exactly_zero_after_the_dwell(grinder_feed):
 
 
 # -- 8. one block series, two diameters; restart retracts X first --------------------------------------
+@pytest.mark.slow
 def test_stepped_shaft_from_one_block_series(project):
     r = simulate("lathe_roughing", stop_time=50.0, start_values={
         "seq.block[1].Xf": 1.0, "seq.block[1].Xd": 0.5, "seq.block[1].N": 2,
@@ -199,6 +206,7 @@ def test_stepped_shaft_from_one_block_series(project):
     assert r["x_axis.pos"][-1] == pytest.approx(29.0, abs=BAND) and r["z_axis.pos"][-1] == pytest.approx(2.0, abs=BAND)
 
 
+@pytest.mark.slow
 def test_lathe_restart_after_an_alarm_retracts_x_before_z_moves(project, tmp_path):
     csv_file = tmp_path / "alarm.csv"
     csv_file.write_text('"time","seq.alarm_in"\n0.0,0\n3.0,1\n3.1,0\n')

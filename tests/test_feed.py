@@ -98,6 +98,7 @@ def phase_of(o):
     return o["pc"]
 
 
+@pytest.mark.slow
 def test_normal_cycle_rates_dwell_and_return():
     g = Grinder()
     g.step(start=True)
@@ -120,6 +121,7 @@ def test_normal_cycle_rates_dwell_and_return():
     assert o["x"] == pytest.approx(0.0, abs=BAND) and o["return_counter_x"] == pytest.approx(0.0, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_wear_compensation_moves_the_origin():
     g = Grinder()
     g.step(wear_start=True)
@@ -185,6 +187,7 @@ def _every_phase(test):
     return test
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(phase=st.sampled_from(sorted(PHASES)), fraction=st.floats(0.0, 1.0), worn=st.booleans())
 @_every_phase

@@ -12,6 +12,8 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 
+pytestmark = pytest.mark.slow        # a process per case (the console script): not in the fast subset
+
 
 def ncfmu(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ncfmu.cli", *args], capture_output=True, text=True, timeout=300,

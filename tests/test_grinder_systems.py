@@ -10,9 +10,11 @@ pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the 
 BAND = 0.005
 
 
-def test_normal_cycle_through_the_fmus(grinder_feed):
-    from physics import check_grinder_feed
-    check_grinder_feed(grinder_feed)
+# The cycle's depths, rates and spark-out, and the envelope, are physics.check_grinder_feed/_envelope, which
+# test_interop runs on these same results and on libcosim's. Here: what only ncfmu's run records.
+
+
+def test_normal_cycle_ends_idle_without_alarm(grinder_feed):
     assert not grinder_feed["feed.run"][-1] and not grinder_feed["feed.alarm"].any()
 
 
@@ -53,8 +55,6 @@ def test_m_word_waits_for_mfin_from_the_panel(project):
 
 
 def test_envelope_default_program_never_alarms(grinder_envelope):
-    from physics import check_grinder_envelope
-    check_grinder_envelope(grinder_envelope)
     assert not grinder_envelope["limiter.alarm"].any() and not grinder_envelope["feed.alarm"].any()
 
 

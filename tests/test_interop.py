@@ -8,7 +8,6 @@ from conftest import ROOT
 from physics import CHECKS
 
 from ncfmu.cosim.libcosim import run_ssp
-from ncfmu.project import simulate
 from ncfmu.systems import SYSTEMS, get_system
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
@@ -23,20 +22,17 @@ def libcosim_runs(project):
         return dict(pool.map(run, SYSTEMS))
 
 
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
-def test_libcosim_run_passes_the_physics_checks(libcosim_runs, name):
-    CHECKS[name](libcosim_runs[name])
+def test_libcosim_run_passes_the_physics_checks(libcosim_runs, system):
+    CHECKS[system](libcosim_runs[system])
 
 
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
-def test_our_gauss_seidel_run_passes_the_same_checks(ncfmu_run, name):
-    CHECKS[name](ncfmu_run(name))
+def test_our_gauss_seidel_run_passes_the_same_checks(ncfmu_run, system):
+    CHECKS[system](ncfmu_run(system))
 
 
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
-def test_jacobi_mode_reproduces_libcosim(libcosim_runs, name):
-    theirs = libcosim_runs[name]
-    ours = simulate(name, mode="jacobi")
+def test_jacobi_mode_reproduces_libcosim(libcosim_runs, ncfmu_run, system):
+    theirs = libcosim_runs[system]
+    ours = ncfmu_run(system, mode="jacobi")
     assert len(theirs.names) >= 10
     for variable in theirs.names:
         a, b = theirs[variable].astype(float), ours[variable].astype(float)

@@ -5,20 +5,14 @@ import pytest
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
-X0, Z0 = 30.0, 2.0
-BAND = 0.005
+# The cut depths, the taper line, the end point, the two blocks and nothing blocked are
+# physics.check_lathe_roughing/_taper, which test_interop runs on these same results and on libcosim's.
+# Here: what only ncfmu's run records.
 
 
-# The cut depths, the taper line and the end point are physics.check_lathe_roughing/_taper, which
-# test_interop runs on these same results and on libcosim's. Here: what only ncfmu's run records.
-
-
-def test_roughing_ends_at_the_start_point(lathe_roughing):
+def test_roughing_ends_done_counting_passes_as_the_seed(lathe_roughing):
     r = lathe_roughing
     assert r["seq.done"][-1] and not r["seq.alarm"].any()
-    assert abs(r["x_axis.pos"][-1] - X0) <= BAND and abs(r["z_axis.pos"][-1] - Z0) <= BAND
-    # passes and blocks as the seed counts them
-    assert r["seq.block_no"].max() == 2
     assert set(np.unique(r["seq.pass_no"][r["seq.block_no"] == 1])) >= {1, 2, 3, 4, 5, 6}
 
 
@@ -34,7 +28,6 @@ def test_feed_rate_during_the_cut(lathe_roughing):
 def test_default_programs_never_raise_the_limiter_alarm(lathe_roughing, lathe_taper):
     for r in (lathe_roughing, lathe_taper):
         assert not r["limiter.alarm"].any() and not r["seq.alarm"].any()
-        assert r["limiter.blocked"].max() == 0
 
 
 def test_cut_into_the_chuck_stops_before_it(project):

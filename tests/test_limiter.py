@@ -219,13 +219,15 @@ def tables(draw):
     for w in widths:
         b += w
         bounds.append(b)
-    highs = draw(st.lists(st.floats(20.0, 150.0), min_size=n, max_size=n))
-    lows = draw(st.lists(st.floats(-120.0, -10.0), min_size=n, max_size=n))
+    highs = draw(st.lists(st.floats(5.0, 60.0), min_size=n, max_size=n))
+    lows = draw(st.lists(st.floats(-60.0, -5.0), min_size=n, max_size=n))
     return [(bb, lo, hi) for bb, lo, hi in zip(bounds, lows, highs)]
 
 
-# straight moves of the upstream controller: (d_ref, d_lim) in mm, speed mm/s
-moves = st.lists(st.tuples(st.floats(-300.0, 300.0), st.floats(-200.0, 200.0), st.floats(5.0, 200.0)),
+# straight moves of the upstream controller: (d_ref, d_lim) in mm, speed mm/s; the signs drawn apart from the
+# lengths, so that moves down (toward the lower limits) are as frequent as moves up
+signed = st.builds(float.__mul__, st.sampled_from((-1.0, 1.0)), st.floats(0.0, 1.0))
+moves = st.lists(st.tuples(signed.map(lambda f: 300.0 * f), signed.map(lambda f: 200.0 * f), st.floats(5.0, 200.0)),
                  min_size=1, max_size=4)
 
 
@@ -260,6 +262,7 @@ class Upstream:
         return {"ref_cmd_in": r, "lim_cmd_in": l, "ref_vff_in": vr, "lim_vff_in": vl, "ref_pos": ar, "lim_pos": al}
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(table=tables(), program=moves)
 def test_property_predictive_commanded_and_actual_never_cross(table, program):
@@ -297,6 +300,7 @@ def inside_tours(draw):
     return table, points
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(tour=inside_tours(), lim_start=st.floats(-5.0, 5.0))
 def test_property_predictive_follows_every_inside_command(tour, lim_start):
@@ -338,6 +342,7 @@ def test_property_predictive_follows_every_inside_command(tour, lim_start):
         assert not o["alarm"] and o["blocked"] == 0
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(table=tables(), program=moves)
 def test_property_overshoot_within_the_documented_bound(table, program):
@@ -362,3 +367,57 @@ def test_property_overshoot_within_the_documented_bound(table, program):
                 stepped = find_region(limiter.ref_max, o["ref_cmd"] - bound) != r
                 assert ok or stepped
     assert_no_velocity_step(limiter, trace)
+
+
+@st.composite
+def lower_limit_cases(draw):
+    """A table, a point inside region j at a distance above that region's lower limit, and a downward speed."""
+    table = draw(tables())
+    j = draw(st.integers(0, len(table) - 1))
+    lo_ref = table[j - 1][0] if j else table[0][0] - 200.0
+    ref = draw(st.floats(lo_ref + 5.0, table[j][0] - 5.0))
+    speed = draw(st.floats(5.0, 200.0))
+    lim = table[j][1] + speed * draw(st.floats(0.01, 0.3))         # reaches the lower limit in 10..300 ms
+    return table, ref, min(lim, table[j][2] - 1.0), speed
+
+
+@settings(max_examples=100, deadline=None)
+@given(case=lower_limit_cases(), predictive=st.booleans())
+def test_property_lower_limit_stops_the_limited_axis_and_blocks_only_lim_minus(case, predictive):
+    """The limited axis sent down through its region's lim_min: it stops at it (predictive) or within the
+    overshoot bound past it, only lim- is blocked, the reference axis still moves, and a move up backs out."""
+    table, ref, lim, speed = case
+    d = Drive(table, ref=ref, lim=lim, predictive=predictive)
+    low = d.lim.lim_min[find_region(d.lim.ref_max, ref) - 1]
+    bound = 0.0 if predictive else d.lim.overshoot_bound(speed, DT)
+    trace = [d.out]
+    for _ in range(2000):
+        trace.append(d.step(v_lim=-speed))
+        o = trace[-1]
+        assert o["lim_cmd"] >= low - bound and o["ref_cmd"] == ref
+        if o["alarm"] and o["lim_vff"] == 0.0:
+            break
+    assert_no_velocity_step(d.lim, trace[1:])      # (the first step is the input's own velocity step)
+    assert o["alarm"] and o["blocked"] == LIM_MINUS and o["lim_vff"] == 0.0
+    if predictive:
+        assert low <= o["lim_cmd"] <= low + 1.0                       # at the boundary, not early
+    else:
+        assert low - bound <= o["lim_cmd"] < low                      # seen after the fact, stopped within the bound
+    held = o["lim_cmd"]
+    for _ in range(20):                                               # the command goes on down: held
+        o = d.step(v_lim=-speed)
+        assert o["lim_cmd"] == held and o["lim_vff"] == 0.0 and o["blocked"] == LIM_MINUS
+    # only lim- is blocked: the reference axis follows its command within the region
+    for v_ref in (10.0, -10.0):
+        for _ in range(20):
+            o = d.step(v_ref=v_ref)
+            assert o["ref_cmd"] == d.ref_cmd and o["lim_cmd"] == held and o["blocked"] == LIM_MINUS
+    # back out upward: passes at once, released once inside
+    d.hold_inputs_at_output()
+    o = d.step(v_lim=speed)
+    assert o["lim_cmd"] > held and o["lim_vff"] == speed
+    for _ in range(1000):
+        if not o["alarm"]:
+            break
+        o = d.step(v_lim=speed)
+    assert not o["alarm"] and o["blocked"] == 0 and o["lim_cmd"] >= low

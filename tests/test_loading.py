@@ -5,7 +5,7 @@ import zipfile
 import pytest
 
 from ncfmu.errors import SystemDefinitionError
-from ncfmu.project import OpenSystem, system_archive, validate
+from ncfmu.project import OpenSystem, system_archive
 
 
 def rewrite(src, dst, change_ssd=None, drop=(), add=()):
@@ -49,10 +49,6 @@ def test_type_mismatch_is_named(project, tmp_path):
                                                  'startElement="seq" startConnector="subcycle"'))
     with pytest.raises(SystemDefinitionError, match=r"seq.subcycle -> seq.start: type mismatch \(Integer -> Boolean\)"):
         OpenSystem(bad)
-
-
-def test_every_archive_is_schema_valid_and_flat(project):
-    assert validate() == []
 
 
 @pytest.mark.parametrize("version, kind, says", [

@@ -51,6 +51,7 @@ def outputs(proc: subprocess.CompletedProcess) -> list[float]:
     return [float(v) for v in re.findall(r"^OUT \d+ (\S+)$", proc.stdout, re.M)]
 
 
+@pytest.mark.slow
 def test_controller_fmu_loads_python_itself_and_exits_cleanly(fmus, fmi_host, tmp_path):
     """CutSequencer in a host with no Python and an empty environment, 12 runs of 1-3 instances: each runs
     the approach (X towards its clearance first) and exits 0 (before: rc 134 in about 1 run of 3)."""

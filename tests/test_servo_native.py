@@ -115,6 +115,7 @@ def native_verdict(fmu, values: dict[str, float]) -> tuple[str, str]:
     return status, proc.stdout
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kv=st.floats(-2.5, 3.2).map(lambda e: 10 ** e), bw=st.floats(-2.3, 3.65).map(lambda e: 10 ** e),
        tau=st.floats(1e-5, 2e-3), b=st.floats(0.0, 0.05), j=st.floats(1e-4, 0.05))

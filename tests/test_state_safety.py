@@ -10,6 +10,8 @@ import textwrap
 
 import pytest
 
+pytestmark = pytest.mark.slow        # a process per case: not in the fast subset
+
 SCRIPT = textwrap.dedent('''
     import os, pickle, shutil, sys, tempfile
     from fmpy import extract, read_model_description

@@ -9,6 +9,7 @@ its own MFIN.
 
 import math
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -49,6 +50,7 @@ class Lathe:
         return o
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(phase=st.integers(1, 4), pass_no=st.integers(1, 3), delay=st.integers(0, 400),
        event=st.sampled_from(["hold", "alarm_in", "following_error", "nan", "override"]),
@@ -182,6 +184,7 @@ def assert_own_mfin(trace):
             assert trace[i]["mfin"] and not trace[i - 1]["mfin"] and i > strobe_at
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(pc=st.sampled_from([0, 1, 2, 3, 4, 5, 6, 7, 43]), delay=st.integers(0, 3000),
        event=st.sampled_from(["alarm_in", "emergency", "hold", "nan"]),
@@ -229,6 +232,7 @@ def test_property_feed_never_feeds_toward_the_work_before_the_origin(pc, delay, 
 
 
 # -- ContourInterpolator ------------------------------------------------------------------------------
+@pytest.mark.slow
 @PROPERTY
 @given(at=st.integers(50, 30000), event=st.sampled_from(["hold", "nan", "jump", "override"]),
        feed=st.floats(2.0, 30.0))

@@ -14,15 +14,17 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.slow
 def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
     dist, venv, work, cache = (tmp_path / d for d in ("dist", "venv", "work", "cache"))
+    # nothing of the caller's environment points into the checkout (a PYTHONPATH to src/ would make the venv's
+    # pip see ncfmu as installed already, and skip the wheel)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("NCFMU_", "PYTHON", "VIRTUAL_ENV"))}
+    env["XDG_CACHE_HOME"] = str(cache)
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(dist), str(ROOT)],
                    check=True, timeout=600, capture_output=True)
     (wheel,) = dist.glob("ncfmu-*.whl")
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
     subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(wheel)], check=True, timeout=900,
-                   capture_output=True)
+                   capture_output=True, env=env)
     work.mkdir()
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("NCFMU_", "PYTHON", "VIRTUAL_ENV"))}
-    env["XDG_CACHE_HOME"] = str(cache)
     done = subprocess.run([str(venv / "bin" / "ncfmu"), "run", "grinder_feed", "--out", "out"],
                           cwd=work, env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr
