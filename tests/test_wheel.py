@@ -18,10 +18,12 @@ def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
                    check=True, timeout=600, capture_output=True)
     (wheel,) = dist.glob("ncfmu-*.whl")
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
-    subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(wheel)], check=True, timeout=900,
-                   capture_output=True)
-    work.mkdir()
+    # the venv sees nothing of this process: with PYTHONPATH on a checkout's src/ (and the egg-info the wheel
+    # build leaves there) pip would take ncfmu as installed already and skip it
     env = {k: v for k, v in os.environ.items() if not k.startswith(("NCFMU_", "PYTHON", "VIRTUAL_ENV"))}
+    subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(wheel)], check=True, timeout=900,
+                   capture_output=True, env=env)
+    work.mkdir()
     env["XDG_CACHE_HOME"] = str(cache)
     done = subprocess.run([str(venv / "bin" / "ncfmu"), "run", "grinder_feed", "--out", "out"],
                           cwd=work, env=env, capture_output=True, text=True, timeout=900)
@@ -36,6 +38,7 @@ def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
         "AreaLimiter.fmu", "ContourInterpolator.fmu", "CutSequencer.fmu", "OperatorPanel.fmu",
         "ProgrammableFeed.fmu", "ServoAxis.fmu"}
     assert (built / "ssp" / "grinder_feed.ssp").is_file() and not (built / "docs").exists()
+    assert len(list((built / "build").glob("ncfmu_loop-*.so"))) == 1       # the master's C loop, built there too
     # the run itself: the seed's cycle ground to 4.3 mm (rapid 4.0, rough 0.2, fine 0.1) and returned
     lines = done.stdout.splitlines()
     assert lines[0].startswith("system grinder_feed: simulated")
