@@ -11,6 +11,8 @@ system (``--quick``: the first pass only, 13 s of simulated time, which still ru
 - speedup_vs_python_loop   the same controller and servo Python objects stepped directly in one loop with the
                            same step / ncfmu's master running the FMUs. Goal >= 3.
 - fmi_overhead_ratio       its inverse (kept for the history in results-*.json).
+- c_loop_speedup           ncfmu's master with its Python loop (Master(native=False)) / with its C loop
+                           (cosim/loop.c, the default): what the loop outside Python gains.
 - vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 1.5.
 - vs_libcosim_speedup      libcosim (libcosimpy) on the same .ssp / ncfmu's master. Goal >= 2.5.
 - vs_ecos_speedup          ecos (ecospy, its step_until) on the same .ssp / ncfmu's master. Goal >= 1.
@@ -60,10 +62,13 @@ def direct_loop(system_name: str, stop_time: float) -> float:
     return time.perf_counter() - t0
 
 
-def ncfmu_master(archive: Path, stop_time: float) -> float:
+def ncfmu_master(archive: Path, stop_time: float, native: bool = True) -> float:
     from ncfmu.project import OpenSystem
     with OpenSystem(archive) as opened:
-        return opened.run(stop_time=stop_time).wall_time
+        opened.master.native = native
+        wall = opened.run(stop_time=stop_time).wall_time
+        assert opened.master.loop_used == ("c" if native else "python")
+        return wall
 
 
 def fmpy_ssp(archive: Path, stop_time: float) -> float:
@@ -223,11 +228,15 @@ def main() -> dict:
     out["servo_python_us"], out["servo_native_us"] = py_s / n_servo * 1e6, c_s / n_servo * 1e6
     out["servo_native_via_ctypes_us"] = ctypes_s / n_servo * 1e6
 
-    t = interleaved({"master": lambda: ncfmu_master(taper, stop), "direct": lambda: direct_loop("lathe_taper", stop)},
-                    repeats)
+    t = interleaved({"master": lambda: ncfmu_master(taper, stop), "direct": lambda: direct_loop("lathe_taper", stop),
+                     "master_python_loop": lambda: ncfmu_master(taper, stop, native=False)}, repeats)
     out["fmi_overhead_ratio"] = t["master"] / t["direct"]
     out["speedup_vs_python_loop"] = t["direct"] / t["master"]
-    out["master_s"], out["direct_s"] = t["master"], t["direct"]
+    out["c_loop_speedup"] = t["master_python_loop"] / t["master"]
+    out["master_s"], out["direct_s"], out["master_python_loop_s"] = t["master"], t["direct"], t["master_python_loop"]
+    n_steps = stop / 1e-3
+    out["master_us_per_step"], out["direct_us_per_step"] = t["master"] / n_steps * 1e6, t["direct"] / n_steps * 1e6
+    out["master_python_loop_us_per_step"] = t["master_python_loop"] / n_steps * 1e6
 
     t2 = interleaved({"master": lambda: ncfmu_master(taper, stop), "fmpy": lambda: fmpy_ssp(taper, stop),
                       "libcosim": lambda: libcosim(taper, stop), "ecos": lambda: ecos(taper, stop)},
@@ -258,7 +267,8 @@ def main() -> dict:
     print(f"\nncfmu benchmarks ({'quick' if args.quick else 'full'}, {out['cores']} cores), "
           "medians of interleaved runs")
     print(f"{'metric':28s} {'value':>10s}  goal")
-    for key in ("servo_step_speedup", "speedup_vs_python_loop", "vs_fmpy_ssp_speedup", "vs_libcosim_speedup",
+    for key in ("servo_step_speedup", "speedup_vs_python_loop", "c_loop_speedup", "vs_fmpy_ssp_speedup",
+                "vs_libcosim_speedup",
                 "vs_ecos_speedup", "sweep_speedup_2_workers", "sweep_overhead_pct", "rtf_lathe"):
         goal = goals.get(key)
         mark = ""
@@ -269,6 +279,8 @@ def main() -> dict:
     print(f"  servo step: Python stepper {out['servo_python_us']:.1f} us; native FMU through FMI from C "
           f"{out['servo_native_us']:.2f} us, from Python via ctypes (ncfmu's FmuSlave) "
           f"{out['servo_native_via_ctypes_us']:.2f} us (speedup {out['servo_step_speedup_via_ctypes']:.1f})")
+    print(f"  per 1 ms step: master {out['master_us_per_step']:.1f} us (its Python loop "
+          f"{out['master_python_loop_us_per_step']:.1f} us), direct Python loop {out['direct_us_per_step']:.1f} us")
     print(f"  master {out['master_s']:.2f} s, direct {out['direct_s']:.2f} s, "
           f"fmpy simulate_ssp {out['fmpy_ssp_s']:.2f} s, "
           f"libcosim {out['libcosim_s']:.2f} s, ecos {out['ecos_s']:.2f} s, sweep serial {serial:.1f} s vs 2 workers "

@@ -18,6 +18,7 @@ from pathlib import Path
 from . import __version__
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
+from .cosim.native_loop import build_library
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, System, pack, read_ssd, write_system
 from .errors import SystemDefinitionError
@@ -68,6 +69,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     if _is_checkout(root):
         from .docs import write_docs
         write_docs(root, fmus)
+    build_library(root)                     # the master's C loop, next to the FMUs it drives
     archives = []
     for name in SYSTEMS:
         folder = write_system(get_system(name), root / "ssp")

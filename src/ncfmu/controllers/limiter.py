@@ -233,18 +233,18 @@ class AreaLimiter(Controller):
             lim_plus = min(self.lim_max[r1 - 1:last]) - m - lim
             lim_minus = lim - (max(self.lim_min[r1 - 1:last]) + m)
 
-        def forbids(j: int) -> bool:
-            return lim_lo < self.lim_min[j - 1] or lim_hi > self.lim_max[j - 1]
-
+        # region j forbids the limited axis's reach: lim_lo < lim_min[j - 1] or lim_hi > lim_max[j - 1]
+        # (written out in both loops: a closure made every step costs more than the test)
+        lows, highs = self.lim_min, self.lim_max
         r = find_region(self.ref_max, ref) or n + 1
         ref_plus = self.ref_max[n - 1] - m - ref            # the end of the table
         for j in range(r + 1, n + 1):
-            if forbids(j):
+            if lim_lo < lows[j - 1] or lim_hi > highs[j - 1]:
                 ref_plus = self.ref_max[j - 2] - m - ref    # region j starts just above ref_max[j-2]
                 break
         ref_minus = inf
         for j in range(min(r, n + 1) - 1, 0, -1):
-            if forbids(j):
+            if lim_lo < lows[j - 1] or lim_hi > highs[j - 1]:
                 ref_minus = ref - self.ref_max[j - 1] - m   # region j ends at ref_max[j-1], inclusive
                 break
         return ref_plus, ref_minus, lim_plus, lim_minus
@@ -252,11 +252,12 @@ class AreaLimiter(Controller):
     def _windows(self, dt: float) -> list[list[float]]:
         """Velocity window [lo, hi] of each axis for this step."""
         w = [[-self.max_speed, self.max_speed], [-self.max_speed, self.max_speed]]
-        for axis, plus, minus in ((0, REF_PLUS, REF_MINUS), (1, LIM_PLUS, LIM_MINUS)):
-            if self.hard & plus:
-                w[axis][1] = 0.0
-            if self.hard & minus:
-                w[axis][0] = 0.0
+        if self.hard:
+            for axis, plus, minus in ((0, REF_PLUS, REF_MINUS), (1, LIM_PLUS, LIM_MINUS)):
+                if self.hard & plus:
+                    w[axis][1] = 0.0
+                if self.hard & minus:
+                    w[axis][0] = 0.0
         if self.predictive:
             rp, rm, lp, lm = self._rooms(dt)
             a = self.decel

@@ -87,10 +87,12 @@ class LinearMove:
     def position(self) -> tuple[float, ...]:
         if self.done:
             return self.end_point
-        return tuple(p + u * self.s for p, u in zip(self.start_point, self.unit))
+        s = self.s
+        return tuple([p + u * s for p, u in zip(self.start_point, self.unit)])
 
     def velocity(self) -> tuple[float, ...]:
-        return tuple(u * self.v for u in self.unit)
+        v = self.v
+        return tuple([u * v for u in self.unit])
 
     def halt(self) -> None:
         """Controlled stop (alarm, EMB, a blocked move): decelerate along the path at ``accel``, then

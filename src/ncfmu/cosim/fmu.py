@@ -31,7 +31,8 @@ from fmpy.fmi2 import (
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError
 from ..ports import Value
-from .slave import Variable
+from .native_loop import Fmi2Functions
+from .slave import KINDS, Variable
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -216,6 +217,24 @@ class FmuSlave:
                                                               if lvl in ("fatal", "warning"))
         return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {said}" if said else ""))
+
+    def fmi2_failure(self, what: str, status: int) -> SimulationError:
+        """The error for ``what`` returning ``status`` (for the C loop, which calls the functions directly)."""
+        return self._fail(what, status)
+
+    def fmi2_functions(self) -> Fmi2Functions:
+        """The component and the addresses of the loop's FMI functions, for the C loop
+        (:mod:`~ncfmu.cosim.native_loop`), which sets the inputs from now on."""
+        self._sent = [None] * len(self._writes)
+
+        def address(name: str) -> int:
+            value = ctypes.cast(getattr(self._dll, name), ctypes.c_void_p).value
+            assert value is not None
+            return value
+
+        return Fmi2Functions(self._component, address("fmi2DoStep"),
+                             {kind: address(f"fmi2Set{kind}") for kind in KINDS},
+                             {kind: address(f"fmi2Get{kind}") for kind in KINDS})
 
     def _check(self, what: str, status: int) -> None:
         if status > 1:

@@ -10,6 +10,10 @@ All outputs of one kind of all components live in one numpy vector; each slave r
 straight into its slice and its inputs are gathered with one ``numpy.take`` per kind. Nothing is
 allocated inside the loop. The master depends only on the :class:`~ncfmu.cosim.slave.Slave`
 interface, so it is tested with a fake slave.
+
+When every slave also offers its raw FMI functions (:class:`~ncfmu.cosim.native_loop.NativeSlave`: the
+FMUs), the steps run in C (``loop.c``), call for call the same; Python acts only between chunks of
+steps: at input-CSV changes, progress reports and deadline checks.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationTimeout, SystemDefinitionError
+from .native_loop import NativePlan, NativeSlave, library
 from .result import Result
 from .slave import DTYPES, KINDS, Slave, StatefulSlave
 from .ssp import System
@@ -48,6 +53,7 @@ class _Run:
     n_rec: dict
     rec: dict
     start_values: dict      # instance -> variable -> value: the system's parameter sets with the caller's applied
+    native: NativePlan | None = None
 
 
 @dataclass
@@ -120,12 +126,17 @@ class Master:
     slaves : sequence of Slave
         One per component, in the system's order, already instantiated.
     mode : {"gauss-seidel", "jacobi"}
+    native : bool
+        Run the steps in C when every slave allows it (False: always the Python loop).
     """
 
-    def __init__(self, system: System, slaves: Sequence[Slave], mode: str = "gauss-seidel") -> None:
+    def __init__(self, system: System, slaves: Sequence[Slave], mode: str = "gauss-seidel",
+                 native: bool = True) -> None:
         if mode not in MODES:
             raise SystemDefinitionError(f"mode = {mode!r}: must be one of {', '.join(MODES)}")
-        self.system, self.slaves, self.mode = system, slaves, mode
+        self.system, self.slaves, self.mode, self.native = system, slaves, mode, native
+        #: which loop the last run stepped in: "c" or "python"
+        self.loop_used = ""
         self.by_name = {s.name: s for s in slaves}
         self.check_connections()
 
@@ -278,9 +289,9 @@ class Master:
             record_names[kind] = [q for q in slots[kind] if q not in ext]
         sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
                    for c in self.system.connections}
-        plan = []
+        plan, bindings = [], []
         for s in self.slaves:
-            gathers = []
+            gathers, bound = [], {}
             for kind in KINDS:
                 outs = [v for v in s.variables.values() if v.causality == "output" and v.type == kind]
                 first = slots[kind][f"{s.name}.{outs[0].name}"] if outs else 0
@@ -291,9 +302,11 @@ class Master:
                                dtype=np.intp)
                 in_buf = np.zeros(len(ins), dtype=DTYPES[kind])
                 s.bind(kind, in_buf, [v.vr for v in ins], out_view, [v.vr for v in outs])
+                bound[kind] = (in_buf, [v.vr for v in ins], idx, out_view, [v.vr for v in outs])
                 if len(ins):
                     gathers.append((in_buf, values[kind].take, idx))
             plan.append((s, tuple(gathers)))
+            bindings.append(bound)
 
         ext_updates = []
         if inputs is not None:
@@ -308,7 +321,12 @@ class Master:
             rec[k][0] = values[k][:n_rec[k]]
         times = start_time + h * np.arange(n_steps + 1)
         input_times = inputs.time if inputs is not None else np.empty(0)
-        return _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec, applied)
+        run = _Run(h, n_steps, times, values, plan, ext_updates, input_times, record_names, n_rec, rec, applied)
+        natives = [s for s in self.slaves if isinstance(s, NativeSlave)]
+        if self.native and len(natives) == len(self.slaves) and library() is not None:
+            records = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
+            run.native = NativePlan(natives, bindings, values, records, times, h, self.mode == "jacobi")
+        return run
 
     def _loop(self, run: _Run, first: int, last: int, progress=None, deadline: float | None = None) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time."""
@@ -326,6 +344,10 @@ class Master:
         jacobi = self.mode == "jacobi"
         report_every = max(1, run.n_steps // 100)
         wall0 = _time.perf_counter()
+        self.loop_used = "python" if run.native is None else "c"
+        if run.native is not None:
+            self._native_loop(run, first, last, next_change, progress, report_every, deadline, wall0)
+            return _time.perf_counter() - wall0
         for i in range(first, last):
             t = times[i]
             while next_change < len(input_times) and input_times[next_change] <= t + 1e-12:
@@ -357,6 +379,37 @@ class Master:
                 raise SimulationTimeout(f"stopped at t = {t + h:.3f} s of {times[-1]:.3f} s: over the time "
                                         f"allowed ({_time.perf_counter() - wall0:.1f} s of wall time)")
         return _time.perf_counter() - wall0
+
+    def _native_loop(self, run: _Run, first: int, last: int, next_change: int, progress, report_every: int,
+                     deadline: float | None, wall0: float) -> None:
+        """The steps of :meth:`_loop` in C, in chunks that end where Python must act before the next step."""
+        native = run.native
+        assert native is not None
+        native.forget_sent()             # start values or a restored state may have changed the FMUs' inputs
+        input_times, ext_updates, times = run.input_times, run.ext_updates, run.times
+        # the first step at which each input change applies: the Python loop's test, input <= t + 1e-12
+        change_steps = np.searchsorted(times + 1e-12, input_times, side="left") if len(input_times) else None
+        i = first
+        while i < last:
+            while next_change < len(input_times) and input_times[next_change] <= times[i] + 1e-12:
+                for arr, slot, col in ext_updates:
+                    arr[slot] = col[next_change]
+                next_change += 1
+            end = last
+            if change_steps is not None and next_change < len(input_times):
+                end = min(end, int(change_steps[next_change]))
+            if progress is not None:
+                end = min(end, (i + report_every) // report_every * report_every)   # the next row to report
+            if deadline is not None:
+                end = min(end, (i + 64) // 64 * 64)
+            native.run(i, end)
+            i = row = end
+            if progress is not None and row % report_every == 0:
+                progress(row / run.n_steps)
+            if deadline is not None and row % 64 == 0 and _time.perf_counter() > deadline:
+                raise SimulationTimeout(f"stopped at t = {float(times[row - 1]) + run.h:.3f} s of "
+                                        f"{float(times[-1]):.3f} s: over the time allowed "
+                                        f"({_time.perf_counter() - wall0:.1f} s of wall time)")
 
     def _assemble(self, run: _Run, rec, wall: float, applied: dict[str, dict[str, object]]) -> Result:
         dtype: list[tuple[str, type[np.generic]]] = [("time", np.float64)]

@@ -16,6 +16,11 @@ Call order, for every slave (the master keeps to it; a fake slave can check it):
 Optional, for branching (FMUs with canGetAndSetFMUstate): ``get_state()`` / ``set_state(state)`` /
 ``free_state(state)`` between steps; after ``set_state`` the master reads the outputs again.
 
+Optional, for the master's C loop (:class:`~ncfmu.cosim.native_loop.NativeSlave`, the FMUs):
+``fmi2_functions()`` hands the component and the FMI function addresses (the loop then sets the inputs
+itself), ``fmi2_failure(what, status)`` the error a failed call raises. The C loop runs only when every
+slave offers both; a fake slave keeps the Python loop.
+
 Buffers are float64 for Real and int32 for Integer and Boolean (FMI's fmi2Boolean is an int).
 """
 

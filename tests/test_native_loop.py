@@ -1,0 +1,130 @@
+"""Issue 13: the master's steps in C (cosim/loop.c) are the Python loop's steps, bit for bit.
+
+The same systems run through both loops (``Master(native=False)`` is the Python loop) and every recorded
+value must be equal, not close: the C loop makes the same FMI calls in the same order with the same values.
+"""
+
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ncfmu.cosim.master import InputTable
+from ncfmu.cosim.native_loop import library
+from ncfmu.project import OpenSystem
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# M words at times off the step grid, one exactly on it, two in one step
+M_WORDS = InputTable(np.array([0.0, 0.2345, 0.9, 1.4999999, 1.5000001, 2.6]),
+                     {"panel.m_active": np.array([0.0, 3.0, 0.0, 5.0, 6.0, 0.0])})
+HOLD = {"panel.hold_at": 1.0, "panel.release_at": 1.7}
+
+
+def run(archive, native, mode="gauss-seidel", **kwargs):
+    with OpenSystem(archive, mode) as opened:
+        opened.master.native = native
+        return opened.run(**kwargs), opened.master.loop_used
+
+
+def assert_identical(a, b):
+    assert a.data.dtype == b.data.dtype and len(a.data) == len(b.data)
+    for name in a.data.dtype.names:
+        assert np.array_equal(a.data[name], b.data[name]), name
+
+
+@pytest.mark.parametrize("system", ["lathe_taper", "mill_contour"])
+@pytest.mark.parametrize("mode", ["gauss-seidel", "jacobi"])
+def test_the_c_loop_records_exactly_what_the_python_loop_records(project, system, mode):
+    assert library() is not None, "the C loop must build on this machine"
+    archive = ROOT / "ssp" / f"{system}.ssp"
+    kwargs = {"stop_time": 3.0, "inputs": M_WORDS, "start_values": HOLD}
+    python, loop = run(archive, False, mode, **kwargs)
+    assert loop == "python"
+    native, loop = run(archive, True, mode, **kwargs)
+    assert loop == "c"
+    assert_identical(python, native)
+    # the run did something: the M words reached the panel (MFIN answered), the hold was pressed
+    assert python["panel.mfin"].any() and python["panel.feed_hold"].any()
+
+
+def test_progress_and_deadline_chunks_change_nothing(project):
+    """Python acts between chunks of C steps (progress, deadline, input changes): still the same steps."""
+    import time
+    archive = ROOT / "ssp" / "lathe_taper.ssp"
+    seen: list[float] = []
+    python, _ = run(archive, False, stop_time=1.0, inputs=M_WORDS)
+    native, _ = run(archive, True, stop_time=1.0, inputs=M_WORDS, progress=seen.append,
+                    deadline=time.perf_counter() + 3600.0)
+    assert_identical(python, native)
+    assert seen == [pytest.approx(k / 100) for k in range(1, 101)]
+
+
+def test_branches_through_the_c_loop_match_the_python_loop(project):
+    archive = ROOT / "ssp" / "grinder_feed.ssp"
+    variants = [{"panel.emergency_at": 3.0}, {"panel.emergency_at": 4.5}]
+    out = []
+    for native in (False, True):
+        with OpenSystem(archive) as opened:
+            opened.master.native = native
+            out.append(opened.master.run_branches(2.0, variants, stop_time=6.0))
+            assert opened.master.loop_used == ("c" if native else "python")
+    for a, b in zip(*out):
+        assert_identical(a, b)
+    assert not np.array_equal(out[1][0]["x_axis.pos"], out[1][1]["x_axis.pos"])
+
+
+FAILING_STEP = textwrap.dedent("""
+    import sys
+    from ncfmu.errors import SimulationError
+    from ncfmu.fmi.builder import fmu_version
+    from ncfmu.project import OpenSystem
+
+    native = sys.argv[1] == "c"
+    with OpenSystem(sys.argv[2]) as opened:
+        opened.master.native = native
+        digest = fmu_version(sys.argv[3]).split("+")[1]      # the FMU's own vendored ncfmu
+        panel = sys.modules[f"ncfmu_{digest}.controllers.panel"].OperatorPanel
+        step = panel.step
+
+        def broken(self, t, dt, inputs):
+            if t >= 0.25:
+                raise ZeroDivisionError("deliberate defect")
+            return step(self, t, dt, inputs)
+        panel.step = broken
+        try:
+            opened.run(stop_time=1.0)
+        except SimulationError as err:
+            print("SimulationError:", err)
+        else:
+            print("no error")
+""")
+
+
+def test_an_fmi2error_mid_run_is_the_same_simulation_error_through_the_c_loop(project, tmp_path):
+    """Run in subprocesses: a defect must not take the test process with it."""
+    script = tmp_path / "fail.py"
+    script.write_text(FAILING_STEP)
+    said = {}
+    for loop in ("python", "c"):
+        done = subprocess.run([sys.executable, str(script), loop, str(ROOT / "ssp" / "lathe_taper.ssp"),
+                               str(ROOT / "fmus" / "OperatorPanel.fmu")], capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 0, done.stderr
+        # the traceback names the process's own unpacking folder
+        said[loop] = re.sub(r"ncfmu_fmus_\w+", "ncfmu_fmus_*", done.stdout.strip())
+    assert said["c"] == said["python"]
+    assert said["c"].startswith("SimulationError: panel: fmi2DoStep at t = 0.250000 s returned fmi2Error")
+    assert "deliberate defect" in said["c"]
+
+
+def test_fake_slaves_keep_the_python_loop():
+    from test_master import chain
+    m, log = chain("gauss-seidel")
+    r = m.run()
+    assert list(r["b.y"]) == [0, 11, 22, 33] and log == ["a", "b"] * 3
+    assert m.loop_used == "python"
