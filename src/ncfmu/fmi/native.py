@@ -76,9 +76,11 @@ class NativeModel:
 
 
 def native_models() -> list[NativeModel]:
-    from ..servo import axis, model
+    # servo/model.py is named by its path, not imported: importing it imports python-control (~1.3 s), which
+    # every run's staleness check would pay; only an actual build needs it
+    from ..servo import axis
     return [NativeModel(axis.ServoAxis, PACKAGE_DIR / "servo" / "native" / "servo_model.c",
-                        (Path(axis.__file__), Path(model.__file__), PACKAGE_DIR / "ports.py"))]
+                        (Path(axis.__file__), PACKAGE_DIR / "servo" / "model.py", PACKAGE_DIR / "ports.py"))]
 
 
 # -- generated files ------------------------------------------------------------------------------
