@@ -1,6 +1,9 @@
 """The master algorithm against fake slaves: call order, Gauss-Seidel vs Jacobi, connection checks."""
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ncfmu.cosim.master import Master
 from ncfmu.cosim.slave import Variable
@@ -88,3 +91,26 @@ def test_unknown_start_value_is_named():
     m, _ = chain("gauss-seidel")
     with pytest.raises(SystemDefinitionError, match="unknown instance 'zz'"):
         m.run(start_values={"zz.k": 1.0})
+
+
+@settings(max_examples=50, deadline=None)
+@given(reals=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=20),
+       seed=st.integers(0, 2 ** 31 - 1))
+def test_result_csv_is_byte_for_byte_fmpys(tmp_path_factory, reals, seed):
+    """Result.to_csv writes exactly what fmpy's write_csv writes (Booleans as 0/1), and read_csv reads it back."""
+    from fmpy.util import read_csv, write_csv
+
+    from ncfmu.cosim.result import Result
+    rng = np.random.default_rng(seed)
+    n = len(reals)
+    data = np.empty(n, dtype=[("time", np.float64), ("a.x", np.float64), ("a.n", np.int32), ("a.on", np.bool_)])
+    data["time"], data["a.x"] = np.arange(n) * 1e-3, reals
+    data["a.n"], data["a.on"] = rng.integers(-2 ** 31, 2 ** 31 - 1, n), rng.integers(0, 2, n).astype(bool)
+    folder = tmp_path_factory.mktemp("csv")
+    ours = Result(data).to_csv(folder / "ours.csv")
+    as_ints = data.astype([(k, np.int32 if data.dtype[k] == np.bool_ else data.dtype[k]) for k in data.dtype.names])
+    write_csv(str(folder / "fmpy.csv"), as_ints)
+    assert ours.read_bytes() == (folder / "fmpy.csv").read_bytes()
+    back = read_csv(str(ours))
+    assert np.array_equal(back["a.x"], data["a.x"]) and np.array_equal(back["a.n"], data["a.n"])
+    assert np.array_equal(back["a.on"].astype(bool), data["a.on"])

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .cosim.result import csv_bytes
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems import report_of
@@ -90,7 +91,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         report = report_of(result)
         keep = list(record) if record is not None else [n for n in report.record() if n in result]
         kept = result.data[["time", *keep]][::every]
-        trajectory = trajectory_csv(kept)
+        trajectory = csv_bytes(kept)           # formatted here, on the worker: the client only writes bytes
         row.update(status="ok", error="", rows=len(kept))
         row.update(report.metrics(result, result.parameters))
     except SimulationTimeout as err:
@@ -168,24 +169,6 @@ def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[st
     for row in rows:
         writer.writerow({k: row.get(k, "") for k in columns})
     write_atomic(path, text.getvalue().encode())
-
-
-def trajectory_csv(data: np.ndarray) -> bytes:
-    """A structured array as CSV text in fmpy's layout (``"time","x_axis.pos",...``; what
-    :func:`fmpy.util.read_csv` reads): floats in their shortest round-trip form, Booleans as 0/1.
-
-    Formatted on the worker (fmpy's ``write_csv`` formats value by value, ~1 µs each, which on the client
-    would hold up every other result)."""
-    names = data.dtype.names
-    assert names is not None, "a trajectory is a structured array"
-    columns = []
-    for n in names:
-        col = data[n]
-        if col.dtype == np.bool_:
-            col = col.astype(np.int8)
-        columns.append(list(map(repr if col.dtype.kind == "f" else str, col.tolist())))
-    lines = [",".join(f'"{n}"' for n in names), *map(",".join, zip(*columns))]
-    return ("\n".join(lines) + "\n").encode()
 
 
 def _complete(path: Path, rows: str) -> bool:

@@ -7,6 +7,23 @@ from pathlib import Path
 import numpy as np
 
 
+def csv_bytes(data: np.ndarray) -> bytes:
+    """A structured array as CSV text in fmpy's layout (``"time","x_axis.pos",...``), byte for byte what
+    :func:`fmpy.util.write_csv` writes and :func:`fmpy.util.read_csv` reads: floats in their shortest
+    round-trip form, Booleans as 0/1. Column by column: fmpy formats value by value (~4x slower, longer
+    than a lathe_roughing run itself)."""
+    names = data.dtype.names
+    assert names is not None, "a trajectory is a structured array"
+    columns = []
+    for n in names:
+        col = data[n]
+        if col.dtype == np.bool_:
+            col = col.astype(np.int8)
+        columns.append(list(map(repr if col.dtype.kind == "f" else str, col.tolist())))
+    lines = [",".join(f'"{n}"' for n in names), *map(",".join, zip(*columns))]
+    return ("\n".join(lines) + "\n").encode()
+
+
 class Result:
     """Trajectories of one run.
 
@@ -59,12 +76,11 @@ class Result:
         return span / self.wall_time if self.wall_time > 0 else float("inf")
 
     def to_csv(self, path: Path) -> Path:
-        from fmpy.util import write_csv
+        """Write fmpy's CSV layout (see :func:`csv_bytes`; Booleans as 0/1, which fmpy's read_csv parses)."""
+        from ..files import write_atomic
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        # Booleans as 0/1: fmpy writes numpy bools as "False", which its own read_csv cannot parse.
-        dtype = [(n, np.int32 if self.data.dtype[n] == np.bool_ else self.data.dtype[n]) for n in self._fields]
-        write_csv(str(path), self.data.astype(dtype))
+        write_atomic(path, csv_bytes(self.data))
         return path
 
     @classmethod
