@@ -13,13 +13,13 @@ system (``--quick``: the first pass only, 13 s of simulated time, which still ru
 - fmi_overhead_ratio       its inverse (kept for the history in results-*.json).
 - c_loop_speedup           ncfmu's master with its Python loop (Master(native=False)) / with its C loop
                            (cosim/loop.c, the default): what the loop outside Python gains.
-- vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 1.5.
+- vs_fmpy_ssp_speedup      fmpy.ssp.simulation.simulate_ssp on the same .ssp / ncfmu's master. Goal >= 3.
 - vs_libcosim_speedup      libcosim (libcosimpy) on the same .ssp / ncfmu's master. Goal >= 2.5.
 - vs_ecos_speedup          ecos (ecospy, its step_until) on the same .ssp / ncfmu's master. Goal >= 1.
 - sweep_overhead_pct       per-variant scheduling overhead (ship, schedule, return, write) in % of a short
                            variant's run (2 s of lathe_taper) on a started 1-worker cluster. Goal < 5.
 - sweep_speedup_2_workers  a 16-variant sweep of whole lathe_taper cycles run serially / the same on a
-                           2-worker dask LocalCluster, cluster start-up included. Goal >= 1.7.
+                           2-worker dask LocalCluster, cluster start-up included. Goal >= 1.8.
 - rtf_lathe                simulated seconds per wall-clock second of the full lathe_roughing cycle.
 - limiter_lookup_ns        AreaLimiter region search at 10, 100, 1000, 10000 regions.
 """

@@ -75,3 +75,17 @@ def test_run_changes_no_file_of_the_checkout(project, tmp_path):
     after = snapshot()
     changed = sorted(p for p in before.keys() | after.keys() if before.get(p) != after.get(p))
     assert changed == []
+
+
+def test_plot_of_a_csv_without_the_plane_columns_draws_what_it_has(project, tmp_path, capsys):
+    """A sweep trajectory recorded with --record x_axis.pos has no Z column: the plot draws X over time and
+    leaves the X-Z plane out (it crashed with a KeyError traceback)."""
+    import numpy as np
+
+    from ncfmu.cosim.result import Result
+    data = np.zeros(50, dtype=[("time", float), ("x_axis.pos", float)])
+    data["time"], data["x_axis.pos"] = np.arange(50) * 1e-3, np.linspace(30.0, 29.0, 50)
+    Result(data).to_csv(tmp_path / "traj.csv")
+    assert main(["plot", str(tmp_path / "traj.csv"), "--system", "lathe_taper", "--png",
+                 str(tmp_path / "traj.png")]) == 0, capsys.readouterr().err
+    assert (tmp_path / "traj.png").read_bytes()[:4] == b"\x89PNG"

@@ -90,7 +90,7 @@ def test_a_reversal_is_rounded_around_its_tip_and_a_fold_is_reported():
     ({"n_points": 1}, "n_points", "must be in 2..64"),
     ({"point[2].x": 0.0, "point[2].y": 0.0}, "point[2]", "repeats point[1]"),
     ({"feed": 0.0}, "feed", "must be > 0"),
-    ({"side": 0}, "side", "must be +1"),
+    ({"side": 0}, "side", "must be one of -1, +1"),
     ({"point[3].y": math.inf}, "point[3].y", "must be finite"),
 ])
 def test_bad_input_refused(values, variable, rule):

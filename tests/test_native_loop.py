@@ -128,3 +128,14 @@ def test_fake_slaves_keep_the_python_loop():
     r = m.run()
     assert list(r["b.y"]) == [0, 11, 22, 33] and log == ["a", "b"] * 3
     assert m.loop_used == "python"
+
+
+def test_a_run_longer_than_one_chunk_is_the_same_run(project, monkeypatch):
+    """The C loop hands back to Python every NATIVE_CHUNK steps (so Ctrl-C is seen): the chunks join seamlessly."""
+    import ncfmu.cosim.master as master
+    monkeypatch.setattr(master, "NATIVE_CHUNK", 997)           # 3000 steps: three whole chunks and a part
+    archive = ROOT / "ssp" / "lathe_taper.ssp"
+    python, _ = run(archive, False, stop_time=3.0, start_values=HOLD)
+    native, loop = run(archive, True, stop_time=3.0, start_values=HOLD)
+    assert loop == "c"
+    assert_identical(python, native)

@@ -28,7 +28,9 @@ def plot_result(result, path: Path) -> Path:
     plt = _plt()
     report = report_of(result)
     axes = [a for a in report.axes if f"{a}.pos" in result]
-    has_plane = report.plane is not None
+    # the plane needs both of its axes' positions (a sweep's --record may have kept fewer)
+    has_plane = report.plane is not None and all(f"{a}.pos" in result for a in (report.plane.horizontal,
+                                                                                  report.plane.vertical))
     fig, panels = plt.subplots(3 if has_plane else 2, 1, figsize=(10, 12 if has_plane else 8))
     ax_pos, ax_err = panels[0], panels[1]
     t = result.time

@@ -55,6 +55,8 @@ class Port:
     description : str
     min, max : float, optional
         Range of legal values, written into the modelDescription.
+    allowed : tuple of float, optional
+        The only legal values (within ``min``..``max``), e.g. a side of +1 or -1.
     min_exclusive : bool
         ``min`` itself is not legal (a gain or a time constant must be > 0). The modelDescription can
         only say ``min``; the rule text (:meth:`rule`) and :meth:`check` say it exactly.
@@ -73,6 +75,7 @@ class Port:
     max: float | None = None
     variability: str | None = None
     min_exclusive: bool = False
+    allowed: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.unit is not None and self.unit not in UNITS:
@@ -90,6 +93,8 @@ class Port:
 
     def rule(self) -> str:
         """The port's range as text, for messages (``must be in (0, 10]``, ``must be in 1..8``)."""
+        if self.allowed is not None:
+            return "must be one of " + ", ".join(f"{v:+g}" for v in self.allowed)
         if self.type == "Integer" and self.min is not None and self.max is not None:
             return f"must be in {self.min:g}..{self.max:g}"
         lo = None if self.min is None else ("(" if self.min_exclusive else "[") + f"{self.min:g}"
@@ -125,7 +130,7 @@ class Port:
         if self.type == "Integer" and x != int(x):
             raise ConfigError(self.name, value, "must be a whole number")
         if ((self.min is not None and (x < self.min or (self.min_exclusive and x == self.min)))
-                or (self.max is not None and x > self.max)):
+                or (self.max is not None and x > self.max) or (self.allowed is not None and x not in self.allowed)):
             raise ConfigError(self.name, value, self.rule())
         return int(x) if self.type == "Integer" else x
 

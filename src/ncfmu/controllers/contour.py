@@ -56,7 +56,6 @@ from .motion import stop_speed
 MAX_POINTS = 64
 #: The contour ends when the actual axes are this close to its last command (mm).
 IN_POSITION = 0.005
-#: mill_contour (SPEC 5).
 #: The point path of the FMU's start values: one 10 mm move along X (a system gives its own).
 DEFAULT_PATH = ((0.0, 0.0), (10.0, 0.0))
 #: On a path with arcs: tangential acceleration and centripetal acceleration, as fractions of ``accel``
@@ -165,7 +164,7 @@ class ContourInterpolator(Controller):
         real("diameter_delta", "parameter", 0.0, "mm", "actual minus nominal cutter diameter (the offset is half)",
              min=-MAX_DIAMETER_DELTA, max=MAX_DIAMETER_DELTA),
         integer("side", "parameter", -1, "point path: side of the correction, +1 left of travel, -1 right "
-                "(a program chooses with G41/G42)", min=-1, max=1),
+                "(a program chooses with G41/G42)", min=-1, max=1, allowed=(-1, 1)),
         real("feed", "parameter", 5.0, "mm/s", "point path: vector feed rate (a program gives F)", min=0.0,
              min_exclusive=True),
         real("approach_feed", "parameter", 5.0, "mm/s", "vector feed of the approach (segment 0) and of G00 moves",
@@ -194,9 +193,7 @@ class ContourInterpolator(Controller):
         self.program = str(values["program"])
         self.closed = bool(values["closed"])
         self.diameter_delta = real_param(values, "diameter_delta")
-        side = int_param(values, "side")
-        require(side in (1, -1), "side", side, "must be +1 (left of travel) or -1 (right)")
-        self.side = side
+        self.side = int_param(values, "side")
         self.feed = real_param(values, "feed")
         self.approach_feed = real_param(values, "approach_feed")
         self.accel = real_param(values, "accel")

@@ -55,6 +55,10 @@ INT32 = (-2 ** 31, 2 ** 31 - 1)
 #: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
 MAX_UNPACKED = 2 ** 30
 
+#: fmi2DoStep's noSetFMUStatePriorToCurrentPoint: fmi2False, because a branch run sets an FMU back to a saved
+#: state before the current point (an FMU may drop that history after fmi2True).
+NO_SET_FMU_STATE_PRIOR = 0
+
 
 def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
     """``value`` as an FMI ``fmi_type`` value, or :class:`ConfigError` -- never rounded, wrapped or guessed.
@@ -281,7 +285,8 @@ class FmuSlave:
             step = self._raw.fmi2DoStep
             step.restype = ctypes.c_int
             self._raw_step = step
-            self._t, self._h, self._true = ctypes.c_double(), ctypes.c_double(), ctypes.c_int(1)
+            self._t, self._h = ctypes.c_double(), ctypes.c_double()
+            self._no_set_prior = ctypes.c_int(NO_SET_FMU_STATE_PRIOR)
         setter = getattr(self._raw, f"fmi2Set{kind}")
         getter = getattr(self._raw, f"fmi2Get{kind}")
         setter.restype = getter.restype = ctypes.c_int
@@ -322,9 +327,9 @@ class FmuSlave:
         raw = self._raw_step
         if raw is not None:
             self._t.value, self._h.value = t, h
-            status = raw(self._raw_component, self._t, self._h, self._true)
+            status = raw(self._raw_component, self._t, self._h, self._no_set_prior)
         else:
-            status = self._step(self._component, t, h, 1)
+            status = self._step(self._component, t, h, NO_SET_FMU_STATE_PRIOR)
         if status > 1:
             raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
 

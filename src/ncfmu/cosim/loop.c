@@ -116,7 +116,8 @@ static int read_outputs(const ncfmu_slave *s, ncfmu_failure *fail)
 
 static int do_step(const ncfmu_slave *s, double t, double h, ncfmu_failure *fail)
 {
-    int status = ((do_step_fn)s->do_step)(s->component, t, h, 1);
+    /* noSetFMUStatePriorToCurrentPoint = fmi2False: branch runs restore states saved earlier (as fmu.py) */
+    int status = ((do_step_fn)s->do_step)(s->component, t, h, 0);
     if (status > 1) {
         fail->status = status;
         fail->call = CALL_DO_STEP;

@@ -30,7 +30,8 @@ class Result:
     ``result["x_axis.pos"]`` is a numpy array over ``result.time``; ``result.data`` is the
     structured array (fmpy's layout); :meth:`to_csv` writes fmpy's CSV layout. ``parameters``
     (instance -> variable -> value) are the start values the run applied: the system's parameter sets
-    with the caller's on top (the rest were the FMUs' defaults); ``models`` maps instance -> FMU model.
+    with the caller's on top (the rest were the FMUs' defaults); a branch's also hold the tunable parameters
+    and inputs set at its branch point. ``models`` maps instance -> FMU model.
     A result read from a CSV has neither.
     """
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..controllers.base import POSITION_LIMIT
 from ..ports import to_float, to_int
 
 Parameters = Mapping[str, Mapping[str, object]]      # instance -> parameter -> value
@@ -132,8 +133,8 @@ class LatheCycle(Part):
         if "x_start" in seq and "block[1].Xf" in seq:
             stock = to_float(seq["x_start"]) - to_float(seq["block[1].Xf"])
             ax.axhline(stock, color="0.5", ls=":", lw=0.8, label=f"stock outline X = {stock:g}")
-        x = result[f"{self.x}.pos"]
-        ax.set_ylim(min(x.min(), 20) - 1, max(x.max(), 30) + 2)
+            x = result[f"{self.x}.pos"]
+            ax.set_ylim(min(x.min(), stock) - 1, max(x.max(), to_float(seq["x_start"])) + 2)
 
 
 @dataclass(frozen=True)
@@ -186,13 +187,14 @@ class Envelope(Part):
         return [f"  area limiter: {verdict}"]
 
     def draw(self, ax, result, parameters: Parameters) -> None:
-        """Shade what the table forbids, region by region, over the span the path covers."""
+        """Shade what the table forbids, region by region, over the span the path covers (a bound beyond
+        POSITION_LIMIT, e.g. the table's 1e6 for "no limit", is none)."""
         table = table_of(parameters.get(self.limiter, {}))
         ref, lim = result[f"{self.ref}.pos"], result[f"{self.lim}.pos"]
-        inner = [b for b, _, _ in table if abs(b) < 1e5]
+        inner = [b for b, _, _ in table if abs(b) < POSITION_LIMIT]
         left = min(ref.min(), *inner) - 20 if inner else ref.min() - 20
         right = max(ref.max(), *inner) + 20 if inner else ref.max() + 20
-        finite = [v for _, lo, hi in table for v in (lo, hi) if abs(v) < 1e5]
+        finite = [v for _, lo, hi in table for v in (lo, hi) if abs(v) < POSITION_LIMIT]
         bottom, top = min(lim.min(), *finite) - 20, max(lim.max(), *finite) + 20
         edge = left
         for i, (ref_max, lo, hi) in enumerate(table):
@@ -201,7 +203,7 @@ class Envelope(Part):
                 continue
             name = self.region_names[i] if i < len(self.region_names) else f"region {i + 1}"
             for low, high, bound in ((bottom, lo, lo), (hi, top, hi)):
-                if low < high and abs(bound) < 1e5:
+                if low < high and abs(bound) < POSITION_LIMIT:
                     ax.fill_between([edge, end], low, high, color="tab:red", alpha=0.15, lw=0)
                     ax.hlines(bound, edge, end, color="tab:red", lw=1)
                     ax.text((edge + end) / 2, bound, name, ha="center", va="bottom", fontsize=8)
