@@ -139,3 +139,19 @@ def test_a_run_longer_than_one_chunk_is_the_same_run(project, monkeypatch):
     native, loop = run(archive, True, stop_time=3.0, start_values=HOLD)
     assert loop == "c"
     assert_identical(python, native)
+
+
+def test_without_a_compiler_or_with_a_broken_source_the_loop_is_not_built_and_says_why(tmp_path, monkeypatch):
+    """No C compiler, or a source that does not compile: a warning saying the Python loop runs, no library file
+    (half-written or not) left behind, and nothing raised: the master falls back to its Python loop."""
+    import ncfmu.cosim.native_loop as native_loop
+    monkeypatch.setenv("PATH", str(tmp_path / "nothing"))
+    with pytest.warns(UserWarning, match="no C compiler found; the master runs its Python loop"):
+        assert native_loop.build_library(tmp_path) is None
+    monkeypatch.undo()
+    broken = tmp_path / "loop.c"
+    broken.write_text("int ncfmu_loop(void) { return }\n")
+    monkeypatch.setattr(native_loop, "SOURCE", broken)
+    with pytest.warns(UserWarning, match=r"(?s)compiling the master loop failed .*the master runs its Python loop"):
+        assert native_loop.build_library(tmp_path) is None
+    assert list((tmp_path / "build").iterdir()) == []
