@@ -114,3 +114,18 @@ def test_result_csv_is_byte_for_byte_fmpys(tmp_path_factory, reals, seed):
     back = read_csv(str(ours))
     assert np.array_equal(back["a.x"], data["a.x"]) and np.array_equal(back["a.n"], data["a.n"])
     assert np.array_equal(back["a.on"].astype(bool), data["a.on"])
+
+
+@pytest.mark.parametrize("fmi_type, raw, value", [("Real", "1e-3", 1e-3), ("Integer", "-3", -3), ("Boolean", "1", True),
+                                                  ("Boolean", "false", False), ("String", "M0: END", "M0: END")])
+def test_fmi_text_is_parsed_by_its_type(fmi_type, raw, value):
+    from ncfmu.ports import parse_text
+    assert parse_text(fmi_type, raw) == value and type(parse_text(fmi_type, raw)) is type(value)
+
+
+@pytest.mark.parametrize("fmi_type, raw", [("Boolean", "yes"), ("Boolean", "True"), ("Integer", "2.5"),
+                                           ("Real", "abc")])
+def test_fmi_text_of_the_wrong_type_is_refused_not_guessed(fmi_type, raw):
+    from ncfmu.ports import parse_text
+    with pytest.raises(ValueError):
+        parse_text(fmi_type, raw)

@@ -142,6 +142,20 @@ class Port:
         return zero[self.type]
 
 
+def parse_text(fmi_type: str, raw: str) -> Value:
+    """An FMI/SSP value written as XML text (a start value, an .ssv parameter) as ``fmi_type``; ValueError if
+    it is not one (Boolean: ``true``/``false``/``1``/``0``; Enumeration as Integer)."""
+    if fmi_type == "Real":
+        return float(raw)
+    if fmi_type in ("Integer", "Enumeration"):
+        return int(raw)
+    if fmi_type == "Boolean":
+        if raw not in ("true", "false", "1", "0"):
+            raise ValueError(f"{raw!r} is not a Boolean")
+        return raw in ("true", "1")
+    return raw
+
+
 def to_float(value: object) -> float:
     """``float(value)`` of a value known only as ``object`` (a parameter or an input as a host set it):
     the same result, and the same TypeError or ValueError, as ``float()``."""

@@ -30,7 +30,7 @@ from fmpy.fmi2 import (
 )
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError
-from ..ports import Value
+from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 
@@ -108,14 +108,6 @@ def safe_extract(archive: Path, target: Path) -> Path:
     return target
 
 
-def _parse_boolean(text: object) -> bool:
-    return str(text).lower() in ("true", "1")
-
-
-#: A start value of the modelDescription as the variable's type.
-_START: dict[str, Callable[[str], object]] = {"Real": float, "Integer": int, "Boolean": _parse_boolean,
-                                              "String": str, "Enumeration": int}
-
 _UNPACKED: dict[str, UnpackedFmu] = {}
 _CACHE_ROOT: list[Path] = []
 
@@ -167,7 +159,11 @@ class UnpackedFmu:
         for v in md.modelVariables:
             start = v.start
             if start is not None:
-                start = _START[v.type](start)
+                try:
+                    start = parse_text(v.type, str(start))
+                except ValueError:
+                    raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has start {start!r}, not a "
+                                                f"valid {v.type}") from None
             self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
                                               getattr(v, "unit", None), start, v.description or "")
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
-from ..ports import UNITS
+from ..ports import UNITS, parse_text
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -200,15 +200,7 @@ def _parse_value(el: ET.Element, where: str) -> object:
     if raw is None:
         raise SystemDefinitionError(f"{where}: {tag} has no value")
     try:
-        if tag == "Real":
-            return float(raw)
-        if tag in ("Integer", "Enumeration"):
-            return int(raw)
-        if tag == "Boolean":
-            if raw not in ("true", "false", "1", "0"):
-                raise ValueError(raw)
-            return raw in ("true", "1")
-        return raw
+        return parse_text(tag, raw)
     except ValueError:
         raise SystemDefinitionError(f"{where}: {raw!r} is not a valid {tag}") from None
 
