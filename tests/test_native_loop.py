@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ncfmu.cosim.master import InputTable
+from ncfmu.cosim.master import InputTable, Master
 from ncfmu.cosim.native_loop import library
 from ncfmu.project import OpenSystem
 
@@ -155,3 +155,79 @@ def test_without_a_compiler_or_with_a_broken_source_the_loop_is_not_built_and_sa
     with pytest.warns(UserWarning, match=r"(?s)compiling the master loop failed .*the master runs its Python loop"):
         assert native_loop.build_library(tmp_path) is None
     assert list((tmp_path / "build").iterdir()) == []
+
+
+def _fake_native_chain(fail_call=None, fail_step=None):
+    """The fake y = u + k chain of test_master, its FMI functions as ctypes callbacks the C loop calls; the
+    ``fail_call`` ("SetReal", "GetReal" or "DoStep") of slave b returns fmi2Error at step ``fail_step``."""
+    import ctypes
+
+    from test_master import FakeSlave
+
+    from ncfmu.cosim.native_loop import Fmi2Functions
+    from ncfmu.cosim.slave import KINDS
+    from ncfmu.cosim.ssp import Component, Connection, System
+    from ncfmu.errors import SimulationError
+
+    transfer = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint), ctypes.c_size_t,
+                                ctypes.c_void_p)
+    step_fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+
+    class FakeNative(FakeSlave):
+        def fmi2_functions(self):
+            self.steps, self.keep = 0, []
+
+            def fails(call):
+                return self.name == "b" and fail_call == call and self.steps == fail_step
+
+            def set_real(c, vrs, n, values):
+                if fails("SetReal"):
+                    return 3
+                self.u = ctypes.cast(values, ctypes.POINTER(ctypes.c_double))[0] if n else self.u
+                return 0
+
+            def get_real(c, vrs, n, values):
+                if fails("GetReal"):
+                    return 3
+                ctypes.cast(values, ctypes.POINTER(ctypes.c_double))[0] = self.y
+                return 0
+
+            def do_step(c, t, h, no_set_prior):
+                self.steps += 1
+                if fails("DoStep"):
+                    return 3
+                self.y = self.u + self.k
+                return 0
+
+            none = transfer(lambda c, vrs, n, values: 0)
+            self.keep = [transfer(set_real), transfer(get_real), step_fn(do_step), none]
+
+            def address(fn):
+                return ctypes.cast(fn, ctypes.c_void_p).value
+            sets = {kind: address(self.keep[0] if kind == "Real" else none) for kind in KINDS}
+            gets = {kind: address(self.keep[1] if kind == "Real" else none) for kind in KINDS}
+            return Fmi2Functions(1, address(self.keep[2]), sets, gets)
+
+        def fmi2_failure(self, what, status):
+            return SimulationError(f"{self.name}: {what} returned {status}")
+
+    log: list[str] = []
+    a, b = FakeNative("a", log), FakeNative("b", log)
+    system = System("chain", [Component("a", "Fake"), Component("b", "Fake", {"k": 10.0})],
+                    [Connection("a", "y", "b", "u"), Connection("b", "y", "a", "u")], stop_time=0.005)
+    return Master(system, [a, b])
+
+
+def test_the_c_loop_calls_the_functions_it_is_given_and_names_a_failing_one():
+    """Through fake FMI functions (ctypes callbacks): the C loop computes the Python loop's chain, and a Set, a
+    DoStep or a Get returning fmi2Error ends the run with the slave's own error for that call."""
+    from ncfmu.errors import SimulationError
+    m = _fake_native_chain()
+    r = m.run()
+    assert m.loop_used == "c"
+    assert list(r["a.y"]) == [0, 1, 12, 23, 34, 45] and list(r["b.y"]) == [0, 11, 22, 33, 44, 55]
+    for call, says in (("SetReal", "fmi2SetReal"), ("DoStep", "fmi2DoStep"), ("GetReal", "fmi2GetReal")):
+        m = _fake_native_chain(call, 2)
+        with pytest.raises(SimulationError) as err:
+            m.run()
+        assert str(err.value).startswith(f"b: {says}") and "returned 3" in str(err.value), str(err.value)
