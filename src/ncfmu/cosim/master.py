@@ -34,7 +34,7 @@ from .ssp import System
 MODES = ("gauss-seidel", "jacobi")
 
 
-#: Steps the C loop runs before handing back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper).
+#: Steps run before the loop hands back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper in C).
 NATIVE_CHUNK = 10_000
 
 #: The most a run may record in memory: a stop time that needs more is a mistake, not a run.
@@ -332,73 +332,36 @@ class Master:
         return run
 
     def _loop(self, run: _Run, first: int, last: int, progress=None, deadline: float | None = None) -> float:
-        """Steps ``first`` .. ``last - 1``; returns the wall time."""
-        values, plan, rec, n_rec, h = run.values, run.plan, run.rec, run.n_rec, run.h
-        ext_updates, input_times = run.ext_updates, run.input_times
-        next_change = (int(np.searchsorted(input_times, run.times[first] + 1e-12, side="right")) - 1
+        """Steps ``first`` .. ``last - 1``; returns the wall time.
+
+        The steps run in chunks that end where Python must act before the next step (an input change, a
+        progress report, a deadline check every 64 steps, and every ``NATIVE_CHUNK`` steps so that Ctrl-C is
+        seen); each chunk runs in C when every slave allows it, else in Python. Both make the same calls.
+        """
+        input_times, ext_updates, times = run.input_times, run.ext_updates, run.times
+        next_change = (int(np.searchsorted(input_times, times[first] + 1e-12, side="right")) - 1
                        if len(input_times) else 0)
         if len(input_times) and next_change >= 0:
             for arr, slot, col in ext_updates:
                 arr[slot] = col[next_change]
         next_change = max(next_change + 1, 0)
-        jacobi = self.mode == "jacobi"
-        report_every = max(1, run.n_steps // 100)
-        wall0 = _time.perf_counter()
-        self.loop_used = "python" if run.native is None else "c"
-        if run.native is not None:
-            self._native_loop(run, first, last, next_change, progress, report_every, deadline, wall0)
-            return _time.perf_counter() - wall0
-        times = run.times.tolist()
-        # the rows to record and the slices of the output vectors they copy, prepared once
-        record = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
-        for i in range(first, last):
-            t = times[i]
-            while next_change < len(input_times) and input_times[next_change] <= t + 1e-12:
-                for arr, slot, col in ext_updates:
-                    arr[slot] = col[next_change]
-                next_change += 1
-            if jacobi:
-                for _s, gathers in plan:
-                    for buf, take, idx in gathers:
-                        take(idx, out=buf)
-                for s, _ in plan:
-                    s.write_inputs()
-                    s.do_step(t, h)
-                for s, _ in plan:
-                    s.read_outputs()
-            else:
-                for s, gathers in plan:
-                    for buf, take, idx in gathers:
-                        take(idx, out=buf)
-                    s.write_inputs()
-                    s.do_step(t, h)
-                    s.read_outputs()
-            row = i + 1
-            for table, vector in record:
-                table[row] = vector
-            if progress is not None and row % report_every == 0:
-                progress(row / run.n_steps)
-            if deadline is not None and row % 64 == 0 and _time.perf_counter() > deadline:
-                raise SimulationTimeout(f"stopped at t = {t + h:.3f} s of {times[-1]:.3f} s: over the time "
-                                        f"allowed ({_time.perf_counter() - wall0:.1f} s of wall time)")
-        return _time.perf_counter() - wall0
-
-    def _native_loop(self, run: _Run, first: int, last: int, next_change: int, progress, report_every: int,
-                     deadline: float | None, wall0: float) -> None:
-        """The steps of :meth:`_loop` in C, in chunks that end where Python must act before the next step."""
-        native = run.native
-        assert native is not None
-        native.forget_sent()             # start values or a restored state may have changed the FMUs' inputs
-        input_times, ext_updates, times = run.input_times, run.ext_updates, run.times
-        # the first step at which each input change applies: the Python loop's test, input <= t + 1e-12
+        # the first step at which each input change applies: input <= t + 1e-12
         change_steps = np.searchsorted(times + 1e-12, input_times, side="left") if len(input_times) else None
+        report_every = max(1, run.n_steps // 100)
+        self.loop_used = "python" if run.native is None else "c"
+        advance: Callable[[int, int], None]
+        if run.native is not None:
+            run.native.forget_sent()     # start values or a restored state may have changed the FMUs' inputs
+            advance = run.native.run
+        else:
+            advance = self._python_steps(run)
+        wall0 = _time.perf_counter()
         i = first
         while i < last:
             while next_change < len(input_times) and input_times[next_change] <= times[i] + 1e-12:
                 for arr, slot, col in ext_updates:
                     arr[slot] = col[next_change]
                 next_change += 1
-            # at most NATIVE_CHUNK steps without the GIL: Python sees Ctrl-C (and other signals) between chunks
             end = min(last, i + NATIVE_CHUNK)
             if change_steps is not None and next_change < len(input_times):
                 end = min(end, int(change_steps[next_change]))
@@ -406,7 +369,7 @@ class Master:
                 end = min(end, (i + report_every) // report_every * report_every)   # the next row to report
             if deadline is not None:
                 end = min(end, (i + 64) // 64 * 64)
-            native.run(i, end)
+            advance(i, end)
             i = row = end
             if progress is not None and row % report_every == 0:
                 progress(row / run.n_steps)
@@ -414,6 +377,39 @@ class Master:
                 raise SimulationTimeout(f"stopped at t = {float(times[row - 1]) + run.h:.3f} s of "
                                         f"{float(times[-1]):.3f} s: over the time allowed "
                                         f"({_time.perf_counter() - wall0:.1f} s of wall time)")
+        return _time.perf_counter() - wall0
+
+    def _python_steps(self, run: _Run) -> Callable[[int, int], None]:
+        """The Python loop: ``advance(first, end)`` steps ``first`` .. ``end - 1`` and records each row."""
+        values, plan, rec, n_rec, h = run.values, run.plan, run.rec, run.n_rec, run.h
+        times = run.times.tolist()
+        # the rows to record and the slices of the output vectors they copy, prepared once
+        record = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
+        jacobi = self.mode == "jacobi"
+
+        def advance(first: int, end: int) -> None:
+            for i in range(first, end):
+                t = times[i]
+                if jacobi:
+                    for _s, gathers in plan:
+                        for buf, take, idx in gathers:
+                            take(idx, out=buf)
+                    for s, _ in plan:
+                        s.write_inputs()
+                        s.do_step(t, h)
+                    for s, _ in plan:
+                        s.read_outputs()
+                else:
+                    for s, gathers in plan:
+                        for buf, take, idx in gathers:
+                            take(idx, out=buf)
+                        s.write_inputs()
+                        s.do_step(t, h)
+                        s.read_outputs()
+                row = i + 1
+                for table, vector in record:
+                    table[row] = vector
+        return advance
 
     def _assemble(self, run: _Run, rec, wall: float, applied: dict[str, dict[str, object]]) -> Result:
         dtype: list[tuple[str, type[np.generic]]] = [("time", np.float64)]
