@@ -38,8 +38,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ..errors import require
-from ..ports import boolean, integer, real
+from ..ports import boolean, integer, real, string
+from . import lathe_program
 from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .lathe_program import ElementMove, Segment
 from .motion import LinearMove
 
 MAX_BLOCKS = 8
@@ -47,6 +49,8 @@ MAX_BLOCKS = 8
 IDLE, SC1, SC2, SC3, SC4 = 0, 1, 2, 3, 4
 #: Phase before SC1 when the command is not at STP on start (reported as sub-cycle 0 while busy).
 APPROACH = -1
+#: A program's move outside a pass (reported as sub-cycle 0 while busy).
+PROGRAM_MOVE = -2
 
 
 @dataclass
@@ -103,6 +107,10 @@ class CutSequencer(Controller):
     PORTS = (
         real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
         real("z_start", "parameter", 2.0, "mm", "Z of the start point STP"),
+        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
+               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
+               "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
+               "moves at block[1].rapid; empty: the registers block[k]"),
         integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
              min_exclusive=True),
@@ -125,7 +133,10 @@ class CutSequencer(Controller):
         integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
         integer("passes_left", "output", None, "the seed's pass down-counter (counts down at SC3 -> SC4)"),
         integer("block_no", "output", None, "block being run (0 idle)"),
-        real("sigma_x", "output", None, "mm", "ΣX accumulator: Xf + n·Xd"),
+        real("sigma_x", "output", None, "mm", "ΣX accumulator: Xf + n·Xd (a program's cycle: the pass's depth "
+             "below the cycle's start point)"),
+        integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
+        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
         boolean("busy", "output", None, "a cycle is running"),
         boolean("done", "output", None, "the last block has finished (until the next start)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
@@ -162,6 +173,12 @@ class CutSequencer(Controller):
             stp = (b.x_stp, b.z_stp) if b.own_stp else stp
             stps.append(stp)
         self.stps = stps
+        self.program = str(values["program"])
+        # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
+        self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid)
+                                    if self.program.strip() else [])
+        if self.plan:
+            self.stps = [(self.x_start, self.z_start)]
 
     @classmethod
     def with_blocks(cls, blocks: list[Block] | tuple[Block, ...], **parameters: object) -> CutSequencer:
@@ -186,7 +203,8 @@ class CutSequencer(Controller):
         self.alarm = False
         self.x_cmd, self.z_cmd = self.x_start, self.z_start
         self.x_vff = self.z_vff = 0.0
-        self.move = LinearMove(self.accel)
+        self.move = ElementMove(self.accel) if self.plan else LinearMove(self.accel)
+        self.segment = 0                     # index into self.plan while a program runs
         self._start_was = False
         self._steps_since_end = 0
         self._waiting = 0.0                  # time since the command stopped, waiting for in-position
@@ -218,7 +236,19 @@ class CutSequencer(Controller):
         elif phase == APPROACH:
             self.move.begin(here, self._waypoints.pop(0), self.blocks[self._then_block].rapid)
 
+    def _begin_segment(self, index: int) -> None:
+        """Run the program's move ``index``: its sub-cycle, pass and ΣX are what the plan says."""
+        seg = self.plan[index]
+        self.segment = index
+        self.phase = seg.subcycle if seg.subcycle else PROGRAM_MOVE
+        self.pass_no, self.sigma_x = seg.pass_no, seg.sigma_x
+        assert isinstance(self.move, ElementMove)
+        self.move.begin_element(seg.element, seg.rate)
+
     def _begin_block(self, index: int) -> None:
+        if self.plan:
+            self._begin_segment(0)
+            return
         self.block_index = index
         b = self.blocks[index]
         self.sigma_x = b.Xf                         # Xf is loaded once per block
@@ -250,6 +280,14 @@ class CutSequencer(Controller):
         self._approach(0)
 
     def _next_phase(self) -> None:
+        if self.plan and self.phase != APPROACH:
+            if self.segment + 1 < len(self.plan):
+                self._begin_segment(self.segment + 1)
+            else:
+                self.phase = IDLE
+                self.busy, self.done = False, True
+                self.pass_no, self.sigma_x = 0, 0.0
+            return
         if self.phase == APPROACH:
             if self._waypoints:
                 self._begin_phase(APPROACH)
@@ -302,7 +340,8 @@ class CutSequencer(Controller):
 
         if self.busy:
             override = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
-            scale = 0.0 if inputs["feed_hold"] else (override if self.phase == SC2 else 1.0)
+            cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
+            scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
             self.move.advance(dt, scale)
             # The servos' in-position answers the final command only after one round trip through
             # the master (one step with Gauss-Seidel, two with Jacobi): trust it from the 2nd step on.
@@ -352,5 +391,8 @@ class CutSequencer(Controller):
         out["passes_left"] = self.passes_left
         out["block_no"] = self.block_index + 1 if self.busy else 0
         out["sigma_x"] = self.sigma_x
+        running = self.busy and bool(self.plan) and self.phase != APPROACH
+        out["line"] = self.plan[self.segment].line if running else 0
+        out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         return out
