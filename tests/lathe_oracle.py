@@ -1,0 +1,219 @@
+"""An oracle for lathe part programs, written from the geometry (not from the planner).
+
+A turned part is a chain of pieces from its start (X ``a_x`` at the start point's Z) toward the chuck:
+straight lines and arcs, every one monotone (Z falls, X never falls: Fanuc's type I). From it come the
+program text (G8 radius or G7 diameter, arcs by I/K or R) and the checks of a tool path:
+
+- roughing never below the profile shifted by the allowances (W in Z, U in X), at any Z;
+- after roughing, the material left is that shifted profile: the tool reached every point of it;
+- no pass deeper than U; SC1..SC4 in order on every pass;
+- finishing follows the profile.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Piece:
+    start: tuple[float, float]          # (z, x)
+    end: tuple[float, float]
+    centre: tuple[float, float] | None = None   # arcs: (z, x); convex: centre below the surface
+    convex: bool = False
+
+    @property
+    def radius(self) -> float:
+        assert self.centre is not None
+        return math.dist(self.start, self.centre)
+
+    def x_low(self, z: float) -> float:
+        """Lowest X of the piece at ``z`` (inside its Z range)."""
+        (z0, x0), (z1, x1) = self.start, self.end
+        if self.centre is None:
+            if abs(z0 - z1) < 1e-12:
+                return min(x0, x1)
+            return x0 + (x1 - x0) * (z - z0) / (z1 - z0)
+        cz, cx = self.centre
+        h = math.sqrt(max(self.radius ** 2 - (z - cz) ** 2, 0.0))
+        return cx + h if self.convex else cx - h
+
+    def points(self, spacing: float) -> list[tuple[float, float]]:
+        if self.centre is None:
+            n = max(1, math.ceil(math.dist(self.start, self.end) / spacing))
+            return [(self.start[0] + (self.end[0] - self.start[0]) * i / n,
+                     self.start[1] + (self.end[1] - self.start[1]) * i / n) for i in range(n + 1)]
+        cz, cx = self.centre
+        a0 = math.atan2(self.start[1] - cx, self.start[0] - cz)
+        a1 = math.atan2(self.end[1] - cx, self.end[0] - cz)
+        if self.convex:       # counter-clockwise (G03): the angle rises
+            a1 = a1 if a1 >= a0 else a1 + 2 * math.pi
+        else:                 # clockwise (G02): the angle falls
+            a1 = a1 if a1 <= a0 else a1 - 2 * math.pi
+        n = max(1, math.ceil(abs(a1 - a0) * self.radius / spacing))
+        return [(cz + self.radius * math.cos(a0 + (a1 - a0) * i / n),
+                 cx + self.radius * math.sin(a0 + (a1 - a0) * i / n)) for i in range(n + 1)]
+
+
+@dataclass
+class Part:
+    x0: float                   # cycle start point X (radius) and Z
+    z0: float
+    a_x: float                  # the profile starts at (a_x, z0)
+    pieces: list[Piece] = field(default_factory=list)
+
+    @property
+    def end(self) -> tuple[float, float]:
+        return self.pieces[-1].end
+
+    def x_low(self, z: float) -> float:
+        """The profile's lowest X at ``z`` (the lower end of a vertical face); z in [end Z, z0]."""
+        return min(p.x_low(z) for p in self.pieces
+                   if min(p.start[0], p.end[0]) - 1e-12 <= z <= max(p.start[0], p.end[0]) + 1e-12)
+
+    def points(self, spacing: float) -> np.ndarray:
+        return np.array([pt for p in self.pieces for pt in p.points(spacing)])
+
+    def program(self, depth: float, retract: float, u: float, w: float, f_rough: float, f_finish: float,
+                diameter: bool = False, arcs: str = "IK") -> str:
+        k = 2.0 if diameter else 1.0
+
+        def num(v: float) -> str:
+            return f"{v:.6f}".rstrip("0").rstrip(".") if "." in f"{v:.6f}" else f"{v}"
+
+        lines = ["%", "G18 G21 G90 " + ("G7" if diameter else "G8"),
+                 f"G00 X{num(k * self.x0)} Z{num(self.z0)}",
+                 f"G71 U{num(depth)} R{num(retract)}",
+                 f"G71 P10 Q20 U{num(k * u)} W{num(w)} F{num(f_rough)}",
+                 f"N10 G00 X{num(k * self.a_x)}"]
+        for i, p in enumerate(self.pieces):
+            n = "N20 " if i == len(self.pieces) - 1 else ""
+            end = f"X{num(k * p.end[1])} Z{num(p.end[0])}"
+            if p.centre is None:
+                lines.append(f"{n}G01 {end}")
+            elif arcs == "R":
+                lines.append(f"{n}G0{3 if p.convex else 2} {end} R{num(p.radius)}")
+            else:
+                lines.append(f"{n}G0{3 if p.convex else 2} {end} I{num(p.centre[1] - p.start[1])} "
+                             f"K{num(p.centre[0] - p.start[0])}")
+        lines += [f"G70 P10 Q20 F{num(f_finish)}", "M30", "%"]
+        return "\n".join(lines) + "\n"
+
+
+def r6(v: float) -> float:
+    return round(v, 6)
+
+
+def build_part(x0: float, z0: float, a_x: float, specs: list[tuple]) -> Part:
+    """A part from piece specifications, coordinates on a 1e-6 mm grid (so G7's doubled X halves back exactly):
+    ``("z", length)``, ``("taper", dz, dx)``, ``("face", dx)``, ``("convex", r, a0, a1)`` (angles in
+    [0, pi/2], a0 < a1), ``("concave", r, a0, a1)`` (angles in [-pi, -pi/2], a0 > a1)."""
+    part = Part(x0, z0, a_x)
+    z, x = z0, a_x
+    for spec in specs:
+        kind = spec[0]
+        if kind in ("convex", "concave"):
+            r, a0, a1 = spec[1:]
+            cz, cx = r6(z - r * math.cos(a0)), r6(x - r * math.sin(a0))
+            end = (r6(cz + r * math.cos(a1)), r6(cx + r * math.sin(a1)))
+            piece = Piece((z, x), end, (cz, cx), kind == "convex")
+        else:
+            dz, dx = (spec[1], 0.0) if kind == "z" else (0.0, spec[1]) if kind == "face" else (spec[1], spec[2])
+            end = (r6(z - dz), r6(x + dx))
+            piece = Piece((z, x), end)
+        part.pieces.append(piece)
+        z, x = piece.end
+    return part
+
+
+# -- checks of a tool path ---------------------------------------------------------------------------
+def densify(path: np.ndarray, spacing: float) -> np.ndarray:
+    """The polyline ``path`` with points inserted so that no piece is longer than ``spacing``."""
+    d = np.diff(path, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / spacing).astype(int))
+    k = np.repeat(np.arange(len(d)), n)
+    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+    return np.vstack([path[k] + frac[:, None] * d[k], path[-1:]])
+
+
+def distances(points: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """Distance of each point (m x 2, (z, x)) from the polyline ``path`` (n x 2), overestimated by at most
+    0.5 um (the polyline is densified to 1 um)."""
+    from scipy.spatial import cKDTree
+
+    dist, _ = cKDTree(densify(path, 0.001)).query(points)
+    return np.asarray(dist)
+
+
+def below_shifted_profile(part: Part, u: float, w: float, z: np.ndarray, x: np.ndarray, tol: float) -> float:
+    """How far the deepest tool point lies below the profile shifted by (W, U), within ``tol`` in Z (mm; <= 0:
+    never below). Beyond the profile's shifted end the tool must not go at all."""
+    zb = part.end[0]
+    worst = -math.inf
+    for zi, xi in zip(z, x):
+        zp = min(zi - w + tol, part.z0)
+        if zp < zb:
+            worst = max(worst, (zb - zp) if xi < part.end[1] + u else -math.inf)
+            continue
+        worst = max(worst, part.x_low(zp) + u - xi)
+    return worst
+
+
+def shifted_points(part: Part, u: float, w: float, spacing: float) -> np.ndarray:
+    """Points of the profile shifted by the allowances, from the start point's Z on."""
+    pts = part.points(spacing) + np.array([w, u])
+    return pts[pts[:, 0] <= part.z0]
+
+
+def pass_changes(sub: np.ndarray, pass_no: np.ndarray) -> list[tuple[int, int]]:
+    """(pass, sub-cycle) at every change of either."""
+    out: list[tuple[int, int]] = []
+    for p, s in zip(pass_no, sub):
+        if not out or out[-1] != (int(p), int(s)):
+            out.append((int(p), int(s)))
+    return out
+
+
+def deepest_cut(x0: float, z: np.ndarray, x: np.ndarray, sub: np.ndarray, pass_no: np.ndarray) -> float:
+    """The largest depth of cut of any SC2: how far below everything cut before at that Z (the stock's X
+    ``x0`` where nothing was) the tool goes, mm."""
+    grid = np.round(np.arange(z.min(), z.max() + 0.01, 0.01), 6)
+    floor = np.full(len(grid), x0)                    # lowest X cut so far at each Z
+    deepest = 0.0
+    for k in sorted(set(int(p) for p in pass_no[sub == 2])):
+        sel = (sub == 2) & (pass_no == k)
+        zs, xs = z[sel], x[sel]
+        idx = np.clip(np.round((zs - grid[0]) / 0.01).astype(int), 0, len(grid) - 1)
+        deepest = max(deepest, float((floor[idx] - xs).max()))
+        np.minimum.at(floor, idx, xs)
+    return deepest
+
+
+# -- the controller with ideal servo feedback ----------------------------------------------------------
+RECORD = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "pass_no", "sigma_x", "line", "canned_cycle", "busy",
+          "done", "alarm")
+
+
+def run_ideal(seq, dt: float = 1e-3, limit: int = 1_000_000, events=None) -> dict[str, np.ndarray]:
+    """Press START and step the sequencer until done (the axes stand where commanded, always in position).
+    ``events(k, inputs)`` may change the inputs before step ``k``. Returns every output per step, and ``t``."""
+    inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": seq.x_cmd, "z_pos": seq.z_cmd,
+              "x_in_position": True, "z_in_position": True, "alarm_in": False}
+    rows = []
+    for k in range(limit):
+        if events is not None:
+            events(k, inputs)
+        out = seq.step(k * dt, dt, inputs)
+        inputs["start"] = False
+        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+        rows.append(tuple(out[name] for name in RECORD))
+        if out["done"]:
+            break
+    else:
+        raise AssertionError("the cycle did not finish")
+    cols = {name: np.array([r[i] for r in rows]) for i, name in enumerate(RECORD)}
+    cols["t"] = np.arange(1, len(rows) + 1) * dt
+    return cols
