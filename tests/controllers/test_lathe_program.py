@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lathe_oracle import (
-    build_part,
     below_shifted_profile,
+    build_part,
     deepest_cut,
     distances,
     pass_changes,
