@@ -165,7 +165,7 @@ def below_shifted_profile(part: Part, u: float, w: float, z: np.ndarray, x: np.n
 def shifted_points(part: Part, u: float, w: float, spacing: float) -> np.ndarray:
     """Points of the profile shifted by the allowances, from the start point's Z on."""
     pts = part.points(spacing) + np.array([w, u])
-    return pts[pts[:, 0] <= part.z0]
+    return pts[pts[:, 0] < part.z0 - 1e-9]          # the stock lies behind the start point's Z
 
 
 def pass_changes(sub: np.ndarray, pass_no: np.ndarray) -> list[tuple[int, int]]:
@@ -185,7 +185,7 @@ def deepest_cut(x0: float, z: np.ndarray, x: np.ndarray, sub: np.ndarray, pass_n
     deepest = 0.0
     for k in sorted(set(int(p) for p in pass_no[sub == 2])):
         sel = (sub == 2) & (pass_no == k)
-        zs, xs = z[sel], x[sel]
+        zs, xs = densify(np.column_stack([z[sel], x[sel]]), 0.002).T   # every bin the cut passes
         idx = np.clip(np.round((zs - grid[0]) / 0.01).astype(int), 0, len(grid) - 1)
         deepest = max(deepest, float((floor[idx] - xs).max()))
         np.minimum.at(floor, idx, xs)

@@ -405,10 +405,10 @@ def _read_profile(blocks: list[_Block], i: int, b: _Block, p: int, q: int, modes
     return profile, j
 
 
-def _inside(arc: Arc, angle: float) -> bool:
-    """The arc passes the direction ``angle`` strictly between its ends."""
-    s = arc.param((arc.center[0] + math.cos(angle), arc.center[1] + math.sin(angle)))
-    return TOL < s < arc.length - TOL
+def _extreme(arc: Arc, angle: float) -> Point | None:
+    """The arc's point in the direction ``angle`` from its centre, if it passes it strictly between its ends."""
+    p = (arc.center[0] + arc.radius * math.cos(angle), arc.center[1] + arc.radius * math.sin(angle))
+    return p if EPS < arc.param(p) < arc.length - EPS else None
 
 
 def _check_profile(profile: Profile, start: Point) -> None:
@@ -420,13 +420,16 @@ def _check_profile(profile: Profile, start: Point) -> None:
     for pb in profile.blocks:
         e, line, raw = pb.element, pb.line, pb.raw
         s, t = e.start, e.end
-        if isinstance(e, Arc) and (_inside(e, 0.0) or _inside(e, math.pi)):
+        # an arc may pass an extreme of Z or X between its ends: by more than TOL, the profile is not monotone
+        z_hi, z_lo, x_lo, x_hi = ((_extreme(e, a) for a in (0.0, math.pi, -math.pi / 2, math.pi / 2))
+                                  if isinstance(e, Arc) else (None, None, None, None))
+        if (z_hi and z_hi[0] > s[0] + TOL) or (z_lo and z_lo[0] < t[0] - TOL):
             raise ProgramError(line, 1, raw, "this arc turns back in Z: the profile must run toward the "
                                                         "chuck (-Z) all along")
         if t[0] > s[0] + TOL:
             raise ProgramError(line, 1, raw, f"the profile moves +Z here (Z {s[0]:g} -> {t[0]:g}): it must "
                                                         "run toward the chuck (-Z) all along")
-        falls = t[1] < s[1] - TOL or (isinstance(e, Arc) and (_inside(e, math.pi / 2) or _inside(e, -math.pi / 2)))
+        falls = t[1] < s[1] - TOL or bool(x_lo and x_lo[1] < s[1] - TOL) or bool(x_hi and x_hi[1] > t[1] + TOL)
         if falls:
             raise ProgramError(line, 1, raw,
                                "X falls along -Z here: a pocket or undercut (type II) is not roughed by this G71 -- "
