@@ -217,3 +217,12 @@ def run_ideal(seq, dt: float = 1e-3, limit: int = 1_000_000, events=None) -> dic
     cols = {name: np.array([r[i] for r in rows]) for i, name in enumerate(RECORD)}
     cols["t"] = np.arange(1, len(rows) + 1) * dt
     return cols
+
+
+#: The example part program's part (docs/examples/lathe_shaft.ngc), from its drawing: a chamfer, a taper, a
+#: radius R4 into a shoulder, and a face up to the start point's X. Start point X 30, Z 2.
+SHAFT = build_part(30.0, 2.0, 14.0, [("z", 2.0), ("taper", 2.0, 2.0), ("z", 10.0), ("taper", 8.0, 4.0), ("z", 6.0),
+                                     ("concave", 4.0, -math.pi / 2, -math.pi), ("face", 3.0), ("z", 10.0),
+                                     ("face", 3.0)])
+#: The example's G71 words: depth of cut U, retract R, allowances U (radius) and W.
+SHAFT_DEPTH, SHAFT_RETRACT, SHAFT_U, SHAFT_W = 1.5, 0.5, 0.2, 0.1

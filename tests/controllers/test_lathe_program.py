@@ -9,8 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lathe_oracle import (
+    SHAFT,
+    SHAFT_DEPTH,
+    SHAFT_RETRACT,
+    SHAFT_U,
+    SHAFT_W,
     below_shifted_profile,
-    build_part,
     deepest_cut,
     distances,
     pass_changes,
@@ -23,12 +27,7 @@ from ncfmu.controllers.lathe_program import parse, plan
 from ncfmu.errors import ProgramError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_shaft.ngc"
-#: The example's part, from its drawing: a chamfer, a taper, a radius R4 into a shoulder, up to the stock.
-SHAFT = build_part(30.0, 2.0, 14.0, [("z", 2.0), ("taper", 2.0, 2.0), ("z", 10.0), ("taper", 8.0, 4.0), ("z", 6.0),
-                                     ("concave", 4.0, -math.pi / 2, -math.pi), ("face", 3.0), ("z", 10.0),
-                                     ("face", 3.0)])
-#: The example's G71 and G70 words.
-DEPTH, RETRACT, U, W = 1.5, 0.5, 0.2, 0.1
+DEPTH, RETRACT, U, W = SHAFT_DEPTH, SHAFT_RETRACT, SHAFT_U, SHAFT_W
 
 
 def program_run(text: str, **kw) -> dict[str, np.ndarray]:

@@ -1,0 +1,99 @@
+"""The example lathe part program (docs/examples/lathe_shaft.ngc) closed loop through the FMUs: lathe_roughing
+with ``seq.program`` set, the tool path checked against the part's geometry (tests/lathe_oracle.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lathe_oracle import (
+    SHAFT,
+    SHAFT_DEPTH,
+    SHAFT_U,
+    SHAFT_W,
+    below_shifted_profile,
+    deepest_cut,
+    distances,
+    pass_changes,
+    shifted_points,
+)
+
+from ncfmu.controllers.lathe_program import parse
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_shaft.ngc"
+STOP = 100.0
+
+pytestmark = pytest.mark.slow
+
+
+def shaft_part():
+    return SHAFT, SHAFT_DEPTH, SHAFT_U, SHAFT_W
+
+
+@pytest.fixture(scope="module")
+def run(ncfmu_run):
+    return ncfmu_run("lathe_roughing", stop_time=STOP, start_values={"seq.program": EXAMPLE.read_text()})
+
+
+def test_cycle_finishes_clear_of_the_chuck(run, ncfmu_checks):
+    assert run["seq.done"].any() and not run["seq.alarm"].any()
+    ncfmu_checks.assert_alarm(run, "limiter.alarm", raised=False)
+    assert run["x_axis.pos"][-1] == pytest.approx(30.0, abs=0.005)
+    assert run["z_axis.pos"][-1] == pytest.approx(2.0, abs=0.005)
+
+
+def test_roughing_against_the_geometry(run):
+    part, depth, u, w = shaft_part()
+    g71 = run["seq.canned_cycle"] == 71
+    z, x = run["seq.z_cmd"][g71], run["seq.x_cmd"][g71]
+    # the commanded tool point never below the profile + allowance, at any Z (2 um)
+    assert below_shifted_profile(part, u, w, z, x, tol=0.002) <= 0.002
+    # the actual tool point neither (the servos follow within microns)
+    za, xa = run["z_axis.pos"][g71], run["x_axis.pos"][g71]
+    assert below_shifted_profile(part, u, w, za, xa, tol=0.002) <= 0.002
+    # after roughing the material left is the allowance everywhere (the actual tool reached all of it, 5 um)
+    target = shifted_points(part, u, w, 0.02)
+    assert distances(target, np.column_stack([za, xa])).max() <= 0.005
+    # SC1..SC4 on every pass, in order; no cut deeper than U
+    sub, pass_no = run["seq.subcycle"][g71], run["seq.pass_no"][g71]
+    changes = pass_changes(sub, pass_no)
+    n = (len(changes) - 1) // 4
+    assert n == 11 and changes == [(k, s) for k in range(1, n + 1) for s in (1, 2, 3, 4)] + [(0, 0)]
+    assert deepest_cut(30.0, z, x, sub, pass_no) <= depth + 1e-6
+
+
+def test_finishing_follows_the_profile(run):
+    part = shaft_part()[0]
+    g70 = (run["seq.canned_cycle"] == 70) & (run["seq.subcycle"] == 2)
+    profile = part.points(0.01)
+    commanded = np.column_stack([run["seq.z_cmd"][g70], run["seq.x_cmd"][g70]])
+    actual = np.column_stack([run["z_axis.pos"][g70], run["x_axis.pos"][g70]])
+    assert distances(commanded, profile).max() <= 0.005 and distances(profile, commanded).max() <= 0.005
+    assert distances(actual, profile).max() <= 0.010 and distances(profile, actual).max() <= 0.010
+
+
+def test_line_output_walks_the_program(run):
+    lines = EXAMPLE.read_text().split("\n")
+    seen = [int(v) for v in np.unique(run["seq.line"]) if v]
+    ops = parse(EXAMPLE.read_text(), (30.0, 2.0))
+    assert {ops[0].line, ops[1].line} <= set(seen)
+    assert all(lines[k - 1].strip() for k in seen)          # only lines holding blocks
+    assert set(np.unique(run["seq.canned_cycle"])) == {0, 70, 71}
+
+
+def test_g7_twin_gives_the_same_path(run, ncfmu_run):
+    part, depth, u, w = shaft_part()
+    g7 = part.program(depth, 0.5, u, w, 300, 180, diameter=True, arcs="R")
+    twin = ncfmu_run("lathe_roughing", stop_time=STOP, start_values={"seq.program": g7})
+    assert np.array_equal(twin["seq.x_cmd"], run["seq.x_cmd"]) and np.array_equal(twin["seq.z_cmd"], run["seq.z_cmd"])
+    assert np.array_equal(twin["x_axis.pos"], run["x_axis.pos"])
+
+
+def test_a_refused_program_fails_initialisation(ncfmu_project):
+    from ncfmu.errors import NcfmuError
+    from ncfmu.project import simulate
+
+    bad = EXAMPLE.read_text().replace("G71 U1.5 R0.5", "G71 U0 R0.5")
+    with pytest.raises(NcfmuError, match=r"line 6, column 5: U0: the depth of cut must be > 0"):
+        simulate("lathe_roughing", stop_time=0.01, start_values={"seq.program": bad})
