@@ -65,6 +65,9 @@ def test_random_monotone_profiles(a_x, specs, depth, retract, u, w, diameter, ar
     assert below_shifted_profile(part, u, w, z, x, tol=0.002) <= 0.002
     # the material left is the allowance everywhere: the tool reached every point of the shifted profile
     assert distances(shifted_points(part, u, w, 0.02), np.column_stack([z, x])).max() <= 0.005
+    # ... and the pass along it stays on it (no detour, no spurious half circle with an allowance)
+    last = (sub == 2) & (pass_no == pass_no.max())
+    assert distances(np.column_stack([z[last], x[last]]), part.points(0.01) + np.array([w, u])).max() <= 0.005
     # SC1..SC4 in order on every pass, then back to the start point; no cut deeper than U
     changes = pass_changes(sub, pass_no)
     n = (len(changes) - 1) // 4

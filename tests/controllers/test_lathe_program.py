@@ -56,6 +56,11 @@ def test_example_leaves_the_allowance_everywhere(shaft):
     target = shifted_points(SHAFT, U, W, 0.02)
     assert len(target) > 2000
     assert distances(target, path).max() <= 0.005
+    # and the pass along it is on it: no detour, no spurious half circle where an allowance is given (the defect
+    # LinuxCNC's G71 has), no arc other than the profile's own, shifted
+    last = g71 & (shaft["subcycle"] == 2) & (shaft["pass_no"] == shaft["pass_no"][g71].max())
+    along = np.column_stack([shaft["z_cmd"][last], shaft["x_cmd"][last]])
+    assert distances(along, SHAFT.points(0.01) + np.array([W, U])).max() <= 0.005
 
 
 def test_example_passes_sc1_to_sc4_no_deeper_than_u(shaft):

@@ -30,6 +30,14 @@ the sequencer's own command has reached its end AND the actual positions are wit
 of it AND the servos report in-position, so a move held downstream (by the area limiter) never
 counts as done. After an alarm, START re-bases the command on the actual position (follow-up, as an
 NC does after a stop it did not command) and approaches the start point safely.
+
+A part program (``program``, :mod:`.lathe_program`) replaces the registers: an RS274 lathe subset whose
+G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii -- and runs
+each as the seed's SC1 infeed (at most U deeper), SC2 cut in -Z to the profile plus its allowances, SC3
+retract by R, SC4 return in Z, then one pass along the profile shifted by the allowances, so the stock left
+for G70's finishing pass is the allowance everywhere. ``line`` and ``canned_cycle`` say where the program
+is; ``subcycle``, ``pass_no`` and ``sigma_x`` the pass. Feed hold, override, alarms, the in-position check
+and the restart (from the program's start, after the safe approach) work as for the registers.
 """
 
 from __future__ import annotations

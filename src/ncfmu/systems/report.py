@@ -130,7 +130,20 @@ class LatheCycle(Part):
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         seq = parameters.get(self.seq, {})
-        if "x_start" in seq and "block[1].Xf" in seq:
+        program = str(seq.get("program") or "")
+        if program.strip() and "x_start" in seq:
+            # a part program: the finished profile of each cycle and the planned passes, from the program itself
+            from ..controllers.geometry import sample
+            from ..controllers.lathe_program import Finish, Rough, parse, plan_ops
+            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])))
+            for k, seg in enumerate(plan_ops(ops, 1.0)):
+                ax.plot(*zip(*sample([seg.element], 0.2)), color="tab:green", lw=0.5, alpha=0.6,
+                        label="planned moves" if k == 0 else None)
+            profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
+            for k, profile in enumerate(profiles.values()):
+                ax.plot(*zip(*sample(profile.elements, 0.2)), color="k", lw=1.5,
+                        label="profile (finished part)" if k == 0 else None)
+        elif "x_start" in seq and "block[1].Xf" in seq:
             stock = to_float(seq["x_start"]) - to_float(seq["block[1].Xf"])
             ax.axhline(stock, color="0.5", ls=":", lw=0.8, label=f"stock outline X = {stock:g}")
             x = result[f"{self.x}.pos"]
