@@ -115,10 +115,6 @@ class CutSequencer(Controller):
     PORTS = (
         real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
         real("z_start", "parameter", 2.0, "mm", "Z of the start point STP"),
-        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
-               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
-               "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
-               "moves at block[1].rapid; empty: the registers block[k]"),
         integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
              min_exclusive=True),
@@ -143,11 +139,16 @@ class CutSequencer(Controller):
         integer("block_no", "output", None, "block being run (0 idle)"),
         real("sigma_x", "output", None, "mm", "ΣX accumulator: Xf + n·Xd (a program's cycle: the pass's depth "
              "below the cycle's start point)"),
-        integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
-        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
         boolean("busy", "output", None, "a cycle is running"),
         boolean("done", "output", None, "the last block has finished (until the next start)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
+        # last, so the value references of the ports before them stay what they were
+        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
+               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
+               "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
+               "moves at block[1].rapid; empty: the registers block[k]"),
+        integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
+        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
