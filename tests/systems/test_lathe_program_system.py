@@ -97,3 +97,19 @@ def test_a_refused_program_fails_initialisation(ncfmu_project):
     bad = EXAMPLE.read_text().replace("G71 U1.5 R0.5", "G71 U0 R0.5")
     with pytest.raises(NcfmuError, match=r"line 6, column 5: U0: the depth of cut must be > 0"):
         simulate("lathe_roughing", stop_time=0.01, start_values={"seq.program": bad})
+
+
+def test_state_mid_program_continues_bit_identically(ncfmu_project):
+    """An FMU state saved on the pass along the shifted profile (its radius: an arc move, the plan, the program
+    counter) restores and runs on bit for bit."""
+    from ncfmu.project import simulate, simulate_branches
+
+    values = {"seq.program": EXAMPLE.read_text()}
+    straight = simulate("lathe_roughing", stop_time=69.0, start_values=values)
+    at = 66.5
+    k = int(np.searchsorted(straight.time, at))
+    assert straight["seq.canned_cycle"][k] == 71 and straight["seq.subcycle"][k] == 2
+    assert "G02" in EXAMPLE.read_text().split("\n")[int(straight["seq.line"][k]) - 1]
+    (branch,) = simulate_branches("lathe_roughing", at, [{}], stop_time=69.0, start_values=values)
+    for variable in straight.names:
+        assert np.array_equal(branch[variable], straight[variable]), variable
