@@ -119,8 +119,8 @@ def test_g7_program_and_its_g8_twin_give_the_same_path():
     g8 = SHAFT.program(DEPTH, RETRACT, U, W, 300, 180, diameter=False, arcs="R")
     g7 = SHAFT.program(DEPTH, RETRACT, U, W, 300, 180, diameter=True, arcs="R")
     assert "X60" in g7 and "U0.4" in g7
-    a, b = program_run(g8), program_run(g7)
-    assert np.array_equal(a["x_cmd"], b["x_cmd"]) and np.array_equal(a["z_cmd"], b["z_cmd"])
+    # the same plan, number for number (the run through the FMUs compares the trajectories)
+    assert plan(g8, (30.0, 2.0), 50.0) == plan(g7, (30.0, 2.0), 50.0)
     # and the I/K twin of the R program plans the same geometry
     ik = plan(SHAFT.program(DEPTH, RETRACT, U, W, 300, 180, arcs="IK"), (30.0, 2.0), 50.0)
     r = plan(g8, (30.0, 2.0), 50.0)
@@ -224,3 +224,24 @@ def test_profile_after_m30_is_not_found_and_g70_reuses_g71_profile():
                .replace("X20", "X40").replace("X24", "X48").replace("X27", "X54").replace("X30", "X60"),
                (30.0, 2.0))
     assert g7[0].u == pytest.approx(0.1) and g7[0].depth == 1.5 and g7[0].retract == 0.5
+
+
+def test_moves_around_a_cycle_incremental_and_modes_restored():
+    """Plain moves before and after G71 (G91 too): sub-cycle 0, canned cycle 0, their own line; the cycle starts
+    where the tool stands and ends there; after the profile the modes in force before it hold again."""
+    text = ("G18 G21 G8\nG00 X35 Z5\nG91 G00 X-5 Z-3\nG90\nG71 U1 R0.5\nG71 P1 Q2 U0.1 F300\n"
+            "N1 G00 X20\nG01 Z-10 F100\nN2 X30\nX34 Z4\nG01 X33 Z3\nM30\n")
+    segs = plan(text, (30.0, 2.0), 50.0)
+    plain = [s for s in segs if s.cycle == 0]
+    assert [(s.line, s.feed, s.subcycle) for s in plain] == [(2, False, 0), (3, False, 0), (10, False, 0),
+                                                              (11, True, 0)]
+    assert plain[1].element.end == (2.0, 30.0)                 # G91: X-5 Z-3 from X35 Z5, as (z, x)
+    assert plain[2].element.start == (2.0, 30.0)               # after the cycle: from its start point, G00 again
+    assert plain[3].rate == pytest.approx(5.0)                 # F300 (the profile's F100 was not executed)
+    g71 = [s for s in segs if s.cycle == 71]
+    assert g71[0].element.start == (2.0, 30.0) and g71[-1].element.end == (2.0, 30.0)
+    assert {s.rate for s in g71 if s.feed} == {5.0}             # the cycle's F, not the profile's
+    run = program_run(text)
+    assert run["done"][-1] and not run["alarm"].any()
+    assert (run["x_cmd"][-1], run["z_cmd"][-1]) == (33.0, 3.0)
+    assert set(run["line"][run["canned_cycle"] == 0]) == {0, 2, 3, 10, 11}

@@ -113,3 +113,18 @@ def test_state_mid_program_continues_bit_identically(ncfmu_project):
     (branch,) = simulate_branches("lathe_roughing", at, [{}], stop_time=69.0, start_values=values)
     for variable in straight.names:
         assert np.array_equal(branch[variable], straight[variable]), variable
+
+
+def test_limiter_stops_a_program_that_runs_into_the_chuck(ncfmu_run):
+    """A profile down to Z -50: the first pass runs into the chuck zone; the limiter stops the axes at its
+    boundary (Z -45) and its alarm stops the sequencer, as for the registers."""
+    text = ("G18 G21 G8\nG00 X30 Z2\nG71 U2 R0.5\nG71 P10 Q20 U0.2 W0 F600\n"
+            "N10 G00 X20\nG01 Z-50\nN20 X30\nG70 P10 Q20\nM30\n")
+    r = ncfmu_run("lathe_roughing", stop_time=12.0, start_values={"seq.program": text})
+    assert r["limiter.alarm"].any() and r["seq.alarm"][-1] and not r["seq.busy"][-1]
+    z = r["z_axis.pos"]
+    assert -46.0 < z.min() <= -44.9
+    k = int(np.argmax(r["seq.alarm"]))
+    assert r["seq.canned_cycle"][k - 1] == 71 and r["seq.subcycle"][k - 1] == 2 and r["seq.pass_no"][k - 1] == 1
+    assert r["seq.line"][-1] == 0 and r["seq.canned_cycle"][-1] == 0
+    assert np.abs(r["z_axis.vel"][-100:]).max() < 1e-6                 # at rest

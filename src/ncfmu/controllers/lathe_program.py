@@ -296,6 +296,8 @@ def _interpret(b: _Block, modes: _Modes, here: Point,
                   "tool nose radius compensation is not in the subset" if letter == "D" else
                   f"word {letter} is not in the subset (G, M, N, X, Z, I, K, R, F, U, W, P, Q)")
         raise b.err(col, f"{word}: {reason}")
+    if "F" in values:
+        modes.feed = values["F"] / 60.0                # modal, a cycle's F too (RS274)
     if cycle is not None:
         if new_motion is not None:
             raise b.err(motion_col or 1, f"G{new_motion:02d} and G{cycle} in one block: a canned cycle moves by "
@@ -309,8 +311,6 @@ def _interpret(b: _Block, modes: _Modes, here: Point,
             reason = ("U and W as incremental X/Z are not in the subset: use G91" if k in "UW" else
                       "P and Q belong to G70/G71")
             raise b.err(b.col(k), f"{k}{values[k]:g}: {reason}")
-    if "F" in values:
-        modes.feed = values["F"] / 60.0
     element, end = _move(b, modes, here, values, new_motion, motion_col, profile)
     if new_motion is not None:
         modes.motion = new_motion
