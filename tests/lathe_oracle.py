@@ -158,7 +158,9 @@ def below_shifted_profile(part: Part, u: float, w: float, z: np.ndarray, x: np.n
         if zp < zb:
             worst = max(worst, (zb - zp) if xi < part.end[1] + u else -math.inf)
             continue
-        worst = max(worst, part.x_low(zp) + u - xi)
+        # the lowest profile within tol in Z (a wall there: its foot)
+        lowest = min(part.x_low(min(max(zc, zb), part.z0)) for zc in (zi - w - tol, zi - w, zp))
+        worst = max(worst, lowest + u - xi)
     return worst
 
 
@@ -175,6 +177,25 @@ def pass_changes(sub: np.ndarray, pass_no: np.ndarray) -> list[tuple[int, int]]:
         if not out or out[-1] != (int(p), int(s)):
             out.append((int(p), int(s)))
     return out
+
+
+def rapids_in_air(segments, x0: float, z0: float, spacing: float = 0.01) -> float:
+    """How deep (mm) any rapid move of a plan goes into the material the cuts before it left (<= 0: never); the
+    stock is X ``x0`` behind Z ``z0``, every feed move cuts down to where it passes."""
+    from ncfmu.controllers.geometry import sample
+
+    floor: dict[int, float] = {}
+    worst = -math.inf
+    for seg in segments:
+        pts = densify(np.array(sample([seg.element], 0.01)), spacing / 2)
+        for z, x in pts:
+            b = round(z / spacing)
+            top = floor.get(b, x0 if z < z0 - 1e-9 else -math.inf)
+            if seg.feed:
+                floor[b] = min(top, x)
+            else:
+                worst = max(worst, top - x)
+    return worst
 
 
 def deepest_cut(x0: float, z: np.ndarray, x: np.ndarray, sub: np.ndarray, pass_no: np.ndarray) -> float:

@@ -15,9 +15,11 @@ from lathe_oracle import (
     SHAFT_U,
     SHAFT_W,
     below_shifted_profile,
+    build_part,
     deepest_cut,
     distances,
     pass_changes,
+    rapids_in_air,
     run_ideal,
     shifted_points,
 )
@@ -179,8 +181,8 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     ("G00 X30 Z2\nG71 U1 R-0.5\nM30\n", 2, 8, "R-0.5: the retract must be >= 0"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X31\nG01 Z-10\nN20 X30\nM30\n", 5, 1, "starts above the start point"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nN20 X31\nM30\n", 7, 1, "leaves the stock"),
-    (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nX15 Z-15\nN20 X30\nM30\n", 7, 1,
-     "pocket or undercut (type II)"),
+    (HEAD + "G71 P10 Q20 W0.1 F300\nN10 G00 X20\nG01 Z-10\nX15 Z-15\nN20 X30\nM30\n", 4, 13,
+     "W0.1: the profile has a pocket (X falls along -Z on line 7)"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nG02 X25 Z-15 I0 K-3\nN20 X30\nM30\n", 7, 14,
      "do not define a circle"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nG02 X25 Z-25 R2\nN20 X30\nM30\n", 7, 14,
@@ -245,3 +247,37 @@ def test_moves_around_a_cycle_incremental_and_modes_restored():
     assert run["done"][-1] and not run["alarm"].any()
     assert (run["x_cmd"][-1], run["z_cmd"][-1]) == (33.0, 3.0)
     assert set(run["line"][run["canned_cycle"] == 0]) == {0, 2, 3, 10, 11}
+
+
+#: A part with two pockets (type II): a collar, a vertical near wall, a flat bottom, a taper back up, a convex
+#: radius falling into a second pocket, a concave radius out of it, a shoulder up to the start point's X.
+POCKETS = build_part(30.0, 2.0, 22.0, [("z", 5.0), ("face", -8.0), ("z", 6.0), ("taper", 4.0, 6.0), ("z", 3.0),
+                                       ("convex", 3.0, math.pi / 2, math.pi), ("z", 4.0),
+                                       ("concave", 2.5, -math.pi / 2, -math.pi), ("z", 3.0), ("face", 30.0 - 22.5)])
+
+
+@pytest.mark.parametrize("u", [0.0, 0.3])
+def test_pockets_roughed_without_cutting_below_profile_plus_allowance(u):
+    assert min(p.end[1] for p in POCKETS.pieces) == pytest.approx(14.0)
+    text = POCKETS.program(1.25, 0.4, u, 0.0, 600, 600, arcs="R")
+    segs = plan(text, (30.0, 2.0), 50.0)
+    assert rapids_in_air(segs, 30.0, 2.0) <= 1e-6                 # rapids only through air
+    run = program_run(text, dt=2e-3)
+    g71 = run["canned_cycle"] == 71
+    z, x, sub, pass_no = run["z_cmd"][g71], run["x_cmd"][g71], run["subcycle"][g71], run["pass_no"][g71]
+    assert below_shifted_profile(POCKETS, u, 0.0, z, x, tol=0.002) <= 0.002
+    assert distances(shifted_points(POCKETS, u, 0.0, 0.02), np.column_stack([z, x])).max() <= 0.005
+    changes = pass_changes(sub, pass_no)
+    n = (len(changes) - 1) // 4
+    assert changes == [(k, s) for k in range(1, n + 1) for s in (1, 2, 3, 4)] + [(0, 0)]
+    assert deepest_cut(30.0, z, x, sub, pass_no) <= 1.25 + 1e-6
+    # the pockets take passes of their own: more passes than levels
+    levels = {round(float(v), 9) for v in run["sigma_x"][g71][sub == 2]}
+    assert n > len(levels) + 1
+    # the plunges into the pockets are at the feed, never deeper than U below what the cuts before left
+    plunge = [s for s in segs if s.cycle == 71 and s.subcycle == 1 and s.feed]
+    assert len(plunge) > 3 and all(s.rate == pytest.approx(10.0) for s in plunge)
+    g70 = (run["canned_cycle"] == 70) & (run["subcycle"] == 2)
+    path = np.column_stack([run["z_cmd"][g70], run["x_cmd"][g70]])
+    assert distances(path, POCKETS.points(0.01)).max() <= 0.005
+    assert distances(POCKETS.points(0.01), path).max() <= 0.005

@@ -105,6 +105,7 @@ class Profile:
     q: int
     lead: ProfileBlock              # the N<P> block: S -> A, in X only
     blocks: tuple[ProfileBlock, ...]
+    pocket: int = 0                 # the line where X first falls along -Z (type II), 0: monotone (type I)
 
     @property
     def elements(self) -> list[Element]:
@@ -401,8 +402,7 @@ def _read_profile(blocks: list[_Block], i: int, b: _Block, p: int, q: int, modes
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
     profile = Profile(p, q, lead, tuple(pieces))
-    _check_profile(profile, start)
-    return profile, j
+    return replace(profile, pocket=_check_profile(profile, start)), j
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -411,8 +411,10 @@ def _extreme(arc: Arc, angle: float) -> Point | None:
     return p if EPS < arc.param(p) < arc.length - EPS else None
 
 
-def _check_profile(profile: Profile, start: Point) -> None:
-    """Type I: toward -Z, X never falls; inside the stock (below the start point's X)."""
+def _check_profile(profile: Profile, start: Point) -> int:
+    """Toward -Z all along, inside the stock (below the start point's X, above the axis); returns the line where X
+    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I)."""
+    pocket = 0
     a = profile.lead.element.end
     if a[1] > start[1] + TOL:
         raise ProgramError(profile.lead.line, 1, profile.lead.raw,
@@ -430,10 +432,8 @@ def _check_profile(profile: Profile, start: Point) -> None:
             raise ProgramError(line, 1, raw, f"the profile moves +Z here (Z {s[0]:g} -> {t[0]:g}): it must "
                                                         "run toward the chuck (-Z) all along")
         falls = t[1] < s[1] - TOL or bool(x_lo and x_lo[1] < s[1] - TOL) or bool(x_hi and x_hi[1] > t[1] + TOL)
-        if falls:
-            raise ProgramError(line, 1, raw,
-                               "X falls along -Z here: a pocket or undercut (type II) is not roughed by this G71 -- "
-                               "rough the outline up to it, and the pocket with its own G71 from a start point over it")
+        if falls and not pocket:
+            pocket = line
         top = max(s[1], t[1])
         if top > start[1] + TOL:
             raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:g} above the start "
@@ -443,6 +443,7 @@ def _check_profile(profile: Profile, start: Point) -> None:
     if profile.blocks[-1].element.end[0] >= start[0] - TOL:
         last = profile.blocks[-1]
         raise ProgramError(last.line, 1, last.raw, "the profile ends in front of the start point's Z: nothing to cut")
+    return pocket
 
 
 def parse(text: str, start: tuple[float, float]) -> list[Op]:
@@ -511,6 +512,10 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
         if u < 0 or w < 0:
             k = "U" if u < 0 else "W"
             raise b.err(b.col(k), f"{k}{v[k]:g}: a negative allowance would cut into the part (outside roughing only)")
+        if profile.pocket and w > 0:
+            raise b.err(b.col("W"), f"W{w:g}: the profile has a pocket (X falls along -Z on line {profile.pocket}): "
+                                    "a Z allowance would shift its near wall into the part; give W0 (type II is "
+                                    "roughed with the X allowance U alone)")
         feed = feed or modes.feed
         if profile.blocks[-1].element.end[0] + w >= here[0] - TOL:
             raise b.err(b.col("W"), f"W{w:g}: the profile shifted by the Z allowance ends in front of the start "
@@ -558,17 +563,38 @@ def clip_front(chain: list[Element], z0: float) -> list[Element]:
     return out
 
 
-def reach(chain: list[Element], x_level: float) -> Point | None:
-    """The first point of a monotone chain (X rising along it) at X >= ``x_level``; None if it stays below."""
+def monotone_pieces(chain: list[Element]) -> list[Element]:
+    """The chain with every arc split where X turns (its lowest or highest point): each piece monotone in X."""
+    out: list[Element] = []
     for e in chain:
-        if e.start[1] >= x_level:
-            return e.start
-        if e.end[1] >= x_level:
-            if isinstance(e, Line):
-                t = (x_level - e.start[1]) / (e.end[1] - e.start[1])
-                return (e.start[0] + t * (e.end[0] - e.start[0]), x_level)
-            return e.point(_solve(e, lambda p: p[1], x_level))
-    return None
+        if isinstance(e, Arc):
+            turns = sorted(e.param((e.center[0] + e.radius * math.cos(a), e.center[1] + e.radius * math.sin(a)))
+                           for a in (math.pi / 2, -math.pi / 2))
+            ends = [0.0, *(c for c in turns if EPS < c < e.length - EPS), e.length]
+            out += [e.sub(a, b) for a, b in zip(ends, ends[1:])]
+        else:
+            out.append(e)
+    return out
+
+
+def below(pieces: list[Element], level: float) -> list[tuple[float, float]]:
+    """The Z ranges (high, low), front to back, where the chain (running toward -Z, each piece monotone) is below
+    X ``level``; ranges of no length (a wall touching the level) are left out."""
+    ranges: list[tuple[float, float]] = []
+    for e in pieces:
+        (zs, xs), (ze, xe) = e.start, e.end
+        if max(xs, xe) < level:
+            part = (zs, ze)
+        elif min(xs, xe) >= level:
+            continue
+        else:
+            zc = e.point(_solve(e, lambda p: p[1], level))[0]
+            part = (zs, zc) if xs < level else (zc, ze)
+        if ranges and ranges[-1][1] - part[0] <= EPS:
+            ranges[-1] = (ranges[-1][0], part[1])
+        else:
+            ranges.append(part)
+    return [(hi, lo) for hi, lo in ranges if hi - lo > TOL]
 
 
 def rough_boundary(op: Rough) -> list[Element]:
@@ -576,43 +602,84 @@ def rough_boundary(op: Rough) -> list[Element]:
     return clip_front([shifted(e, op.w, op.u) for e in op.profile.elements], op.start[0])
 
 
+class _Stock:
+    """What is left of the stock: up to X ``top`` (the start point's) behind Z ``front``, cut down by the passes."""
+
+    def __init__(self, top: float, front: float) -> None:
+        self.top, self.front = top, front
+        self.cuts: list[tuple[float, float, float]] = []      # (z low, z high, X cut to)
+
+    def cut(self, z_lo: float, z_hi: float, x: float) -> None:
+        self.cuts.append((z_lo, z_hi, x))
+
+    def at(self, z: float) -> float:
+        """The highest X of material at ``z`` (-inf in front of the stock)."""
+        if z >= self.front - EPS:
+            return -math.inf
+        return min([self.top] + [x for lo, hi, x in self.cuts if lo - EPS <= z <= hi + EPS])
+
+    def highest(self, z_a: float, z_b: float) -> float:
+        """The highest X of material anywhere in Z between ``z_a`` and ``z_b``."""
+        lo, hi = min(z_a, z_b), max(z_a, z_b)
+        zs = sorted({lo, hi, *(z for c in self.cuts for z in c[:2] if lo < z < hi)})
+        probes = zs + [(a + b) / 2 for a, b in zip(zs, zs[1:])]
+        return max(self.at(z) for z in probes)
+
+
 def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
+    """The passes: at X = S.x - k*U, one pass per Z range where the rough boundary lies below that X (one range
+    for a monotone profile; each pocket adds its own), each the seed's SC1-SC4; then the pass along the boundary.
+    SC1 reaches a pass's start clear of the material left: up, along Z, down (into a pocket at the feed)."""
     z0, x0 = op.start
     bound = rough_boundary(op)
-    x_min = bound[0].start[1]
-    end = bound[-1].end
+    pieces = monotone_pieces(bound)
+    x_min = min(min(e.start[1], e.end[1]) for e in pieces)
+    x_max = max(max(e.start[1], e.end[1]) for e in pieces)
+    stock = _Stock(x0, z0)
     out: list[Segment] = []
     here = op.start
     k = 0
 
-    def add(to: Point, rate: float, feed: bool, sub: int, pass_no: int, sigma: float, line: int = op.line) -> None:
+    def add(to: Point, rate: float, feed: bool, sub: int, sigma: float) -> None:
         nonlocal here
-        out.append(Segment(Line(here, to), rate, feed, sub, pass_no, sigma, line, 71))
+        out.append(Segment(Line(here, to), rate, feed, sub, k, sigma, op.line, 71))
         here = to
-
-    while True:
-        level = x0 - (k + 1) * op.depth
-        if level <= x_min + TOL:
-            break
-        k += 1
-        sigma = x0 - level
-        hit = reach(bound, level)
-        z_end = hit[0] if hit is not None else end[0]
-        add((z0, level), rapid, False, 1, k, sigma)
-        add((z_end, level), op.feed, True, 2, k, sigma)
-        add((z_end, level + op.retract), rapid, False, 3, k, sigma)
-        add((z0, level + op.retract), rapid, False, 4, k, sigma)
         if len(out) > MAX_SEGMENTS:
             raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS} moves: U is too small")
+
+    def reach(z: float, x: float, plunge: bool, sigma: float) -> None:
+        """SC1: from where the tool is to (z, x) over the material between, the last leg down."""
+        clear = max(stock.highest(here[0], z) + op.retract, here[1], x)
+        if clear > here[1] + EPS:
+            add((here[0], clear), rapid, False, 1, sigma)
+        if abs(z - here[0]) > EPS:
+            add((z, clear), rapid, False, 1, sigma)
+        add((z, x), op.feed if plunge else rapid, plunge, 1, sigma)
+
+    n = 0
+    level = x0 - op.depth
+    while level > x_min + TOL:
+        sigma = x0 - level
+        for z_hi, z_lo in below(pieces, level):
+            k += 1
+            reach(z_hi, level, z_hi < z0 - TOL, sigma)           # in front of the stock at rapid, else a plunge
+            add((z_lo, level), op.feed, True, 2, sigma)
+            stock.cut(z_lo, z_hi, level)
+            add((z_lo, level + op.retract), rapid, False, 3, sigma)
+            add((z_hi, level + op.retract), rapid, False, 4, sigma)
+        n += 1
+        level = x0 - (n + 1) * op.depth
     k += 1
     sigma = x0 - x_min
-    add(bound[0].start, op.feed, True, 1, k, sigma)
+    reach(bound[0].start[0], bound[0].start[1], True, sigma)
     for e, line in zip(bound, _lines_of(op, bound)):
         out.append(Segment(e, op.feed, True, 2, k, sigma, line, 71))
+    end = bound[-1].end
     here = end
-    add((end[0], end[1] + op.retract), rapid, False, 3, k, sigma)
-    add((z0, end[1] + op.retract), rapid, False, 4, k, sigma)
-    add(op.start, rapid, False, 0, 0, 0.0)
+    add((end[0], x_max + op.retract), rapid, False, 3, sigma)
+    add((z0, x_max + op.retract), rapid, False, 4, sigma)
+    k = 0
+    add(op.start, rapid, False, 0, 0.0)
     return out
 
 
