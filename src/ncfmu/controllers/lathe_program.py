@@ -19,17 +19,21 @@ RS274/NGC's G02 is clockwise with Z to the right and X up, so G02 is a clockwise
 sweep) and G03 a counter-clockwise one. The controller's commands are (x, z): :func:`xz` turns a point round.
 
 The profile N<P>..N<Q>: its first block moves in X only, from the cycle's start point S to the profile's
-start A (Fanuc's form); the rest runs toward the chuck (Z never increases) and is monotone (X never falls
-along -Z: Fanuc's type I). A pocket or undercut (type II) is refused naming the block where X falls. The
-stock is what lies between S's X and the profile, from S's Z (which must be in front of the stock) to the
-profile's end; beyond the profile's end a wall at its Z is left standing.
+start A (Fanuc's form); the rest runs toward the chuck (Z never increases), inside the stock (at most S's X,
+never below the axis). The stock is what lies between S's X and the profile, behind S's Z (S stands in front
+of it), up to the profile's end; beyond the profile's end a wall at its Z is left standing.
 
 G71 roughing: the allowances shift the profile by U in X and W in Z (Fanuc's meaning) -- the rough
-boundary. Passes at X = S.x - k*U while above the boundary's lowest point; each pass is SC1 (rapid infeed
-at S's Z, the cut at most U deeper than the last), SC2 (cut in -Z at the feed until the rough boundary),
-SC3 (retract by R in +X), SC4 (rapid return in +Z to S's Z). Then one more pass along the rough boundary
-(SC1 infeed at the feed, SC2 along the boundary, SC3, SC4), so the stock left is the allowance everywhere,
-and a rapid move back to S. A shifted monotone profile is never below the profile plus U at any Z.
+boundary. Levels at X = S.x - k*U while above the boundary's lowest point; at each level one pass per Z range
+where the boundary lies below the level: one range for a monotone profile (Fanuc's type I), one more for each
+pocket or undercut the level reaches (type II: X falls along -Z). Each pass is SC1 (reach the range's start:
+at S's Z a rapid infeed; into a pocket up over the material left, along Z, and down at the feed, at most U
+into it), SC2 (cut in -Z at the feed to the range's end), SC3 (retract by R in +X), SC4 (rapid return in +Z to
+the range's start). Then one more pass along the rough boundary (SC1 at the feed, SC2 along it, SC3 up clear
+of it, SC4 back to S's Z), so the stock left is the allowance everywhere, and a rapid move back to S. Rapid
+moves pass only through air. With a pocket, W must be 0: a shift in Z would move the pocket's near wall into
+the part (on a vertical wall in a pocket the finishing allowance is then 0, as with Fanuc's type II). A
+monotone profile shifted by (W, U) with W >= 0 is never below the profile plus U at any Z.
 
 G70 finishing: SC1 the profile's first block (from where the tool stands), SC2 the profile as programmed
 (G70's F when given, else each block's own feed), SC3 +X clear of the start point's X, SC4 +Z to its Z.
