@@ -74,6 +74,21 @@ class Part:
         return min(p.x_low(z) for p in self.pieces
                    if min(p.start[0], p.end[0]) - 1e-12 <= z <= max(p.start[0], p.end[0]) + 1e-12)
 
+    def x_low_array(self, z: np.ndarray) -> np.ndarray:
+        """:meth:`x_low` for an array of Z, each in [end Z, z0]."""
+        out = np.full(len(z), np.inf)
+        for p in self.pieces:
+            (z0, x0), (z1, x1) = p.start, p.end
+            inside = (z >= min(z0, z1) - 1e-12) & (z <= max(z0, z1) + 1e-12)
+            zi = z[inside]
+            if p.centre is None:
+                v = np.full(len(zi), min(x0, x1)) if abs(z0 - z1) < 1e-12 else x0 + (x1 - x0) * (zi - z0) / (z1 - z0)
+            else:
+                h = np.sqrt(np.maximum(p.radius ** 2 - (zi - p.centre[0]) ** 2, 0.0))
+                v = p.centre[1] + h if p.convex else p.centre[1] - h
+            out[inside] = np.minimum(out[inside], v)
+        return out
+
     def points(self, spacing: float) -> np.ndarray:
         return np.array([pt for p in self.pieces for pt in p.points(spacing)])
 
@@ -150,18 +165,20 @@ def distances(points: np.ndarray, path: np.ndarray) -> np.ndarray:
 
 def below_shifted_profile(part: Part, u: float, w: float, z: np.ndarray, x: np.ndarray, tol: float) -> float:
     """How far the deepest tool point lies below the profile shifted by (W, U), within ``tol`` in Z (mm; <= 0:
-    never below). Beyond the profile's shifted end the tool must not go at all."""
+    never below). Beyond the profile's shifted end the tool must not go at all (below the end's X)."""
+    z, x = np.asarray(z, float), np.asarray(x, float)
     zb = part.end[0]
     worst = -math.inf
-    for zi, xi in zip(z, x):
-        zp = min(zi - w + tol, part.z0)
-        if zp < zb:
-            worst = max(worst, (zb - zp) if xi < part.end[1] + u else -math.inf)
-            continue
-        # the lowest profile within tol in Z (a wall there: its foot)
-        lowest = min(part.x_low(min(max(zc, zb), part.z0)) for zc in (zi - w - tol, zi - w, zp))
-        worst = max(worst, lowest + u - xi)
-    return worst
+    beyond = z - w + tol < zb
+    if beyond.any():
+        past = beyond & (x < part.end[1] + u)
+        worst = float((zb - (z[past] - w + tol)).max()) if past.any() else worst
+    z, x = z[~beyond], x[~beyond]
+    # the lowest profile within tol in Z (a wall there: its foot)
+    lowest = np.full(len(z), np.inf)
+    for zc in (z - w - tol, z - w, z - w + tol):
+        lowest = np.minimum(lowest, part.x_low_array(np.clip(zc, zb, part.z0)))
+    return max(worst, float((lowest + u - x).max())) if len(z) else worst
 
 
 def shifted_points(part: Part, u: float, w: float, spacing: float) -> np.ndarray:

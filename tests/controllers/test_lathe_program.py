@@ -51,6 +51,17 @@ def test_example_roughing_never_below_profile_plus_allowance(shaft):
     assert all(xi >= SHAFT.x_low(min(zi + 0.002, SHAFT.z0)) + U - 0.002 for zi, xi in zip(z[inside], x[inside]))
 
 
+def test_the_oracle_sees_a_gouge_and_a_step(shaft):
+    """The checks can fail: the roughing path 5 um lower is below the profile + allowance; without the pass along
+    the shifted profile the steps are left."""
+    g71 = shaft["canned_cycle"] == 71
+    z, x = shaft["z_cmd"][g71], shaft["x_cmd"][g71]
+    assert below_shifted_profile(SHAFT, U, W, z, x - 0.005, tol=0.002) > 0.002
+    passes = shaft["pass_no"][g71] < shaft["pass_no"][g71].max()
+    left = distances(shifted_points(SHAFT, U, W, 0.02), np.column_stack([z[passes], x[passes]]))
+    assert left.max() > 0.5                                        # the steps on the taper and the radius
+
+
 def test_example_leaves_the_allowance_everywhere(shaft):
     """The tool reached every point of the profile shifted by (W, U): no steps left on the taper and the radius."""
     g71 = shaft["canned_cycle"] == 71
@@ -256,7 +267,7 @@ POCKETS = build_part(30.0, 2.0, 22.0, [("z", 5.0), ("face", -8.0), ("z", 6.0), (
                                        ("concave", 2.5, -math.pi / 2, -math.pi), ("z", 3.0), ("face", 30.0 - 22.5)])
 
 
-@pytest.mark.parametrize("u", [0.0, 0.3])
+@pytest.mark.parametrize("u", [pytest.param(0.0, marks=pytest.mark.slow), 0.3])
 def test_pockets_roughed_without_cutting_below_profile_plus_allowance(u):
     assert min(p.end[1] for p in POCKETS.pieces) == pytest.approx(14.0)
     text = POCKETS.program(1.25, 0.4, u, 0.0, 600, 600, arcs="R")

@@ -32,7 +32,7 @@ counts as done. After an alarm, START re-bases the command on the actual positio
 NC does after a stop it did not command) and approaches the start point safely.
 
 A part program (``program``, :mod:`.lathe_program`) replaces the registers: an RS274 lathe subset whose
-G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii -- and runs
+G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii, pockets -- and runs
 each as the seed's SC1 infeed (at most U deeper), SC2 cut in -Z to the profile plus its allowances, SC3
 retract by R, SC4 return in Z, then one pass along the profile shifted by the allowances, so the stock left
 for G70's finishing pass is the allowance everywhere. ``line`` and ``canned_cycle`` say where the program
