@@ -126,6 +126,14 @@ def test_command_never_jumps(shaft):
     assert step.max() <= 50.0 * 1e-3 + 1e-9                         # the rapid rate, 50 mm/s
     vff = np.hypot(shaft["x_vff"], shaft["z_vff"])
     assert np.abs(np.diff(vff)).max() <= 500.0 * 1e-3 + 1e-9        # accel 500 mm/s2
+    for axis in ("x_vff", "z_vff"):                                 # per axis too, on the radius as well
+        assert np.abs(np.diff(shaft[axis])).max() <= 500.0 * 1e-3 + 1e-9
+    assert np.isfinite(shaft["x_cmd"]).all() and np.isfinite(shaft["z_cmd"]).all()
+
+
+def test_a_depth_of_cut_too_small_is_refused():
+    with pytest.raises(ProgramError, match=r"line 7, column 1: more than 5000 passes of U0.001"):
+        CutSequencer(program=EXAMPLE.read_text().replace("G71 U1.5", "G71 U0.001"))
 
 
 def test_g7_program_and_its_g8_twin_give_the_same_path():

@@ -638,6 +638,9 @@ def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
     bound = rough_boundary(op)
     pieces = monotone_pieces(bound)
     x_min = min(min(e.start[1], e.end[1]) for e in pieces)
+    if (x0 - x_min) / op.depth > MAX_SEGMENTS / 4:
+        raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS // 4} passes of U{op.depth:g} "
+                                                          f"down to X {x_min:g}: U is too small")
     x_max = max(max(e.start[1], e.end[1]) for e in pieces)
     stock = _Stock(x0, z0)
     out: list[Segment] = []
