@@ -128,3 +128,30 @@ def test_limiter_stops_a_program_that_runs_into_the_chuck(ncfmu_run):
     assert r["seq.canned_cycle"][k - 1] == 71 and r["seq.subcycle"][k - 1] == 2 and r["seq.pass_no"][k - 1] == 1
     assert r["seq.line"][-1] == 0 and r["seq.canned_cycle"][-1] == 0
     assert np.abs(r["z_axis.vel"][-100:]).max() < 1e-6                 # at rest
+
+
+def test_hold_and_restart_through_the_panel(project, tmp_path):
+    """The panel holds the first cut of the example and releases it; an alarm stops the cut; START again re-bases
+    on the axes, retracts X clear before Z moves, and runs the program from its start."""
+    from test_edges_fmus import unwired  # lathe_roughing with seq.alarm_in free for an input CSV
+
+    from ncfmu.project import simulate
+
+    csv_file = tmp_path / "alarm.csv"
+    csv_file.write_text('"time","seq.alarm_in"\n0.0,0\n5.0,1\n5.1,0\n')
+    r = simulate(unwired("lathe_roughing", tmp_path), stop_time=9.0, input_csv=csv_file, start_values={
+        "seq.program": EXAMPLE.read_text(), "panel.hold_at": 2.0, "panel.release_at": 3.0, "panel.restart_at": 6.0})
+    t, x, z = r.time, r["x_axis.pos"], r["z_axis.pos"]
+    held = (t > 2.1) & (t < 3.0)
+    assert np.ptp(z[held]) < 1e-4 and r["seq.subcycle"][held].min() == 2 and r["seq.busy"][held].all()
+    assert np.ptp(z[(t > 3.2) & (t < 3.5)]) > 1.0                      # released: cutting on
+    stopped = (t > 5.5) & (t < 6.0)
+    assert r["seq.alarm"][stopped].all() and r["seq.line"][stopped].max() == 0
+    x_rest, z_rest = x[stopped][-1], z[stopped][-1]
+    assert z_rest < -10.0 and x_rest < 29.0
+    approach = (t > 6.0) & (r["seq.subcycle"] == 0) & r["seq.busy"].astype(bool)
+    moving_z = approach & (np.abs(z - z_rest) > 0.01)
+    assert moving_z.any() and (x[moving_z] > 30.0 - 0.01).all()        # Z travels only with X clear
+    again = (t > 6.0) & (r["seq.canned_cycle"] == 71)
+    assert again.any() and r["seq.pass_no"][again][0] == 1 and r["seq.line"][again][0] == 7
+    assert not r["seq.alarm"][t > 6.1].any()

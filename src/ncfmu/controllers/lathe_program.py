@@ -713,9 +713,8 @@ def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
     bz, bx = op.profile.blocks[-1].element.end
     clear = max(x0, bx)
     # up the wall the profile ends at, at the feed: below the stock's X the roughing left its allowance there
-    last = op.profile.blocks[-1]
-    out.append(Segment(Line((bz, bx), (bz, clear)), op.feed or last.feed or rapid, not last.rapid or op.feed > 0,
-                       3, 1, 0.0, op.line, 70))
+    up = op.feed or op.profile.blocks[-1].feed
+    out.append(Segment(Line((bz, bx), (bz, clear)), up or rapid, up > 0, 3, 1, 0.0, op.line, 70))
     out.append(Segment(Line((bz, clear), (z0, clear)), rapid, False, 4, 1, 0.0, op.line, 70))
     if clear > x0:
         out.append(Segment(Line((z0, clear), op.start), rapid, False, 0, 0, 0.0, op.line, 70))
