@@ -500,6 +500,10 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
             profiles[(p, q)] = profile
         elif (p, q) in profiles:
             profile = profiles[(p, q)]
+            (z1, x1) = profile.lead.element.start
+            if cycle.code == 71 and math.dist((z1, x1), here) > EPS:
+                raise b.err(b.col("P"), f"P{p}: the profile N{p}..N{q} was read from the start point X {x1:g} Z "
+                                        f"{z1:g}, this G71 starts at X {here[1]:g} Z {here[0]:g}")
         else:
             profile, _ = _read_profile(blocks, i, b, p, q, modes, here, cycle.code)   # raises: not found
         if cycle.code == 70:
