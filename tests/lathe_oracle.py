@@ -264,3 +264,9 @@ SHAFT = build_part(30.0, 2.0, 14.0, [("z", 2.0), ("taper", 2.0, 2.0), ("z", 10.0
                                      ("face", 3.0)])
 #: The example's G71 words: depth of cut U, retract R, allowances U (radius) and W.
 SHAFT_DEPTH, SHAFT_RETRACT, SHAFT_U, SHAFT_W = 1.5, 0.5, 0.2, 0.1
+
+#: The pocket example's part (docs/examples/lathe_pockets.ngc, written there in diameters): a collar, a square
+#: groove, a taper back up, a convex radius falling into a second groove, a concave radius out of it, a shoulder.
+POCKETS = build_part(30.0, 2.0, 22.0, [("z", 5.0), ("face", -8.0), ("z", 6.0), ("taper", 4.0, 6.0), ("z", 3.0),
+                                       ("convex", 3.0, math.pi / 2, math.pi), ("z", 4.0),
+                                       ("concave", 2.5, -math.pi / 2, -math.pi), ("z", 3.0), ("face", 30.0 - 22.5)])

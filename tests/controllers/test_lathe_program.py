@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lathe_oracle import (
+    POCKETS,
     SHAFT,
     SHAFT_DEPTH,
     SHAFT_RETRACT,
     SHAFT_U,
     SHAFT_W,
     below_shifted_profile,
-    build_part,
     deepest_cut,
     distances,
     pass_changes,
@@ -268,13 +268,6 @@ def test_moves_around_a_cycle_incremental_and_modes_restored():
     assert run["done"][-1] and not run["alarm"].any()
     assert (run["x_cmd"][-1], run["z_cmd"][-1]) == (33.0, 3.0)
     assert set(run["line"][run["canned_cycle"] == 0]) == {0, 2, 3, 10, 11}
-
-
-#: A part with two pockets (type II): a collar, a vertical near wall, a flat bottom, a taper back up, a convex
-#: radius falling into a second pocket, a concave radius out of it, a shoulder up to the start point's X.
-POCKETS = build_part(30.0, 2.0, 22.0, [("z", 5.0), ("face", -8.0), ("z", 6.0), ("taper", 4.0, 6.0), ("z", 3.0),
-                                       ("convex", 3.0, math.pi / 2, math.pi), ("z", 4.0),
-                                       ("concave", 2.5, -math.pi / 2, -math.pi), ("z", 3.0), ("face", 30.0 - 22.5)])
 
 
 @pytest.mark.parametrize("u", [pytest.param(0.0, marks=pytest.mark.slow), 0.3])

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lathe_oracle import (
+    POCKETS,
     SHAFT,
     SHAFT_DEPTH,
     SHAFT_U,
@@ -155,3 +156,27 @@ def test_hold_and_restart_through_the_panel(project, tmp_path):
     again = (t > 6.0) & (r["seq.canned_cycle"] == 71)
     assert again.any() and r["seq.pass_no"][again][0] == 1 and r["seq.line"][again][0] == 7
     assert not r["seq.alarm"][t > 6.1].any()
+
+
+def test_pocket_example_through_the_fmus(ncfmu_run):
+    """docs/examples/lathe_pockets.ngc (G7, two grooves): the actual tool never below the profile + U, the
+    allowance left everywhere, SC1-SC4 per pass, G70 on the profile (actual axes within 10 um)."""
+    text = (EXAMPLE.parent / "lathe_pockets.ngc").read_text()
+    r = ncfmu_run("lathe_roughing", stop_time=120.0, start_values={"seq.program": text})      # about 104 s
+    assert r["seq.done"].any() and not r["seq.alarm"].any()
+    u = 0.3
+    g71 = r["seq.canned_cycle"] == 71
+    z, x = r["z_axis.pos"][g71], r["x_axis.pos"][g71]
+    assert below_shifted_profile(POCKETS, u, 0.0, r["seq.z_cmd"][g71], r["seq.x_cmd"][g71], tol=0.002) <= 0.002
+    assert below_shifted_profile(POCKETS, u, 0.0, z, x, tol=0.002) <= 0.002
+    assert distances(shifted_points(POCKETS, u, 0.0, 0.02), np.column_stack([z, x])).max() <= 0.005
+    sub, pass_no = r["seq.subcycle"][g71], r["seq.pass_no"][g71]
+    changes = pass_changes(sub, pass_no)
+    n = (len(changes) - 1) // 4
+    # levels 28.75 .. 22.5 over everything (6); 21.25 behind the collar (1); 20, 18.75, 17.5 in both grooves (6);
+    # 16.25, 15 in the square groove (2); the pass along the shifted profile (1)
+    assert n == 16 and changes == [(k, s) for k in range(1, n + 1) for s in (1, 2, 3, 4)] + [(0, 0)]
+    g70 = (r["seq.canned_cycle"] == 70) & (r["seq.subcycle"] == 2)
+    actual = np.column_stack([r["z_axis.pos"][g70], r["x_axis.pos"][g70]])
+    assert distances(actual, POCKETS.points(0.01)).max() <= 0.010
+    assert distances(POCKETS.points(0.01), actual).max() <= 0.010
