@@ -30,7 +30,9 @@ ENVELOPE_REPORT = Report(
           xlabel="Y (table) [mm]", ylabel="X (infeed) [mm]", path_label="wheel (actual)"))
 
 _PANEL_TO_FEED = ("panel.start -> feed.start", "panel.wear_start -> feed.wear_start",
-                  "panel.emergency -> feed.emergency", "panel.mfin -> feed.mfin", "feed.m_active -> panel.m_active")
+                  "panel.emergency -> feed.emergency", "panel.feed_hold -> feed.feed_hold",
+                  "panel.feed_override -> feed.feed_override", "panel.mfin -> feed.mfin",
+                  "feed.m_active -> panel.m_active")
 
 
 def grinder_feed() -> System:

@@ -1,0 +1,90 @@
+"""Every panel signal a system's controller can take is wired, and the grinder's feed hold and override act.
+
+The wiring check is structural (every system, no run); the grinder runs check the physics of a held and an
+overridden feed through the FMUs: a hold of ``release_at - hold_at`` seconds delays the cycle end by exactly
+that (the feed decelerates and re-accelerates at the same ``accel``, so the ramps cancel), and an override
+``o`` stretches every feed word from ``D/F + F/a`` (trapezoid: cruise plus one ramp's worth) to
+``D/(o F) + o F/a``; the spark-out dwell and the M handshakes do not change.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from ncfmu.project import simulate
+from ncfmu.systems import MODELS, SYSTEMS, get_system
+from ncfmu.systems.report import _ended
+
+ACCEL = 500.0      # ProgrammableFeed's accel (the grinder systems keep the default), mm/s^2
+
+
+def _controller_of(system):
+    """The component the panel's START drives: the system's controller."""
+    starts = [c for c in system.connections if (c.start_element, c.start_connector) == ("panel", "start")]
+    assert len(starts) == 1, starts
+    return system.component(starts[0].end_element)
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_every_panel_signal_the_controller_takes_is_connected(name):
+    system = get_system(name)
+    ctrl = _controller_of(system)
+    panel = MODELS[system.component("panel").model]
+    logic = MODELS[ctrl.model]
+    wired = {(c.start_element, c.start_connector, c.end_element, c.end_connector) for c in system.connections}
+    ctrl_inputs = {p.name for p in logic.ports("input")}
+    ctrl_outputs = {p.name for p in logic.ports("output")}
+    missing = [f"panel.{p.name} -> {ctrl.name}.{p.name}" for p in panel.ports("output")
+               if p.name in ctrl_inputs and ("panel", p.name, ctrl.name, p.name) not in wired]
+    missing += [f"{ctrl.name}.{p.name} -> panel.{p.name}" for p in panel.ports("input")
+                if p.name in ctrl_outputs and (ctrl.name, p.name, "panel", p.name) not in wired]
+    assert not missing, f"{name}: not connected: {missing}"
+    # the check has teeth: every controller takes the panel's START, hold and override
+    assert {"start", "feed_hold", "feed_override"} <= ctrl_inputs
+
+
+def _cycle_end(result) -> float:
+    return _ended(result, result["feed.run"] | result["feed.emergency_active"])
+
+
+def _trapezoid(d: float, v: float, a: float = ACCEL) -> float:
+    """Time of a move of ``d`` mm at ``v`` mm/s from rest to rest, accelerating at ``a`` (d >= v**2/a)."""
+    assert d >= v * v / a
+    return d / v + v / a
+
+
+#: The feed words (distance mm, rate mm/s) of each grinder system's default program (ncfmu.systems.grinder):
+#: grinder_feed: rapid D3 at F7, rough D2 at F1, fine D5 at F2, return D4 at F7;
+#: grinder_envelope: Y D1 at F7, X D2 at F7, X D3 at F1, X D4 at F7, Y D1 at F7.
+FEED_WORDS = {"grinder_feed": [(4.0, 10.0), (0.2, 0.02), (0.1, 0.005), (4.3, 10.0)],
+              "grinder_envelope": [(400.0, 100.0), (150.0, 100.0), (20.0, 2.0), (170.0, 100.0), (400.0, 100.0)]}
+
+
+@pytest.fixture(scope="module")
+def nominal(project):
+    return {name: simulate(name, stop_time=40.0) for name in FEED_WORDS}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(FEED_WORDS))
+def test_feed_hold_from_the_panel_delays_the_cycle_by_the_hold(nominal, name):
+    base = _cycle_end(nominal[name])
+    assert 5.0 < base < 40.0 - 3.0           # the hold lies inside a running cycle (a feed or a dwell)
+    held = simulate(name, stop_time=40.0, start_values={"panel.hold_at": 5.0, "panel.release_at": 7.0})
+    assert held["panel.feed_hold"].any()
+    assert _cycle_end(held) == pytest.approx(base + 2.0, abs=0.001)        # one step of 1 ms
+    # while held nothing moves on the infeed
+    t = held.time
+    x = held["x_axis.pos"][(t >= 5.3) & (t <= 7.0)]     # after the ramp down (<= 0.2 s)
+    assert x.max() - x.min() < 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(FEED_WORDS))
+def test_feed_override_from_the_panel_stretches_every_feed_word(nominal, name):
+    o = 0.5
+    base = _cycle_end(nominal[name])
+    expected = base + sum(_trapezoid(d, o * f) - _trapezoid(d, f) for d, f in FEED_WORDS[name])
+    slow = simulate(name, stop_time=expected + 2.0, start_values={"panel.override": o})
+    assert (slow["panel.feed_override"] == o).all()
+    assert _cycle_end(slow) == pytest.approx(expected, abs=0.002)   # the end falls on a 1 ms step
