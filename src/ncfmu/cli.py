@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from pathlib import Path
 
@@ -40,6 +41,27 @@ def _summary(result) -> str:
             if level in ("warning", "error", "fatal"):
                 lines.append(f"  [{level}] {text}")
     return "\n".join(lines)
+
+
+def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str]) -> list[str]:
+    """Summary lines warning of the settings (of any of ``runs``) that reach no connected port of ``system``
+    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting."""
+    from .cosim.ssp import read_ssp
+    from .systems import SYSTEMS, get_system
+    from .systems.reach import unreached
+    definition = read_ssp(Path(system)) if system.endswith(".ssp") else get_system(system) if system in SYSTEMS \
+        else None
+    if definition is None:
+        return []
+    why: dict[str, str] = {}
+    where: dict[str, list[object]] = {}
+    for values in runs:
+        for name, reason in unreached(definition, values).items():
+            why.setdefault(name, reason)
+            if values[name] not in where.setdefault(name, []):
+                where[name].append(values[name])
+    return [f"  [warning] {option.get(name, '--set')} {name}={','.join(map(str, where[name]))}: {reason}"
+            for name, reason in why.items()]
 
 
 def cmd_build(args) -> int:
@@ -82,6 +104,10 @@ def cmd_run(args) -> int:
             print(f"branch {i} from t = {args.branch_at} s ({label}):")
             print(_summary(result))
             print(f"  results: {csv}")
+        base = _parse_set(args.set)
+        for line in _unreached_lines(args.system, [{**base, **v} for v in variants],
+                                     dict.fromkeys(variants[0], "--branch-set")):
+            print(line)
         return 0
     start_values = _parse_set(args.set)
     result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
@@ -89,6 +115,8 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     csv = result.to_csv(out / f"{result.system}.csv")
     print(_summary(result))
+    for line in _unreached_lines(args.system, [start_values], {}):
+        print(line)
     print(f"  results: {csv}")
     if args.plot:
         try:
@@ -131,6 +159,9 @@ def cmd_sweep(args) -> int:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
             print(f"  {r['status']}: {varied}: {r['error']}")
+    for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
+                                 dict.fromkeys(vary, "--vary")):
+        print(line)
     return 0
 
 

@@ -88,3 +88,97 @@ def test_feed_override_from_the_panel_stretches_every_feed_word(nominal, name):
     slow = simulate(name, stop_time=expected + 2.0, start_values={"panel.override": o})
     assert (slow["panel.feed_override"] == o).all()
     assert _cycle_end(slow) == pytest.approx(expected, abs=0.002)   # the end falls on a 1 ms step
+
+
+# -- settings that reach nothing are said -----------------------------------------------------------
+def _panel_trace(parameters: dict, m_active: int = 0, seconds: float = 1.0) -> dict[str, list]:
+    from ncfmu.controllers import OperatorPanel
+    panel = OperatorPanel(**parameters)
+    trace: dict[str, list] = {p.name: [] for p in OperatorPanel.ports("output")}
+    dt = 1e-3
+    for k in range(int(round(seconds / dt))):
+        out = panel.step(k * dt, dt, {"m_active": m_active})
+        for name, value in out.items():
+            trace[name].append(value)
+    return trace
+
+
+#: For each panel parameter (and its input): a base setting and a change that must show within 1 s.
+PANEL_CHANGES = {
+    "start_at": ({}, {"start_at": 0.5}), "restart_at": ({}, {"restart_at": 0.3}),
+    "wear_start_at": ({}, {"wear_start_at": 0.2}), "emergency_at": ({}, {"emergency_at": 0.2}),
+    "hold_at": ({}, {"hold_at": 0.2}), "release_at": ({"hold_at": 0.2}, {"release_at": 0.4}),
+    "pulse": ({"wear_start_at": 0.3, "emergency_at": 0.6}, {"pulse": 0.05}),
+    "mfin_delay": ({}, {"mfin_delay": 0.2}), "override": ({}, {"override": 0.5}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PANEL_CHANGES))
+def test_panel_acts_on_says_which_outputs_a_parameter_changes(name):
+    """ACTS_ON is the panel's behaviour: the outputs a change of the parameter moves are exactly those named."""
+    from ncfmu.controllers import OperatorPanel
+    base, change = PANEL_CHANGES[name]
+    m = 3 if name == "mfin_delay" else 0
+    a, b = _panel_trace(base, m), _panel_trace({**base, **change}, m)
+    moved = {out for out in a if a[out] != b[out]}
+    assert moved == set(OperatorPanel.ACTS_ON[name]), (name, moved)
+
+
+def test_panel_m_active_acts_on_mfin_only():
+    from ncfmu.controllers import OperatorPanel
+    a, b = _panel_trace({}, 0), _panel_trace({}, 4)
+    assert {out for out in a if a[out] != b[out]} == set(OperatorPanel.ACTS_ON["m_active"]) == {"mfin"}
+
+
+def test_every_panel_parameter_has_its_outputs_named():
+    from ncfmu.controllers import OperatorPanel
+    assert set(OperatorPanel.ACTS_ON) == {p.name for p in OperatorPanel.ports() if p.causality != "output"}
+
+
+def _warnings(out: str) -> list[str]:
+    """The warnings about settings (an FMU's own warnings, e.g. EMB's, are not the point here)."""
+    return [line.strip() for line in out.splitlines() if line.strip().startswith("[warning] --")]
+
+
+def test_run_warns_of_settings_that_reach_no_connected_port(project, capsys, tmp_path):
+    from ncfmu.cli import main
+    rc = main(["run", "lathe_taper", "--stop-time", "0.2", "--out", str(tmp_path),
+               "--set", "panel.emergency_at=0.1", "--set", "panel.override=0.5", "--set", "panel.pulse=0.02",
+               "--set", "seq.block[2].Xd=0.2", "--set", "seq.block[1].Xd=0.4", "--set", "limiter.region[3].lim_min=1"])
+    assert rc == 0
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --set panel.emergency_at=0.1: panel.emergency_at acts only on panel.emergency, which no "
+        "connection of lathe_taper reads: it changes nothing in this system",
+        "[warning] --set seq.block[2].Xd=0.2: seq reads block[1..1] only (n_blocks = 1): seq.block[2].Xd changes "
+        "nothing",
+        "[warning] --set limiter.region[3].lim_min=1: limiter reads region[1..2] only (n_regions = 2): "
+        "limiter.region[3].lim_min changes nothing"]
+    # override and pulse reach the sequencer (feed_override, start) in the lathe: no warning for them
+
+
+def test_run_warns_per_system_and_the_count_as_the_run_sets_it(project, capsys, tmp_path):
+    from ncfmu.cli import main
+    # the grinder reads the panel's override and hold now, and its emergency: no warning
+    assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "panel.override=0.5",
+                 "--set", "panel.hold_at=0.1", "--set", "panel.emergency_at=0.15"]) == 0
+    assert _warnings(capsys.readouterr().out) == []
+    # a second block is read once n_blocks says so
+    assert main(["run", "lathe_taper", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "seq.n_blocks=2",
+                 "--set", "seq.block[2].Xd=0.2", "--set", "seq.block[2].N=1", "--set", "seq.block[2].Zp=42",
+                 "--set", "seq.block[2].Xf=4", "--set", "seq.block[2].feed=2", "--set", "seq.block[2].rapid=50"]) == 0
+    assert _warnings(capsys.readouterr().out) == []
+    # the mill has no EMB and no M words: the panel's MFIN delay reaches nothing
+    assert main(["run", "mill_contour", "--stop-time", "0.2", "--out", str(tmp_path),
+                 "--set", "panel.mfin_delay=1"]) == 0
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --set panel.mfin_delay=1: panel.mfin_delay acts only on panel.mfin, which no connection of "
+        "mill_contour reads: it changes nothing in this system"]
+
+
+def test_sweep_warns_of_a_varied_setting_that_reaches_nothing(project, capsys, tmp_path):
+    from ncfmu.cli import main
+    main(["sweep", "lathe_taper", "--vary", "panel.wear_start_at=0.1,0.15", "--vary", "seq.block[1].Xd=0.4,0.5",
+          "--stop-time", "0.2", "--workers", "0", "--out", str(tmp_path)])
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --vary panel.wear_start_at=0.1,0.15: panel.wear_start_at acts only on panel.wear_start, which no "
+        "connection of lathe_taper reads: it changes nothing in this system"]

@@ -34,6 +34,9 @@ class Controller:
     #: Default stop time of a stand-alone run, s.
     STOP_TIME: ClassVar[float] = 1.0
     PORTS: ClassVar[tuple[Port, ...]] = ()
+    #: The outputs a parameter or input acts on, for one that acts on only some of them (an operator panel's
+    #: button time acts on that button alone); one not named here may act on every output.
+    ACTS_ON: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     def __init__(self, **parameters: object) -> None:
         self.messages: list[tuple[str, str]] = []
