@@ -142,8 +142,13 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     return vary
 
 
+#: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
+#: command line, as for every command.
+SWEEP_INCOMPLETE = 1
+
+
 def cmd_sweep(args) -> int:
-    from .batch import sweep
+    from .batch import STATUSES, sweep
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -152,9 +157,9 @@ def cmd_sweep(args) -> int:
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
                  output_interval=args.output_interval, timeout=args.timeout)
-    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "failed", "timeout")}
-    print(f"{args.system}: {len(rows)} variants, {counts['ok']} ok, {counts['failed']} failed, "
-          f"{counts['timeout']} timeout -> {Path(args.out) / 'summary.csv'}")
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
+          + f" -> {Path(args.out) / 'summary.csv'}")
     for r in rows:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
@@ -162,7 +167,7 @@ def cmd_sweep(args) -> int:
     for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
                                  dict.fromkeys(vary, "--vary")):
         print(line)
-    return 0
+    return 0 if counts["ok"] == len(rows) else SWEEP_INCOMPLETE
 
 
 def cmd_plot(args) -> int:
@@ -229,8 +234,12 @@ def main(argv: list[str] | None = None) -> int:
                        description="Run every combination of the --vary values on dask workers (they need ncfmu "
                                    "installed, nothing else: the system is shipped to them, results come back). "
                                    "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
-                                   "ok/failed/timeout, error, wall time, metrics), atomically. A sweep into an "
-                                   "existing OUT merges into it; variants already done are not run again.",
+                                   "ok/unfinished/failed/timeout, error, wall time, metrics), atomically; "
+                                   "'unfinished': the run reached the stop time with the cycle not finished "
+                                   "(error 'cycle not finished by t = ...'). A sweep into an existing OUT merges "
+                                   "into it; variants already done are not run again. Exit status 0 when every "
+                                   "variant is ok, 1 when any is unfinished, failed or timed out, 2 for a bad "
+                                   "command line.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")

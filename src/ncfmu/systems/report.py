@@ -58,6 +58,10 @@ class Part:
     def alarmed(self, result) -> bool:
         return self.alarm is not None and bool(result[self.alarm].any())
 
+    def finished(self, result) -> bool | None:
+        """Whether the part's cycle ran to its end within the run; None for a part without a cycle."""
+        return None
+
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Add to the machine-plane panel (path, envelope, contour)."""
 
@@ -123,6 +127,9 @@ class LatheCycle(Part):
                      f"alarm: {'yes' if self.alarmed(result) else 'no'}")
         return lines
 
+    def finished(self, result) -> bool | None:
+        return bool(result[f"{self.seq}.done"].any())
+
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         cut = result[f"{self.seq}.subcycle"] == 2
         return {"final_radius_mm": float(result[f"{self.x}.pos"][cut].min()) if cut.any() else float("nan"),
@@ -159,6 +166,9 @@ class FeedCycle(Part):
         return [f"  deepest X: {x.max():.4f} mm; cycle ended: {'not finished' if np.isnan(end) else f'{end:.3f} s'}; "
                 f"X at the end {x[-1]:.4f} mm; return counter X {result[f'{self.feed}.return_counter_x'][-1]:.4f} mm",
                 f"  alarm: {'yes' if self.alarmed(result) else 'no'}"]
+
+    def finished(self, result) -> bool | None:
+        return not np.isnan(_ended(result, self._active(result)))
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         return {"deepest_x_mm": float(result[f"{self.x}.pos"].max()),
@@ -237,6 +247,9 @@ class ContourCycle(Part):
         return [f"  contour done: {end}; last segment (point path) or program line: "
                 f"{int(result[f'{self.contour}.segment'][-1])}; alarm: {'yes' if self.alarmed(result) else 'no'}"]
 
+    def finished(self, result) -> bool | None:
+        return bool(result[f"{self.contour}.done"].any())
+
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         from ..checks import path_distance
         path = [move.element for move in self.interpolator(parameters).tool_path]
@@ -285,6 +298,10 @@ class Report:
 
     def summary(self, result, parameters: Parameters) -> list[str]:
         return [line for p in self.parts for line in p.summary(result, parameters)]
+
+    def finished(self, result) -> bool:
+        """False when a cycle of the report's parts was still running, or never ran, at the end of the run."""
+        return all(p.finished(result) is not False for p in self.parts)
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         out = {"sim_time": float(result.time[-1]), "wall_time": float(result.wall_time)}
