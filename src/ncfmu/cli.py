@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import os
 import sys
 from pathlib import Path
 
@@ -194,6 +195,50 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_vars(args) -> int:
+    """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
+    import zipfile
+
+    from .cosim.ssp import read_ssp
+    from .systems import get_system
+    from .systems.settable import settable
+    if args.system.endswith(".ssp"):
+        archive = Path(args.system)
+        system = read_ssp(archive)
+
+        def model_description(model: str) -> bytes:
+            with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(f"resources/{model}.fmu")) as fmu:
+                return fmu.read("modelDescription.xml")
+        rows = settable(system, model_description)
+    else:
+        system = get_system(args.system)
+        rows = settable(system)
+    if args.instance:
+        known = [c.name for c in system.components]
+        if args.instance not in known:
+            raise NcfmuError(f"--instance {args.instance!r}: {system.name} has no such instance "
+                             f"(instances: {', '.join(known)})")
+        rows = [r for r in rows if r.name.split(".", 1)[0] == args.instance]
+    lines = [f"{system.name}: {len(rows)} parameters and inputs. Set one with --set INSTANCE.VARIABLE=VALUE "
+             "(ncfmu run); tunable parameters and free inputs also with --branch-set, free inputs with --input "
+             "FILE.csv. An input a connection drives cannot be set: set its source. START is the system's value."]
+    header = ("NAME", "KIND", "TYPE", "UNIT", "START", "RULE", "DRIVEN BY", "DESCRIPTION")
+    long = 30                        # a longer start value (a program) goes on a line of its own, below
+    table = [(r.name, r.kind, r.type, r.unit, r.start if len(r.start) <= long else "(below)", r.rule,
+              r.driven_by or "-", r.description) for r in rows]
+    widths = [max(len(row[i]) for row in [header, *table]) for i in range(len(header) - 1)]
+    for r, row in zip([None, *rows], [header, *table]):
+        lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
+        if r is not None and len(r.start) > long:
+            lines.append(f"    start: {r.start}")
+    try:
+        sys.stdout.write("\n".join(lines) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:          # `ncfmu vars SYSTEM | head`: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
 def cmd_validate(args) -> int:
     from .project import validate
     problems = validate(args.root)
@@ -268,6 +313,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name)")
     p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser("vars", help="list every parameter and input of a system: unit, start value, rule, "
+                       "description, tunable or fixed, the connection that drives an input",
+                       description="Every settable variable of a system (what --set, --branch-set, --vary and "
+                                   "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
+                                   "value the system gives it, its rule, the output a connection drives an input "
+                                   "from, and its description.", epilog=EPILOG)
+    p.add_argument("system", help="system name or path of an .ssp file")
+    p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
+    p.set_defaults(func=cmd_vars)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)
