@@ -240,12 +240,13 @@ def cmd_vars(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from .project import validate
-    problems = validate(args.root)
-    for p in problems:
+    from .project import validation
+    checked = validation(args.root)
+    print("checked " + ";\nchecked ".join(checked.checked()))
+    for p in checked.problems:
         print(p)
-    print("all FMUs and SSPs valid" if not problems else f"{len(problems)} problem(s)")
-    return 1 if problems else 0
+    print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
+    return 1 if checked.problems else 0
 
 
 def main(argv: list[str] | None = None) -> int:

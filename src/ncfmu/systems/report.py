@@ -191,10 +191,21 @@ class Envelope(Part):
     def alarm(self) -> str | None:
         return f"{self.limiter}.alarm"
 
+    def legend(self) -> tuple[str, ...]:
+        """What each bit of the limiter's ``blocked`` mask stops (its port says: 1 ref+, 2 ref-, 4 lim+, 8 lim-),
+        in the system's axis names."""
+        return (f"{self.ref} +", f"{self.ref} -", f"{self.lim} +", f"{self.lim} -")
+
     def summary(self, result, parameters: Parameters) -> list[str]:
-        verdict = (f"ALARM, blocked mask {result[f'{self.limiter}.blocked'].max()}" if self.alarmed(result)
-                   else "no violation")
-        return [f"  area limiter: {verdict}"]
+        if not self.alarmed(result):
+            return ["  area limiter: no violation"]
+        mask = int(np.bitwise_or.reduce(np.asarray(result[f"{self.limiter}.blocked"], dtype=np.int64)))
+        bits = ", ".join(f"{1 << i} {d}" for i, d in enumerate(self.legend()))
+        stopped = [d for i, d in enumerate(self.legend()) if mask & (1 << i)]
+        what = (f"blocked {' and '.join(stopped)}" if stopped
+                else "no direction blocked (a fault: an absurd input, see the log)")
+        first = _first_time(result, result[f"{self.limiter}.alarm"].astype(bool))
+        return [f"  area limiter: ALARM from t = {first:.3f} s, {what} (blocked mask {mask}; bits {bits})"]
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Shade what the table forbids, region by region, over the span the path covers (a bound beyond
