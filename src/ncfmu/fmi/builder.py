@@ -51,9 +51,11 @@ def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
 
 
 def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
-    """Digest of the model script and every module the FMU carries (12 hex digits)."""
+    """Digest of the model script, every module the FMU carries and the generator of its documentation
+    (12 hex digits)."""
     h = hashlib.sha256()
-    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h"]:
+    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h",
+                 package_dir / "docs.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())

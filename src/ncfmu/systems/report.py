@@ -218,16 +218,29 @@ class Envelope(Part):
         finite = [v for _, lo, hi in table for v in (lo, hi) if abs(v) < POSITION_LIMIT]
         bottom, top = min(lim.min(), *finite) - 20, max(lim.max(), *finite) + 20
         edge = left
+        # A region's name goes on its boundary, on the forbidden side; a boundary outside the view (the chuck's
+        # X >= 40 above a lathe's work, whose cycle part has set the limits already) gets its name at the view's
+        # edge nearest to it, with the bound: a label outside the axes would have tight_layout shrink the figure.
+        view = (bottom, top) if ax.get_autoscaley_on() else ax.get_ylim()
+        edge_of_view = ax.get_xaxis_transform()          # x in data, y in axes fractions
         for i, (ref_max, lo, hi) in enumerate(table):
             end = min(ref_max, right)
             if end <= edge:
                 continue
             name = self.region_names[i] if i < len(self.region_names) else f"region {i + 1}"
-            for low, high, bound in ((bottom, lo, lo), (hi, top, hi)):
+            for low, high, bound, above in ((bottom, lo, lo, False), (hi, top, hi, True)):
                 if low < high and abs(bound) < POSITION_LIMIT:
                     ax.fill_between([edge, end], low, high, color="tab:red", alpha=0.15, lw=0)
                     ax.hlines(bound, edge, end, color="tab:red", lw=1)
-                    ax.text((edge + end) / 2, bound, name, ha="center", va="bottom", fontsize=8)
+                    mid = (edge + end) / 2
+                    if view[0] <= bound <= view[1]:
+                        label = ax.text(mid, bound, name, ha="center", va="bottom" if above else "top", fontsize=8)
+                    else:
+                        over = bound > view[1]
+                        label = ax.text(mid, 0.97 if over else 0.03, f"{name}: {self.lim} {'>' if above else '<'} "
+                                        f"{bound:g} forbidden", transform=edge_of_view, ha="center",
+                                        va="top" if over else "bottom", fontsize=8)
+                    label.set_in_layout(False)
             edge = end
         ax.fill_between([], [], [], color="tab:red", alpha=0.15, label="forbidden by the limit table")
 
