@@ -51,3 +51,13 @@ def test_validate_says_what_it_checked(project, capsys):
     assert "SystemStructure.ssd against the SSP 1.0 schema" in out[1]
     assert f"their {n_ssv} .ssv parameter sets against the SSP 1.0 parameter-values schema" in out[1]
     assert out[-1] == "all FMUs and SSPs valid"
+
+
+def test_an_input_csv_column_that_is_an_output_is_said_in_good_grammar(project, capsys, tmp_path):
+    csv_file = tmp_path / "inputs.csv"
+    csv_file.write_text('"time","x_axis.pos"\n0.0,1\n')
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'x_axis.pos' is an output, not an input\n")
+    csv_file.write_text('"time","seq.accel"\n0.0,100\n')
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'seq.accel' is a parameter, not an input\n")
