@@ -1,4 +1,4 @@
-"""Memory stays flat over many runs in one process (issue 12): no copies of the FMU libraries, no sys.path
+"""Memory stays flat over many runs in one process: no copies of the FMU libraries, no sys.path
 entries and no more than 5 MB of RSS pile up over 40 runs of ``simulate()``. Measured in a fresh process."""
 
 import subprocess

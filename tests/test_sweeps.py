@@ -1,4 +1,4 @@
-"""Sweeps that scale out (issue 16): workers that share no files with the client, nothing lost, timeouts."""
+"""Sweeps that scale out: workers that share no files with the client, nothing lost, timeouts."""
 
 from __future__ import annotations
 

@@ -30,6 +30,11 @@ def _variables(md_xml: bytes) -> list[dict[str, str]]:
     return rows
 
 
+def seed_text(logic) -> str:
+    """The seed a model follows (its file among the seeds), or that it has none."""
+    return logic.SEED or "none: ncfmu's own design"
+
+
 def _behaviour(logic) -> str:
     return (sys.modules[logic.__module__].__doc__ or logic.__doc__ or "").strip()
 
@@ -105,7 +110,7 @@ padding:2px 6px;text-align:left;vertical-align:top}}table{{border-collapse:colla
 </head><body>
 <h1>{logic.MODEL_NAME}</h1>
 <p>{html.escape(logic.DESCRIPTION)}</p>
-<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
+<p>Seed: <code>{html.escape(seed_text(logic))}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
 Default experiment: step {exp.get("stepSize")} s, stop {exp.get("stopTime")} s.
 Capabilities: canGetAndSetFMUstate = {cosim.get("canGetAndSetFMUstate")}.</p>
 <h2>Behaviour</h2>
@@ -124,7 +129,7 @@ and the rule.</p>
 
 def fmu_markdown(md_xml: bytes, logic) -> str:
     rows = _compact(_variables(md_xml))
-    lines = [f"# {logic.MODEL_NAME}", "", logic.DESCRIPTION, "", f"Seed: `{logic.SEED}`", "", "## Behaviour", "",
+    lines = [f"# {logic.MODEL_NAME}", "", logic.DESCRIPTION, "", f"Seed: `{seed_text(logic)}`", "", "## Behaviour", "",
              "```text", behaviour_text(logic), "```", "", "## Interface", "",
              "| name | causality | type | unit | start | range | description |", "|---|---|---|---|---|---|---|"]
     for r in rows:

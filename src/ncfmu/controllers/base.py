@@ -105,7 +105,7 @@ class Controller:
 
 
 def servo_ports(*axes: tuple[str, float]) -> tuple[Port, ...]:
-    """The ports by which a controller drives servo axes (SPEC 2): per axis ``(letter, start position)``,
+    """The ports by which a controller drives servo axes: per axis ``(letter, start position)``,
     inputs ``<a>_pos`` and ``<a>_in_position``, outputs ``<a>_cmd`` and ``<a>_vff``."""
     inputs, outputs = [], []
     for a, start in axes:
