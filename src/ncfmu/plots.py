@@ -45,8 +45,14 @@ def plot_result(result, path: Path) -> Path:
             ax_err.plot(t, result[f"{a}.following_error"] * 1000, label=f"{a}")
     ax_pos.set(title=f"{result.system}: axis positions", xlabel="time [s]", ylabel="position [mm]")
     ax_err.set(title="following error (command - actual)", xlabel="time [s]", ylabel="error [µm]")
+    if not ax_err.lines:                      # a trajectory recorded without them (a sweep's --record)
+        ax_err.text(0.5, 0.5, "no following_error recorded", transform=ax_err.transAxes, ha="center",
+                    va="center", color="0.4")
+        ax_err.set_xlim(ax_pos.get_xlim())
+        ax_err.set_yticks([])
     for ax in (ax_pos, ax_err):
-        ax.legend(loc="best", fontsize=8)
+        if ax.lines:
+            ax.legend(loc="best", fontsize=8)
         ax.grid(True, alpha=0.3)
     if has_plane:
         report.draw_plane(panels[2], result, run_parameters(result))

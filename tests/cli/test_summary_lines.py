@@ -39,6 +39,7 @@ def test_the_grinder_limiter_alarm_names_its_own_axes(project, capsys, tmp_path)
                         r"1 y_axis \+, 2 y_axis -, 4 x_axis \+, 8 x_axis -\)", line), line
 
 
+@pytest.mark.slow                       # fmpy validates every FMU again (test_cli's fast check does it once)
 def test_validate_says_what_it_checked(project, capsys):
     assert main(["validate"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -53,6 +54,7 @@ def test_validate_says_what_it_checked(project, capsys):
     assert out[-1] == "all FMUs and SSPs valid"
 
 
+@pytest.mark.slow                       # opens the system twice (the master's own test covers connections fast)
 def test_an_input_csv_column_that_is_an_output_is_said_in_good_grammar(project, capsys, tmp_path):
     csv_file = tmp_path / "inputs.csv"
     csv_file.write_text('"time","x_axis.pos"\n0.0,1\n')
