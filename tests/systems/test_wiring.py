@@ -182,3 +182,14 @@ def test_sweep_warns_of_a_varied_setting_that_reaches_nothing(project, capsys, t
     assert _warnings(capsys.readouterr().out) == [
         "[warning] --vary panel.wear_start_at=0.1,0.15: panel.wear_start_at acts only on panel.wear_start, which no "
         "connection of lathe_taper reads: it changes nothing in this system"]
+
+
+def test_branches_warn_of_their_settings_once(project, capsys, tmp_path):
+    from ncfmu.cli import main
+    assert main(["run", "lathe_taper", "--branch-at", "0.5", "--branch-set", "panel.emergency_at=1,2",
+                 "--set", "seq.block[2].Xd=0.3", "--stop-time", "1", "--out", str(tmp_path)]) == 0
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --set seq.block[2].Xd=0.3: seq reads block[1..1] only (n_blocks = 1): seq.block[2].Xd changes "
+        "nothing",
+        "[warning] --branch-set panel.emergency_at=1,2: panel.emergency_at acts only on panel.emergency, which no "
+        "connection of lathe_taper reads: it changes nothing in this system"]
