@@ -191,8 +191,8 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_plot(args) -> int:
+    from . import plots
     from .cosim.result import Result
-    from .plots import plot_result, plot_sweep
     src = Path(args.file)
     if not src.is_file():
         raise NcfmuError(f"{src}: no such file (give a result CSV from 'ncfmu run' or a sweep's summary.csv)")
@@ -202,15 +202,22 @@ def cmd_plot(args) -> int:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
     if src.name == "summary.csv":
-        print(plot_sweep(src, out))
+        print(plots.plot_sweep(src, out))
     else:
-        from .systems import SYSTEMS
+        from .systems import SYSTEMS, report_for
+        if args.system is not None and args.system not in SYSTEMS:
+            raise NcfmuError(f"--system {args.system!r}: unknown; one of {', '.join(SYSTEMS)} (or leave it out to "
+                             "draw the CSV's signals over time)")
         result = Result.from_csv(src)
-        result.system = args.system or src.stem.split("_branch")[0]
-        if result.system not in SYSTEMS:
-            raise NcfmuError(f"{src}: system {result.system!r} unknown (from the file name); give the system the "
-                             f"CSV came from with --system, one of {', '.join(SYSTEMS)}")
-        print(plot_result(result, out))
+        name = args.system or src.stem.split("_branch")[0]
+        # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
+        # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
+        if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            result.system = name
+            print(plots.plot_result(result, out))
+        else:
+            result.system = src.stem
+            print(plots.plot_signals(result, out))
     return 0
 
 
@@ -281,9 +288,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv")
-    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', or OUT/summary.csv from 'ncfmu sweep'")
-    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name)")
+    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
+                       description="A known system's CSV gets its plot (positions, following errors, the path with "
+                                   "its envelope or contour); any other result CSV in fmpy's layout (a single FMU "
+                                   "run by fmpy, another tool's) its recorded signals over time.")
+    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', a CSV fmpy wrote, or OUT/summary.csv from "
+                                "'ncfmu sweep'")
+    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name; a CSV "
+                                                  "that names none is drawn as signals over time)")
     p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
     p.set_defaults(func=cmd_plot)
 
