@@ -22,6 +22,13 @@ def servo_step(project):
                              output_interval=1e-3, start_values={"pos_cmd": 1.0})
 
 
+@pytest.fixture(scope="module")
+def taper_1s(project):
+    """ncfmu runs lathe_taper for 1 s (shared by the tests of a known system's CSV)."""
+    from ncfmu.project import simulate
+    return simulate("lathe_taper", stop_time=1.0)
+
+
 def test_fmpy_csv_of_a_single_fmu_reads_back_exactly(servo_step, tmp_path):
     csv = tmp_path / "servo.csv"
     write_csv(csv, servo_step)
@@ -53,9 +60,8 @@ def test_plot_of_a_single_fmus_fmpy_csv_draws_its_signals(servo_step, tmp_path, 
     assert panels.constant == {}
 
 
-def test_a_known_systems_csv_written_by_fmpy_gets_the_system_plot(project, tmp_path, capsys, monkeypatch):
-    from ncfmu.project import simulate
-    run = simulate("lathe_taper", stop_time=1.0)
+def test_a_known_systems_csv_written_by_fmpy_gets_the_system_plot(taper_1s, tmp_path, capsys, monkeypatch):
+    run = taper_1s
     assert run.data["seq.busy"].dtype == np.bool_
     csv = tmp_path / "lathe_taper.csv"
     write_csv(csv, run.data)
@@ -108,12 +114,10 @@ def test_a_bad_result_csv_is_one_line(tmp_path, capsys, text, says):
     assert err.startswith("ncfmu plot: ") and "\n" not in err and says in err, err
 
 
-def test_ncfmus_own_csv_reads_back_as_fmpy_reads_it(project, tmp_path):
+def test_ncfmus_own_csv_reads_back_as_fmpy_reads_it(taper_1s, tmp_path):
     """Our CSV (Booleans as 0/1) reads back number for number, and as fmpy's read_csv reads it."""
     from fmpy.util import read_csv
-
-    from ncfmu.project import simulate
-    run = simulate("lathe_taper", stop_time=1.0)
+    run = taper_1s
     csv = run.to_csv(tmp_path / "lathe_taper.csv")
     ours, theirs = Result.from_csv(csv).data, read_csv(str(csv))
     assert ours.dtype.names == run.data.dtype.names == theirs.dtype.names
