@@ -24,7 +24,6 @@ What goes where:
 
 from __future__ import annotations
 
-import asyncio
 import csv
 import hashlib
 import io
@@ -244,14 +243,14 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     address = scheduler if scheduler_file is None else _scheduler_address(scheduler_file)
     try:
         client = Client(address, timeout=connect_timeout)
-    except (OSError, TimeoutError, asyncio.TimeoutError):          # distinct classes before Python 3.11
+    except (OSError, TimeoutError):
         raise NcfmuError(f"{option}: no dask scheduler answered within {connect_timeout:g} s at {address} "
                          "(--connect-timeout S waits longer)") from None
     except ValueError as err:                           # an address dask cannot parse (an unknown scheme)
         raise NcfmuError(f"{option}: {err}") from None
     try:
         client.wait_for_workers(1, timeout=connect_timeout)
-    except (OSError, TimeoutError, asyncio.TimeoutError):
+    except (OSError, TimeoutError):
         client.close()
         raise NcfmuError(f"{option}: the scheduler at {address} has no worker (waited {connect_timeout:g} s, "
                          "--connect-timeout): start one with dask worker") from None
