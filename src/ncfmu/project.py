@@ -106,7 +106,7 @@ class OpenSystem:
             self.unpacked: dict[str, UnpackedFmu] = {}
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
-                    self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp))
+                    self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
             self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
         except Exception:

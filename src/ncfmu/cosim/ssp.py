@@ -255,16 +255,18 @@ def is_link(entry: zipfile.ZipInfo) -> bool:
     return stat.S_ISLNK(entry.external_attr >> 16)
 
 
-def fmu_path(folder: Path, component: Component) -> Path:
+def fmu_path(folder: Path, component: Component, origin: Path | None = None) -> Path:
     """The FMU file of ``component`` in the system unpacked in ``folder`` (an extracted archive or the folder of
-    an .ssd): inside that folder, or refused -- a symbolic link may point elsewhere in the folder, not out of it."""
+    an .ssd): inside that folder, or refused -- a symbolic link may point elsewhere in the folder, not out of it.
+    Errors name ``origin`` (the archive ``folder`` was extracted from), else ``folder``."""
     base = Path(folder).resolve()
+    where = origin if origin is not None else folder
     target = (base / component.source).resolve()
     if base not in target.parents:
-        raise SystemDefinitionError(f"component {component.name}: {component.source} leads outside the system "
-                                    f"folder (to {target}): an FMU is loaded only from inside it")
+        raise SystemDefinitionError(f"{where}: component {component.name}: {component.source} leads outside the "
+                                    f"system folder (to {target}): an FMU is loaded only from inside it")
     if not target.is_file():
-        raise SystemDefinitionError(f"component {component.name}: FMU not found: {component.source} in {folder}")
+        raise SystemDefinitionError(f"{where}: component {component.name}: FMU not found: {component.source}")
     return target
 
 
