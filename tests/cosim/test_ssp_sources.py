@@ -149,6 +149,7 @@ def test_ncfmu_run_refuses_the_evil_ssp_and_never_runs_its_fmu(project, tmp_path
     assert not marker.exists()
 
 
+@pytest.mark.slow
 def test_the_evil_copy_is_a_working_fmu(project, tmp_path):
     """The check above means something only if the copy would run: loaded directly, it writes its marker."""
     code = ("import sys; from ncfmu.cosim.fmu import FmuSlave, UnpackedFmu; "
