@@ -232,7 +232,7 @@ def cmd_validate(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
-                                     "run closed loop with servo axes.", epilog=EPILOG)
+                     "run closed loop with servo axes.", epilog=EPILOG)
     parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
     sub = parser.add_subparsers(dest="command", required=True)
 
