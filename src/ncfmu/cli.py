@@ -4,15 +4,71 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 import os
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from .errors import NcfmuError
 
 EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
           "Instances: lathe panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; "
           "mill panel, contour, x_axis, y_axis.")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with ncfmu's error line: ``ncfmu <command>: <what is wrong>`` and exit status 2, not the usage
+    block (``--help`` still shows it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
+def _negative_values(argv: list[str]) -> list[str]:
+    """``--step -1e-3`` as ``--step=-1e-3``.
+
+    argparse takes a word that starts with '-' for an option unless it looks like ``-5`` or ``-0.5``, so a
+    negative number in exponent form (or ``-inf``) after an option came out as "expected one argument". Joined
+    to its option it is a value, which the option's own rule then judges.
+    """
+    out: list[str] = []
+    for word in argv:
+        previous = out[-1] if out else ""
+        if word.startswith("-") and previous.startswith("--") and previous != "--" and "=" not in previous:
+            try:
+                float(word)
+            except ValueError:
+                pass
+            else:
+                out[-1] = f"{previous}={word}"
+                continue
+        out.append(word)
+    return out
+
+
+#: options of a command that take a number that must be > 0 and finite (checked before the command runs)
+POSITIVE = {"run": ("--stop-time", "--step", "--branch-at"), "sweep": ("--connect-timeout",)}
+
+
+def _check_positive(args: argparse.Namespace) -> None:
+    for option in POSITIVE.get(args.command, ()):
+        value = getattr(args, option[2:].replace("-", "_"))
+        if value is not None and not math.isfinite(value):
+            raise NcfmuError(f"{option} {value!r}: must be > 0 and finite")
+        if value is not None and not value > 0:
+            raise NcfmuError(f"{option} {value!r}: must be > 0")
+
+
+def _output_folder(out: str) -> None:
+    """``--out``: a folder, made now -- before a run that would only fail to write its results at the end."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise NcfmuError(f"--out {path}: is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise NcfmuError(f"--out {path}: cannot make the folder: {err.strerror or err}") from None
 
 
 def _parse_set(items: list[str]) -> dict[str, object]:
@@ -157,7 +213,7 @@ def cmd_sweep(args) -> int:
     vary = _parse_vary(args.vary)
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
-                 output_interval=args.output_interval, timeout=args.timeout)
+                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
           + f" -> {Path(args.out) / 'summary.csv'}")
@@ -172,8 +228,8 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_plot(args) -> int:
+    from . import plots
     from .cosim.result import Result
-    from .plots import plot_result, plot_sweep
     src = Path(args.file)
     if not src.is_file():
         raise NcfmuError(f"{src}: no such file (give a result CSV from 'ncfmu run' or a sweep's summary.csv)")
@@ -183,15 +239,22 @@ def cmd_plot(args) -> int:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
     if src.name == "summary.csv":
-        print(plot_sweep(src, out))
+        print(plots.plot_sweep(src, out))
     else:
-        from .systems import SYSTEMS
+        from .systems import SYSTEMS, report_for
+        if args.system is not None and args.system not in SYSTEMS:
+            raise NcfmuError(f"--system {args.system!r}: unknown; one of {', '.join(SYSTEMS)} (or leave it out to "
+                             "draw the CSV's signals over time)")
         result = Result.from_csv(src)
-        result.system = args.system or src.stem.split("_branch")[0]
-        if result.system not in SYSTEMS:
-            raise NcfmuError(f"{src}: system {result.system!r} unknown (from the file name); give the system the "
-                             f"CSV came from with --system, one of {', '.join(SYSTEMS)}")
-        print(plot_result(result, out))
+        name = args.system or src.stem.split("_branch")[0]
+        # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
+        # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
+        if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            result.system = name
+            print(plots.plot_result(result, out))
+        else:
+            result.system = src.stem
+            print(plots.plot_signals(result, out))
     return 0
 
 
@@ -250,8 +313,8 @@ def cmd_validate(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
-                                     "run closed loop with servo axes.", epilog=EPILOG)
+    parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
+                     "run closed loop with servo axes.", epilog=EPILOG)
     parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -307,11 +370,18 @@ def main(argv: list[str] | None = None) -> int:
                    help="keep every S seconds of the trajectories (a whole multiple of the system's step)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
+    p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+                   help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv")
-    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', or OUT/summary.csv from 'ncfmu sweep'")
-    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name)")
+    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
+                       description="A known system's CSV gets its plot (positions, following errors, the path with "
+                                   "its envelope or contour); any other result CSV in fmpy's layout (a single FMU "
+                                   "run by fmpy, another tool's) its recorded signals over time.")
+    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', a CSV fmpy wrote, or OUT/summary.csv from "
+                                "'ncfmu sweep'")
+    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name; a CSV "
+                                                  "that names none is drawn as signals over time)")
     p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
     p.set_defaults(func=cmd_plot)
 
@@ -328,10 +398,18 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)
 
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(_negative_values(sys.argv[1:] if argv is None else argv))
+    if unknown:                      # named by the command they were given to, not by the top-level parser
+        parser.exit(2, f"ncfmu {args.command}: unrecognized arguments: {' '.join(unknown)}\n")
     try:
+        _check_positive(args)
+        if args.command in ("run", "sweep"):
+            _output_folder(args.out)
         return args.func(args)
     except NcfmuError as err:
+        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:           # the machine's refusal (a full disk, a folder that went away): one line too
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
         return 2
 

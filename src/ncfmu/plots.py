@@ -6,6 +6,7 @@
 - :func:`plot_sweep`: a sweep's summary metrics against the varied value.
 - :func:`bode_figure`: the ServoAxis's open loops over the band that matters, with their margins (for the
   FMU's documentation).
+- :func:`plot_signals`: a result of no known system (a single FMU's, a CSV fmpy wrote): its signals over time.
 """
 
 from __future__ import annotations
@@ -255,3 +256,79 @@ def bode_figure(p=None):
     ax_mag.legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     return fig, info
+
+
+# -- a result of no known system: a single FMU's, or a CSV another tool wrote --------------------------
+#: changing numeric signals drawn at most; the title says how many more the file has
+MAX_SIGNAL_PANELS = 24
+
+
+@dataclass
+class SignalPanels:
+    """How :func:`plot_signals` lays out a result."""
+
+    numbers: list[str]                  # numbers that change: a panel each, in the file's order
+    booleans: list[str]                 # Booleans: together on one panel, as logic traces
+    constant: dict[str, float]          # numbers that never change: listed with their value, not drawn
+
+
+def signal_panels(result) -> SignalPanels:
+    panels = SignalPanels([], [], {})
+    for name in result.names:
+        column = result[name]
+        if column.dtype == np.bool_:
+            panels.booleans.append(name)
+        elif np.array_equal(column, np.full_like(column, column[0]), equal_nan=True):
+            panels.constant[name] = float(column[0])
+        else:
+            panels.numbers.append(name)
+    return panels
+
+
+def plot_signals(result, path: Path) -> Path:
+    """Every recorded signal over time, for a result that names no system ncfmu knows (a single FMU run by
+    fmpy, another tool's CSV): each changing number on a panel of its own (whole-numbered ones as steps), the
+    Booleans as logic traces on one panel, the constant numbers listed with their values."""
+    import textwrap
+    plt = _plt()
+    panels = signal_panels(result)
+    drawn = panels.numbers[:MAX_SIGNAL_PANELS]
+    rows = max(1, len(drawn) + bool(panels.booleans))
+    logic_height = 0.45 * len(panels.booleans) + 0.6
+    heights = [1.0] * len(drawn) + ([logic_height / 1.9] if panels.booleans else [])
+    listed = ", ".join(f"{name} = {value:g}" for name, value in panels.constant.items())
+    note = textwrap.fill(f"constant over the run: {listed}", 140) if listed else ""
+    note_height = 0.2 + 0.16 * (note.count("\n") + 1) if note else 0.0          # inches under the panels
+    height = 1.9 * sum(heights or [1.0]) + 1.0 + note_height
+    fig, axes = plt.subplots(rows, 1, figsize=(10, height), sharex=True, squeeze=False,
+                             gridspec_kw={"height_ratios": heights or [1.0]})
+    t = result.time
+    for ax, name in zip(axes[:, 0], drawn):
+        values = result[name]
+        whole = bool(np.all(np.isfinite(values) & (values == np.round(values))))
+        ax.plot(t, values, lw=1.0, drawstyle="steps-post" if whole else "default")
+        ax.set_title(name, loc="left", fontsize=9)
+        ax.grid(True, alpha=0.3)
+    if panels.booleans:
+        ax = axes[len(drawn), 0]
+        for i, name in enumerate(panels.booleans):
+            color = f"C{i % 10}"
+            ax.fill_between(t, i, i + 0.7 * result[name], step="post", alpha=0.4, color=color, lw=0)
+            ax.step(t, i + 0.7 * result[name], where="post", lw=1.0, color=color)
+        ax.set_yticks([i + 0.35 for i in range(len(panels.booleans))], panels.booleans, fontsize=8)
+        ax.set_ylim(-0.2, len(panels.booleans))
+        ax.set_title("Booleans (raised: true)", loc="left", fontsize=9)
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    title = f"{result.system or 'result'}: recorded signals over {t[0]:g}..{t[-1]:g} s"
+    if len(panels.numbers) > len(drawn):
+        title += f" (the first {len(drawn)} of {len(panels.numbers)} changing numbers)"
+    fig.suptitle(title)
+    if note:
+        fig.text(0.01, 0.1 / height, note, fontsize=8, va="bottom")
+    fig.tight_layout(rect=(0, note_height / height, 1, 1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -21,7 +21,7 @@ from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.native_loop import build_library
 from .cosim.result import Result
-from .cosim.ssp import SSD_NAME, System, pack, read_ssd, write_system
+from .cosim.ssp import SSD_NAME, System, fmu_path, pack, read_ssp, write_system
 from .errors import SystemDefinitionError
 from .fmi.builder import PACKAGE_DIR, build_all
 from .systems import SYSTEMS, get_system
@@ -101,12 +101,13 @@ class OpenSystem:
         self.archive = Path(archive)
         self._tmp = Path(tempfile.mkdtemp(prefix="ncfmu_ssp_"))
         try:
-            safe_extract(self.archive, self._tmp / "ssp")
-            self.system: System = read_ssd(self._tmp / "ssp" / SSD_NAME)
+            # read from the archive first: every component's source is checked before anything is extracted
+            self.system: System = read_ssp(self.archive)
+            folder = safe_extract(self.archive, self._tmp / "ssp")
             self.unpacked: dict[str, UnpackedFmu] = {}
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
-                    self.unpacked[comp.model] = unpacked_fmu(self._tmp / "ssp" / comp.source)
+                    self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
             self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
         except Exception:

@@ -39,7 +39,8 @@ from dataclasses import dataclass
 
 from ..errors import require
 from ..ports import boolean, integer, real
-from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .base import int_param, real_param, servo_ports
+from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
 from .motion import LinearMove
 
 MAX_BLOCKS = 8
@@ -92,13 +93,14 @@ def _block_ports():
     return tuple(ports)
 
 
-class CutSequencer(Controller):
+class CutSequencer(CycleController):
     """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
 
     MODEL_NAME = "CutSequencer"
     DESCRIPTION = "Lathe repetitive-cut sequencer: SC1 infeed, SC2 cut (taper), SC3 retract, SC4 return (US 4,017,723)"
     SEED = "repetitive-cut-sequencer-US4017723.txt"
     STOP_TIME = 100.0
+    AXES = ("x", "z")
 
     PORTS = (
         real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
@@ -106,14 +108,7 @@ class CutSequencer(Controller):
         integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
              min_exclusive=True),
-        real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
-             min_exclusive=True),
-        real("inpos_band", "parameter", 0.005, "mm",
-             "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0,
-             min_exclusive=True),
-        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
+        *cycle_ports("a sub-cycle"),
         *_block_ports(),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
@@ -137,9 +132,7 @@ class CutSequencer(Controller):
         self.z_start = real_param(values, "z_start")
         self.n_blocks = int_param(values, "n_blocks")
         self.accel = real_param(values, "accel")
-        self.max_following_error = real_param(values, "max_following_error")
-        self.inpos_band = real_param(values, "inpos_band")
-        self.inpos_timeout = real_param(values, "inpos_timeout")
+        self.configure_cycle(values)
         blocks = []
         for k in range(1, self.n_blocks + 1):
             p = f"block[{k}]"
@@ -183,17 +176,12 @@ class CutSequencer(Controller):
         self.pass_no = 0
         self.busy = False
         self.done = False
-        self.alarm = False
+        self.reset_cycle()
         self.x_cmd, self.z_cmd = self.x_start, self.z_start
         self.x_vff = self.z_vff = 0.0
         self.move = LinearMove(self.accel)
-        self._start_was = False
-        self._steps_since_end = 0
-        self._waiting = 0.0                  # time since the command stopped, waiting for in-position
         self._waypoints: list[tuple[float, float]] = []
         self._then_block = 0                 # block to begin once the approach is done
-        self._positions = PositionGuard(("x_pos", "z_pos"))
-        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -201,6 +189,7 @@ class CutSequencer(Controller):
     def _begin_phase(self, phase: int) -> None:
         """Load the distance counters for ``phase`` (the seed's non-destructive transfers)."""
         b = self.blocks[self.block_index]
+        self.inpos.reset()
         here = (self.x_cmd, self.z_cmd)
         stp = x0, z0 = self.stps[self.block_index]
         self.phase = phase
@@ -268,58 +257,46 @@ class CutSequencer(Controller):
 
     def _raise_alarm(self, t: float, why: str) -> None:
         """Latch the alarm and bring the present move to a controlled stop along its path."""
-        if not self.alarm:
-            self.say("error", f"t = {t:.4f} s: {why}; decelerating to rest, cycle stopped")
-        self.alarm = True
+        self.latch_alarm(t, why, "decelerating to rest, cycle stopped")
         self.move.halt()
         self.phase = IDLE
         self.busy = False
         self._waypoints = []
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
+        bad = self.judge_inputs(inputs, dt)
         if bad:
             self._raise_alarm(t, bad)
         elif inputs["alarm_in"]:
             self._raise_alarm(t, "alarm_in (area limiter) is set")
         else:
-            err = max(abs(self.x_cmd - inputs["x_pos"]), abs(self.z_cmd - inputs["z_pos"]))  # type: ignore[operator]
-            if err > self.max_following_error:
-                self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
-                                     f"{self.max_following_error:g} mm")
+            excess = self.following_error(inputs, (self.x_cmd, self.z_cmd))
+            if excess:
+                self._raise_alarm(t, excess)
 
-        start = bool(inputs["start"])
-        if start and not self._start_was and not self.busy and not inputs["alarm_in"] and not bad:
+        if self.start_button.pressed(inputs["start"]) and not self.busy and not inputs["alarm_in"] and not bad:
             if self.move.at_rest:
                 if self.alarm:
                     self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-                    self._follow_up(t, float(inputs["x_pos"]), float(inputs["z_pos"]))  # type: ignore[arg-type]
+                    self._follow_up(t, inputs)
                 self.alarm = False
                 self._start_cycle()
             else:
                 self.say("warning", f"t = {t:.4f} s: start ignored: the axes are still decelerating")
-        self._start_was = start
 
         if self.busy:
-            override = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+            override = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
             scale = 0.0 if inputs["feed_hold"] else (override if self.phase == SC2 else 1.0)
             self.move.advance(dt, scale)
-            # The servos' in-position answers the final command only after one round trip through
-            # the master (one step with Gauss-Seidel, two with Jacobi): trust it from the 2nd step on.
-            self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
-            if (self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]
-                    and self._arrived(inputs)):
-                self._steps_since_end = 0
-                self._waiting = 0.0
+            judged = self.inpos.judge(dt, self.move.done, self.in_position(inputs), self.actual(inputs),
+                                      (self.x_cmd, self.z_cmd))
+            if judged == ARRIVED:
                 self._next_phase()
-            elif self.move.done:
-                self._waiting += dt
-                if self._waiting > self.inpos_timeout:
-                    self._waiting = 0.0
-                    self._raise_alarm(t, f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
-                                         f"{float(inputs['z_pos']):.4f}), not at the command ({self.x_cmd:.4f}, "  # type: ignore[arg-type]
-                                         f"{self.z_cmd:.4f}), {self.inpos_timeout:g} s after it stopped "
-                                         "(held downstream?)")
+            elif judged == LATE:
+                x_pos, z_pos = self.actual(inputs)
+                self._raise_alarm(t, f"in-position check: the axes stand at ({x_pos:.4f}, {z_pos:.4f}), not at the "
+                                     f"command ({self.x_cmd:.4f}, {self.z_cmd:.4f}), {self.inpos_timeout:g} s after "
+                                     "it stopped (held downstream?)")
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         elif not self.move.done:
@@ -330,14 +307,10 @@ class CutSequencer(Controller):
             self.x_vff = self.z_vff = 0.0
         return self._publish()
 
-    def _arrived(self, inputs: Mapping[str, object]) -> bool:
-        """The actual axes stand at the sequencer's own command (not only at whatever reached the servos)."""
-        return (abs(float(inputs["x_pos"]) - self.x_cmd) <= self.inpos_band  # type: ignore[arg-type]
-                and abs(float(inputs["z_pos"]) - self.z_cmd) <= self.inpos_band)  # type: ignore[arg-type]
-
-    def _follow_up(self, t: float, x_pos: float, z_pos: float) -> None:
+    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
         """Re-base the command on the actual position where a stop left them apart (a held axis)."""
-        if abs(x_pos - self.x_cmd) > self.inpos_band or abs(z_pos - self.z_cmd) > self.inpos_band:
+        x_pos, z_pos = self.actual(inputs)
+        if follow_up({"x": x_pos, "z": z_pos}, {"x": self.x_cmd, "z": self.z_cmd}, self.inpos_band):
             self.say("info", f"t = {t:.4f} s: follow-up: command ({self.x_cmd:.4f}, {self.z_cmd:.4f}) re-based on "
                              f"the actual position ({x_pos:.4f}, {z_pos:.4f})")
             self.x_cmd, self.z_cmd = x_pos, z_pos

@@ -209,7 +209,8 @@ class Master:
         """
         stateful = [self._stateful(s) for s in self.slaves]
         run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
-        k = int(round((branch_time - start_time) / run.h))
+        steps = (branch_time - start_time) / run.h      # nan or beyond the run (1e308 s) is refused, not rounded
+        k = int(round(steps)) if 0 < steps < run.n_steps else 0
         if not 0 < k < run.n_steps:
             raise SystemDefinitionError(f"branch time {branch_time} s must lie inside the run "
                                         f"({start_time}..{start_time + run.n_steps * run.h} s)")
@@ -251,14 +252,15 @@ class Master:
             raise SystemDefinitionError(f"step size = {h!r}: must be > 0")
         if not (math.isfinite(stop) and stop > start_time):
             raise SystemDefinitionError(f"stop time = {stop!r}: must be after the start time {start_time}")
-        n_steps = int(round((stop - start_time) / h))
+        steps = (stop - start_time) / h       # judged before rounding: 1e308 s at 1 ms is inf steps
+        recorded = sum(len(s.variables) for s in self.slaves) + 1
+        if (steps + 1) * recorded * 8 > MAX_RECORD_BYTES:
+            raise SystemDefinitionError(f"stop time {stop:g} s at a step of {h:g} s is {steps:.6g} steps: recording "
+                                        f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
+        n_steps = int(round(steps))
         if n_steps < 1:
             raise SystemDefinitionError(f"stop time {stop:g} s is shorter than one step ({h:g} s) after the start "
                                         f"time {start_time:g} s: nothing would run")
-        recorded = sum(len(s.variables) for s in self.slaves) + 1
-        if (n_steps + 1) * recorded * 8 > MAX_RECORD_BYTES:
-            raise SystemDefinitionError(f"stop time {stop:g} s at a step of {h:g} s is {n_steps} steps: recording "
-                                        f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
 
         # Start values: the system's parameter sets, then the caller's overrides.
         applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
