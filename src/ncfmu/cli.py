@@ -270,8 +270,12 @@ def cmd_vars(args) -> int:
         system = read_ssp(archive)
 
         def model_description(model: str) -> bytes:
-            with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(f"resources/{model}.fmu")) as fmu:
-                return fmu.read("modelDescription.xml")
+            source = next(c.source for c in system.components if c.model == model)
+            try:
+                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
+                    return fmu.read("modelDescription.xml")
+            except (KeyError, zipfile.BadZipFile) as err:
+                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
         rows = settable(system, model_description)
     else:
         system = get_system(args.system)

@@ -104,3 +104,31 @@ def test_a_bad_system_or_instance_is_one_line_and_status_2(capsys):
     assert main(["vars", "lathe_taper", "--instance", "feed"]) == 2
     assert capsys.readouterr().err == ("ncfmu vars: --instance 'feed': lathe_taper has no such instance (instances: "
                                        "panel, seq, limiter, x_axis, z_axis)\n")
+
+
+def _foreign_ssp(tmp_path, fmus, fmu_bytes: bytes):
+    """An .ssp of the user's: a ServoAxis-driven instance of a model ncfmu does not define ("Foreign")."""
+    from ncfmu.cosim.ssp import Component, Connection, System, pack, write_system
+    from ncfmu.systems.compose import component
+    (tmp_path / "fmus").mkdir()
+    (tmp_path / "fmus" / "Foreign.fmu").write_bytes(fmu_bytes)
+    (tmp_path / "fmus" / "ServoAxis.fmu").write_bytes(fmus["ServoAxis"].read_bytes())
+    system = System("mine", [Component("ext", "Foreign", {"Kv": 20.0}), component("y", "ServoAxis")],
+                    [Connection("y", "pos", "ext", "pos_cmd")], stop_time=1.0)
+    return pack(write_system(system, tmp_path / "systems"), tmp_path / "fmus", tmp_path / "mine.ssp")
+
+
+def test_an_ssp_with_a_model_of_another_make_lists_it_from_its_fmu(project, fmus, capsys, tmp_path):
+    archive = _foreign_ssp(tmp_path, fmus, fmus["ServoAxis"].read_bytes())     # another model, same interface
+    rows = _listing(capsys, str(archive))
+    assert rows["ext.Kv"][1:5] == ["parameter, fixed", "Real", "1/s", "20"]     # the archive's .ssv value
+    assert rows["ext.pos_cmd"][1] == "input" and rows["ext.pos_cmd"][-2] == "y.pos"
+    assert rows["ext.vel_ff"][-2] == "-" and "y.Kv" in rows
+
+
+def test_an_ssp_whose_foreign_fmu_is_broken_is_one_line(project, fmus, capsys, tmp_path):
+    archive = _foreign_ssp(tmp_path, fmus, b"not a zip")
+    assert main(["vars", str(archive)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ncfmu vars: {archive}: resources/Foreign.fmu has no readable modelDescription.xml")
+    assert err.count("\n") == 1
