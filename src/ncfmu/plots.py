@@ -209,6 +209,10 @@ def bode_design(p=None) -> Bode:
     return Bode(band, tuple(loops))
 
 
+#: a margin's label stays readable where it crosses a curve
+_ON_WHITE = {"boxstyle": "square,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.85}
+
+
 def bode_figure(p=None):
     """The Bode plot of the open velocity and position loops over :func:`bode_design`'s band: magnitude in
     dB, phase in degrees, each loop's gain and phase margin drawn where they are read (an infinite gain margin
@@ -235,14 +239,14 @@ def bode_figure(p=None):
         ax_ph.axvline(wc, color=colour, ls=":", lw=0.8)
         ax_ph.vlines(wc, -180.0, -180.0 + margins.phase_margin, color=colour, lw=2.5)
         ax_ph.annotate(f"PM {margins.phase_margin:.1f}°", (wc, -180.0 + margins.phase_margin / 2), xytext=(6, 0),
-                       textcoords="offset points", color=colour, fontsize=8, va="center")
+                       textcoords="offset points", color=colour, fontsize=8, va="center", bbox=_ON_WHITE)
         if np.isfinite(margins.gain_margin):
             w180, gm_db = margins.phase_crossover, 20 * np.log10(margins.gain_margin)
             ax_mag.axvline(w180, color=colour, ls="--", lw=0.8)
             ax_ph.axvline(w180, color=colour, ls="--", lw=0.8)
             ax_mag.vlines(w180, -gm_db, 0.0, color=colour, lw=2.5)
             ax_mag.annotate(f"GM {gm_db:.1f} dB", (w180, -gm_db / 2), xytext=(6, 0), textcoords="offset points",
-                            color=colour, fontsize=8, va="center")
+                            color=colour, fontsize=8, va="center", bbox=_ON_WHITE)
     for ax in (ax_mag, ax_ph):
         ax.axvline(1.0 / p.tau_current, color="0.4", ls="-.", lw=0.8)
         ax.grid(True, which="both", alpha=0.3)
