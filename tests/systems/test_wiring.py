@@ -193,3 +193,14 @@ def test_branches_warn_of_their_settings_once(project, capsys, tmp_path):
         "nothing",
         "[warning] --branch-set panel.emergency_at=1,2: panel.emergency_at acts only on panel.emergency, which no "
         "connection of lathe_taper reads: it changes nothing in this system"]
+
+
+def test_a_count_that_is_no_number_leaves_the_warnings_alone(project, capsys, tmp_path):
+    """The variant with n_blocks = 'two' fails (its own error); the warning rule does not crash on it."""
+    from ncfmu.cli import main
+    assert main(["sweep", "lathe_taper", "--vary", "seq.n_blocks=two,1", "--vary", "seq.block[2].Xd=0.2",
+                 "--stop-time", "0.1", "--workers", "0", "--out", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "failed: seq.n_blocks=two, seq.block[2].Xd=0.2" in out
+    assert _warnings(out) == ["[warning] --vary seq.block[2].Xd=0.2: seq reads block[1..1] only (n_blocks = 1): "
+                              "seq.block[2].Xd changes nothing"]

@@ -20,6 +20,7 @@ import re
 from collections.abc import Mapping
 
 from ..cosim.ssp import System
+from ..errors import ConfigError
 from ..ports import to_int
 from .compose import MODELS
 
@@ -45,7 +46,10 @@ def unreached(system: System, values: Mapping[str, object]) -> dict[str, str]:
         count_name = f"n_{entry['head']}s" if entry else ""
         if entry and count_name in ports:
             raw = values.get(f"{inst}.{count_name}", comp.parameters.get(count_name, ports[count_name].start))
-            count = to_int(raw)
+            try:
+                count = to_int(ports[count_name].check(raw))
+            except ConfigError:        # a count its rule refuses: the run says so, there is nothing to judge
+                continue
             if int(entry["k"]) > count:
                 out[qualified] = (f"{inst} reads {entry['head']}[1..{count}] only ({count_name} = {count}): "
                                   f"{qualified} changes nothing")
