@@ -204,3 +204,84 @@ def test_a_count_that_is_no_number_leaves_the_warnings_alone(project, capsys, tm
     assert "failed: seq.n_blocks=two, seq.block[2].Xd=0.2" in out
     assert _warnings(out) == ["[warning] --vary seq.block[2].Xd=0.2: seq reads block[1..1] only (n_blocks = 1): "
                               "seq.block[2].Xd changes nothing"]
+
+
+def test_settings_a_program_leaves_unread_are_warned(project, capsys, tmp_path):
+    from ncfmu.cli import main
+    # the seed's program names D1..D5, F1, F2, F7 and T1: D6, F3, T2 are switches nothing reads
+    assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "feed.D6=1",
+                 "--set", "feed.F3=1", "--set", "feed.T2=3", "--set", "feed.T1=2", "--set", "feed.D3=3.5"]) == 0
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --set feed.D6=1: feed reads D1, D2, D3, D4, D5 only (the D settings its program names): "
+        "feed.D6 changes nothing",
+        "[warning] --set feed.F3=1: feed reads F1, F2, F7 only (the F settings its program names): feed.F3 changes "
+        "nothing",
+        "[warning] --set feed.T2=3: feed reads T1 only (the T settings its program names): feed.T2 changes nothing"]
+    # a program of the run's own that names T2 reads it
+    program = "M0: X+D3F7; M1: T2; M2: X-D3F7; M3: END; M41: XF7S1; M42: END; M43: END"
+    assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set",
+                 f"feed.program={program}", "--set", "feed.T2=3"]) == 0
+    assert _warnings(capsys.readouterr().out) == []
+    # a part program replaces the contour's point path: its points, side and feed are read no more
+    assert main(["run", "mill_contour", "--stop-time", "0.2", "--out", str(tmp_path), "--set",
+                 "contour.program=G01 X5 Y-10 F300\nM02", "--set", "contour.side=1", "--set", "contour.point[2].x=50",
+                 "--set", "contour.diameter_delta=0.2"]) == 0
+    assert _warnings(capsys.readouterr().out) == [
+        "[warning] --set contour.side=1: contour runs its program (program is set), not the point path: "
+        "contour.side changes nothing",
+        "[warning] --set contour.point[2].x=50: contour runs its program (program is set), not the point path: "
+        "contour.point[2].x changes nothing"]
+
+
+# -- unread is the controllers' behaviour -----------------------------------------------------------------
+SHORT_PROGRAM = "M0: X+D1F1; M1: T1; M2: X-D1F1; M3: END; M41: XF7S1; M42: END; M43: END"
+
+
+def _feed_trace(**changes) -> list[tuple]:
+    """A short cycle of the plain ProgrammableFeed with an axis that stands where commanded."""
+    from ncfmu.controllers import ProgrammableFeed
+    feed = ProgrammableFeed(**{"program": SHORT_PROGRAM, "D1": 0.5, "F1": 5.0, "T1": 0.2, **changes})
+    inputs = {"start": False, "wear_start": False, "emergency": False, "mfin": False, "alarm_in": False,
+              "feed_hold": False, "feed_override": 1.0, "x_pos": 0.0, "y_pos": 0.0, "x_in_position": True,
+              "y_in_position": True}
+    trace = []
+    for k in range(700):
+        inputs["start"] = k == 1
+        out = feed.step(k * 1e-3, 1e-3, inputs)
+        inputs["x_pos"] = out["x_cmd"]
+        trace.append((out["x_cmd"], out["x_vff"], out["pc"], out["run"]))
+    assert not trace[-1][3] and trace[300][0] > 0          # the cycle ran and ended inside the trace
+    return trace
+
+
+def test_feed_unread_names_exactly_the_switches_the_cycle_does_not_read():
+    from ncfmu.controllers import ProgrammableFeed
+    params = {**ProgrammableFeed.default_parameters(), "program": SHORT_PROGRAM, "D1": 0.5, "F1": 5.0, "T1": 0.2}
+    unread = set(ProgrammableFeed.unread(params))
+    assert unread == {f"{letter}{k}" for letter in "DFT" for k in range(1, 8)} - {"D1", "F1", "T1", "F7"}
+    base = _feed_trace()
+    for name in sorted(unread):
+        assert _feed_trace(**{name: 0.3}) == base, name                 # changes nothing
+    for name, value in (("D1", 0.4), ("F1", 4.0), ("T1", 0.1)):
+        assert _feed_trace(**{name: value}) != base, name               # the rule has teeth
+    # F7 is read by the emergency return (M41), which this cycle does not strike: read, not warned
+
+
+def test_contour_unread_is_the_point_path_when_a_program_runs():
+    from ncfmu.controllers import ContourInterpolator
+    from ncfmu.systems import parameters
+    program = {"program": "G01 X5 Y-10 F300\nG01 X5 Y0\nM02"}
+    params = {**parameters("mill_contour", "contour"), **program}
+    unread = ContourInterpolator.unread(params)
+    points = {p.name for p in ContourInterpolator.ports("parameter") if p.name.startswith("point[")}
+    assert set(unread) == points | {"n_points", "closed", "side", "feed"}
+
+    def path(**changes):
+        return [(m.element, m.feed) for m in ContourInterpolator(**{**params, **changes}).tool_path]
+    base = path()
+    for name, value in (("side", 1), ("feed", 2.0), ("closed", False), ("point[2].x", 50.0), ("n_points", 5)):
+        assert path(**{name: value}) == base, name
+    assert path(x_start=1.0) != base                   # the program starts where the tool stands: read
+    # without a program the point path runs: only the points beyond n_points (6) go unread
+    assert set(ContourInterpolator.unread(parameters("mill_contour", "contour"))) == \
+        {name for name in points if int(name[6:name.index("]")]) > 6}

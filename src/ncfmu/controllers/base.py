@@ -8,11 +8,15 @@ through ``dt`` (``t`` is for messages). Nothing here imports pythonfmu or fmpy.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import Port, boolean, real, to_float, to_int
+
+#: An entry of a counted table: ``block[3].Xd`` (counted by ``n_blocks``).
+_TABLE_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
 class Controller:
@@ -72,6 +76,31 @@ class Controller:
     def retune(self, values: Mapping[str, object]) -> None:
         """Apply parameters changed during a run (tunable ones): checked as at construction."""
         self.configure(self.check_parameters(values))
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """The parameters that the parameter set ``values`` leaves unread, each with why (``reads block[1..2] only
+        (n_blocks = 2)``): a setting of one of them changes nothing, and ncfmu says so. Here, the entries
+        ``<head>[k].<field>`` of a counted table (a parameter ``n_<head>s``) beyond its count; a controller
+        whose program or mode leaves parameters unread adds them."""
+        ports = {p.name: p for p in cls.ports("parameter")}
+        counts: dict[str, int | None] = {}
+        out: dict[str, str] = {}
+        for name in ports:
+            entry = _TABLE_ENTRY.match(name)
+            count_name = f"n_{entry['head']}s" if entry else ""
+            if not entry or count_name not in ports:
+                continue
+            if count_name not in counts:
+                try:
+                    counts[count_name] = to_int(ports[count_name].check(values.get(count_name,
+                                                                                   ports[count_name].start)))
+                except ConfigError:          # a count its rule refuses: the run says so
+                    counts[count_name] = None
+            count = counts[count_name]
+            if count is not None and int(entry["k"]) > count:
+                out[name] = f"reads {entry['head']}[1..{count}] only ({count_name} = {count})"
+        return out
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, object]) -> Controller:

@@ -179,6 +179,18 @@ class ContourInterpolator(CycleController):
         boolean("alarm", "output", None, "geometry cannot be corrected, or a bad input"),
     )
 
+    #: What only the point path reads: a program replaces it (its own G41/G42, F and path).
+    POINT_PATH_ONLY = ("n_points", "closed", "side", "feed")
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        out = super().unread(values)
+        if str(values.get("program", "")).strip():
+            for p in cls.ports("parameter"):
+                if p.name.startswith("point[") or p.name in cls.POINT_PATH_ONLY:
+                    out[p.name] = "runs its program (program is set), not the point path"
+        return out
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.program = str(values["program"])
         self.closed = bool(values["closed"])

@@ -197,6 +197,22 @@ class ProgrammableFeed(CycleController):
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input)"),
     )
 
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """Also the D, F and T settings no word of the program names."""
+        out = super().unread(values)
+        try:
+            words = parse_program(str(values.get("program", EMPTY_PROGRAM))).values()
+        except ProgramError:            # the run refuses the program, naming line and column
+            return out
+        for letter, index in (("D", "d"), ("F", "f"), ("T", "t")):
+            used = sorted({getattr(w, index) for w in words} - {0})
+            for k in range(1, 8):
+                if k not in used:
+                    out[f"{letter}{k}"] = (f"reads {', '.join(f'{letter}{i}' for i in used) or f'no {letter} setting'}"
+                                           f"{' only' if used else ''} (the {letter} settings its program names)")
+        return out
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.D = [real_param(values, f"D{k}") for k in range(1, 8)]
         self.F = [real_param(values, f"F{k}") for k in range(1, 8)]

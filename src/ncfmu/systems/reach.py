@@ -9,22 +9,19 @@ instances of other models are not judged):
   ``feed_hold``, ``override`` on ``feed_override``, ``mfin_delay`` (and the input ``m_active``) on ``mfin``,
   ``pulse`` on the three push buttons. When no connection starts at any of those outputs, the setting
   reaches nothing (``panel.emergency_at`` in a lathe system, whose sequencer has no EMB input).
-- An entry ``<head>[k].<field>`` of a counted table -- a model with a parameter ``n_<head>s``: the
-  CutSequencer's ``block[k]``, the AreaLimiter's ``region[k]``, the ContourInterpolator's ``point[k]`` --
-  reaches nothing when ``k`` is above that count (the count as the same run sets it).
+- A parameter its model's ``unread`` names for the run's parameter set (the system's, with the run's
+  settings on top) reaches nothing: an entry ``<head>[k].<field>`` of a counted table beyond its count
+  ``n_<head>s`` (the CutSequencer's ``block[k]``, the AreaLimiter's ``region[k]``, the ContourInterpolator's
+  ``point[k]``); the ContourInterpolator's point path (``point[k]``, ``n_points``, ``closed``, ``side``,
+  ``feed``) when ``program`` is set; a ProgrammableFeed's D, F or T setting its program names nowhere.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 
 from ..cosim.ssp import System
-from ..errors import ConfigError
-from ..ports import to_int
 from .compose import MODELS
-
-_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
 def unreached(system: System, values: Mapping[str, object]) -> dict[str, str]:
@@ -42,17 +39,11 @@ def unreached(system: System, values: Mapping[str, object]) -> dict[str, str]:
         ports = {p.name: p for p in logic.PORTS}
         if var not in ports or ports[var].causality == "output":
             continue
-        entry = _ENTRY.match(var)
-        count_name = f"n_{entry['head']}s" if entry else ""
-        if entry and count_name in ports:
-            raw = values.get(f"{inst}.{count_name}", comp.parameters.get(count_name, ports[count_name].start))
-            try:
-                count = to_int(ports[count_name].check(raw))
-            except ConfigError:        # a count its rule refuses: the run says so, there is nothing to judge
-                continue
-            if int(entry["k"]) > count:
-                out[qualified] = (f"{inst} reads {entry['head']}[1..{count}] only ({count_name} = {count}): "
-                                  f"{qualified} changes nothing")
+        if ports[var].causality == "parameter":
+            mine = {name.partition(".")[2]: v for name, v in values.items() if name.partition(".")[0] == inst}
+            why = logic.unread({**logic.default_parameters(), **comp.parameters, **mine}).get(var)
+            if why:
+                out[qualified] = f"{inst} {why}: {qualified} changes nothing"
                 continue
         outputs = logic.ACTS_ON.get(var, tuple(p.name for p in logic.ports("output")))
         if not any((inst, o) in read for o in outputs):
