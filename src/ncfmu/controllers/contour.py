@@ -462,7 +462,8 @@ class ContourInterpolator(Controller):
         if self._i < len(run):
             at = list(self._position())
         elif run:
-            at = [self._counts(run[-1].element.end[0]) * self.dda_unit, self._counts(run[-1].element.end[1]) * self.dda_unit]
+            end = run[-1].element.end
+            at = [self._counts(end[0]) * self.dda_unit, self._counts(end[1]) * self.dda_unit]
         else:
             at = [self.x_start, self.y_start]
         if self.cmd != at:

@@ -492,7 +492,7 @@ class ProgrammableFeed(Controller):
         """A restored state: the word executing is the program's at the program counter (or the return to the
         origin before a start), the command where the interpolator stands and, while a cycle runs, within
         max_following_error (and one step) of the actual axes."""
-        from .base import POSITION_LIMIT, SPEED_LIMIT      # here: this check is one self-contained piece
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
         why = super().check_state(inputs)
         if why:
             return why
@@ -513,6 +513,8 @@ class ProgrammableFeed(Controller):
                 return f"word = {word!r}: not the word at M{self.pc} of the program"
         if self.m_active and (word is None or word.kind != "aux" or word.m != self.m_active):
             return f"m_active = {self.m_active!r}: not the M word executing"
+        if not 0.0 <= self._waiting <= self.inpos_timeout:
+            return f"_waiting = {self._waiting!r}: not within inpos_timeout = {self.inpos_timeout:g} s"
         if not 0.0 <= self.dwell_left <= max(self.T):
             return f"dwell_left = {self.dwell_left!r}: not within the dwell settings T"
         for a in ("x", "y"):

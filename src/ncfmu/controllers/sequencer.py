@@ -358,7 +358,7 @@ class CutSequencer(Controller):
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
         """A restored state: the registers within the present block, the command where the interpolator
         stands and (while running) within max_following_error (and one step) of the actual axes."""
-        from .base import POSITION_LIMIT, SPEED_LIMIT      # here: this check is one self-contained piece
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
         why = super().check_state(inputs)
         if why:
             return why
@@ -376,6 +376,8 @@ class CutSequencer(Controller):
             return f"passes_left = {self.passes_left!r}, pass_no = {self.pass_no!r}: not within N = {b.N}"
         if not 0.0 <= self.sigma_x <= b.Xf + b.N * b.Xd + 1e-9:
             return f"sigma_x = {self.sigma_x!r}: not within 0..Xf + N*Xd = {b.Xf + b.N * b.Xd:g}"
+        if not 0.0 <= self._waiting <= self.inpos_timeout:
+            return f"_waiting = {self._waiting!r}: not within inpos_timeout = {self.inpos_timeout:g} s"
         for i, p in enumerate(self._waypoints):
             if type(p) is not tuple or len(p) != 2 or not all(type(x) is float and abs(x) <= POSITION_LIMIT for x in p):
                 return f"_waypoints[{i}] = {p!r}: not an (x, z) position within {POSITION_LIMIT:g} mm"

@@ -334,14 +334,14 @@ def _port_value(port: Port, value: Any, where: str) -> None:
     want = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[port.type]
     if type(value) is not want:
         raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {port.type}")
-    if want is float and not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise StateError(f"{where} = {value!r}: must be finite")
 
 
 def _check_inputs(logic_class: type[Controller], inputs: dict[str, object]) -> None:
     """Every input of its port's type and rule; positions within reach."""
     for port in logic_class.ports("input"):
-        value = inputs[port.name]
+        value: Any = inputs[port.name]
         if port.type == "Boolean" and type(value) is int and value in (0, 1):
             continue                                   # the FMI Boolean a host wrote as 0/1
         _port_value(port, value, f"inputs.{port.name}")
@@ -350,8 +350,10 @@ def _check_inputs(logic_class: type[Controller], inputs: dict[str, object]) -> N
                 port.check(value)
             except ConfigError as err:
                 raise StateError(f"inputs.{err}") from None
-        if port.unit == "mm" and abs(value) > POSITION_LIMIT:  # type: ignore[arg-type]
+        if port.unit == "mm" and abs(value) > POSITION_LIMIT:
             raise StateError(f"inputs.{port.name} = {value!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long")
+        if port.unit == "mm/s" and abs(value) > SPEED_LIMIT:
+            raise StateError(f"inputs.{port.name} = {value!r}: faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
 
 
 def _check_outputs(logic_class: type[Controller], outputs: Any, where: str) -> None:
@@ -360,9 +362,9 @@ def _check_outputs(logic_class: type[Controller], outputs: Any, where: str) -> N
         raise StateError(f"{where}: not the outputs of {logic_class.MODEL_NAME}")
     for port in ports:
         _port_value(port, outputs[port.name], f"{where}[{port.name!r}]")
-        if port.unit == "mm" and abs(outputs[port.name]) > POSITION_LIMIT:  # type: ignore[arg-type]
+        if port.unit == "mm" and abs(outputs[port.name]) > POSITION_LIMIT:
             raise StateError(f"{where}[{port.name!r}] = {outputs[port.name]!r}: beyond {POSITION_LIMIT:g} mm")
-        if port.unit == "mm/s" and abs(outputs[port.name]) > SPEED_LIMIT:  # type: ignore[arg-type]
+        if port.unit == "mm/s" and abs(outputs[port.name]) > SPEED_LIMIT:
             raise StateError(f"{where}[{port.name!r}] = {outputs[port.name]!r}: faster than {SPEED_LIMIT:g} mm/s")
 
 
@@ -479,5 +481,6 @@ def _loads(data: bytes, logic_class: type[Controller], build_logic: Callable[[di
     if saved is None:                     # saved before exitInitializationMode: checked when it is left
         return None, parameters, inputs
     logic = build_logic(parameters)
+    parameters = logic_class.check_parameters(parameters)          # each as its port's type (as the FMU holds it)
     _restore_logic(logic, saved, parameters, inputs)
     return logic, parameters, inputs
