@@ -17,6 +17,12 @@ ncfmu package, among the modules already loaded; the object is created empty (``
 and its attributes filled with decoded plain data. The controller itself is rebuilt from the saved
 parameters (its ``configure()`` checks them) before its dynamic attributes are restored; attributes
 it lists in ``DERIVED`` (python-control models, rebuilt from the parameters) are not saved.
+
+Restoring checks every value, not only the names (see "checking" below): the freshly built controller is
+the template for the saved attributes, inputs and outputs keep their ports' types and rules, the
+controller judges its own registers (``Controller.check_state``), and one step of a copy must run sanely.
+Whatever breaks a rule, and whatever error decoding or checking meets, is a :class:`StateError` naming the
+field; no other exception leaves :func:`loads`.
 """
 
 from __future__ import annotations
@@ -336,6 +342,8 @@ def _port_value(port: Port, value: Any, where: str) -> None:
         raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {port.type}")
     if isinstance(value, float) and not math.isfinite(value):
         raise StateError(f"{where} = {value!r}: must be finite")
+    if isinstance(value, int) and not -2 ** 31 <= value < 2 ** 31:
+        raise StateError(f"{where} = {_text(value)}: beyond the range of an fmi2Integer")
 
 
 def _check_inputs(logic_class: type[Controller], inputs: dict[str, object]) -> None:
