@@ -109,10 +109,10 @@ class Controller:
         if not all(type(m) is tuple and len(m) == 2 and m[0] in ("info", "warning", "error") and type(m[1]) is str
                    for m in self.messages):
             return "messages: not a list of (info|warning|error, text) pairs"
-        inputs_ = {p.name: p for p in self.ports("input")}
+        input_ports = {p.name: p for p in self.ports("input")}
         for name, value in vars(self).items():
             if isinstance(value, PositionGuard):
-                if not all(n in inputs_ and inputs_[n].unit == "mm" for n in value.names):
+                if not all(n in input_ports and input_ports[n].unit == "mm" for n in value.names):
                     return f"{name}.names = {value.names!r}: not position inputs of {type(self).__name__}"
                 if value.last is not None:
                     if type(value.last) is not list or len(value.last) != len(value.names):
@@ -121,7 +121,7 @@ class Controller:
                         if type(x) is not float or not abs(x) <= POSITION_LIMIT:
                             return f"{name}.last[{i}] = {x!r}: must be a finite position within {POSITION_LIMIT:g} mm"
             elif isinstance(value, OverrideDial):
-                port = inputs_.get(value.name)
+                port = input_ports.get(value.name)
                 if port is None or value.hi != port.max:
                     return f"{name}: clamps {value.name!r} to 0..{value.hi!r}, not to its input's range"
         return None
