@@ -65,6 +65,26 @@ static inline int fmi2_step_ok(const Fmi2Log *log, double t, double h)
     return 0;
 }
 
+/* 1 when the step, counted in whole nanoseconds as ncfmu's FMUs count it, is at least 1 ns. */
+static inline int fmi2_step_ns_ok(const Fmi2Log *log, double h)
+{
+    if (nearbyint(h * 1e9) > 0.0) return 1;
+    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
+    return 0;
+}
+
+/* 1 when a step at ``t`` continues from ``next`` (where the last successful step ended, or the start time,
+ * or the time of a restored state), as the Reference-FMUs require; within half a nanosecond (steps are
+ * whole nanoseconds) and the rounding of the host's own time arithmetic. */
+static inline int fmi2_continues_ok(const Fmi2Log *log, double next, double t)
+{
+    if (fabs(t - next) <= 0.5e-9 + 1e-12 * fabs(next)) return 1;
+    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
+             "last step ended): an FMU steps on from where it is, or from a state restored with fmi2SetFMUstate",
+             t, next);
+    return 0;
+}
+
 /* 1 when ``s`` is well-formed UTF-8 (no overlongs, no surrogates, at most U+10FFFF). */
 static inline int fmi2_utf8_ok(const unsigned char *s)
 {
