@@ -11,8 +11,8 @@ import gc
 import sys
 import tempfile
 
-from fmpy import extract, read_model_description
 import fmpy.fmi2 as fmi2
+from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 
