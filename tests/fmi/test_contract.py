@@ -8,6 +8,8 @@ import inspect
 import re
 from pathlib import Path
 
+import pytest
+
 from ncfmu.fmi import contract
 from ncfmu.fmi.adapter import ControllerSlave
 from ncfmu.fmi.builder import C_LAYER, CONTRACT_HEADER, SHIM_SOURCE, fmi_headers
@@ -75,3 +77,32 @@ def test_the_ports_table_speaks_the_contracts_codes(fmus):
     log = slave.fmi_take_log()
     assert [s for s, _, _ in log] == [contract.STATUS["ERROR"]] * 2 and "block[1].Xd = -0.5" in log[0][2]
     assert slave.fmi_take_log() == []
+
+
+def test_a_serialized_state_is_the_slaves_bytes_and_its_time(fmus):
+    """The shim appends the state's time (contract.STATE_TRAILER) so a state restored from bytes goes on from it;
+    a state whose trailer is gone is refused naming why, and one with an edited time goes on from that time."""
+    import tempfile
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(fmus["CutSequencer"]))
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmus["CutSequencer"]), tempfile.mkdtemp()),
+                    modelIdentifier="CutSequencer", instanceName="dut")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    for k in range(7):
+        fmu.doStep(k * 1e-3, 1e-3)
+    blob = bytes(fmu.serializeFMUstate(fmu.getFMUstate()))
+    data, time = contract.split_state(blob)
+    assert data.startswith(b'{"format":"ncfmu-fmu-state"') and time == 6e-3 + 1e-3
+    with pytest.raises(FMICallException):
+        fmu.deSerializeFMUstate(data)                                 # no trailer: refused
+    fmu.setFMUstate(fmu.deSerializeFMUstate(contract.join_state(data, 0.5)))
+    fmu.doStep(0.5, 1e-3)                                             # goes on from the state's time
+    fmu.terminate()
+    fmu.freeInstance()

@@ -68,7 +68,27 @@ TYPE = {"Real": 1, "Integer": 2, "Boolean": 3, "String": 4}
 #: A variable's causality in PORTS (anything else -- local, independent -- is OTHER).
 CAUSALITY = {"OTHER": 0, "INPUT": 1, "OUTPUT": 2, "PARAMETER": 3}
 
+#: What the shim appends to the slave's serialized state: these 8 bytes, then the state's time (a native double),
+#: so that a state restored from bytes continues from its own time. The slave never sees them.
+STATE_TRAILER = b"ncfmu-t1"
+STATE_TRAILER_SIZE = len(STATE_TRAILER) + 8
+
 HEADER_NAME = "ncfmu_contract.h"
+
+
+def split_state(serialized: bytes) -> tuple[bytes, float]:
+    """An FMU's serialized state -> (the slave's bytes, the state's time); ValueError without the trailer."""
+    import struct
+    data, trailer = bytes(serialized[:-STATE_TRAILER_SIZE]), bytes(serialized[-STATE_TRAILER_SIZE:])
+    if len(serialized) < STATE_TRAILER_SIZE or not trailer.startswith(STATE_TRAILER):
+        raise ValueError("not a state serialized by an ncfmu Python FMU (no time trailer)")
+    return data, struct.unpack("=d", trailer[len(STATE_TRAILER):])[0]
+
+
+def join_state(data: bytes, time: float) -> bytes:
+    """The inverse of :func:`split_state` (for tests that edit a state's bytes)."""
+    import struct
+    return bytes(data) + STATE_TRAILER + struct.pack("=d", time)
 
 
 def entry(macro: str) -> Entry:
@@ -87,6 +107,9 @@ def c_header() -> str:
     lines.append("")
     lines.append("/* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */")
     lines.append("#define NCFMU_CONTRACT_NAMES(X) " + " ".join(f"X({e.macro})" for e in ENTRIES))
+    lines.append("")
+    lines.append(f'#define NCFMU_STATE_TRAILER "{STATE_TRAILER.decode()}"  /* then the time, a double */')
+    lines.append(f"#define NCFMU_STATE_TRAILER_SIZE {STATE_TRAILER_SIZE}")
     lines.append("")
     for group, table in (("STATUS", STATUS), ("TYPE", TYPE), ("CAUSALITY", CAUSALITY)):
         for name, value in table.items():

@@ -210,7 +210,6 @@ static int names_ready(void)
  * dereferences one faults at once instead of corrupting memory), counted up, never handed out twice. */
 #define INSTANCE_TAG ((uintptr_t)0x4E43460000000000ull)
 #define STATE_TAG    ((uintptr_t)0x4E43530000000000ull)
-#define STATE_TRAILER "ncfmu-t1"        /* 8 bytes + the state's time (a double) after the Python bytes */
 
 typedef struct {
     uintptr_t handle;
@@ -932,7 +931,9 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
 
 /* The serialized state: the Python side's bytes, then STATE_TRAILER and the state's time, so that a state
  * restored from bytes continues from its own time. */
-#define TRAILER_SIZE (8 + sizeof(double))
+#define TRAILER_SIZE NCFMU_STATE_TRAILER_SIZE
+#define STATE_TRAILER NCFMU_STATE_TRAILER
+_Static_assert(sizeof NCFMU_STATE_TRAILER - 1 + sizeof(double) == NCFMU_STATE_TRAILER_SIZE, "trailer: 8 bytes + a double");
 
 static PyObject *serialized(Inst *i, const char *fmi_call, fmi2FMUstate s)
 {
@@ -974,8 +975,8 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], 
         } else {
             double time = state_find(i, "fmi2SerializeFMUstate", s)->time;
             memcpy(b, data, (size_t)n);
-            memcpy(b + n, STATE_TRAILER, 8);
-            memcpy(b + n + 8, &time, sizeof time);
+            memcpy(b + n, STATE_TRAILER, sizeof STATE_TRAILER - 1);
+            memcpy(b + n + sizeof STATE_TRAILER - 1, &time, sizeof time);
             st = fmi2OK;
         }
     }
@@ -995,7 +996,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
                  !s ? "FMUstate pointer" : "byte array");
         return fmi2Error;
     }
-    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, 8) != 0) {
+    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, sizeof STATE_TRAILER - 1) != 0) {
         FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: %zu bytes that are not a "
                  "state this FMU serialized (no time trailer)", size);
         return fmi2Error;
