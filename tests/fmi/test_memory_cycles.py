@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow        # a fresh process and 350 cycles per FMU
+
 CYCLES = Path(__file__).with_name("memory_cycles.py")
 FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis"]
 

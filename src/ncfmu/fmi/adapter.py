@@ -10,6 +10,9 @@ The decorator returns a :class:`ControllerSlave` subclass that registers every p
 controller (declared once, as data), builds and checks the controller at
 ``exitInitializationMode`` and steps it in ``doStep``. Messages the controller queues go to the FMU
 log with their level.
+
+The FMU's binary (``fmi/c/status_shim.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
+else: the contract is the table in :mod:`ncfmu.fmi.contract`, described in ``docs/architecture.md``.
 """
 
 from __future__ import annotations
