@@ -94,3 +94,15 @@ def test_info_messages_reach_the_logger_only_with_debug_logging_on(fmus, debug_l
     assert [s for s, _ in host.log if s != 0] == [3]                 # the alarm: always
     assert info == (["dut: t = 0.0020 s: inputs sane again; following the commands"] if debug_logging else [])
     host.close()
+
+
+@pytest.mark.parametrize("model", ["ContourInterpolator", "CutSequencer"])
+def test_warnings_reach_the_logger_without_debug_logging(fmus, model):
+    host = Host(fmus[model], debug_logging=False)
+    host.fmu.exitInitializationMode()
+    host.fmu.setReal([host.vr["feed_override"]], [3.0])
+    host.fmu.setBoolean([host.vr["start"]], [True])                # the override is read while a cycle runs
+    host.steps(3)
+    warnings = [m for s, m in host.log if s == 1]
+    assert len(warnings) == 1 and "input feed_override = 3.0: outside 0..1.5, clamped to 1.5" in warnings[0]
+    host.close()
