@@ -42,3 +42,28 @@ def test_every_misuse_is_refused_and_nothing_crashes(fmus, model):
     # the NULL/freed/made-up component cases cover every function the binary exports
     covered = set(re.search(r"^CALLS (.*)$", proc.stdout, re.MULTILINE).group(1).split())
     assert covered == exported_fmi_functions(fmus[model]) - NO_COMPONENT
+
+
+@pytest.fixture(scope="module")
+def native_host(tmp_path_factory) -> Path:
+    from ncfmu.fmi.builder import fmi_headers
+    exe = tmp_path_factory.mktemp("host") / "fmi_host"
+    host_c = Path(__file__).parents[1] / "native" / "fmi_host.c"
+    subprocess.run(["cc", "-O1", "-Wall", f"-I{fmi_headers()}", "-o", str(exe), str(host_c), "-ldl", "-lpthread"],
+                   check=True)
+    return exe
+
+
+@pytest.mark.parametrize("model", PYTHON_FMUS)
+def test_misuse_in_a_native_host_without_python(fmus, native_host, model, tmp_path):
+    """The same refusals in a C host with an empty environment, where the FMU loads Python itself."""
+    from fmpy import extract, read_model_description
+    md = read_model_description(str(fmus[model]))
+    folder = Path(extract(str(fmus[model]), unzipdir=str(tmp_path)))
+    binary = folder / "binaries" / "linux64" / f"{model}.so"
+    proc = subprocess.run(["env", "-i", str(native_host), str(binary), md.guid, (folder / "resources").as_uri(), "0"],
+                          capture_output=True, text=True, timeout=120)
+    cases = re.findall(r"^CASE (\S+) (HELD|BROKEN)$", proc.stdout, re.MULTILINE)
+    assert proc.returncode == 0, f"died after {cases[-1:]}: {proc.stderr[-2000:]}"
+    assert [name for name, result in cases if result != "HELD"] == []
+    assert re.search(r"^CASES 36 HELD 36$", proc.stdout, re.MULTILINE), proc.stdout[-500:]
