@@ -54,6 +54,7 @@ def native_host(tmp_path_factory) -> Path:
     return exe
 
 
+@pytest.mark.slow                                      # compiles the host, a process per FMU
 @pytest.mark.parametrize("model", PYTHON_FMUS)
 def test_misuse_in_a_native_host_without_python(fmus, native_host, model, tmp_path):
     """The same refusals in a C host with an empty environment, where the FMU loads Python itself."""
