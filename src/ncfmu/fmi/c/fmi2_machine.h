@@ -1,7 +1,7 @@
 /*
  * ncfmu: the FMI 2.0 co-simulation state machine, written once.
  *
- * Included by both of ncfmu's FMI layers: the status shim in front of pythonfmu's library (the
+ * Included by both of ncfmu's FMI layers: the Python FMUs' binary, status_shim.c (the
  * controller FMUs) and the native layer of the C FMUs (ServoAxis). It says which call is allowed in
  * which state, what a refused call returns (fmi2Error: the instance stays usable and freeable;
  * fmi2Fatal is kept for a broken instance, never for bad input), and checks what every FMU checks
