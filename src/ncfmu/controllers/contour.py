@@ -419,3 +419,49 @@ class ContourInterpolator(CycleController):
         out["segment"] = self.segment
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the cycle's moves are the tool path (after at most an approach to its start), their
+        plans and the DDA what they give, the command the point the path position gives."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        run, path = self._run, self.tool_path
+        k = len(run) - len(path)
+        if run and (k not in (0, 1) or run[k:] != path):
+            return "_run: not the tool path (after at most an approach to its start)"
+        if k == 1 and not (run[0].rapid and run[0].feed == self.approach_feed and run[0].label == 0
+                           and isinstance(run[0].element, Line) and run[0].element.end == path[0].element.start
+                           and all(abs(x) <= POSITION_LIMIT for x in run[0].element.start)):
+            return f"_run[0] = {run[0]!r}: not an approach to the tool path's start"
+        if not 0.0 < self._plan_scale <= 1.5:
+            return f"_plan_scale = {self._plan_scale!r}: not a feed override in (0, 1.5]"
+        if self._caps_run != ([math.inf] * k + self._caps if run else []):
+            return "_caps_run: not the speed caps of the cycle's moves"
+        planned = (self._plan(run, self._caps_run, None), self._plan(run, self._caps_run, self._plan_scale))
+        if (self._v_end_hard, self._v_end_soft) != planned:
+            return "_v_end_hard, _v_end_soft: not the plan of the cycle's moves"
+        if not 0 <= self._i <= len(run):
+            return f"_i = {self._i!r}: not a move of the cycle ({len(run)} moves)"
+        segment, dda = self.segment, self._dda
+        self._enter(self._i)                                          # the DDA (and the label) it loads
+        if self._dda != dda or self.segment != segment:
+            return f"_dda = {dda!r}, segment = {segment!r}: not what move {self._i} loads"
+        top = max(self.feed, self.approach_feed) * 1.5
+        if self._i < len(run) and not (0.0 <= self._s <= run[self._i].element.length and 0.0 <= self.v <= top):
+            return f"_s = {self._s!r}, v = {self.v!r}: not within move {self._i}"
+        if math.hypot(*self.vff) > self.v + 1e-9 and self.v <= top:
+            return f"vff = {self.vff!r}: faster than the path speed v = {self.v!r}"
+        if self._i < len(run):
+            at = list(self._position())
+        elif run:
+            end = run[-1].element.end
+            at = [self._counts(end[0]) * self.dda_unit, self._counts(end[1]) * self.dda_unit]
+        else:
+            at = [self.x_start, self.y_start]
+        if self.cmd != at:
+            return f"cmd = {self.cmd!r}: not the point of the path the state stands at ({at!r})"
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None

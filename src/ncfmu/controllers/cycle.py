@@ -149,3 +149,19 @@ class CycleController(Controller):
         if not self.alarm:
             self.say("error", f"t = {t:.4f} s: {why}; {consequence}")
         self.alarm = True
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the in-position check judges with this controller's band and timeout and has
+        waited no longer than the timeout (then the rules of :meth:`Controller.check_state`)."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        check = self.inpos
+        if (check.band, check.timeout) != (self.inpos_band, self.inpos_timeout):
+            return (f"inpos: band {check.band!r}, timeout {check.timeout!r}: not inpos_band = {self.inpos_band:g} mm, "
+                    f"inpos_timeout = {self.inpos_timeout:g} s")
+        if not (type(check.steps) is int and check.steps >= 0):
+            return f"inpos.steps = {check.steps!r}: must be a count >= 0"
+        if not 0.0 <= check.waited <= self.inpos_timeout:
+            return f"inpos.waited = {check.waited!r}: not within inpos_timeout = {self.inpos_timeout:g} s"
+        return None

@@ -483,3 +483,48 @@ class ProgrammableFeed(CycleController):
         out["return_counter_x"], out["return_counter_y"] = self.rc["x"], self.rc["y"]
         out["alarm"] = self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the word executing is the program's at the program counter (or the return to the
+        origin before a start), the command where the interpolator stands and, while a cycle runs, within
+        max_following_error (and one step) of the actual axes."""
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        why = super().check_state(inputs)
+        if why:
+            return why
+        why = self.move_fault(self.move, self.accel, {1.0, self.return_rate, *self.F})
+        if why:
+            return why
+        if self.mode not in (IDLE, RUN, EMERGENCY):
+            return f"mode = {self.mode!r}: not idle, run or emergency"
+        for name in ("pc", "_then"):
+            if getattr(self, name) not in self.program and getattr(self, name) != 0:
+                return f"{name} = {getattr(self, name)!r}: no address of the program"
+        word = self.word
+        if word is not None:
+            axis = word.axis.upper()
+            if not (word == self.program.get(self.pc)
+                    or (word.line == 0 and word.axis in ("x", "y")
+                        and word == Word("return", f"{axis} to the feed origin", 0, axis=word.axis))):
+                return f"word = {word!r}: not the word at M{self.pc} of the program"
+        if self.m_active and (word is None or word.kind != "aux" or word.m != self.m_active):
+            return f"m_active = {self.m_active!r}: not the M word executing"
+        if not 0.0 <= self.dwell_left <= max(self.T):
+            return f"dwell_left = {self.dwell_left!r}: not within the dwell settings T"
+        for a in ("x", "y"):
+            if not abs(self.cmd[a] - self.rc[a]) <= POSITION_LIMIT:
+                return f"rc[{a!r}] = {self.rc[a]!r}: puts the feed origin beyond {POSITION_LIMIT:g} mm"
+        if (self.cmd["x"], self.cmd["y"]) != self.move.position():
+            return f"cmd = {self.cmd!r}: not where the interpolator stands ({self.move.position()!r})"
+        if (self.vff["x"], self.vff["y"]) not in (self.move.velocity(), (0.0, 0.0)):
+            return f"vff = {self.vff!r}: not the interpolator's velocity"
+        if self.mode != IDLE and not self.alarm and not self._pending_emergency and self.positions.last is not None:
+            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
+            for a in ("x", "y"):
+                if abs(self.cmd[a] - inputs[f"{a}_pos"]) > bound:  # type: ignore[operator]
+                    return (f"cmd[{a!r}] = {self.cmd[a]!r}: {abs(self.cmd[a] - inputs[f'{a}_pos']):.4g} mm from "  # type: ignore[operator]
+                            f"the actual {a}_pos, beyond max_following_error = {self.max_following_error:g} mm")
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None

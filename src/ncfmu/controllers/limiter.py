@@ -447,6 +447,37 @@ class AreaLimiter(Controller):
         out["alarm"], out["region"], out["blocked"] = self.alarm, self.region, self.blocked
         return out
 
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: gated commands within reach and published, speeds within max_speed, the blocked
+        directions those of the hard and soft blocks, the region that of the last monitor tick."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        for i in (0, 1):
+            if not abs(self.pos[i]) <= POSITION_LIMIT:
+                return f"pos[{i}] = {self.pos[i]!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
+            if not abs(self.vel[i]) <= self.max_speed * (1 + 1e-9):
+                return f"vel[{i}] = {self.vel[i]!r}: faster than max_speed = {self.max_speed:g} mm/s"
+            if not abs(self._tick[i]) <= POSITION_LIMIT:
+                return f"_tick[{i}] = {self._tick[i]!r}: beyond {POSITION_LIMIT:g} mm"
+        if self._prev_in is not None and not (type(self._prev_in) is tuple and len(self._prev_in) == 2 and all(
+                type(x) is float and abs(x) <= POSITION_LIMIT for x in self._prev_in)):
+            return f"_prev_in = {self._prev_in!r}: not a (ref, lim) command within {POSITION_LIMIT:g} mm"
+        if not (0 <= self.hard <= 15 and 0 <= self.soft <= 15 and self.blocked == self.hard | self.soft):
+            return f"blocked = {self.blocked!r}: not hard {self.hard!r} | soft {self.soft!r} (directions 0..15)"
+        if not all(0.0 <= v <= self.max_speed for v in self._block_speed.values()):
+            return f"_block_speed = {self._block_speed!r}: not speeds within max_speed"
+        if self.region != find_region(self.ref_max, self._tick[0]):
+            return f"region = {self.region!r}: not the region of the last tick at ref {self._tick[0]!r}"
+        if not 0.0 <= self.clock <= self.monitor_period:
+            return f"clock = {self.clock!r}: not within the monitor period {self.monitor_period:g} s"
+        if self.fault is not None and type(self.fault) is not str:
+            return f"fault = {self.fault!r}: not a message"
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None
+
 
 #: (command, feed-forward) input names of the reference and the limited axis.
 _INPUT_NAMES = (("ref_cmd_in", "ref_vff_in"), ("lim_cmd_in", "lim_vff_in"))

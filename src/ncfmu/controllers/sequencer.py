@@ -327,3 +327,43 @@ class CutSequencer(CycleController):
         out["sigma_x"] = self.sigma_x
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the registers within the present block, the command where the interpolator
+        stands and (while running) within max_following_error (and one step) of the actual axes."""
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        why = super().check_state(inputs)
+        if why:
+            return why
+        rates = {0.0, 1.0} | {b.rapid for b in self.blocks} | {b.feed for b in self.blocks}
+        why = self.move_fault(self.move, self.accel, rates)
+        if why:
+            return why
+        if self.phase not in (APPROACH, IDLE, SC1, SC2, SC3, SC4):
+            return f"phase = {self.phase!r}: not a sub-cycle"
+        for name in ("block_index", "_then_block"):
+            if not 0 <= getattr(self, name) < self.n_blocks:
+                return f"{name} = {getattr(self, name)!r}: not a block of n_blocks = {self.n_blocks}"
+        b = self.blocks[self.block_index]
+        if not (0 <= self.passes_left <= b.N and 0 <= self.pass_no <= b.N):
+            return f"passes_left = {self.passes_left!r}, pass_no = {self.pass_no!r}: not within N = {b.N}"
+        if not 0.0 <= self.sigma_x <= b.Xf + b.N * b.Xd + 1e-9:
+            return f"sigma_x = {self.sigma_x!r}: not within 0..Xf + N*Xd = {b.Xf + b.N * b.Xd:g}"
+        for i, p in enumerate(self._waypoints):
+            if type(p) is not tuple or len(p) != 2 or not all(type(x) is float and abs(x) <= POSITION_LIMIT for x in p):
+                return f"_waypoints[{i}] = {p!r}: not an (x, z) position within {POSITION_LIMIT:g} mm"
+        here = (self.x_cmd, self.z_cmd)
+        if here != self.move.position() and not (self.move.end_point == () and here == (self.x_start, self.z_start)):
+            return f"x_cmd, z_cmd = {here!r}: not where the interpolator stands ({self.move.position()!r})"
+        if (self.x_vff, self.z_vff) not in (self.move.velocity(), (0.0, 0.0)):
+            return f"x_vff, z_vff = {(self.x_vff, self.z_vff)!r}: not the interpolator's velocity"
+        if self.busy and not self.alarm and self.positions.last is not None:
+            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
+            for axis, cmd in (("x", self.x_cmd), ("z", self.z_cmd)):
+                if abs(cmd - inputs[f"{axis}_pos"]) > bound:  # type: ignore[operator]
+                    return (f"{axis}_cmd = {cmd!r}: {abs(cmd - inputs[f'{axis}_pos']):.4g} mm from the actual "  # type: ignore[operator]
+                            f"{axis}_pos, beyond max_following_error = {self.max_following_error:g} mm and one step")
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None
