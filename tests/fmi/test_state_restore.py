@@ -27,6 +27,7 @@ from ncfmu.controllers.base import SPEED_LIMIT
 from ncfmu.controllers.contour import ContourInterpolator
 from ncfmu.errors import ConfigError
 from ncfmu.fmi import state
+from ncfmu.fmi.contract import split_state
 from ncfmu.project import OpenSystem, system_archive
 
 CLASSES = {c.MODEL_NAME: c for c in (CutSequencer, AreaLimiter, ProgrammableFeed, ContourInterpolator,
@@ -66,7 +67,7 @@ def collect_states(system: str, start_values: dict, times, step: float | None = 
                 blob = slave.serialize_state(handle)
                 slave.free_state(handle)
                 if blob.startswith(b"{"):                 # the Python FMUs (the servo's format is its own)
-                    out.append((system, slave.name, t, blob))
+                    out.append((system, slave.name, t, split_state(blob)[0]))   # the JSON, without the time
     return out
 
 
@@ -308,6 +309,7 @@ HOST = textwrap.dedent('''
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
     from fmpy.fmi1 import FMICallException
+    from ncfmu.fmi.contract import join_state
 
     jobs_file, speed_limit = sys.argv[1], float(sys.argv[2])
     dt, t = 1e-3, [0.0]
@@ -345,7 +347,8 @@ HOST = textwrap.dedent('''
             return fmu
 
         def restore(fmu, blob):
-            st = fmu.deSerializeFMUstate(blob.encode())
+            # the JSON with the shim's time trailer: the state continues at this host's next step
+            st = fmu.deSerializeFMUstate(join_state(blob.encode(), t[0] + dt))
             fmu.setFMUstate(st)
             fmu.freeFMUstate(st)
 
@@ -512,7 +515,7 @@ def _continue_identically(system: str, start_values: dict, times) -> int:
         run = master._prepare(max(times) + 0.5, None, start_values, None, 0.0)
         done = 0
         for t in sorted(times):
-            k = int(round(t / run.h))
+            k = max(int(round(t / run.h)), done)          # the FMUs step on from where they are
             master._loop(run, done, k)
             handles = [s.get_state() for s in opened.slaves]
             blobs = [s.serialize_state(h) for s, h in zip(opened.slaves, handles)]
