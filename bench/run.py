@@ -85,7 +85,8 @@ def libcosim(archive: Path, stop_time: float) -> float:
 
 ECOS_SCRIPT = """
 import sys, time
-from ecospy import EcosSimulation
+from ncfmu.cosim.ecos import import_ecospy
+EcosSimulation = import_ecospy().EcosSimulation
 with EcosSimulation(ssp_path=sys.argv[1], step_size=1e-3) as sim:
     sim.init(parameter_set="parameters")
     t0 = time.perf_counter()

@@ -10,7 +10,6 @@ the parameter-set log line), in a child process with its own working directory (
 
 from __future__ import annotations
 
-import shutil
 import signal
 import subprocess
 import time
@@ -21,6 +20,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from ncfmu.cosim import ecos
 from ncfmu.cosim.ssp import PARAMETER_SET, read_ssp
 from ncfmu.project import simulate
 
@@ -56,16 +56,9 @@ TRAVEL = {"lathe_taper": {"x_axis.pos": 1.5, "z_axis.pos": 40.0}, "grinder_feed"
 def ecos_exe(tmp_path_factory) -> Path:
     """The ecos CLI shipped in ecospy, copied and made executable (the wheel ships it without +x)."""
     try:
-        import ecospy
-    except ImportError:
-        pytest.fail("ecospy is not installed; the test extras need it: pip install -e '.[test]'")
-    shipped = Path(ecospy.__file__).parent / "binaries" / "ecos"
-    if not shipped.is_file():
-        pytest.fail(f"ecospy {getattr(ecospy, '__version__', '?')} ships no ecos CLI at {shipped}")
-    exe = tmp_path_factory.mktemp("ecos_bin") / "ecos"
-    shutil.copyfile(shipped, exe)
-    exe.chmod(0o755)
-    return exe
+        return ecos.ecos_program(tmp_path_factory.mktemp("ecos_bin") / "ecos")
+    except FileNotFoundError as err:
+        pytest.fail(str(err))
 
 
 def _csv_config(system, compared: list[str]) -> tuple[str, list[str]]:
@@ -102,12 +95,12 @@ def run_ecos(exe: Path, name: str, stop_time: float, compared: list[str], workdi
     cmd = [str(exe), "simulate", "--path", str(archive), "--stopTime", repr(stop_time + STEP / 2),
            "--stepSize", repr(STEP), "--parameterSet", PARAMETER_SET, "--csvConfig", "csv.xml", "-l", "debug"]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600, env=ecos.environment())
     wall = time.perf_counter() - t0
     log = proc.stdout + proc.stderr
     rc = proc.returncode
     why = f"killed by {signal.Signals(-rc).name}" if rc < 0 else f"exit status {rc}"
-    hint = " (ecos needs Debian's libtbb12)" if "libtbb" in log else ""
+    hint = " (ecos needs libtbb.so.12: pip's tbb wheel, a test extra)" if "libtbb" in log else ""
     assert rc == 0, f"ecos on {name}: {why}{hint}; its output ends:\n{log[-3000:]}"
     # ecos goes on (and may exit 0) when an FMU call fails: any warning, error or line that is not
     # ecos's own log (an FMU's or the C library's stderr) is a failure.

@@ -1,5 +1,6 @@
-"""Memory stays flat over many runs in one process (issue 12): no copies of the FMU libraries, no sys.path
-entries and no more than 5 MB of RSS pile up over 40 runs of ``simulate()``. Measured in a fresh process."""
+"""Memory stays flat over many runs in one process: no copies of the FMU libraries, no sys.path entries and
+less than 1 MB of RSS pile up over 200 runs of ``simulate()`` after a warm-up. Measured in a fresh process.
+(Each FMU's own instantiate/free cycles: tests/fmi/test_memory_cycles.py.)"""
 
 import subprocess
 import sys
@@ -21,19 +22,20 @@ SCRIPT = textwrap.dedent('''
         with open("/proc/self/maps") as f:
             return sum(1 for line in f if "(deleted)" in line)
 
-    for _ in range(5):                                    # warm-up: first imports, first loads
+    for _ in range(40):                                   # warm-up: first imports, first loads, the arenas
         simulate("lathe_taper", stop_time=0.1)
     rss, path, maps = rss_mb(), len(sys.path), deleted_maps()
-    for _ in range(40):
+    for _ in range(200):
         r = simulate("lathe_taper", stop_time=0.1)
     assert r["seq.subcycle"].max() == 1                   # the runs did run
     print("GROWTH", rss_mb() - rss, len(sys.path) - path, deleted_maps() - maps)
 ''')
 
 
-def test_forty_runs_in_one_process_stay_flat(project):
+def test_two_hundred_runs_in_one_process_stay_flat(project):
     proc = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rss, path, maps = [float(x) for x in proc.stdout.split("GROWTH")[1].split()]
     assert path == 0 and maps == 0
-    assert rss < 5.0, f"RSS grew {rss:.1f} MB over 40 runs"
+    print(f"lathe_taper: RSS grew {rss * 1024:.0f} KiB over 200 runs")
+    assert rss < 1.0, f"RSS grew {rss:.2f} MB over 200 runs"

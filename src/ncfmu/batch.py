@@ -51,7 +51,12 @@ if TYPE_CHECKING:
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
-STATUSES = ("ok", "failed", "timeout")
+#: A variant's status: ``ok`` (ran to the stop time and every cycle of the system's report finished),
+#: ``unfinished`` (ran to the stop time with a cycle still running or never started: the error column says
+#: ``cycle not finished by t = <stop> s``), ``failed`` (refused or crashed: the error says why), ``timeout``.
+STATUSES = ("ok", "unfinished", "failed", "timeout")
+#: The statuses of a variant that ran to its stop time: its trajectory file is written.
+RAN = ("ok", "unfinished")
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
@@ -93,6 +98,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         kept = result.data[["time", *keep]][::every]
         trajectory = csv_bytes(kept)           # formatted here, on the worker: the client only writes bytes
         row.update(status="ok", error="", rows=len(kept))
+        if not report.finished(result):
+            row.update(status="unfinished", error=f"cycle not finished by t = {result.time[-1]:g} s")
         row.update(report.metrics(result, result.parameters))
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
@@ -198,7 +205,8 @@ def output_names(archive: Path) -> list[str]:
 class Progress:
     """A tqdm bar with done / failed / timeout and an ETA, on a terminal only."""
 
-    def __init__(self, total: int, stream=sys.stderr) -> None:
+    def __init__(self, total: int, stream=None) -> None:
+        stream = sys.stderr if stream is None else stream      # the stderr of now, not of import time
         self.bar = None
         self.counts = {s: 0 for s in STATUSES}
         if total and hasattr(stream, "isatty") and stream.isatty():
@@ -208,8 +216,8 @@ class Progress:
     def update(self, status: str) -> None:
         self.counts[status] = self.counts.get(status, 0) + 1
         if self.bar is not None:
-            self.bar.set_postfix(done=self.counts["ok"], failed=self.counts["failed"],
-                                 timeout=self.counts["timeout"], refresh=False)
+            self.bar.set_postfix(unfinished=self.counts["unfinished"], done=self.counts["ok"],
+                                 failed=self.counts["failed"], timeout=self.counts["timeout"], refresh=False)
             self.bar.update(1)
 
     def close(self) -> None:
@@ -217,14 +225,52 @@ class Progress:
             self.bar.close()
 
 
+def _scheduler_address(scheduler_file: str) -> str:
+    """The address a running scheduler wrote to its scheduler file (JSON with an ``address``).
+
+    Read here rather than by dask's ``Client(scheduler_file=...)``, which waits for a missing file for ever.
+    """
+    path = Path(scheduler_file)
+    if not path.exists():
+        raise NcfmuError(f"--scheduler-file {path}: no such file (start the scheduler first: dask scheduler "
+                         f"--scheduler-file {path})")
+    try:
+        address = json.loads(path.read_text())["address"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as err:
+        raise NcfmuError(f"--scheduler-file {path}: not a dask scheduler file (JSON with the scheduler's "
+                         f"'address'): {type(err).__name__}: {err}") from None
+    if not isinstance(address, str):
+        raise NcfmuError(f"--scheduler-file {path}: address {address!r} is not text")
+    return address
+
+
+def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout: float):
+    """A client of a running scheduler that has a worker, or one line saying why not within ``connect_timeout``."""
+    from dask.distributed import Client
+    option = f"--scheduler {scheduler}" if scheduler_file is None else f"--scheduler-file {scheduler_file}"
+    address = scheduler if scheduler_file is None else _scheduler_address(scheduler_file)
+    try:
+        client = Client(address, timeout=connect_timeout)
+    except (OSError, TimeoutError):
+        raise NcfmuError(f"{option}: no dask scheduler answered within {connect_timeout:g} s at {address} "
+                         "(--connect-timeout S waits longer)") from None
+    except ValueError as err:                           # an address dask cannot parse (an unknown scheme)
+        raise NcfmuError(f"{option}: {err}") from None
+    try:
+        client.wait_for_workers(1, timeout=connect_timeout)
+    except (OSError, TimeoutError):
+        client.close()
+        raise NcfmuError(f"{option}: the scheduler at {address} has no worker (waited {connect_timeout:g} s, "
+                         "--connect-timeout): start one with dask worker") from None
+    return client
+
+
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
-                 scheduler_file: str | None, record_result: Callable) -> None:
+                 scheduler_file: str | None, connect_timeout: float, record_result: Callable) -> None:
     from dask.distributed import Client, LocalCluster, as_completed
     cluster = None
-    if scheduler is not None:
-        client = Client(scheduler)
-    elif scheduler_file is not None:
-        client = Client(scheduler_file=scheduler_file)
+    if scheduler is not None or scheduler_file is not None:
+        client = _connect(scheduler, scheduler_file, connect_timeout)
     else:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
@@ -244,15 +290,22 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
           scheduler: str | None = None, scheduler_file: str | None = None, stop_time: float | None = None,
           root: Path | None = None, record: Sequence[str] | None = None, output_interval: float | None = None,
           timeout: float | None = None, progress: bool = True,
-          on_done: Callable[[dict], None] | None = None) -> list[dict[str, object]]:
+          on_done: Callable[[dict], None] | None = None, connect_timeout: float = 5.0) -> list[dict[str, object]]:
     """Run the cartesian product of ``vary`` on ``system`` (a name or an ``.ssp`` path); return its summary rows.
 
     ``workers = 0`` runs the variants serially in this process (no dask); ``scheduler`` (an address) or
     ``scheduler_file`` runs them on an existing dask cluster, else on a LocalCluster of ``workers`` processes.
+    An existing cluster must answer, with at least one worker, within ``connect_timeout`` seconds.
     """
     from .cosim.ssp import read_ssp
     from .project import system_archive
     out = Path(out)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise NcfmuError(f"--workers {workers!r}: must be >= 0 (0: serial, no dask)")
+    if not (math.isfinite(connect_timeout) and connect_timeout > 0):
+        raise NcfmuError(f"--connect-timeout {connect_timeout!r}: must be a number of seconds > 0")
+    if scheduler_file is not None:
+        _scheduler_address(scheduler_file)              # refused now, not after the archive is built and read
     if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
         raise SystemDefinitionError(f"--timeout {timeout!r}: must be a number of seconds > 0")
     archive = system_archive(system, root).resolve()
@@ -287,7 +340,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         key = variant_key(v)
         old = rows.get(key)
         done = old is not None and old.get("status") in STATUSES and (
-            old["status"] != "ok" or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
+            old["status"] not in RAN or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
         if not done:
             todo.append((key, v))
         if key not in rows:
@@ -321,7 +374,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             for key, v in todo:
                 record_result(key, v, run_variant(data, digest, v, *args))
         elif todo:
-            _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, record_result)
+            _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, connect_timeout,
+                         record_result)
     finally:
         flush_summary(force=True)
     if bar:

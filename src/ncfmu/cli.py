@@ -3,14 +3,72 @@
 from __future__ import annotations
 
 import argparse
+import itertools
+import math
+import os
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from .errors import NcfmuError
 
 EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
           "Instances: lathe panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; "
           "mill panel, contour, x_axis, y_axis.")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with ncfmu's error line: ``ncfmu <command>: <what is wrong>`` and exit status 2, not the usage
+    block (``--help`` still shows it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
+def _negative_values(argv: list[str]) -> list[str]:
+    """``--step -1e-3`` as ``--step=-1e-3``.
+
+    argparse takes a word that starts with '-' for an option unless it looks like ``-5`` or ``-0.5``, so a
+    negative number in exponent form (or ``-inf``) after an option came out as "expected one argument". Joined
+    to its option it is a value, which the option's own rule then judges.
+    """
+    out: list[str] = []
+    for word in argv:
+        previous = out[-1] if out else ""
+        if word.startswith("-") and previous.startswith("--") and previous != "--" and "=" not in previous:
+            try:
+                float(word)
+            except ValueError:
+                pass
+            else:
+                out[-1] = f"{previous}={word}"
+                continue
+        out.append(word)
+    return out
+
+
+#: options of a command that take a number that must be > 0 and finite (checked before the command runs)
+POSITIVE = {"run": ("--stop-time", "--step", "--branch-at"), "sweep": ("--connect-timeout",)}
+
+
+def _check_positive(args: argparse.Namespace) -> None:
+    for option in POSITIVE.get(args.command, ()):
+        value = getattr(args, option[2:].replace("-", "_"))
+        if value is not None and not math.isfinite(value):
+            raise NcfmuError(f"{option} {value!r}: must be > 0 and finite")
+        if value is not None and not value > 0:
+            raise NcfmuError(f"{option} {value!r}: must be > 0")
+
+
+def _output_folder(out: str) -> None:
+    """``--out``: a folder, made now -- before a run that would only fail to write its results at the end."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise NcfmuError(f"--out {path}: is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise NcfmuError(f"--out {path}: cannot make the folder: {err.strerror or err}") from None
 
 
 def _parse_set(items: list[str]) -> dict[str, object]:
@@ -40,6 +98,27 @@ def _summary(result) -> str:
             if level in ("warning", "error", "fatal"):
                 lines.append(f"  [{level}] {text}")
     return "\n".join(lines)
+
+
+def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str]) -> list[str]:
+    """Summary lines warning of the settings (of any of ``runs``) that reach no connected port of ``system``
+    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting."""
+    from .cosim.ssp import read_ssp
+    from .systems import SYSTEMS, get_system
+    from .systems.reach import unreached
+    definition = read_ssp(Path(system)) if system.endswith(".ssp") else get_system(system) if system in SYSTEMS \
+        else None
+    if definition is None:
+        return []
+    why: dict[str, str] = {}
+    where: dict[str, list[object]] = {}
+    for values in runs:
+        for name, reason in unreached(definition, values).items():
+            why.setdefault(name, reason)
+            if values[name] not in where.setdefault(name, []):
+                where[name].append(values[name])
+    return [f"  [warning] {option.get(name, '--set')} {name}={','.join(map(str, where[name]))}: {reason}"
+            for name, reason in why.items()]
 
 
 def cmd_build(args) -> int:
@@ -82,6 +161,10 @@ def cmd_run(args) -> int:
             print(f"branch {i} from t = {args.branch_at} s ({label}):")
             print(_summary(result))
             print(f"  results: {csv}")
+        base = _parse_set(args.set)
+        for line in _unreached_lines(args.system, [{**base, **v} for v in variants],
+                                     dict.fromkeys(variants[0], "--branch-set")):
+            print(line)
         return 0
     start_values = _parse_set(args.set)
     result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
@@ -89,6 +172,8 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     csv = result.to_csv(out / f"{result.system}.csv")
     print(_summary(result))
+    for line in _unreached_lines(args.system, [start_values], {}):
+        print(line)
     print(f"  results: {csv}")
     if args.plot:
         try:
@@ -114,8 +199,13 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     return vary
 
 
+#: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
+#: command line, as for every command.
+SWEEP_INCOMPLETE = 1
+
+
 def cmd_sweep(args) -> int:
-    from .batch import sweep
+    from .batch import STATUSES, sweep
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -123,20 +213,23 @@ def cmd_sweep(args) -> int:
     vary = _parse_vary(args.vary)
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
-                 output_interval=args.output_interval, timeout=args.timeout)
-    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "failed", "timeout")}
-    print(f"{args.system}: {len(rows)} variants, {counts['ok']} ok, {counts['failed']} failed, "
-          f"{counts['timeout']} timeout -> {Path(args.out) / 'summary.csv'}")
+                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
+          + f" -> {Path(args.out) / 'summary.csv'}")
     for r in rows:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
             print(f"  {r['status']}: {varied}: {r['error']}")
-    return 0
+    for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
+                                 dict.fromkeys(vary, "--vary")):
+        print(line)
+    return 0 if counts["ok"] == len(rows) else SWEEP_INCOMPLETE
 
 
 def cmd_plot(args) -> int:
+    from . import plots
     from .cosim.result import Result
-    from .plots import plot_result, plot_sweep
     src = Path(args.file)
     if not src.is_file():
         raise NcfmuError(f"{src}: no such file (give a result CSV from 'ncfmu run' or a sweep's summary.csv)")
@@ -146,30 +239,86 @@ def cmd_plot(args) -> int:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
     if src.name == "summary.csv":
-        print(plot_sweep(src, out))
+        print(plots.plot_sweep(src, out))
     else:
-        from .systems import SYSTEMS
+        from .systems import SYSTEMS, report_for
+        if args.system is not None and args.system not in SYSTEMS:
+            raise NcfmuError(f"--system {args.system!r}: unknown; one of {', '.join(SYSTEMS)} (or leave it out to "
+                             "draw the CSV's signals over time)")
         result = Result.from_csv(src)
-        result.system = args.system or src.stem.split("_branch")[0]
-        if result.system not in SYSTEMS:
-            raise NcfmuError(f"{src}: system {result.system!r} unknown (from the file name); give the system the "
-                             f"CSV came from with --system, one of {', '.join(SYSTEMS)}")
-        print(plot_result(result, out))
+        name = args.system or src.stem.split("_branch")[0]
+        # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
+        # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
+        if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            result.system = name
+            print(plots.plot_result(result, out))
+        else:
+            result.system = src.stem
+            print(plots.plot_signals(result, out))
+    return 0
+
+
+def cmd_vars(args) -> int:
+    """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
+    import zipfile
+
+    from .cosim.ssp import read_ssp
+    from .systems import get_system
+    from .systems.settable import settable
+    if args.system.endswith(".ssp"):
+        archive = Path(args.system)
+        system = read_ssp(archive)
+
+        def model_description(model: str) -> bytes:
+            source = next(c.source for c in system.components if c.model == model)
+            try:
+                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
+                    return fmu.read("modelDescription.xml")
+            except (KeyError, zipfile.BadZipFile) as err:
+                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
+        rows = settable(system, model_description)
+    else:
+        system = get_system(args.system)
+        rows = settable(system)
+    if args.instance:
+        known = [c.name for c in system.components]
+        if args.instance not in known:
+            raise NcfmuError(f"--instance {args.instance!r}: {system.name} has no such instance "
+                             f"(instances: {', '.join(known)})")
+        rows = [r for r in rows if r.name.split(".", 1)[0] == args.instance]
+    lines = [f"{system.name}: {len(rows)} parameters and inputs. Set one with --set INSTANCE.VARIABLE=VALUE "
+             "(ncfmu run); tunable parameters and free inputs also with --branch-set, free inputs with --input "
+             "FILE.csv. An input a connection drives cannot be set: set its source. START is the system's value."]
+    header = ("NAME", "KIND", "TYPE", "UNIT", "START", "RULE", "DRIVEN BY", "DESCRIPTION")
+    long = 30                        # a longer start value (a program) goes on a line of its own, below
+    table = [(r.name, r.kind, r.type, r.unit, r.start if len(r.start) <= long else "(below)", r.rule,
+              r.driven_by or "-", r.description) for r in rows]
+    widths = [max(len(row[i]) for row in [header, *table]) for i in range(len(header) - 1)]
+    for r, row in zip([None, *rows], [header, *table]):
+        lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
+        if r is not None and len(r.start) > long:
+            lines.append(f"    start: {r.start}")
+    try:
+        sys.stdout.write("\n".join(lines) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:          # `ncfmu vars SYSTEM | head`: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 
 def cmd_validate(args) -> int:
-    from .project import validate
-    problems = validate(args.root)
-    for p in problems:
+    from .project import validation
+    checked = validation(args.root)
+    print("checked " + ";\nchecked ".join(checked.checked()))
+    for p in checked.problems:
         print(p)
-    print("all FMUs and SSPs valid" if not problems else f"{len(problems)} problem(s)")
-    return 1 if problems else 0
+    print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
+    return 1 if checked.problems else 0
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
-                                     "run closed loop with servo axes.", epilog=EPILOG)
+    parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
+                     "run closed loop with servo axes.", epilog=EPILOG)
     parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -198,8 +347,12 @@ def main(argv: list[str] | None = None) -> int:
                        description="Run every combination of the --vary values on dask workers (they need ncfmu "
                                    "installed, nothing else: the system is shipped to them, results come back). "
                                    "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
-                                   "ok/failed/timeout, error, wall time, metrics), atomically. A sweep into an "
-                                   "existing OUT merges into it; variants already done are not run again.",
+                                   "ok/unfinished/failed/timeout, error, wall time, metrics), atomically; "
+                                   "'unfinished': the run reached the stop time with the cycle not finished "
+                                   "(error 'cycle not finished by t = ...'). A sweep into an existing OUT merges "
+                                   "into it; variants already done are not run again. Exit status 0 when every "
+                                   "variant is ok, 1 when any is unfinished, failed or timed out, 2 for a bad "
+                                   "command line.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")
@@ -221,21 +374,46 @@ def main(argv: list[str] | None = None) -> int:
                    help="keep every S seconds of the trajectories (a whole multiple of the system's step)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
+    p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+                   help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv")
-    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', or OUT/summary.csv from 'ncfmu sweep'")
-    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name)")
+    p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
+                       description="A known system's CSV gets its plot (positions, following errors, the path with "
+                                   "its envelope or contour); any other result CSV in fmpy's layout (a single FMU "
+                                   "run by fmpy, another tool's) its recorded signals over time.")
+    p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', a CSV fmpy wrote, or OUT/summary.csv from "
+                                "'ncfmu sweep'")
+    p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name; a CSV "
+                                                  "that names none is drawn as signals over time)")
     p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser("vars", help="list every parameter and input of a system: unit, start value, rule, "
+                       "description, tunable or fixed, the connection that drives an input",
+                       description="Every settable variable of a system (what --set, --branch-set, --vary and "
+                                   "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
+                                   "value the system gives it, its rule, the output a connection drives an input "
+                                   "from, and its description.", epilog=EPILOG)
+    p.add_argument("system", help="system name or path of an .ssp file")
+    p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
+    p.set_defaults(func=cmd_vars)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)
 
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(_negative_values(sys.argv[1:] if argv is None else argv))
+    if unknown:                      # named by the command they were given to, not by the top-level parser
+        parser.exit(2, f"ncfmu {args.command}: unrecognized arguments: {' '.join(unknown)}\n")
     try:
+        _check_positive(args)
+        if args.command in ("run", "sweep"):
+            _output_folder(args.out)
         return args.func(args)
     except NcfmuError as err:
+        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:           # the machine's refusal (a full disk, a folder that went away): one line too
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
         return 2
 

@@ -8,8 +8,10 @@
 from __future__ import annotations
 
 import html
+import re
 import sys
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -28,8 +30,42 @@ def _variables(md_xml: bytes) -> list[dict[str, str]]:
     return rows
 
 
+def seed_text(logic) -> str:
+    """The seed a model follows (its file among the seeds), or that it has none."""
+    return logic.SEED or "none: ncfmu's own design"
+
+
 def _behaviour(logic) -> str:
     return (sys.modules[logic.__module__].__doc__ or logic.__doc__ or "").strip()
+
+
+#: reStructuredText in the docstrings: a Sphinx role (``:func:`~ncfmu.servo.model.servo_axis```) or literal
+#: (````program````); an FMU's documentation shows them as code, never as markup.
+_ROLE = re.compile(r":(?P<role>[a-z]+):`(?P<target>[^`]+)`|``(?P<literal>[^`]+)``")
+
+
+def _rendered(text: str, plain: Callable[[str], str], code: Callable[[str], str]) -> str:
+    """``text`` with every role and literal given to ``code`` -- a role's target as its dotted name (a function
+    or method with ``()``), a literal as it is -- and everything else to ``plain``."""
+    out, at = [], 0
+    for m in _ROLE.finditer(text):
+        out.append(plain(text[at:m.start()]))
+        name = m["literal"] if m["literal"] is not None else (
+            m["target"].lstrip("~.") + ("()" if m["role"] in ("func", "meth") else ""))
+        out.append(code(name))
+        at = m.end()
+    out.append(plain(text[at:]))
+    return "".join(out)
+
+
+def behaviour_html(logic) -> str:
+    """The behaviour for an HTML ``<pre>``: escaped, names and literals as ``<code>``."""
+    return _rendered(_behaviour(logic), html.escape, lambda name: f"<code>{html.escape(name)}</code>")
+
+
+def behaviour_text(logic) -> str:
+    """The behaviour as plain text (a Markdown text block): names and literals in single backquotes."""
+    return _rendered(_behaviour(logic), lambda piece: piece, lambda name: f"`{name}`")
 
 
 def _compact(rows: list[dict[str, str]]) -> list[dict[str, str]]:
@@ -74,11 +110,11 @@ padding:2px 6px;text-align:left;vertical-align:top}}table{{border-collapse:colla
 </head><body>
 <h1>{logic.MODEL_NAME}</h1>
 <p>{html.escape(logic.DESCRIPTION)}</p>
-<p>Seed: <code>{html.escape(logic.SEED)}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
+<p>Seed: <code>{html.escape(seed_text(logic))}</code>. Built by ncfmu {version} with {html.escape(built_with)}.
 Default experiment: step {exp.get("stepSize")} s, stop {exp.get("stopTime")} s.
 Capabilities: canGetAndSetFMUstate = {cosim.get("canGetAndSetFMUstate")}.</p>
 <h2>Behaviour</h2>
-<pre>{html.escape(_behaviour(logic))}</pre>
+<pre>{behaviour_html(logic)}</pre>
 <h2>Interface</h2>
 <table><tr><th>name</th><th>causality</th><th>type</th><th>unit</th><th>start</th><th>range</th><th>description</th></tr>
 {table}
@@ -93,8 +129,8 @@ and the rule.</p>
 
 def fmu_markdown(md_xml: bytes, logic) -> str:
     rows = _compact(_variables(md_xml))
-    lines = [f"# {logic.MODEL_NAME}", "", logic.DESCRIPTION, "", f"Seed: `{logic.SEED}`", "", "## Behaviour", "",
-             "```text", _behaviour(logic), "```", "", "## Interface", "",
+    lines = [f"# {logic.MODEL_NAME}", "", logic.DESCRIPTION, "", f"Seed: `{seed_text(logic)}`", "", "## Behaviour", "",
+             "```text", behaviour_text(logic), "```", "", "## Interface", "",
              "| name | causality | type | unit | start | range | description |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append("| " + " | ".join(str(r[c]).replace("|", "\\|") for c in

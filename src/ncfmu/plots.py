@@ -4,11 +4,15 @@
   plane the system's report names, with its envelope or contour (lathe X-Z with the chuck zone, grinder
   Y-X with its four regions, mill X-Y with the programmed and the corrected contour).
 - :func:`plot_sweep`: a sweep's summary metrics against the varied value.
+- :func:`bode_figure`: the ServoAxis's open loops over the band that matters, with their margins (for the
+  FMU's documentation).
+- :func:`plot_signals`: a result of no known system (a single FMU's, a CSV fmpy wrote): its signals over time.
 """
 
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,8 +46,14 @@ def plot_result(result, path: Path) -> Path:
             ax_err.plot(t, result[f"{a}.following_error"] * 1000, label=f"{a}")
     ax_pos.set(title=f"{result.system}: axis positions", xlabel="time [s]", ylabel="position [mm]")
     ax_err.set(title="following error (command - actual)", xlabel="time [s]", ylabel="error [µm]")
+    if not ax_err.lines:                      # a trajectory recorded without them (a sweep's --record)
+        ax_err.text(0.5, 0.5, "no following_error recorded", transform=ax_err.transAxes, ha="center",
+                    va="center", color="0.4")
+        ax_err.set_xlim(ax_pos.get_xlim())
+        ax_err.set_yticks([])
     for ax in (ax_pos, ax_err):
-        ax.legend(loc="best", fontsize=8)
+        if ax.lines:
+            ax.legend(loc="best", fontsize=8)
         ax.grid(True, alpha=0.3)
     if has_plane:
         report.draw_plane(panels[2], result, run_parameters(result))
@@ -55,47 +65,274 @@ def plot_result(result, path: Path) -> Path:
     return path
 
 
+#: Columns of a sweep's summary that are bookkeeping, not metrics of the machine (``ncfmu.batch`` writes them).
+SWEEP_BOOKKEEPING = ("key", "status", "error", "rows", "wall_time", "sim_time")
+
+
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def sweep_figure(rows: list[dict[str, str]], title: str):
+    """The figure of :func:`plot_sweep` (a matplotlib Figure), from the summary's rows.
+
+    One panel per metric (every column after ``error`` but the bookkeeping ones), against the first varied
+    parameter, one line per combination of the others. A variant that ran but did not finish its cycle is an
+    open marker (its value at the stop time); a metric it has no value for (nan: e.g. the cycle time of an
+    unfinished cycle) is an x on the panel's lower edge; a failed or timed-out variant is a triangle on the
+    upper edge. Nothing is left out silently.
+    """
+    plt = _plt()
+    columns = list(rows[0])
+    varied = columns[1:columns.index("status")]
+    metrics = [c for c in columns[columns.index("error") + 1:] if c not in SWEEP_BOOKKEEPING
+               and any(_number(r[c]) is not None for r in rows if r[c] != "")]
+    x_name = varied[0]
+    xs = [r[x_name] for r in rows]
+    numeric = all(_number(x) is not None for x in xs)
+    categories = list(dict.fromkeys(xs))
+
+    def x_of(r: dict[str, str]) -> float:
+        return float(r[x_name]) if numeric else float(categories.index(r[x_name]))
+    ran = [r for r in rows if r["status"] in ("ok", "unfinished")]
+    stopped = [r for r in rows if r["status"] not in ("ok", "unfinished")]
+    groups = list(dict.fromkeys(", ".join(f"{v}={r[v]}" for v in varied[1:]) for r in rows))
+    colours = {g: f"C{i % 10}" for i, g in enumerate(groups)}
+    fig, axes = plt.subplots(len(metrics) or 1, 1, figsize=(10, 2.6 * max(1, len(metrics))), squeeze=False)
+    for ax, metric in zip(axes[:, 0], metrics):
+        edges = ax.get_xaxis_transform()              # x in data, y in axes fractions: the panel's edges
+        said: set[str] = set()
+
+        def once(text: str, said: set[str] = said) -> str:
+            """The legend label the first time in this panel, none after."""
+            if text in said:
+                return "_nolegend_"
+            said.add(text)
+            return text
+        ax.margins(y=0.2)                             # bands at the edges for the markers of missing values
+        for group in groups:
+            mine = [r for r in ran if ", ".join(f"{v}={r[v]}" for v in varied[1:]) == group]
+            colour = colours[group]
+            if not mine:
+                continue
+            done = sorted((x_of(r), float(r[metric])) for r in mine
+                          if r["status"] == "ok" and np.isfinite(float(r[metric])))
+            ax.plot([p[0] for p in done], [p[1] for p in done], "o-", color=colour, label=group or metric)
+            open_ = [(x_of(r), float(r[metric])) for r in mine
+                     if r["status"] == "unfinished" and np.isfinite(float(r[metric]))]
+            if open_:
+                ax.plot([p[0] for p in open_], [p[1] for p in open_], "o", mfc="none", color=colour,
+                        label=once("unfinished: value at the stop time"))
+            nans = [x_of(r) for r in mine if not np.isfinite(float(r[metric]))]
+            if nans:
+                ax.plot(nans, [0.05] * len(nans), "x", ms=9, mew=2, color=colour, transform=edges, clip_on=False,
+                        label=once("no value (nan): cycle not finished"))
+        for status, edge in (("failed", "tab:red"), ("timeout", "tab:purple")):
+            for group in groups:
+                at = [x_of(r) for r in stopped if r["status"] == status
+                      and ", ".join(f"{v}={r[v]}" for v in varied[1:]) == group]
+                if at:
+                    ax.plot(at, [0.95] * len(at), "v", ms=9, mfc=colours[group], mec=edge, mew=2, ls="none",
+                            transform=edges, clip_on=False, label=f"{status}, no value" + (f": {group}" if group
+                                                                                           else ""))
+        ax.set(xlabel=x_name, ylabel=metric)
+        if not numeric:
+            ax.set_xticks(range(len(categories)), categories)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "unfinished", "failed", "timeout")}
+    axes[0, 0].set_title(f"{title}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
+    fig.tight_layout()
+    return fig
+
+
 def plot_sweep(summary_csv: Path, path: Path) -> Path:
-    """Each numeric metric of a sweep's summary against the first varied parameter."""
+    """Each metric of a sweep's summary against the first varied parameter (see :func:`sweep_figure`)."""
     plt = _plt()
     with open(summary_csv, newline="") as f:
         rows = list(csv.DictReader(f))
     if not rows:
         raise ValueError(f"{summary_csv} has no rows")
-    columns = list(rows[0])
-    varied = columns[1:columns.index("status")]
-    metrics = [c for c in columns[columns.index("error") + 1:] if c not in ("wall_time", "sim_time")]
-    ok = [r for r in rows if r["status"] == "ok"]
-
-    def finite(metric):
-        try:
-            return any(np.isfinite(float(r[metric])) for r in ok)
-        except ValueError:
-            return False
-    metrics = [m for m in metrics if finite(m)]
-    x_name = varied[0]
-    fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 2.6 * max(1, len(metrics))), squeeze=False)
-    for ax, metric in zip(axes[:, 0], metrics):
-        groups: dict[str, list[tuple[float, float]]] = {}
-        for r in ok:
-            label = ", ".join(f"{v}={r[v]}" for v in varied[1:]) or metric
-            try:
-                groups.setdefault(label, []).append((float(r[x_name]), float(r[metric])))
-            except ValueError:
-                continue
-        for label, pts in groups.items():
-            pts.sort()
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=label)
-        failed = [float(r[x_name]) for r in rows if r["status"] != "ok"]
-        for xf in failed:
-            ax.axvline(xf, color="tab:red", ls=":", lw=1)
-        ax.set(xlabel=x_name, ylabel=metric)
-        ax.grid(True, alpha=0.3)
-        if len(groups) > 1:
-            ax.legend(fontsize=7)
-    axes[0, 0].set_title(f"sweep {Path(summary_csv).parent.name}: {len(ok)} ok, {len(rows) - len(ok)} failed "
-                         "(red: failed variants)")
-    fig.tight_layout()
+    fig = sweep_figure(rows, f"sweep {Path(summary_csv).parent.name}")
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)
+
+
+# -- the servo axis's loops ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LoopMargins:
+    """One open loop's margins as python-control's ``margin`` gives them (gain margin as a factor, inf when the
+    phase never reaches -180 deg; frequencies in rad/s, NaN where there is no such crossing)."""
+
+    name: str
+    gain_margin: float
+    phase_margin: float
+    phase_crossover: float          # where the phase is -180 deg: the gain margin is read there
+    gain_crossover: float           # where the gain is 1: the phase margin is read there
+
+    def gain_margin_text(self) -> str:
+        if not np.isfinite(self.gain_margin):
+            return "GM infinite (the phase never reaches -180 deg)"
+        return f"GM {20 * np.log10(self.gain_margin):.1f} dB at {self.phase_crossover:.0f} rad/s"
+
+    def phase_margin_text(self) -> str:
+        return f"PM {self.phase_margin:.1f} deg at {self.gain_crossover:.1f} rad/s"
+
+
+@dataclass(frozen=True)
+class Bode:
+    """What the servo axis's Bode plot shows: the band (rad/s) and each loop's margins."""
+
+    band: tuple[float, float]
+    loops: tuple[LoopMargins, ...]
+
+
+def bode_design(p=None) -> Bode:
+    """The band that matters for the axis ``p`` (default: the ServoAxis's defaults) -- a decade below the
+    position loop's closed-loop bandwidth to a decade above the current loop's (1/tau_current) -- and the
+    margins of the open velocity and position loops (:mod:`ncfmu.servo.model`)."""
+    import control as ct
+
+    from .servo.model import AxisParameters, design, position_loop, velocity_loop
+    p = AxisParameters() if p is None else p
+    d = design(p)
+    low = (d.position_bandwidth if np.isfinite(d.position_bandwidth) else d.position_crossover) / 10.0
+    band = (low, 10.0 / p.tau_current)
+    loops = []
+    for loop in (velocity_loop(p), position_loop(p)):
+        gm, pm, w180, wc = (float(v) for v in ct.margin(loop))
+        loops.append(LoopMargins(loop.name, gm, pm, w180, wc))
+    return Bode(band, tuple(loops))
+
+
+#: a margin's label stays readable where it crosses a curve
+_ON_WHITE = {"boxstyle": "square,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.85}
+
+
+def bode_figure(p=None):
+    """The Bode plot of the open velocity and position loops over :func:`bode_design`'s band: magnitude in
+    dB, phase in degrees, each loop's gain and phase margin drawn where they are read (an infinite gain margin
+    is said in words), the current loop's corner 1/tau_current marked. Returns ``(figure, Bode)``."""
+    import control as ct
+
+    from .servo.model import AxisParameters, position_loop, velocity_loop
+    plt = _plt()
+    p = AxisParameters() if p is None else p
+    info = bode_design(p)
+    w = np.logspace(np.log10(info.band[0]), np.log10(info.band[1]), 1000)
+    fig, (ax_mag, ax_ph) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    for loop, margins, colour in zip((velocity_loop(p), position_loop(p)), info.loops, ("C0", "C1")):
+        response = ct.frequency_response(loop, w)
+        h = np.asarray(response.complex).reshape(-1)
+        mag_db, phase = 20 * np.log10(np.abs(h)), np.degrees(np.unwrap(np.angle(h)))
+        # unwrap starts where numpy's angle does; a loop with an integrator starts near -90 deg
+        phase -= 360.0 * np.round((phase[0] + 90.0) / 360.0)
+        label = f"{loop.name}: {margins.phase_margin_text()}; {margins.gain_margin_text()}"
+        ax_mag.semilogx(w, mag_db, color=colour, label=label)
+        ax_ph.semilogx(w, phase, color=colour)
+        wc = margins.gain_crossover
+        ax_mag.axvline(wc, color=colour, ls=":", lw=0.8)
+        ax_ph.axvline(wc, color=colour, ls=":", lw=0.8)
+        ax_ph.vlines(wc, -180.0, -180.0 + margins.phase_margin, color=colour, lw=2.5)
+        ax_ph.annotate(f"PM {margins.phase_margin:.1f}°", (wc, -180.0 + margins.phase_margin / 2), xytext=(6, 0),
+                       textcoords="offset points", color=colour, fontsize=8, va="center", bbox=_ON_WHITE)
+        if np.isfinite(margins.gain_margin):
+            w180, gm_db = margins.phase_crossover, 20 * np.log10(margins.gain_margin)
+            ax_mag.axvline(w180, color=colour, ls="--", lw=0.8)
+            ax_ph.axvline(w180, color=colour, ls="--", lw=0.8)
+            ax_mag.vlines(w180, -gm_db, 0.0, color=colour, lw=2.5)
+            ax_mag.annotate(f"GM {gm_db:.1f} dB", (w180, -gm_db / 2), xytext=(6, 0), textcoords="offset points",
+                            color=colour, fontsize=8, va="center", bbox=_ON_WHITE)
+    for ax in (ax_mag, ax_ph):
+        ax.axvline(1.0 / p.tau_current, color="0.4", ls="-.", lw=0.8)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_mag.axhline(0.0, color="k", lw=0.8)
+    ax_ph.axhline(-180.0, color="k", lw=0.8)
+    ax_mag.text(1.0 / p.tau_current, 0.97, " current loop 1/tau", transform=ax_mag.get_xaxis_transform(),
+                fontsize=8, color="0.4", va="top")
+    ax_mag.set(ylabel="magnitude [dB]", title="ServoAxis open loops (default parameters)")
+    ax_ph.set(ylabel="phase [deg]", xlabel="frequency [rad/s]", xlim=info.band)
+    ax_ph.set_yticks(np.arange(-270, -44, 45))
+    ax_mag.legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    return fig, info
+
+
+# -- a result of no known system: a single FMU's, or a CSV another tool wrote --------------------------
+#: changing numeric signals drawn at most; the title says how many more the file has
+MAX_SIGNAL_PANELS = 24
+
+
+@dataclass
+class SignalPanels:
+    """How :func:`plot_signals` lays out a result."""
+
+    numbers: list[str]                  # numbers that change: a panel each, in the file's order
+    booleans: list[str]                 # Booleans: together on one panel, as logic traces
+    constant: dict[str, float]          # numbers that never change: listed with their value, not drawn
+
+
+def signal_panels(result) -> SignalPanels:
+    panels = SignalPanels([], [], {})
+    for name in result.names:
+        column = result[name]
+        if column.dtype == np.bool_:
+            panels.booleans.append(name)
+        elif np.array_equal(column, np.full_like(column, column[0]), equal_nan=True):
+            panels.constant[name] = float(column[0])
+        else:
+            panels.numbers.append(name)
+    return panels
+
+
+def plot_signals(result, path: Path) -> Path:
+    """Every recorded signal over time, for a result that names no system ncfmu knows (a single FMU run by
+    fmpy, another tool's CSV): each changing number on a panel of its own (whole-numbered ones as steps), the
+    Booleans as logic traces on one panel, the constant numbers listed with their values."""
+    import textwrap
+    plt = _plt()
+    panels = signal_panels(result)
+    drawn = panels.numbers[:MAX_SIGNAL_PANELS]
+    rows = max(1, len(drawn) + bool(panels.booleans))
+    logic_height = 0.45 * len(panels.booleans) + 0.6
+    heights = [1.0] * len(drawn) + ([logic_height / 1.9] if panels.booleans else [])
+    listed = ", ".join(f"{name} = {value:g}" for name, value in panels.constant.items())
+    note = textwrap.fill(f"constant over the run: {listed}", 140) if listed else ""
+    note_height = 0.2 + 0.16 * (note.count("\n") + 1) if note else 0.0          # inches under the panels
+    height = 1.9 * sum(heights or [1.0]) + 1.0 + note_height
+    fig, axes = plt.subplots(rows, 1, figsize=(10, height), sharex=True, squeeze=False,
+                             gridspec_kw={"height_ratios": heights or [1.0]})
+    t = result.time
+    for ax, name in zip(axes[:, 0], drawn):
+        values = result[name]
+        whole = bool(np.all(np.isfinite(values) & (values == np.round(values))))
+        ax.plot(t, values, lw=1.0, drawstyle="steps-post" if whole else "default")
+        ax.set_title(name, loc="left", fontsize=9)
+        ax.grid(True, alpha=0.3)
+    if panels.booleans:
+        ax = axes[len(drawn), 0]
+        for i, name in enumerate(panels.booleans):
+            color = f"C{i % 10}"
+            ax.fill_between(t, i, i + 0.7 * result[name], step="post", alpha=0.4, color=color, lw=0)
+            ax.step(t, i + 0.7 * result[name], where="post", lw=1.0, color=color)
+        ax.set_yticks([i + 0.35 for i in range(len(panels.booleans))], panels.booleans, fontsize=8)
+        ax.set_ylim(-0.2, len(panels.booleans))
+        ax.set_title("Booleans (raised: true)", loc="left", fontsize=9)
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    title = f"{result.system or 'result'}: recorded signals over {t[0]:g}..{t[-1]:g} s"
+    if len(panels.numbers) > len(drawn):
+        title += f" (the first {len(drawn)} of {len(panels.numbers)} changing numbers)"
+    fig.suptitle(title)
+    if note:
+        fig.text(0.01, 0.1 / height, note, fontsize=8, va="bottom")
+    fig.tight_layout(rect=(0, note_height / height, 1, 1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

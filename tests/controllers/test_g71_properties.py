@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, given, reject, settings
 from hypothesis import strategies as st
 from lathe_oracle import (
     below_shifted_profile,
@@ -23,6 +23,7 @@ from lathe_oracle import (
 
 from ncfmu.controllers import CutSequencer
 from ncfmu.controllers.lathe_program import plan
+from ncfmu.errors import ProgramError
 
 X0, Z0 = 30.0, 2.0
 
@@ -127,7 +128,13 @@ def test_random_profiles_with_pockets(a_x, specs, depth, retract, u):
     xs = [x for p in part.pieces for x in (p.start[1], p.end[1])]
     assume(part.end[0] < Z0 - 0.1 and 0.5 <= min(xs) and max(xs) <= 29.0)
     text = part.program(depth, retract, u, 0.0, 600, 600)
-    assert rapids_in_air(plan(text, (X0, Z0), 50.0), X0, Z0) <= 1e-6
+    try:
+        segments = plan(text, (X0, Z0), 50.0)
+    except ProgramError as err:                  # a groove of no width is refused, naming its wall
+        if "a groove of no width" not in str(err):
+            raise
+        reject()
+    assert rapids_in_air(segments, X0, Z0) <= 1e-6
     run = run_ideal(CutSequencer(program=text, x_start=X0, z_start=Z0), dt=2e-3)
     assert not run["alarm"].any()
     g71 = run["canned_cycle"] == 71

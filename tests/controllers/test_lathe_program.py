@@ -222,6 +222,8 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     ("G00 X#1\nM30\n", 1, 5, "parameters and expressions"),
     ("G00 X30 Z2\nG71 U1 R0.5\nG71 P10 Q20 F300 X5\n" + PROFILE + "M30\n", 3, 18, "G71 takes P, Q"),
     (HEAD + "G70 P10 Q20\n" + PROFILE.replace("G01", "G01 ") + "M30\n", 4, 1, "has no feed"),
+    (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nN20 X15\nM30\n", 7, 1, "a groove of no width"),
+    (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nX15\nX25\nN20 Z-20\nM30\n", 7, 1, "a groove of no width"),
     (HEAD + "G71 P10 Q20 F300\n" + PROFILE + "G00 X32\nG71 P10 Q20 F300\nM30\n", 9, 5,
      "was read from the start point X 30 Z 2, this G71 starts at X 32 Z 2"),
 ])

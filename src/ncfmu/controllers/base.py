@@ -8,11 +8,15 @@ through ``dt`` (``t`` is for messages). Nothing here imports pythonfmu or fmpy.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import Port, boolean, real, to_float, to_int
+
+#: An entry of a counted table: ``block[3].Xd`` (counted by ``n_blocks``).
+_TABLE_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
 class Controller:
@@ -34,6 +38,9 @@ class Controller:
     #: Default stop time of a stand-alone run, s.
     STOP_TIME: ClassVar[float] = 1.0
     PORTS: ClassVar[tuple[Port, ...]] = ()
+    #: The outputs a parameter or input acts on, for one that acts on only some of them (an operator panel's
+    #: button time acts on that button alone); one not named here may act on every output.
+    ACTS_ON: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     def __init__(self, **parameters: object) -> None:
         self.messages: list[tuple[str, str]] = []
@@ -71,6 +78,31 @@ class Controller:
         self.configure(self.check_parameters(values))
 
     @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """The parameters that the parameter set ``values`` leaves unread, each with why (``reads block[1..2] only
+        (n_blocks = 2)``): a setting of one of them changes nothing, and ncfmu says so. Here, the entries
+        ``<head>[k].<field>`` of a counted table (a parameter ``n_<head>s``) beyond its count; a controller
+        whose program or mode leaves parameters unread adds them."""
+        ports = {p.name: p for p in cls.ports("parameter")}
+        counts: dict[str, int | None] = {}
+        out: dict[str, str] = {}
+        for name in ports:
+            entry = _TABLE_ENTRY.match(name)
+            count_name = f"n_{entry['head']}s" if entry else ""
+            if not entry or count_name not in ports:
+                continue
+            if count_name not in counts:
+                try:
+                    counts[count_name] = to_int(ports[count_name].check(values.get(count_name,
+                                                                                   ports[count_name].start)))
+                except ConfigError:          # a count its rule refuses: the run says so
+                    counts[count_name] = None
+            count = counts[count_name]
+            if count is not None and int(entry["k"]) > count:
+                out[name] = f"reads {entry['head']}[1..{count}] only ({count_name} = {count})"
+        return out
+
+    @classmethod
     def from_parameters(cls, values: Mapping[str, object]) -> Controller:
         """Build from flat FMI parameter names (``block[1].Xd``); unknown names are refused."""
         return cls(**dict(values))
@@ -100,9 +132,62 @@ class Controller:
         out, self.messages = self.messages, []
         return out
 
+    # -- a restored state ---------------------------------------------------------------------------
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """Judge the values of a state restored into this controller (its types and structure are checked
+        already, against a controller freshly built from the same parameters): a message naming the first
+        attribute that breaks its rule (``pos[0] = nan: must be finite``), else None. Subclasses add the
+        rules of their own registers and call this first."""
+        if not all(type(m) is tuple and len(m) == 2 and m[0] in ("info", "warning", "error") and type(m[1]) is str
+                   for m in self.messages):
+            return "messages: not a list of (info|warning|error, text) pairs"
+        input_ports = {p.name: p for p in self.ports("input")}
+        for name, value in vars(self).items():
+            if isinstance(value, PositionGuard):
+                if not all(n in input_ports and input_ports[n].unit == "mm" for n in value.names):
+                    return f"{name}.names = {value.names!r}: not position inputs of {type(self).__name__}"
+                if value.last is not None:
+                    if type(value.last) is not list or len(value.last) != len(value.names):
+                        return f"{name}.last = {value.last!r}: not one position per input"
+                    for i, x in enumerate(value.last):
+                        if type(x) is not float or not abs(x) <= POSITION_LIMIT:
+                            return f"{name}.last[{i}] = {x!r}: must be a finite position within {POSITION_LIMIT:g} mm"
+            elif isinstance(value, OverrideDial):
+                port = input_ports.get(value.name)
+                if port is None or value.hi != port.max:
+                    return f"{name}: clamps {value.name!r} to 0..{value.hi!r}, not to its input's range"
+        return None
+
+    @staticmethod
+    def move_fault(move: object, accel: float, rates: set[float], name: str = "move") -> str | None:
+        """A restored straight move (:class:`~ncfmu.controllers.motion.LinearMove`) is one its ``begin()`` and
+        ``advance()`` can leave: its geometry recomputed from its end points, its path position and speed
+        within the move and the rate it was given one of ``rates``."""
+        m = vars(move)
+        ends = (m["start_point"], m["end_point"], m["unit"])
+        if m["accel"] != accel:
+            return f"{name}.accel = {m['accel']!r}: not accel = {accel!r}"
+        if len({len(e) for e in ends}) != 1 or not all(type(x) is float for e in ends for x in e):
+            return f"{name}: start_point, end_point and unit are not points of one space"
+        for end in ("start_point", "end_point"):
+            if not all(abs(x) <= POSITION_LIMIT for x in m[end]):
+                return f"{name}.{end} = {m[end]!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
+        delta = [b - a for a, b in zip(m["start_point"], m["end_point"])]
+        length = math.sqrt(sum(d * d for d in delta))
+        unit = tuple(d / length for d in delta) if length > 0 else tuple(0.0 for _ in delta)
+        if m["length"] != length or m["unit"] != unit:
+            return f"{name}.length = {m['length']!r}, unit = {m['unit']!r}: not those of its end points"
+        if m["rate"] not in rates:
+            return f"{name}.rate = {m['rate']!r}: not a rate of this controller"
+        if not (0.0 <= m["s"] <= length and 0.0 <= m["v"] <= min(1.5 * m["rate"], SPEED_LIMIT)):
+            return f"{name}.s = {m['s']!r}, v = {m['v']!r}: not within the move (length {length!r})"
+        if m["done"] and (m["s"] != length or m["v"] != 0.0 or m["halting"]):
+            return f"{name}.done = True: with s = {m['s']!r} of {length!r} and v = {m['v']!r}"
+        return None
+
 
 def servo_ports(*axes: tuple[str, float]) -> tuple[Port, ...]:
-    """The ports by which a controller drives servo axes (SPEC 2): per axis ``(letter, start position)``,
+    """The ports by which a controller drives servo axes: per axis ``(letter, start position)``,
     inputs ``<a>_pos`` and ``<a>_in_position``, outputs ``<a>_cmd`` and ``<a>_vff``."""
     inputs, outputs = [], []
     for a, start in axes:

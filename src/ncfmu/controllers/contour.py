@@ -40,22 +40,12 @@ from dataclasses import dataclass
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
-from .base import (
-    POSITION_LIMIT,
-    Controller,
-    OverrideDial,
-    PositionGuard,
-    finite_inputs,
-    int_param,
-    real_param,
-    servo_ports,
-)
+from .base import POSITION_LIMIT, int_param, real_param, servo_ports
+from .cycle import ARRIVED, LATE, CycleController, cycle_ports
 from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
 from .motion import stop_speed
 
 MAX_POINTS = 64
-#: The contour ends when the actual axes are this close to its last command (mm).
-IN_POSITION = 0.005
 #: The point path of the FMU's start values: one 10 mm move along X (a system gives its own).
 DEFAULT_PATH = ((0.0, 0.0), (10.0, 0.0))
 #: On a path with arcs: tangential acceleration and centripetal acceleration, as fractions of ``accel``
@@ -147,12 +137,13 @@ def _point_ports():
     return tuple(ports)
 
 
-class ContourInterpolator(Controller):
+class ContourInterpolator(CycleController):
     MODEL_NAME = "ContourInterpolator"
     DESCRIPTION = ("Contour interpolator with cutter compensation: part programs (RS274 subset) or terminal points, "
                    "lines and arcs, offset corners, DDA interpolation, exact stop, feed override (GB 1,175,423)")
     SEED = "cutter-compensation-GB1175423.txt"
     STOP_TIME = 40.0
+    AXES = ("x", "y")
 
     PORTS = (
         string("program", "parameter", "", "part program, RS274/NGC subset (G00-G03 with I/J, G17, G21, G90/G91, "
@@ -171,8 +162,7 @@ class ContourInterpolator(Controller):
              min=0.0, min_exclusive=True),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration limit (start, stop, corners, arcs, "
              "override, hold)", min=0.0, min_exclusive=True),
-        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "end point this long after the command stopped", min=0.0, min_exclusive=True),
+        *cycle_ports("the contour"),
         real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=1e-6, max=1.0),
         real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position; a "
              "program starts here)", min=-POSITION_LIMIT, max=POSITION_LIMIT),
@@ -189,6 +179,18 @@ class ContourInterpolator(Controller):
         boolean("alarm", "output", None, "geometry cannot be corrected, or a bad input"),
     )
 
+    #: What only the point path reads: a program replaces it (its own G41/G42, F and path).
+    POINT_PATH_ONLY = ("n_points", "closed", "side", "feed")
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        out = super().unread(values)
+        if str(values.get("program", "")).strip():
+            for p in cls.ports("parameter"):
+                if p.name.startswith("point[") or p.name in cls.POINT_PATH_ONLY:
+                    out[p.name] = "runs its program (program is set), not the point path"
+        return out
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.program = str(values["program"])
         self.closed = bool(values["closed"])
@@ -197,7 +199,7 @@ class ContourInterpolator(Controller):
         self.feed = real_param(values, "feed")
         self.approach_feed = real_param(values, "approach_feed")
         self.accel = real_param(values, "accel")
-        self.inpos_timeout = real_param(values, "inpos_timeout")
+        self.configure_cycle(values)
         self.dda_unit = real_param(values, "dda_unit")
         self.x_start = real_param(values, "x_start")
         self.y_start = real_param(values, "y_start")
@@ -257,6 +259,7 @@ class ContourInterpolator(Controller):
         self.segment = 0
         self.busy = False
         self.done = False
+        self.reset_cycle()
         self.alarm = self.geometry_error is not None
         if self.alarm:
             self.say("error", f"cutter compensation impossible: {self.geometry_error}")
@@ -269,11 +272,7 @@ class ContourInterpolator(Controller):
         self._i = 0                       # index of the move being run; len(_run): the path is finished
         self._s = 0.0                     # path length done within it, mm
         self._dda: tuple[tuple[int, int], tuple[int, int], int] | None = None
-        self._start_was = False
-        self._steps_since_end = 0
         self._halting = False             # controlled stop after an alarm
-        self._positions = PositionGuard(("x_pos", "y_pos"))
-        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -289,6 +288,7 @@ class ContourInterpolator(Controller):
         self._v_end_hard = self._plan(self._run, self._caps_run, None)
         self._v_end_soft = self._plan(self._run, self._caps_run, self._plan_scale)
         self._i, self._s, self.v = 0, 0.0, 0.0
+        self.inpos.reset()
         self._enter(0)
 
     def _enter(self, i: int) -> None:
@@ -326,12 +326,12 @@ class ContourInterpolator(Controller):
 
     # -- stepping -------------------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
+        bad = self.judge_inputs(inputs, dt) or (self.following_error(inputs, self.cmd) if self.busy else None)
+        started = self.start_button.pressed(inputs["start"])
         if bad or self._halting:
-            if bad and not self.alarm:
-                self.say("error", f"t = {t:.4f} s: {bad}; decelerating to rest on the path, cycle stopped")
             if bad:
-                self.alarm, self.busy = True, False
+                self.latch_alarm(t, bad, "decelerating to rest on the path, cycle stopped")
+                self.busy = False
                 self._halting = self._i < len(self._run) and self.v > 0.0
             if self._halting:
                 self._advance(dt, 0.0, inputs, finishing=False)
@@ -340,18 +340,15 @@ class ContourInterpolator(Controller):
                     self.vff = [0.0, 0.0]
             else:
                 self.vff = [0.0, 0.0]
-            self._start_was = bool(inputs["start"])
             return self._publish()
-        start = bool(inputs["start"])
-        if start and not self._start_was and not self.busy:
+        if started and not self.busy:
             if self.geometry_error:
                 self.say("error", f"t = {t:.4f} s: start refused: {self.geometry_error}")
             else:
                 self.alarm, self.done, self.busy = False, False, True
                 self._begin_cycle()
-        self._start_was = start
         if self.busy:
-            scale = 0.0 if inputs["feed_hold"] else self._override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+            scale = 0.0 if inputs["feed_hold"] else self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             self._advance(dt, scale, inputs)
         return self._publish()
 
@@ -406,14 +403,10 @@ class ContourInterpolator(Controller):
         self.v = 0.0
         if not finishing:
             return
-        self._steps_since_end += 1
-        # the actual axes must stand at this controller's own end point, not only be in position
-        arrived = all(abs(float(inputs[f"{a}_pos"]) - c) <= IN_POSITION  # type: ignore[arg-type]
-                      for a, c in zip("xy", self.cmd))
-        if self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["y_in_position"] and arrived:
-            self.busy, self.done, self._steps_since_end = False, True, 0
-        elif self._steps_since_end * dt > self.inpos_timeout:
-            self._steps_since_end = 0
+        judged = self.inpos.judge(dt, True, self.in_position(inputs), self.actual(inputs), self.cmd)
+        if judged == ARRIVED:
+            self.busy, self.done = False, True
+        elif judged == LATE:
             self.alarm, self.busy = True, False
             self.say("error", f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
                               f"{float(inputs['y_pos']):.4f}), not at the end point ({self.cmd[0]:.4f}, "  # type: ignore[arg-type]
@@ -426,3 +419,49 @@ class ContourInterpolator(Controller):
         out["segment"] = self.segment
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the cycle's moves are the tool path (after at most an approach to its start), their
+        plans and the DDA what they give, the command the point the path position gives."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        run, path = self._run, self.tool_path
+        k = len(run) - len(path)
+        if run and (k not in (0, 1) or run[k:] != path):
+            return "_run: not the tool path (after at most an approach to its start)"
+        if k == 1 and not (run[0].rapid and run[0].feed == self.approach_feed and run[0].label == 0
+                           and isinstance(run[0].element, Line) and run[0].element.end == path[0].element.start
+                           and all(abs(x) <= POSITION_LIMIT for x in run[0].element.start)):
+            return f"_run[0] = {run[0]!r}: not an approach to the tool path's start"
+        if not 0.0 < self._plan_scale <= 1.5:
+            return f"_plan_scale = {self._plan_scale!r}: not a feed override in (0, 1.5]"
+        if self._caps_run != ([math.inf] * k + self._caps if run else []):
+            return "_caps_run: not the speed caps of the cycle's moves"
+        planned = (self._plan(run, self._caps_run, None), self._plan(run, self._caps_run, self._plan_scale))
+        if (self._v_end_hard, self._v_end_soft) != planned:
+            return "_v_end_hard, _v_end_soft: not the plan of the cycle's moves"
+        if not 0 <= self._i <= len(run):
+            return f"_i = {self._i!r}: not a move of the cycle ({len(run)} moves)"
+        segment, dda = self.segment, self._dda
+        self._enter(self._i)                                          # the DDA (and the label) it loads
+        if self._dda != dda or self.segment != segment:
+            return f"_dda = {dda!r}, segment = {segment!r}: not what move {self._i} loads"
+        top = max(self.feed, self.approach_feed) * 1.5
+        if self._i < len(run) and not (0.0 <= self._s <= run[self._i].element.length and 0.0 <= self.v <= top):
+            return f"_s = {self._s!r}, v = {self.v!r}: not within move {self._i}"
+        if math.hypot(*self.vff) > self.v + 1e-9 and self.v <= top:
+            return f"vff = {self.vff!r}: faster than the path speed v = {self.v!r}"
+        if self._i < len(run):
+            at = list(self._position())
+        elif run:
+            end = run[-1].element.end
+            at = [self._counts(end[0]) * self.dda_unit, self._counts(end[1]) * self.dda_unit]
+        else:
+            at = [self.x_start, self.y_start]
+        if self.cmd != at:
+            return f"cmd = {self.cmd!r}: not the point of the path the state stands at ({at!r})"
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None

@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
-from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .base import int_param, real_param, servo_ports
+from .cycle import ARRIVED, LATE, Button, CycleController, cycle_ports, follow_up
 from .motion import LinearMove
 
 #: The program store as the FMU starts: empty cycles, and an emergency return of X at F7 (a system or a
@@ -56,8 +57,6 @@ SETTINGS = {"D": (0.0,) * 7, "F": (0.0,) * 6 + (10.0,), "T": (0.0,) * 7}
 IDLE, RUN, EMERGENCY = 0, 1, 2
 #: A return counter within this of 0 is at the feed origin (mm): float sums of D settings leave ~1e-15.
 RC_ZERO = 1e-6
-#: A feed word ends when the actual axis is this close to the feed's own command (mm).
-IN_POSITION = 0.005
 #: Time left of a dwell below which it is over (s): steps of dt do not sum exactly to T.
 DWELL_EPS = 1e-9
 
@@ -155,12 +154,13 @@ def _setting_ports():
     return tuple(ports)
 
 
-class ProgrammableFeed(Controller):
+class ProgrammableFeed(CycleController):
     MODEL_NAME = "ProgrammableFeed"
     DESCRIPTION = ("Grinding-machine programmable feed control: program store, rough/fine/spark-out, wheel-wear "
                    "compensation, emergency return to the feed origin (JP S60-43522)")
     SEED = "programmable-feed-JPS6043522.txt"
     STOP_TIME = 35.0
+    AXES = ("x", "y")
 
     PORTS = (
         *_setting_ports(),
@@ -176,11 +176,7 @@ class ProgrammableFeed(Controller):
              min_exclusive=True),
         real("return_rate", "parameter", 10.0, "mm/s", "rate of the return to the feed origin before a start away "
              "from it", min=0.0, min_exclusive=True),
-        real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
-             min_exclusive=True),
-        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axis has not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
+        *cycle_ports("a feed word"),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
@@ -201,6 +197,22 @@ class ProgrammableFeed(Controller):
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input)"),
     )
 
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """Also the D, F and T settings no word of the program names."""
+        out = super().unread(values)
+        try:
+            words = parse_program(str(values.get("program", EMPTY_PROGRAM))).values()
+        except ProgramError:            # the run refuses the program, naming line and column
+            return out
+        for letter, index in (("D", "d"), ("F", "f"), ("T", "t")):
+            used = sorted({getattr(w, index) for w in words} - {0})
+            for k in range(1, 8):
+                if k not in used:
+                    out[f"{letter}{k}"] = (f"reads {', '.join(f'{letter}{i}' for i in used) or f'no {letter} setting'}"
+                                           f"{' only' if used else ''} (the {letter} settings its program names)")
+        return out
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.D = [real_param(values, f"D{k}") for k in range(1, 8)]
         self.F = [real_param(values, f"F{k}") for k in range(1, 8)]
@@ -213,8 +225,7 @@ class ProgrammableFeed(Controller):
         self.y_origin = real_param(values, "y_origin")
         self.accel = real_param(values, "accel")
         self.return_rate = real_param(values, "return_rate")
-        self.max_following_error = real_param(values, "max_following_error")
-        self.inpos_timeout = real_param(values, "inpos_timeout")
+        self.configure_cycle(values)
         for name in ("start_address", "emergency_address", "wear_address"):
             entry = getattr(self, name)
             require(entry in self.program, name, entry, f"entry address M{entry} is missing from the program")
@@ -252,34 +263,25 @@ class ProgrammableFeed(Controller):
         self.rc = {"x": 0.0, "y": 0.0}                    # return counters
         self.cmd = {"x": self.x_origin, "y": self.y_origin}
         self.vff = {"x": 0.0, "y": 0.0}
-        self.alarm = False
+        self.reset_cycle()
         self.move = LinearMove(self.accel)
         self.move.begin((self.x_origin, self.y_origin), (self.x_origin, self.y_origin), 1.0)
         self._counting = True                              # gate 55: closed during S4
         self._pending_emergency = False
-        self._steps_since_end = 0
-        self._edges = {"start": False, "wear_start": False, "emergency": False}
+        self._wear_button, self._emergency_button = Button(), Button()
         self._mfin_was = False
         self._mfin_stuck_said = False
-        self._waiting = 0.0                                # time since a feed's command stopped
         self._then = 0                                     # entry address after the return to the origin
-        self._positions = PositionGuard(("x_pos", "y_pos"))
-        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
     # -- the cycle ------------------------------------------------------------------------------
-    def _rising(self, inputs: Mapping[str, object], name: str) -> bool:
-        now = bool(inputs[name])
-        was, self._edges[name] = self._edges[name], now
-        return now and not was
-
     def _load(self, address: int) -> None:
         """Read the word at ``address`` (the seed's CL1..CL5 read cycle) and start executing it."""
         self.pc = address
         word = self.word = self.program[address]
         self.busy = True
-        self._steps_since_end = 0
+        self.inpos.reset()
         here = (self.cmd["x"], self.cmd["y"])
         if word.kind == "feed":
             delta = word.sign * self.D[word.d - 1]
@@ -303,14 +305,9 @@ class ProgrammableFeed(Controller):
         self._counting = counting
         self.move.begin(start, end, rate)
 
-    def _word_done(self, word: Word, inputs: Mapping[str, object]) -> bool:
+    def _word_done(self, word: Word, inputs: Mapping[str, object], judged: int | None) -> bool:
         if word.kind in ("feed", "return"):
-            self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
-            # in-position answers the final command only after one round trip through the master;
-            # the actual position must stand at this controller's own command (not a held one)
-            axis = word.axis
-            return (self._steps_since_end >= 2 and bool(inputs[f"{axis}_in_position"])
-                    and abs(float(inputs[f"{axis}_pos"]) - self.cmd[axis]) <= IN_POSITION)  # type: ignore[arg-type]
+            return judged == ARRIVED
         if word.kind == "dwell":
             return self.dwell_left == 0.0
         if word.kind == "aux":
@@ -320,9 +317,7 @@ class ProgrammableFeed(Controller):
 
     def _raise_alarm(self, t: float, why: str) -> None:
         """Latch the alarm; the running feed decelerates to rest; a dwell or M wait is abandoned."""
-        if not self.alarm:
-            self.say("error", f"t = {t:.4f} s: {why}; feed decelerating to rest, cycle stopped")
-        self.alarm = True
+        self.latch_alarm(t, why, "feed decelerating to rest, cycle stopped")
         self.move.halt()
         self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
         self._pending_emergency = False
@@ -332,13 +327,13 @@ class ProgrammableFeed(Controller):
         area limiter while the command went on). The return counters follow: they count where the wheel
         really is from the feed origin, so S1 and the return before a restart go to the true origin."""
         moved = []
-        for axis in ("x", "y"):
-            pos = float(inputs[f"{axis}_pos"])  # type: ignore[arg-type]
-            if abs(pos - self.cmd[axis]) > IN_POSITION:
-                moved.append(f"{axis.upper()} {self.cmd[axis]:.4f} -> {pos:.4f}")
-                if self._counting:                     # an S4 move is not counted: nor is what it fell short
-                    self.rc[axis] += pos - self.cmd[axis]
-                self.cmd[axis] = pos
+        actual = dict(zip(self.AXES, self.actual(inputs)))
+        for axis in follow_up(actual, self.cmd, self.inpos_band):
+            pos = actual[axis]
+            moved.append(f"{axis.upper()} {self.cmd[axis]:.4f} -> {pos:.4f}")
+            if self._counting:                     # an S4 move is not counted: nor is what it fell short
+                self.rc[axis] += pos - self.cmd[axis]
+            self.cmd[axis] = pos
         if moved:
             self.say("info", f"t = {t:.4f} s: follow-up: command re-based on the actual position ({', '.join(moved)})")
             here = (self.cmd["x"], self.cmd["y"])
@@ -365,12 +360,14 @@ class ProgrammableFeed(Controller):
     def _return_first(self, axis: str) -> None:
         self.word = Word("return", f"{axis.upper()} to the feed origin", 0, axis=axis)
         self.busy = True
-        self._steps_since_end = 0
+        self.inpos.reset()
         self._start_move(axis, -self.rc[axis], self.return_rate, counting=True)
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        start, wear, emb = (self._rising(inputs, n) for n in ("start", "wear_start", "emergency"))
-        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
+        start = self.start_button.pressed(inputs["start"])
+        wear = self._wear_button.pressed(inputs["wear_start"])
+        emb = self._emergency_button.pressed(inputs["emergency"])
+        bad = self.judge_inputs(inputs, dt)
         if bad:
             self._raise_alarm(t, bad)
         elif inputs["alarm_in"]:
@@ -385,10 +382,9 @@ class ProgrammableFeed(Controller):
             else:
                 self.alarm = True
         elif self.mode != IDLE and not self._pending_emergency:
-            err = max(abs(self.cmd[a] - float(inputs[f"{a}_pos"])) for a in ("x", "y"))  # type: ignore[arg-type]
-            if err > self.max_following_error:
-                self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
-                                     f"{self.max_following_error:g} mm")
+            excess = self.following_error(inputs, [self.cmd[a] for a in self.AXES])
+            if excess:
+                self._raise_alarm(t, excess)
 
         if emb and not bad:
             # EMB: abort whatever runs; a running feed first decelerates to rest (EMB.SDW).
@@ -420,7 +416,7 @@ class ProgrammableFeed(Controller):
         elif self.word is not None:
             word = self.word
             if word.kind == "feed":
-                rate = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+                rate = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
                 self.move.advance(dt, 0.0 if hold else rate)
             elif word.kind == "return":
                 self.move.advance(dt, 0.0 if hold else 1.0)
@@ -433,21 +429,21 @@ class ProgrammableFeed(Controller):
                 self._mfin_stuck_said = True
                 self.say("warning", f"t = {t:.4f} s: M{word.m} (M{self.pc}) waits for MFIN to drop: it is still "
                                     "high (the auxiliary device has not released the previous answer)")
-            if self._word_done(word, inputs):
+            # a feed word ends when its axis stands at this controller's own command (the cycle's in-position check)
+            judged = (self.inpos.judge(dt, self.move.done, self.in_position(inputs, (word.axis,)),
+                                       self.actual(inputs, (word.axis,)), [self.cmd[word.axis]])
+                      if word.kind in ("feed", "return") else None)
+            if self._word_done(word, inputs, judged):
                 if word.kind == "aux":
                     self.m_active = 0
-                self._waiting = 0.0
                 self._advance_move_outputs()
                 self._next_word()
-            elif word.kind in ("feed", "return") and self.move.done:
-                self._waiting += dt
-                if self._waiting > self.inpos_timeout:
-                    self._waiting = 0.0
-                    axis = word.axis
-                    self._raise_alarm(t, f"in-position check: {axis.upper()} stands at "
-                                         f"{float(inputs[f'{axis}_pos']):.4f}, not at the command "  # type: ignore[arg-type]
-                                         f"{self.cmd[axis]:.4f}, {self.inpos_timeout:g} s after it stopped "
-                                         "(held downstream?)")
+            elif judged == LATE:
+                axis = word.axis
+                self._raise_alarm(t, f"in-position check: {axis.upper()} stands at "
+                                     f"{float(inputs[f'{axis}_pos']):.4f}, not at the command "  # type: ignore[arg-type]
+                                     f"{self.cmd[axis]:.4f}, {self.inpos_timeout:g} s after it stopped "
+                                     "(held downstream?)")
         elif not self.move.done:
             self.move.advance(dt, 0.0)                     # the controlled stop after an alarm
         self._mfin_was = bool(inputs["mfin"])
@@ -487,3 +483,48 @@ class ProgrammableFeed(Controller):
         out["return_counter_x"], out["return_counter_y"] = self.rc["x"], self.rc["y"]
         out["alarm"] = self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the word executing is the program's at the program counter (or the return to the
+        origin before a start), the command where the interpolator stands and, while a cycle runs, within
+        max_following_error (and one step) of the actual axes."""
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        why = super().check_state(inputs)
+        if why:
+            return why
+        why = self.move_fault(self.move, self.accel, {1.0, self.return_rate, *self.F})
+        if why:
+            return why
+        if self.mode not in (IDLE, RUN, EMERGENCY):
+            return f"mode = {self.mode!r}: not idle, run or emergency"
+        for name in ("pc", "_then"):
+            if getattr(self, name) not in self.program and getattr(self, name) != 0:
+                return f"{name} = {getattr(self, name)!r}: no address of the program"
+        word = self.word
+        if word is not None:
+            axis = word.axis.upper()
+            if not (word == self.program.get(self.pc)
+                    or (word.line == 0 and word.axis in ("x", "y")
+                        and word == Word("return", f"{axis} to the feed origin", 0, axis=word.axis))):
+                return f"word = {word!r}: not the word at M{self.pc} of the program"
+        if self.m_active and (word is None or word.kind != "aux" or word.m != self.m_active):
+            return f"m_active = {self.m_active!r}: not the M word executing"
+        if not 0.0 <= self.dwell_left <= max(self.T):
+            return f"dwell_left = {self.dwell_left!r}: not within the dwell settings T"
+        for a in ("x", "y"):
+            if not abs(self.cmd[a] - self.rc[a]) <= POSITION_LIMIT:
+                return f"rc[{a!r}] = {self.rc[a]!r}: puts the feed origin beyond {POSITION_LIMIT:g} mm"
+        if (self.cmd["x"], self.cmd["y"]) != self.move.position():
+            return f"cmd = {self.cmd!r}: not where the interpolator stands ({self.move.position()!r})"
+        if (self.vff["x"], self.vff["y"]) not in (self.move.velocity(), (0.0, 0.0)):
+            return f"vff = {self.vff!r}: not the interpolator's velocity"
+        if self.mode != IDLE and not self.alarm and not self._pending_emergency and self.positions.last is not None:
+            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
+            for a in ("x", "y"):
+                if abs(self.cmd[a] - inputs[f"{a}_pos"]) > bound:  # type: ignore[operator]
+                    return (f"cmd[{a!r}] = {self.cmd[a]!r}: {abs(self.cmd[a] - inputs[f'{a}_pos']):.4g} mm from "  # type: ignore[operator]
+                            f"the actual {a}_pos, beyond max_following_error = {self.max_following_error:g} mm")
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None

@@ -438,6 +438,14 @@ def _check_profile(profile: Profile, start: Point) -> int:
         falls = t[1] < s[1] - TOL or bool(x_lo and x_lo[1] < s[1] - TOL) or bool(x_hi and x_hi[1] > t[1] + TOL)
         if falls and not pocket:
             pocket = line
+        if isinstance(e, Line) and abs(t[0] - s[0]) <= TOL and t[1] < s[1] - TOL:
+            # a wall falling at the profile's end (against the stock left standing there) or straight back up:
+            # a groove of no width, which no pass can enter at most U deep
+            k = profile.blocks.index(pb)
+            after = profile.blocks[k + 1].element if k + 1 < len(profile.blocks) else None
+            if after is None or (abs(after.start[0] - after.end[0]) <= TOL and after.end[1] > after.start[1]):
+                raise ProgramError(line, 1, raw, "a groove of no width: this wall falls at the profile's end or "
+                                                 "the next block climbs straight back up at the same Z")
         top = max(s[1], t[1])
         if top > start[1] + TOL:
             raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:g} above the start "
@@ -758,6 +766,13 @@ class ElementMove(LinearMove):
         self.accel = self.full_accel
         super().begin(start, end, rate)
 
+    @staticmethod
+    def rate_on(element: Element, rate: float, accel: float) -> float:
+        """The rate a move along ``element`` runs at: ``rate``, on an arc at most its centripetal cap."""
+        if isinstance(element, Arc):
+            return min(rate, math.sqrt(ARC_CENTRIPETAL * accel * element.radius))
+        return rate
+
     def begin_element(self, element: Element, rate: float) -> None:
         self.begin(xz(element.start), xz(element.end), rate)
         if isinstance(element, Arc):
@@ -765,7 +780,13 @@ class ElementMove(LinearMove):
             self.length = element.length
             self.done = self.length == 0.0
             self.accel = ARC_TANGENTIAL * self.full_accel
-            self.rate = min(rate, math.sqrt(ARC_CENTRIPETAL * self.full_accel * element.radius))
+            self.rate = self.rate_on(element, rate, self.full_accel)
+
+    def _end_here(self) -> None:
+        """Halted on an arc: the move ends where it rests, a straight move of no length from then on."""
+        super()._end_here()
+        self.arc = None
+        self.accel = self.full_accel
 
     def position(self) -> tuple[float, ...]:
         if self.arc is None or self.done:

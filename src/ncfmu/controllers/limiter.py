@@ -11,9 +11,9 @@ blocks the direction that was being commanded -- on whichever axis moved into th
 seed resets that bit of its movement-axis register. Motion in the opposite direction passes at once,
 so the axis can be backed out without re-homing.
 
-Stops are controlled (SPEC 2): a blocked direction is not a frozen command. The gated output of that
-axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the command
-never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
+Stops are controlled, as in every ncfmu controller: a blocked direction is not a frozen command. The gated
+output of that axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the
+command never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
 gated command may pass the boundary by at most ``v * (monitor_period + dt) + v**2 / (2 * decel)``
 (``v``: its speed; :meth:`AreaLimiter.overshoot_bound`). With ``predictive`` the limiter governs
 the speed every step: each axis may move toward a boundary only as fast as it can still stop
@@ -446,6 +446,37 @@ class AreaLimiter(Controller):
         out["ref_vff"], out["lim_vff"] = self.vel
         out["alarm"], out["region"], out["blocked"] = self.alarm, self.region, self.blocked
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: gated commands within reach and published, speeds within max_speed, the blocked
+        directions those of the hard and soft blocks, the region that of the last monitor tick."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        for i in (0, 1):
+            if not abs(self.pos[i]) <= POSITION_LIMIT:
+                return f"pos[{i}] = {self.pos[i]!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
+            if not abs(self.vel[i]) <= self.max_speed * (1 + 1e-9):
+                return f"vel[{i}] = {self.vel[i]!r}: faster than max_speed = {self.max_speed:g} mm/s"
+            if not abs(self._tick[i]) <= POSITION_LIMIT:
+                return f"_tick[{i}] = {self._tick[i]!r}: beyond {POSITION_LIMIT:g} mm"
+        if self._prev_in is not None and not (type(self._prev_in) is tuple and len(self._prev_in) == 2 and all(
+                type(x) is float and abs(x) <= POSITION_LIMIT for x in self._prev_in)):
+            return f"_prev_in = {self._prev_in!r}: not a (ref, lim) command within {POSITION_LIMIT:g} mm"
+        if not (0 <= self.hard <= 15 and 0 <= self.soft <= 15 and self.blocked == self.hard | self.soft):
+            return f"blocked = {self.blocked!r}: not hard {self.hard!r} | soft {self.soft!r} (directions 0..15)"
+        if not all(0.0 <= v <= self.max_speed for v in self._block_speed.values()):
+            return f"_block_speed = {self._block_speed!r}: not speeds within max_speed"
+        if self.region != find_region(self.ref_max, self._tick[0]):
+            return f"region = {self.region!r}: not the region of the last tick at ref {self._tick[0]!r}"
+        if not 0.0 <= self.clock <= self.monitor_period:
+            return f"clock = {self.clock!r}: not within the monitor period {self.monitor_period:g} s"
+        if self.fault is not None and type(self.fault) is not str:
+            return f"fault = {self.fault!r}: not a message"
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None
 
 
 #: (command, feed-forward) input names of the reference and the limited axis.

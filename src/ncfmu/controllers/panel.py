@@ -50,6 +50,13 @@ class OperatorPanel(Controller):
         real("feed_override", "output", None, "1", "feed override dial"),
     )
 
+    # Each time, dial and delay drives one output (pulse: the push buttons): a system that does not connect
+    # that output cannot feel the setting (ncfmu warns about a --set of it).
+    ACTS_ON = {"start_at": ("start",), "restart_at": ("start",), "wear_start_at": ("wear_start",),
+               "emergency_at": ("emergency",), "hold_at": ("feed_hold",), "release_at": ("feed_hold",),
+               "pulse": ("start", "wear_start", "emergency"), "mfin_delay": ("mfin",),
+               "override": ("feed_override",), "m_active": ("mfin",)}
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.start_at = real_param(values, "start_at")
         self.restart_at = real_param(values, "restart_at")
@@ -91,3 +98,16 @@ class OperatorPanel(Controller):
         out["mfin"] = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
         out["feed_override"] = self.override
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the panel clock and the time the present M word has been active are times."""
+        why = super().check_state(inputs)
+        if why:
+            return why
+        if not self.clock >= 0.0:
+            return f"clock = {self.clock!r}: must be >= 0"
+        if not (0.0 <= self.m_seen_for <= self.clock + 1e-9 and (self.m_seen or self.m_seen_for == 0.0)):
+            return f"m_seen_for = {self.m_seen_for!r}: not a time the M word {self.m_seen!r} can have been active"
+        if not 0.0 <= self._outputs["feed_override"] <= 1.5:  # type: ignore[operator]
+            return f"_outputs['feed_override'] = {self._outputs['feed_override']!r}: must be in [0, 1.5]"
+        return None

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import Controller, OverrideDial, PositionGuard, finite_inputs, int_param, real_param, servo_ports
+from .base import int_param, real_param, servo_ports
+from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
 from .lathe_program import ElementMove, Segment
 from .motion import LinearMove
 
@@ -104,13 +105,14 @@ def _block_ports():
     return tuple(ports)
 
 
-class CutSequencer(Controller):
+class CutSequencer(CycleController):
     """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
 
     MODEL_NAME = "CutSequencer"
     DESCRIPTION = "Lathe repetitive-cut sequencer: SC1 infeed, SC2 cut (taper), SC3 retract, SC4 return (US 4,017,723)"
     SEED = "repetitive-cut-sequencer-US4017723.txt"
     STOP_TIME = 100.0
+    AXES = ("x", "z")
 
     PORTS = (
         real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
@@ -118,14 +120,7 @@ class CutSequencer(Controller):
         integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
              min_exclusive=True),
-        real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
-             min_exclusive=True),
-        real("inpos_band", "parameter", 0.005, "mm",
-             "a sub-cycle ends only when the actual positions are this close to the sequencer's own command", min=0.0,
-             min_exclusive=True),
-        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
+        *cycle_ports("a sub-cycle"),
         *_block_ports(),
         boolean("start", "input", False, "cycle start (rising edge)"),
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
@@ -152,14 +147,21 @@ class CutSequencer(Controller):
     )
 
     # -- parameters -----------------------------------------------------------------------------
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        out = super().unread(values)
+        if str(values.get("program", "")).strip():
+            for p in cls.ports("parameter"):
+                if (p.name.startswith("block[") and p.name != "block[1].rapid") or p.name == "n_blocks":
+                    out[p.name] = "runs its program (program is set), not the registers"
+        return out
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.x_start = real_param(values, "x_start")
         self.z_start = real_param(values, "z_start")
         self.n_blocks = int_param(values, "n_blocks")
         self.accel = real_param(values, "accel")
-        self.max_following_error = real_param(values, "max_following_error")
-        self.inpos_band = real_param(values, "inpos_band")
-        self.inpos_timeout = real_param(values, "inpos_timeout")
+        self.configure_cycle(values)
         blocks = []
         for k in range(1, self.n_blocks + 1):
             p = f"block[{k}]"
@@ -209,18 +211,13 @@ class CutSequencer(Controller):
         self.pass_no = 0
         self.busy = False
         self.done = False
-        self.alarm = False
+        self.reset_cycle()
         self.x_cmd, self.z_cmd = self.x_start, self.z_start
         self.x_vff = self.z_vff = 0.0
         self.move = ElementMove(self.accel) if self.plan else LinearMove(self.accel)
         self.segment = 0                     # index into self.plan while a program runs
-        self._start_was = False
-        self._steps_since_end = 0
-        self._waiting = 0.0                  # time since the command stopped, waiting for in-position
         self._waypoints: list[tuple[float, float]] = []
         self._then_block = 0                 # block to begin once the approach is done
-        self._positions = PositionGuard(("x_pos", "z_pos"))
-        self._override = OverrideDial()
         self._outputs: dict[str, object] = {}
         self._publish()
 
@@ -228,6 +225,7 @@ class CutSequencer(Controller):
     def _begin_phase(self, phase: int) -> None:
         """Load the distance counters for ``phase`` (the seed's non-destructive transfers)."""
         b = self.blocks[self.block_index]
+        self.inpos.reset()
         here = (self.x_cmd, self.z_cmd)
         stp = x0, z0 = self.stps[self.block_index]
         self.phase = phase
@@ -248,6 +246,7 @@ class CutSequencer(Controller):
     def _begin_segment(self, index: int) -> None:
         """Run the program's move ``index``: its sub-cycle, pass and ΣX are what the plan says."""
         seg = self.plan[index]
+        self.inpos.reset()
         self.segment = index
         self.phase = seg.subcycle if seg.subcycle else PROGRAM_MOVE
         self.pass_no, self.sigma_x = seg.pass_no, seg.sigma_x
@@ -315,59 +314,47 @@ class CutSequencer(Controller):
 
     def _raise_alarm(self, t: float, why: str) -> None:
         """Latch the alarm and bring the present move to a controlled stop along its path."""
-        if not self.alarm:
-            self.say("error", f"t = {t:.4f} s: {why}; decelerating to rest, cycle stopped")
-        self.alarm = True
+        self.latch_alarm(t, why, "decelerating to rest, cycle stopped")
         self.move.halt()
         self.phase = IDLE
         self.busy = False
         self._waypoints = []
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = self._positions.check(inputs, dt) or finite_inputs(inputs, ("feed_override",))
+        bad = self.judge_inputs(inputs, dt)
         if bad:
             self._raise_alarm(t, bad)
         elif inputs["alarm_in"]:
             self._raise_alarm(t, "alarm_in (area limiter) is set")
         else:
-            err = max(abs(self.x_cmd - inputs["x_pos"]), abs(self.z_cmd - inputs["z_pos"]))  # type: ignore[operator]
-            if err > self.max_following_error:
-                self._raise_alarm(t, f"excess following error {err:.4f} mm > max_following_error "
-                                     f"{self.max_following_error:g} mm")
+            excess = self.following_error(inputs, (self.x_cmd, self.z_cmd))
+            if excess:
+                self._raise_alarm(t, excess)
 
-        start = bool(inputs["start"])
-        if start and not self._start_was and not self.busy and not inputs["alarm_in"] and not bad:
+        if self.start_button.pressed(inputs["start"]) and not self.busy and not inputs["alarm_in"] and not bad:
             if self.move.at_rest:
                 if self.alarm:
                     self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-                    self._follow_up(t, float(inputs["x_pos"]), float(inputs["z_pos"]))  # type: ignore[arg-type]
+                    self._follow_up(t, inputs)
                 self.alarm = False
                 self._start_cycle()
             else:
                 self.say("warning", f"t = {t:.4f} s: start ignored: the axes are still decelerating")
-        self._start_was = start
 
         if self.busy:
-            override = self._override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+            override = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
             self.move.advance(dt, scale)
-            # The servos' in-position answers the final command only after one round trip through
-            # the master (one step with Gauss-Seidel, two with Jacobi): trust it from the 2nd step on.
-            self._steps_since_end = self._steps_since_end + 1 if self.move.done else 0
-            if (self._steps_since_end >= 2 and inputs["x_in_position"] and inputs["z_in_position"]
-                    and self._arrived(inputs)):
-                self._steps_since_end = 0
-                self._waiting = 0.0
+            judged = self.inpos.judge(dt, self.move.done, self.in_position(inputs), self.actual(inputs),
+                                      (self.x_cmd, self.z_cmd))
+            if judged == ARRIVED:
                 self._next_phase()
-            elif self.move.done:
-                self._waiting += dt
-                if self._waiting > self.inpos_timeout:
-                    self._waiting = 0.0
-                    self._raise_alarm(t, f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
-                                         f"{float(inputs['z_pos']):.4f}), not at the command ({self.x_cmd:.4f}, "  # type: ignore[arg-type]
-                                         f"{self.z_cmd:.4f}), {self.inpos_timeout:g} s after it stopped "
-                                         "(held downstream?)")
+            elif judged == LATE:
+                x_pos, z_pos = self.actual(inputs)
+                self._raise_alarm(t, f"in-position check: the axes stand at ({x_pos:.4f}, {z_pos:.4f}), not at the "
+                                     f"command ({self.x_cmd:.4f}, {self.z_cmd:.4f}), {self.inpos_timeout:g} s after "
+                                     "it stopped (held downstream?)")
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         elif not self.move.done:
@@ -378,14 +365,10 @@ class CutSequencer(Controller):
             self.x_vff = self.z_vff = 0.0
         return self._publish()
 
-    def _arrived(self, inputs: Mapping[str, object]) -> bool:
-        """The actual axes stand at the sequencer's own command (not only at whatever reached the servos)."""
-        return (abs(float(inputs["x_pos"]) - self.x_cmd) <= self.inpos_band  # type: ignore[arg-type]
-                and abs(float(inputs["z_pos"]) - self.z_cmd) <= self.inpos_band)  # type: ignore[arg-type]
-
-    def _follow_up(self, t: float, x_pos: float, z_pos: float) -> None:
+    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
         """Re-base the command on the actual position where a stop left them apart (a held axis)."""
-        if abs(x_pos - self.x_cmd) > self.inpos_band or abs(z_pos - self.z_cmd) > self.inpos_band:
+        x_pos, z_pos = self.actual(inputs)
+        if follow_up({"x": x_pos, "z": z_pos}, {"x": self.x_cmd, "z": self.z_cmd}, self.inpos_band):
             self.say("info", f"t = {t:.4f} s: follow-up: command ({self.x_cmd:.4f}, {self.z_cmd:.4f}) re-based on "
                              f"the actual position ({x_pos:.4f}, {z_pos:.4f})")
             self.x_cmd, self.z_cmd = x_pos, z_pos
@@ -405,3 +388,71 @@ class CutSequencer(Controller):
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         return out
+
+    def check_state(self, inputs: Mapping[str, object]) -> str | None:
+        """A restored state: the registers within the present block, the command where the interpolator
+        stands and (while running) within max_following_error (and one step) of the actual axes."""
+        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        why = super().check_state(inputs)
+        if why:
+            return why
+        rates = {0.0, 1.0} | {b.rapid for b in self.blocks} | {b.feed for b in self.blocks}
+        rates |= {ElementMove.rate_on(g.element, g.rate, self.accel) for g in self.plan}
+        why = self._program_fault() if self.plan else None
+        if why:
+            return why
+        if not isinstance(self.move, ElementMove) or self.move.arc is None:
+            why = self.move_fault(self.move, self.accel, rates)
+            if why:
+                return why
+        if self.phase not in (APPROACH, IDLE, SC1, SC2, SC3, SC4) + ((PROGRAM_MOVE,) if self.plan else ()):
+            return f"phase = {self.phase!r}: not a sub-cycle"
+        for name in ("block_index", "_then_block"):
+            if not 0 <= getattr(self, name) < self.n_blocks:
+                return f"{name} = {getattr(self, name)!r}: not a block of n_blocks = {self.n_blocks}"
+        b = self.blocks[self.block_index]
+        if self.plan:
+            pass                                  # a program's pass and ΣX: checked by _program_fault
+        elif not (0 <= self.passes_left <= b.N and 0 <= self.pass_no <= b.N):
+            return f"passes_left = {self.passes_left!r}, pass_no = {self.pass_no!r}: not within N = {b.N}"
+        elif not 0.0 <= self.sigma_x <= b.Xf + b.N * b.Xd + 1e-9:
+            return f"sigma_x = {self.sigma_x!r}: not within 0..Xf + N*Xd = {b.Xf + b.N * b.Xd:g}"
+        for i, p in enumerate(self._waypoints):
+            if type(p) is not tuple or len(p) != 2 or not all(type(x) is float and abs(x) <= POSITION_LIMIT for x in p):
+                return f"_waypoints[{i}] = {p!r}: not an (x, z) position within {POSITION_LIMIT:g} mm"
+        here = (self.x_cmd, self.z_cmd)
+        if here != self.move.position() and not (self.move.end_point == () and here == (self.x_start, self.z_start)):
+            return f"x_cmd, z_cmd = {here!r}: not where the interpolator stands ({self.move.position()!r})"
+        if (self.x_vff, self.z_vff) not in (self.move.velocity(), (0.0, 0.0)):
+            return f"x_vff, z_vff = {(self.x_vff, self.z_vff)!r}: not the interpolator's velocity"
+        if self.busy and not self.alarm and self.positions.last is not None:
+            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
+            for axis, cmd in (("x", self.x_cmd), ("z", self.z_cmd)):
+                if abs(cmd - inputs[f"{axis}_pos"]) > bound:  # type: ignore[operator]
+                    return (f"{axis}_cmd = {cmd!r}: {abs(cmd - inputs[f'{axis}_pos']):.4g} mm from the actual "  # type: ignore[operator]
+                            f"{axis}_pos, beyond max_following_error = {self.max_following_error:g} mm and one step")
+        published = dict(self._outputs)
+        if self._publish() != published:
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None
+
+    def _program_fault(self) -> str | None:
+        """A restored state of a running program: the move is the plan's present segment (an arc with the arc's
+        own acceleration, rate cap and length), the pass and ΣX are the segment's."""
+        if not (isinstance(self.move, ElementMove) and type(self.segment) is int
+                and 0 <= self.segment < len(self.plan)):
+            return f"segment = {self.segment!r}: not a move of the program ({len(self.plan)} moves)"
+        seg = self.plan[self.segment]
+        running = self.busy and self.phase != APPROACH
+        if running and (self.pass_no, self.sigma_x) != (seg.pass_no, seg.sigma_x):
+            return f"pass_no, sigma_x = {(self.pass_no, self.sigma_x)!r}: not the program's move {self.segment}"
+        m = self.move
+        if m.arc is not None:
+            if m.arc != seg.element:
+                return f"move.arc = {m.arc!r}: not the program's move {self.segment}"
+            cap = ElementMove.rate_on(m.arc, seg.rate, self.accel)
+            if (m.accel, m.rate, m.length) != (lathe_program.ARC_TANGENTIAL * self.accel, cap, m.arc.length):
+                return f"move.accel, rate, length = {(m.accel, m.rate, m.length)!r}: not those of its arc"
+            if not (0.0 <= m.s <= m.length and 0.0 <= m.v <= 1.5 * m.rate):
+                return f"move.s = {m.s!r}, v = {m.v!r}: not within the arc (length {m.length!r})"
+        return None

@@ -33,6 +33,7 @@ from ..errors import ConfigError, SimulationError, SystemDefinitionError
 from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
+from .ssp import is_link
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -89,7 +90,8 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
 
 
 def safe_extract(archive: Path, target: Path) -> Path:
-    """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths)."""
+    """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths) and symbolic
+    links (zipfile would write a link as a file holding its target; no tool should find one there)."""
     target = Path(target).resolve()
     try:
         z = zipfile.ZipFile(archive)
@@ -100,10 +102,14 @@ def safe_extract(archive: Path, target: Path) -> Path:
         if total > MAX_UNPACKED:
             raise SystemDefinitionError(f"{archive}: unpacks to more than {MAX_UNPACKED / 2 ** 30:g} GiB "
                                         f"({total / 2 ** 30:.1f} GiB): refused")
-        for name in z.namelist():
+        for entry in z.infolist():
+            name = entry.filename
             dest = (target / name).resolve()
             if name.startswith(("/", "\\")) or (dest != target and target not in dest.parents):
                 raise SystemDefinitionError(f"{archive}: entry {name!r} would be written outside the extraction folder")
+            if is_link(entry):
+                raise SystemDefinitionError(f"{archive}: entry {name!r} is a symbolic link: refused (an archive "
+                                            "carries its files themselves)")
         z.extractall(target)
     return target
 

@@ -120,6 +120,11 @@ def _output_slots(slaves, kind, ext_names):
     return slots
 
 
+def _a(causality: str) -> str:
+    """``an output``, ``a parameter``: a causality with its article, for messages."""
+    return f"{'an' if causality[:1] in 'aeiou' else 'a'} {causality}"
+
+
 class Master:
     """Run a :class:`~ncfmu.cosim.ssp.System` whose components are given as slaves.
 
@@ -157,11 +162,11 @@ class Master:
             if dst is None:
                 raise SystemDefinitionError(f"connection {c}: {c.end_element} has no variable {c.end_connector!r}")
             if src.causality != "output":
-                raise SystemDefinitionError(f"connection {c}: {c.start_element}.{c.start_connector} is a "
-                                            f"{src.causality}, not an output")
+                raise SystemDefinitionError(f"connection {c}: {c.start_element}.{c.start_connector} is "
+                                            f"{_a(src.causality)}, not an output")
             if dst.causality != "input":
-                raise SystemDefinitionError(f"connection {c}: {c.end_element}.{c.end_connector} is a "
-                                            f"{dst.causality}, not an input")
+                raise SystemDefinitionError(f"connection {c}: {c.end_element}.{c.end_connector} is "
+                                            f"{_a(dst.causality)}, not an input")
             if src.type != dst.type or src.type not in KINDS:
                 raise SystemDefinitionError(f"connection {c}: type mismatch ({src.type} -> {dst.type})")
             key = (c.end_element, c.end_connector)
@@ -204,7 +209,8 @@ class Master:
         """
         stateful = [self._stateful(s) for s in self.slaves]
         run = self._prepare(stop_time, step_size, start_values, inputs, start_time)
-        k = int(round((branch_time - start_time) / run.h))
+        steps = (branch_time - start_time) / run.h      # nan or beyond the run (1e308 s) is refused, not rounded
+        k = int(round(steps)) if 0 < steps < run.n_steps else 0
         if not 0 < k < run.n_steps:
             raise SystemDefinitionError(f"branch time {branch_time} s must lie inside the run "
                                         f"({start_time}..{start_time + run.n_steps * run.h} s)")
@@ -246,14 +252,15 @@ class Master:
             raise SystemDefinitionError(f"step size = {h!r}: must be > 0")
         if not (math.isfinite(stop) and stop > start_time):
             raise SystemDefinitionError(f"stop time = {stop!r}: must be after the start time {start_time}")
-        n_steps = int(round((stop - start_time) / h))
+        steps = (stop - start_time) / h       # judged before rounding: 1e308 s at 1 ms is inf steps
+        recorded = sum(len(s.variables) for s in self.slaves) + 1
+        if (steps + 1) * recorded * 8 > MAX_RECORD_BYTES:
+            raise SystemDefinitionError(f"stop time {stop:g} s at a step of {h:g} s is {steps:.6g} steps: recording "
+                                        f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
+        n_steps = int(round(steps))
         if n_steps < 1:
             raise SystemDefinitionError(f"stop time {stop:g} s is shorter than one step ({h:g} s) after the start "
                                         f"time {start_time:g} s: nothing would run")
-        recorded = sum(len(s.variables) for s in self.slaves) + 1
-        if (n_steps + 1) * recorded * 8 > MAX_RECORD_BYTES:
-            raise SystemDefinitionError(f"stop time {stop:g} s at a step of {h:g} s is {n_steps} steps: recording "
-                                        f"them needs more than {MAX_RECORD_BYTES / 2 ** 30:g} GiB; shorten the run")
 
         # Start values: the system's parameter sets, then the caller's overrides.
         applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
@@ -276,7 +283,7 @@ class Master:
             for qualified in inputs.columns:
                 slave, v = self.variable(qualified)
                 if v.causality != "input":
-                    raise SystemDefinitionError(f"input CSV column {qualified!r} is a {v.causality}, not an input")
+                    raise SystemDefinitionError(f"input CSV column {qualified!r} is {_a(v.causality)}, not an input")
                 if any(c.end_element == slave.name and c.end_connector == v.name for c in self.system.connections):
                     raise SystemDefinitionError(f"input CSV column {qualified!r} is driven by a connection already")
                 ext[qualified] = v.type

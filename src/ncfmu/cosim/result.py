@@ -86,5 +86,56 @@ class Result:
 
     @classmethod
     def from_csv(cls, path: Path) -> Result:
-        from fmpy.util import read_csv
-        return cls(read_csv(str(path)))
+        """Read fmpy's CSV layout: ``time``, then one column per variable.
+
+        Numbers are read as float64; a column of True/False (how :func:`fmpy.util.write_csv` writes Booleans,
+        which fmpy's own ``read_csv`` cannot read back) as Booleans. Every mistake is a
+        :class:`~ncfmu.errors.SystemDefinitionError` naming the file, the line and the column.
+        """
+        import csv
+
+        from ..errors import SystemDefinitionError
+        path = Path(path)
+        try:
+            with open(path, newline="") as f:
+                lines = list(csv.reader(f))
+        except (OSError, UnicodeDecodeError, csv.Error) as err:
+            raise SystemDefinitionError(f"{path}: cannot read the result CSV: {err}") from None
+        if not lines or not any(cell.strip() for cell in lines[0]):
+            raise SystemDefinitionError(f"{path}: the result CSV is empty (expected a header time,NAME,...)")
+        header = [h.strip() for h in lines[0]]
+        if header[0] != "time":
+            raise SystemDefinitionError(f"{path}: a result CSV needs a first column 'time', not {header[0]!r}")
+        for j, name in enumerate(header):
+            if name in header[:j]:
+                raise SystemDefinitionError(f"{path}: line 1: column {name!r} twice")
+        rows = [(k, row) for k, row in enumerate(lines[1:], start=2) if any(cell.strip() for cell in row)]
+        if not rows:
+            raise SystemDefinitionError(f"{path}: the result CSV has a header and no rows")
+        for k, row in rows:
+            if len(row) != len(header):
+                raise SystemDefinitionError(f"{path}: line {k}: {len(row)} values for {len(header)} columns")
+        columns: dict[str, np.ndarray] = {}
+        for j, name in enumerate(header):
+            cells = [row[j].strip() for _, row in rows]
+            words = {c.lower() for c in cells}
+            if j > 0 and words <= {"true", "false"}:
+                columns[name] = np.array([c == "true" for c in map(str.lower, cells)])
+                continue
+            try:
+                columns[name] = np.array(cells).astype(np.float64)
+            except ValueError:
+                for (k, _), cell in zip(rows, cells):
+                    try:
+                        float(cell)
+                    except ValueError:
+                        raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
+                                                    "True/False") from None
+                raise
+        bad_time = np.flatnonzero(~np.isfinite(columns["time"]))
+        if bad_time.size:
+            raise SystemDefinitionError(f"{path}: line {rows[int(bad_time[0])][0]}: time must be finite")
+        data = np.empty(len(rows), dtype=[(name, columns[name].dtype) for name in header])
+        for name in header:
+            data[name] = columns[name]
+        return cls(data)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import math
+import stat
 import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass, field
@@ -234,6 +235,41 @@ def _time_attribute(path: Path, element: ET.Element, name: str) -> float:
     return value
 
 
+def _model_of(path: Path, name: str, source: str) -> str:
+    """The model of a component whose ``source`` is ``resources/<Model>.fmu``, a file of the archive itself.
+
+    Anything else could make a system load code from outside the archive (or its folder): ``..``, a folder,
+    an absolute path, a drive, a URL of any scheme. All are refused, naming the component.
+    """
+    flat = source.startswith("resources/") and source.endswith(".fmu")
+    model = source[len("resources/"):-len(".fmu")] if flat else ""
+    if not model or model in (".", "..") or any(ch in model for ch in "/\\:\0"):
+        raise SystemDefinitionError(f"{path}: component {name}: source {source!r}: an FMU is loaded only from inside "
+                                    "the archive, as resources/<Model>.fmu (no '..', folders, absolute paths or "
+                                    "URLs)")
+    return model
+
+
+def is_link(entry: zipfile.ZipInfo) -> bool:
+    """Whether an archive entry is a symbolic link (unix mode bits in the entry's external attributes)."""
+    return stat.S_ISLNK(entry.external_attr >> 16)
+
+
+def fmu_path(folder: Path, component: Component, origin: Path | None = None) -> Path:
+    """The FMU file of ``component`` in the system unpacked in ``folder`` (an extracted archive or the folder of
+    an .ssd): inside that folder, or refused -- a symbolic link may point elsewhere in the folder, not out of it.
+    Errors name ``origin`` (the archive ``folder`` was extracted from), else ``folder``."""
+    base = Path(folder).resolve()
+    where = origin if origin is not None else folder
+    target = (base / component.source).resolve()
+    if base not in target.parents:
+        raise SystemDefinitionError(f"{where}: component {component.name}: {component.source} leads outside the "
+                                    f"system folder (to {target}): an FMU is loaded only from inside it")
+    if not target.is_file():
+        raise SystemDefinitionError(f"{where}: component {component.name}: FMU not found: {component.source}")
+    return target
+
+
 def read_ssd(path: Path, read_file=None) -> System:
     """Read a system from an .ssd file (or, with ``read_file``, from inside an archive).
 
@@ -265,11 +301,14 @@ def read_ssd(path: Path, read_file=None) -> System:
     if sys_el is None or elements is None:
         raise SystemDefinitionError(f"{path}: no ssd:System with ssd:Elements (the components) in it")
     components = []
+    names: set[str] = set()
     for comp in elements.findall(_q("ssd:Component")):
-        name, source = _attribute(comp, "name", path), comp.get("source", "")
-        if not source.startswith("resources/") or not source.endswith(".fmu"):
-            raise SystemDefinitionError(f"{path}: component {name}: source {source!r} must be resources/<Model>.fmu")
-        model = source[len("resources/"):-len(".fmu")]
+        name = _attribute(comp, "name", path)
+        if name in names:
+            raise SystemDefinitionError(f"{path}: component name {name!r} is used twice: every component needs a "
+                                        "name of its own")
+        names.add(name)
+        model = _model_of(path, name, comp.get("source", ""))
         connectors: list[tuple[str, str, str, str | None]] = []
         for con in comp.iterfind(f"{_q('ssd:Connectors')}/{_q('ssd:Connector')}"):
             typed = list(con)
@@ -323,4 +362,11 @@ def read_ssp(archive: Path) -> System:
             if rel not in names:
                 raise SystemDefinitionError(f"{archive}: {rel!r} is not in the archive")
             return z.read(rel)
-        return read_ssd(archive, read_file)
+        system = read_ssd(archive, read_file)
+        for comp in system.components:
+            if comp.source in names and is_link(z.getinfo(comp.source)):
+                target = z.read(comp.source).decode(errors="replace")
+                raise SystemDefinitionError(f"{archive}: component {comp.name}: {comp.source} is a symbolic link in "
+                                            f"the archive (to {target!r}): an FMU is loaded only from inside the "
+                                            "archive")
+        return system

@@ -10,16 +10,14 @@ The decorator returns a :class:`ControllerSlave` subclass that registers every p
 controller (declared once, as data), builds and checks the controller at
 ``exitInitializationMode`` and steps it in ``doStep``. Messages the controller queues go to the FMU
 log with their level.
+
+The FMU's binary (``fmi/c/status_shim.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
+else: the contract is the table in :mod:`ncfmu.fmi.contract`, described in ``docs/architecture.md``.
 """
 
 from __future__ import annotations
 
 import copy
-import ctypes
-import operator
-import sys
-import types
-from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.default_experiment import DefaultExperiment
@@ -29,6 +27,7 @@ from ..controllers.base import Controller
 from ..errors import ConfigError
 from ..ports import Port
 from . import state as state_format
+from .contract import CAUSALITY, STATUS, TYPE
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 _CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input, "output": Fmi2Causality.output}
@@ -39,11 +38,15 @@ _CONVERT = {"Real": float, "Integer": int, "Boolean": bool, "String": str}
 
 
 class ControllerSlave(Fmi2Slave):
-    """pythonfmu slave around a controller class (set ``logic_class`` in a subclass)."""
+    """pythonfmu slave around a controller class (set ``logic_class`` in a subclass).
+
+    The FMU's binary (the shim, ``fmi/c/status_shim.c``) drives it through the ``fmi_*`` methods below,
+    and only those: the contract is the table in :mod:`ncfmu.fmi.contract`. Each returns its status
+    (:data:`~ncfmu.fmi.contract.STATUS`) and never raises; what it has to say goes to the log queue,
+    which the shim takes after every call (:meth:`fmi_take_log`).
+    """
 
     logic_class: type[Controller]
-    _shim_present = False                 # set by __init__: the status shim turns refusals into fmi2Error
-    _parked_refusal: str | None = None    # a refusal from a classmethod, for the next flag read
     author = "ncfmu"
     license = "MIT"
 
@@ -57,96 +60,113 @@ class ControllerSlave(Fmi2Slave):
         self.inputs: dict[str, object] = logic.default_inputs()
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
-        self._init_refused = False
-        self._call_refused = False        # the last FMU-state call was refused (read and cleared by the shim)
-        self.step_failed = False          # a failed doStep: fmi2Error through the shim (not discard)
-        resources = kwargs.get("resources")
-        # pythonfmu 0.7 puts the FMU's resources folder on sys.path at every fmi2Instantiate and never takes it
-        # out: one more entry per instance. Keep one (its builder removes exactly one after it built the
-        # model description), drop the repeats: the entries stay bounded by the FMUs a process has loaded.
-        if resources:
-            repeats = [i for i, p in enumerate(sys.path) if p and Path(p) == Path(resources)][1:]
-            for i in reversed(repeats):
-                del sys.path[i]
-        self._status_shim = bool(resources and sys.platform.startswith("linux")
-                                 and Path(resources, "ncfmu_status_shim").is_file())
-        type(self)._shim_present = self._status_shim
+        self._refused = False             # a value fmi_set was given was refused (the old value kept)
         for port in logic.PORTS:
             self._register(port)
-        self._causality = {vr: (v.causality.name, type(v).__name__, v.name, v.variability.name)
-                           for vr, v in self.vars.items()}
-        self._fast_get: dict[tuple, object] = {}
-        self._fast_set: dict[tuple, object] = {}
-        # The status shim picks this instance up right after pythonfmu created it (fmi2Instantiate,
-        # fmi2Reset) and then reads outputs and writes inputs straight from/into these dicts.
-        fast = sys.modules.setdefault("_ncfmu_fast", types.ModuleType("_ncfmu_fast"))
-        vars(fast)["last"] = self
 
-    # -- fast paths for the calls a master makes every step ---------------------------------------
-    # pythonfmu's generic get/set check every variable's type and call its getter one by one; a
-    # master asks for the same value references every step, so a compiled accessor is cached per list.
-    def _getter_for(self, vrs: list[int], kind: str):
-        key = (kind, *vrs)
-        fn = self._fast_get.get(key)
-        if fn is None:
-            info = [i for i in (self._causality.get(vr) for vr in vrs) if i is not None]
-            if vrs and len(info) == len(vrs) and all(i[0] == "output" and i[1] == kind for i in info):
-                pick = operator.itemgetter(*(i[2] for i in info))
-                fn = (lambda: [pick(self.out)]) if len(vrs) == 1 else (lambda: list(pick(self.out)))
-            else:
-                fn = None
-            self._fast_get[key] = fn
-        return fn
+    # -- the shim's entry points (ncfmu.fmi.contract.ENTRIES) -------------------------------------
+    @classmethod
+    def fmi_instantiate(cls, instance_name: str, resources: str, visible: bool) -> ControllerSlave:
+        return cls(instance_name=instance_name, resources=resources, visible=bool(visible))
 
-    def _setter_for(self, vrs: list[int], kind: str):
-        key = (kind, *vrs)
-        fn = self._fast_set.get(key, False)
-        if fn is False:
-            info = [i for i in (self._causality.get(vr) for vr in vrs) if i is not None]
-            if vrs and len(info) == len(vrs) and all(i[0] == "input" and i[1] == kind for i in info):
-                names = tuple(i[2] for i in info)
-                inputs = self.inputs
+    def fmi_ports(self) -> tuple[tuple[int, int, int, bool, str], ...]:
+        return tuple((vr, TYPE[type(v).__name__], CAUSALITY.get(v.causality.name.upper(), CAUSALITY["OTHER"]),
+                      v.variability.name == "fixed", v.name) for vr, v in self.vars.items())
 
-                def fn(values, names=names, inputs=inputs):
-                    for name, value in zip(names, values):
-                        inputs[name] = value
-            else:
-                fn = None
-            self._fast_set[key] = fn
-        return fn
+    def fmi_setup_experiment(self, start_time: float, stop_time: float | None, tolerance: float | None) -> int:
+        return STATUS["OK"]
 
-    def get_real(self, vrs):
-        fn = self._getter_for(vrs, "Real")
-        return fn() if fn is not None else super().get_real(vrs)
+    def fmi_enter_initialization_mode(self) -> int:
+        return STATUS["OK"]
 
-    def get_integer(self, vrs):
-        if len(vrs) == 1 and vrs[0] == INIT_REFUSED_VR:
-            return [int(self._init_refused)]
-        if len(vrs) == 1 and vrs[0] == CALL_REFUSED_VR:
-            cls = type(self)
-            parked, cls._parked_refusal = cls._parked_refusal, None
-            if parked:
-                self.log(f"{self.instance_name}: {parked}", Fmi2Status.error)
-            refused, self._call_refused = self._call_refused or bool(parked), False
-            return [int(refused)]
-        fn = self._getter_for(vrs, "Integer")
-        return fn() if fn is not None else super().get_integer(vrs)
+    def fmi_exit_initialization_mode(self) -> int:
+        try:
+            self.logic = self.logic_class.from_parameters(self.parameters)
+        except Exception as err:               # ConfigError names the rule; anything else is a value no rule foresaw
+            text = str(err) if isinstance(err, ConfigError) else f"the parameters cannot be used: {err!r}"
+            self.log(f"{self.instance_name}: parameter refused: {text}", Fmi2Status.error)
+            return STATUS["ERROR"]             # the instance lives on: the host may reset and try again
+        self.out = self.logic.outputs()
+        self._flush()
+        return STATUS["OK"]
 
-    def get_boolean(self, vrs):
-        fn = self._getter_for(vrs, "Boolean")
-        return fn() if fn is not None else super().get_boolean(vrs)
+    def fmi_do_step(self, current_time: float, step_size: float) -> int:
+        if self.logic is None:
+            self.log(f"{self.instance_name}: doStep refused: the parameters were refused at initialisation",
+                     Fmi2Status.error)
+            return STATUS["ERROR"]
+        # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
+        # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
+        step_size = round(step_size * 1e9) * 1e-9
+        try:
+            self.logic.step(current_time, step_size, self.inputs)
+        except Exception as err:                                  # a defect: say where, fail the step
+            import traceback
+            self.log(f"{self.instance_name}: doStep at t = {current_time:.6f} s failed: {err!r}\n"
+                     f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
+            return STATUS["ERROR"]
+        if self.logic.messages:
+            self._flush()
+        return STATUS["OK"]
 
-    def set_real(self, vrs, values):
-        fn = self._setter_for(vrs, "Real")
-        return fn(values) if fn is not None else super().set_real(vrs, values)
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        """pythonfmu's abstract step (Fmi2Slave is an ABC); the shim calls :meth:`fmi_do_step`."""
+        return self.fmi_do_step(current_time, step_size) == STATUS["OK"]
 
-    def set_integer(self, vrs, values):
-        fn = self._setter_for(vrs, "Integer")
-        return fn(values) if fn is not None else super().set_integer(vrs, values)
+    def fmi_terminate(self) -> int:
+        return STATUS["OK"]
 
-    def set_boolean(self, vrs, values):
-        fn = self._setter_for(vrs, "Boolean")
-        return fn(values) if fn is not None else super().set_boolean(vrs, values)
+    def fmi_get(self, vrs: list[int]) -> list[object]:
+        return [self.vars[vr].getter() for vr in vrs]
+
+    def fmi_set(self, vrs: list[int], values: list[object]) -> int:
+        self._refused = False
+        for vr, value in zip(vrs, values):
+            self.vars[vr].setter(value)
+        return STATUS["ERROR"] if self._refused else STATUS["OK"]
+
+    # FMU state: the controller object holds every hidden state (registers, counters, program counter,
+    # DDA, servo states, caches); a deep copy of it is the FMU state.
+    def fmi_get_state(self) -> tuple:
+        return copy.deepcopy((self.logic, self.parameters, self.inputs))
+
+    def fmi_set_state(self, state: object) -> int:
+        if not (isinstance(state, tuple) and len(state) == 3
+                and (state[0] is None or isinstance(state[0], self.logic_class))):
+            return self._refuse("fmi2SetFMUstate", "not a state of this FMU")
+        logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
+        # in place: the registered getters and setters hold these very dicts
+        self.parameters.clear()
+        self.parameters.update(parameters)
+        self.inputs.clear()
+        self.inputs.update(inputs)
+        self.logic = logic
+        self.out = logic.outputs() if logic is not None else self.out
+        return STATUS["OK"]
+
+    # Serialized: plain data in a versioned format tied to this model and build (fmi/state.py); no code
+    # ever runs from the bytes a host hands us (pythonfmu's default is pickle).
+    def fmi_serialize(self, state: tuple) -> bytes:
+        logic, parameters, inputs = state
+        return state_format.dumps(self.logic_class.MODEL_NAME, parameters, inputs, logic)
+
+    def fmi_deserialize(self, data: bytes) -> tuple | None:
+        try:
+            return state_format.loads(data, self.logic_class, self.logic_class.from_parameters)
+        except Exception as err:   # StateError names what is wrong; anything else is bytes no rule foresaw
+            text = str(err) if isinstance(err, (state_format.StateError, ConfigError)) else repr(err)
+            self._refuse("fmi2DeSerializeFMUstate", text)
+            return None
+
+    def fmi_take_log(self) -> list[tuple[int, str, str]]:
+        queue: list = self.log_queue          # pythonfmu's Fmi2Slave.log appends LogMsg(status, category, msg)
+        taken = [(int(m.status), str(m.category), str(m.msg)) for m in queue]
+        queue.clear()
+        return taken
+
+    def _refuse(self, call: str, why: str) -> int:
+        self.log(f"{self.instance_name}: {call} refused: {why}", Fmi2Status.error)
+        return STATUS["ERROR"]
 
     def _register(self, port: Port) -> None:
         store = {"parameter": self.parameters, "input": self.inputs}.get(port.causality)
@@ -171,20 +191,6 @@ class ControllerSlave(Fmi2Slave):
                                 description=port.description, getter=getter, setter=setter)
         self.register_variable(var, nested=False)
 
-    # -- FMI life cycle -------------------------------------------------------------------------
-    def exit_initialization_mode(self) -> None:
-        try:
-            self.logic = self.logic_class.from_parameters(self.parameters)
-        except Exception as err:               # ConfigError names the rule; anything else is a value no rule foresaw
-            text = str(err) if isinstance(err, ConfigError) else f"the parameters cannot be used: {err!r}"
-            self.log(f"{self.instance_name}: parameter refused: {text}", Fmi2Status.error)
-            if self._status_shim:
-                self._init_refused = True      # the shim turns this into fmi2Error; the instance lives on
-                return
-            raise
-        self.out = self.logic.outputs()
-        self._flush()
-
     def _retune(self, name: str) -> bool:
         """Apply a tunable parameter set during the run; False (logged, flagged for the shim) if refused."""
         try:
@@ -193,76 +199,8 @@ class ControllerSlave(Fmi2Slave):
             return True
         except Exception as err:
             self.log(f"{self.instance_name}: tunable parameter refused, the old value kept: {err}", Fmi2Status.error)
-            if not self._status_shim:
-                raise
-            self._call_refused = True                             # the shim returns fmi2Error
+            self._refused = True                                  # fmi_set returns ERROR
             return False
-
-    # -- FMU state: the controller object holds every hidden state (registers, counters, program
-    # counter, DDA, servo states, caches); a deep copy of it is the FMU state.
-    def _get_fmu_state(self):
-        return copy.deepcopy((self.logic, self.parameters, self.inputs))
-
-    def _set_fmu_state(self, state) -> None:
-        if not (isinstance(state, tuple) and len(state) == 3
-                and (state[0] is None or isinstance(state[0], self.logic_class))):
-            self._refuse_state_call("fmi2SetFMUstate", "not a state of this FMU (a refused or foreign state)")
-            return
-        logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
-        # in place: the registered getters and setters hold these very dicts
-        self.parameters.clear()
-        self.parameters.update(parameters)
-        self.inputs.clear()
-        self.inputs.update(inputs)
-        self.logic = logic
-        self.out = logic.outputs() if logic is not None else self.out
-
-    # Serialized: plain data in a versioned format tied to this model and build (fmi/state.py); no code
-    # ever runs from the bytes a host hands us (pythonfmu's default is pickle). pythonfmu calls these two
-    # on the class, not the instance; a refusal is therefore parked on the class and picked up by the
-    # instance when the shim asks, right after the call, in the same thread.
-    @classmethod
-    def _fmu_state_to_bytes(cls, state) -> bytes:
-        logic, parameters, inputs = state
-        return state_format.dumps(cls.logic_class.MODEL_NAME, parameters, inputs, logic)
-
-    @classmethod
-    def _fmu_state_from_bytes(cls, data: bytes):
-        try:
-            return state_format.loads(data, cls.logic_class, cls.logic_class.from_parameters)
-        except (state_format.StateError, ConfigError) as err:
-            if not cls._shim_present:
-                raise                            # pythonfmu alone: its fmi2Fatal is all it can say
-            cls._parked_refusal = f"fmi2DeSerializeFMUstate refused: {err}"
-            return None
-
-    def _refuse_state_call(self, call: str, why: str) -> None:
-        """Log why; the shim reads the flag after the call and returns fmi2Error (the instance lives on)."""
-        self.log(f"{self.instance_name}: {call} refused: {why}", Fmi2Status.error)
-        self._call_refused = True
-        if not self._status_shim:
-            raise state_format.StateError(why)
-
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        if self.logic is None:
-            self.log(f"{self.instance_name}: doStep refused: the parameters were refused at initialisation",
-                     Fmi2Status.error)
-            self.step_failed = True
-            return False
-        # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
-        # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
-        step_size = round(step_size * 1e9) * 1e-9
-        try:
-            self.logic.step(current_time, step_size, self.inputs)
-        except Exception as err:                                  # a defect: say where, fail the step
-            import traceback
-            self.log(f"{self.instance_name}: doStep at t = {current_time:.6f} s failed: {err!r}\n"
-                     f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
-            self.step_failed = True
-            return False
-        if self.logic.messages:
-            self._flush()
-        return True
 
     def _flush(self) -> None:
         assert self.logic is not None                             # called once the controller is built
@@ -270,31 +208,10 @@ class ControllerSlave(Fmi2Slave):
             self.log(f"{self.instance_name}: {text}", _LEVEL[level])
 
 
-#: Reserved Integer value reference: 1 when exitInitializationMode refused the parameters. The FMU's
-#: status shim (builder.status_shim) reads it and returns fmi2Error instead of pythonfmu's fmi2Fatal.
-INIT_REFUSED_VR = 2147483000
-#: Reserved Integer value reference: 1 once when the last FMU-state call was refused (read clears it).
-CALL_REFUSED_VR = 2147483001
-
-
 def fmu_slave(logic_class: type[Controller]):
-    """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``.
-
-    It also works around a defect of pythonfmu 0.7's native loader: on every ``fmi2Instantiate`` it
-    re-executes the model script and then releases one reference to the module's globals that it
-    never owned (``PyModule_GetDict`` returns a borrowed reference). After a few instantiations of
-    the same FMU in one process -- two servo axes, a sweep -- the module's namespace would be freed
-    under it (a crash, or "Failed to instantiate"). The script runs this decorator once per
-    instantiation, so each run takes one reference of its own to give pythonfmu's release. The
-    references are owned by nobody (``Py_IncRef``), not kept in a list inside the namespace: such a
-    list, freed while the interpreter tears the module down, released them all at once and freed the
-    namespace while it was being cleared (heap corruption at exit, seen intermittently). Over-counting
-    by one (the first import) only keeps the namespace to the end of the process.
-    """
+    """Class decorator for a thin model script: make the class a :class:`ControllerSlave` of ``logic_class``."""
 
     def decorate(cls: type) -> type:
-        module_globals = sys.modules[cls.__module__].__dict__
-        ctypes.pythonapi.Py_IncRef(ctypes.py_object(module_globals))
         namespace = {k: v for k, v in vars(cls).items() if k not in ("__dict__", "__weakref__")}
         namespace["logic_class"] = logic_class
         return type(cls.__name__, (ControllerSlave,), namespace)

@@ -21,7 +21,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import warnings
 import zipfile
 from pathlib import Path
 
@@ -33,6 +32,7 @@ from pythonfmu.osutil import get_lib_extension, get_platform
 
 from .. import __version__
 from ..errors import BuildError
+from .contract import HEADER_NAME
 from .modeldesc import enrich
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -43,7 +43,7 @@ _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 #: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
 #: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
 FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py", "fmi/adapter.py",
-               "fmi/state.py")
+               "fmi/contract.py", "fmi/state.py")
 
 
 def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
@@ -51,9 +51,11 @@ def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
 
 
 def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
-    """Digest of the model script and every module the FMU carries (12 hex digits)."""
+    """Digest of the model script, every module the FMU carries and the generator of its documentation
+    (12 hex digits)."""
     h = hashlib.sha256()
-    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h"]:
+    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
+                 package_dir / "docs.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
@@ -62,7 +64,7 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
 
 C_LAYER = Path(__file__).with_name("c")
 SHIM_SOURCE = C_LAYER / "status_shim.c"
-SHIM_MARKER = "resources/ncfmu_status_shim"
+CONTRACT_HEADER = C_LAYER / HEADER_NAME
 
 
 @functools.lru_cache(maxsize=1)
@@ -72,30 +74,34 @@ def fmi_headers() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def status_shim() -> bytes | None:
-    """The compiled status shim for this platform (linux64), or None where it cannot be built.
+def _c_string(text: str) -> str:
+    if not re.fullmatch(r"[A-Za-z0-9_.\-]+", text):
+        raise BuildError(f"{text!r} cannot be compiled into the FMU's binary (letters, digits, '_', '.', '-' only)")
+    return f'"{text}"'
 
-    Without it an FMU still works; a refused parameter is then reported as fmi2Fatal (pythonfmu's
-    status for any Python exception) instead of fmi2Error.
-    """
-    if get_platform() != "linux64" or not SHIM_SOURCE.is_file():
-        return None
+
+def compile_shim(guid: str, module: str, cls: str) -> bytes:
+    """The FMU's binary for this platform (linux64): the shim (status_shim.c), with the GUID, the model
+    module and its slave class compiled in. A Python FMU has no binary without it, so no compiler is a
+    BuildError: pythonfmu's own library, which would check nothing, is never shipped instead."""
+    if get_platform() != "linux64":
+        raise BuildError(f"Python FMUs are built for linux64 only (the shim's platform), not {get_platform()}")
+    defines = [f"-DNCFMU_GUID={_c_string(guid)}", f"-DNCFMU_MODULE={_c_string(module)}",
+               f"-DNCFMU_CLASS={_c_string(cls)}"]
     with tempfile.TemporaryDirectory(prefix="ncfmu_shim_") as tmp:
         out = Path(tmp) / "shim.so"
         for cc in ("cc", "gcc", "clang"):
             if shutil.which(cc) is None:
                 continue
-            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{fmi_headers()}", f"-I{C_LAYER}", "-o", str(out),
-                                   str(SHIM_SOURCE), "-ldl", "-lm"],
+            proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-Wall", *defines, f"-I{fmi_headers()}",
+                                   f"-I{C_LAYER}", "-o", str(out), str(SHIM_SOURCE), "-ldl", "-lm", "-lpthread"],
                                   capture_output=True, text=True)
-            if proc.returncode == 0:
-                return out.read_bytes()
-            warnings.warn(f"ncfmu: compiling the status shim with {cc} failed: {proc.stderr.strip()[:300]}",
-                          stacklevel=2)
-            return None
-    warnings.warn("ncfmu: no C compiler found; FMUs report refused parameters as fmi2Fatal, not fmi2Error",
-                  stacklevel=2)
-    return None
+            if proc.returncode != 0:
+                raise BuildError(f"compiling the FMU's binary (status_shim.c) with {cc} failed: "
+                                 f"{proc.stderr.strip()[:500]}")
+            return out.read_bytes()
+    raise BuildError("no C compiler (cc, gcc or clang) found: a Python FMU's binary is compiled from "
+                     "src/ncfmu/fmi/c/status_shim.c")
 
 
 def binary_name(model: str) -> str:
@@ -160,7 +166,7 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
                 sys.path.remove(str(stage))
         logic = getattr(importlib.import_module(module), model).logic_class
         target = dest_dir / f"{logic.MODEL_NAME}.fmu"
-        _rewrite(built, target, logic, f"{__version__}+{digest}")
+        _rewrite(built, target, logic, f"{__version__}+{digest}", module, model)
     if not has_binary(target, logic.MODEL_NAME):
         target.unlink()
         raise BuildError(f"{script.name}: the built FMU lacks {binary_name(logic.MODEL_NAME)}")
@@ -179,8 +185,10 @@ def python_runtime_record() -> str:
 
 
 RUNTIME_HTML = """<h2>Runtime requirements</h2>
+<p>Platform: linux64 (x86-64 Linux) only; the binary is compiled by <code>ncfmu build</code> from ncfmu's
+<code>status_shim.c</code> and is the only one this FMU lists.</p>
 <p>This FMU runs Python code (the controller and pythonfmu's slave API, both inside the FMU's resources):
-it needs a CPython {version} runtime with its shared library, and only its standard library.
+it needs the CPython it was built with, {version}, with its shared library, and only its standard library.
 In a Python host (fmpy, ncfmu) it uses the host's interpreter. In a native host (fmusim, ecos, libcosim) the
 FMU's binary loads the runtime itself: <code>$NCFMU_LIBPYTHON</code> (a path or soname) when set, else the
 library recorded at build time in <code>resources/ncfmu_python.txt</code> (<code>{record}</code>), then its
@@ -188,27 +196,31 @@ soname through the system's library search. If none loads, fmi2Instantiate fails
 The interpreter is started once per process and never finalised.</p>"""
 
 
-def _rewrite(src: Path, target: Path, logic, version: str) -> None:
+def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str) -> None:
+    """The FMU as shipped: pythonfmu's model description enriched, our binary, no other platform's."""
     from ..docs import fmu_html
-    shim = status_shim()
-    linux_binary = f"binaries/linux64/{logic.MODEL_NAME}.so"
-    partial = target.with_suffix(".fmu.part")
-    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
-        for item in zin.infolist():
-            data = zin.read(item.filename)
-            if item.filename == "modelDescription.xml":
-                data = enrich(data, logic, version)
-                record = python_runtime_record()
-                extra = RUNTIME_HTML.format(version=".".join(map(str, sys.version_info[:2])),
-                                            record=", ".join(record.split()) or "none: a static Python")
-                zout.writestr("documentation/index.html", fmu_html(data, logic, extra=extra))
-                zout.writestr("resources/ncfmu_python.txt", record)
-            if item.filename == linux_binary and shim is not None:
-                # the shim becomes the FMU's binary and forwards to pythonfmu's, kept beside it
-                zout.writestr(f"binaries/linux64/{logic.MODEL_NAME}.pythonfmu.so", data)
-                zout.writestr(SHIM_MARKER, "linux64\n")
-                data = shim
-            zout.writestr(item.filename, data)
+    binary = f"binaries/linux64/{cls}.so"
+    with zipfile.ZipFile(src) as zin:
+        description = enrich(zin.read("modelDescription.xml"), logic, version)
+        guid = re.search(rb'\bguid="([^"]*)"', description)
+        if guid is None:
+            raise BuildError(f"{cls}: pythonfmu's modelDescription has no guid")
+        compiled = compile_shim(guid.group(1).decode(), module, cls)      # before anything is written
+        record = python_runtime_record()
+        extra = RUNTIME_HTML.format(version=".".join(map(str, sys.version_info[:2])),
+                                    record=", ".join(record.split()) or "none: a static Python")
+        partial = target.with_suffix(".fmu.part")
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                if item.filename.startswith("binaries/"):
+                    continue              # pythonfmu's export libraries: our binary (below) replaces them
+                if item.filename == "modelDescription.xml":
+                    zout.writestr(item.filename, description)
+                    zout.writestr(binary, compiled)
+                    zout.writestr("documentation/index.html", fmu_html(description, logic, extra=extra))
+                    zout.writestr("resources/ncfmu_python.txt", record)
+                else:
+                    zout.writestr(item.filename, zin.read(item.filename))
     partial.replace(target)
 
 

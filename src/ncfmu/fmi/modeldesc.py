@@ -34,6 +34,9 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
         "pythonfmu and fmi.native write CoSimulation, ModelVariables and ModelStructure"
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
+    # The binary loads the Python runtime itself, as a library, in any host (fmi/c/status_shim.c): no tool
+    # has to run beside it.
+    cosim.set("needsExecutionTool", "false")
 
     used_units = sorted({p.unit for p in logic.PORTS if p.unit})
     if used_units:

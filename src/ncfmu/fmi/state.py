@@ -17,17 +17,30 @@ ncfmu package, among the modules already loaded; the object is created empty (``
 and its attributes filled with decoded plain data. The controller itself is rebuilt from the saved
 parameters (its ``configure()`` checks them) before its dynamic attributes are restored; attributes
 it lists in ``DERIVED`` (python-control models, rebuilt from the parameters) are not saved.
+
+Restoring checks every value, not only the names (see "checking" below): the freshly built controller is
+the template for the saved attributes, inputs and outputs keep their ports' types and rules, the
+controller judges its own registers (``Controller.check_state``), and one step of a copy must run sanely.
+Whatever breaks a rule, and whatever error decoding or checking meets, is a :class:`StateError` naming the
+field; no other exception leaves :func:`loads`.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import json
 import math
 import sys
+import types
+import typing
 from collections.abc import Callable, Mapping
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
-from ..errors import NcfmuError
+from ..controllers.base import POSITION_LIMIT, SPEED_LIMIT
+from ..errors import ConfigError, NcfmuError
+from ..ports import Port
 
 if TYPE_CHECKING:
     from ..controllers.base import Controller
@@ -113,6 +126,9 @@ def _class(tag: str) -> type:
     cls = getattr(module, name, None) if module is not None and not name.startswith("_") else None
     if module is None or not isinstance(cls, type) or cls.__module__ != module.__name__:
         raise StateError(f"object tag {tag!r} names no class of this FMU")
+    # an empty object of a class with its own construction (an exception, a builtin subclass) is no state
+    if issubclass(cls, BaseException) or cls.__new__ is not object.__new__:
+        raise StateError(f"object tag {tag!r} names a class whose objects are no state")
     return cls
 
 
@@ -135,8 +151,10 @@ def _decode(tree: Any, where: str) -> Any:
             if not (isinstance(pair, list) and len(pair) == 2):
                 raise StateError(f"{where}: a dict entry is not a [key, value] pair")
             key = _decode(pair[0], where)
-            if isinstance(key, (list, dict)):
-                raise StateError(f"{where}: unhashable key")
+            try:
+                hash(key)
+            except TypeError:
+                raise StateError(f"{where}: a dict key {key!r} is unhashable") from None
             out[key] = _decode(pair[1], where)
         return out
     if set(tree) == {"a", "dtype", "shape"}:
@@ -155,18 +173,290 @@ def _decode(tree: Any, where: str) -> Any:
     return {str(k): _decode(v, f"{where}[{k!r}]") for k, v in tree.items()}
 
 
+# -- checking: a decoded state against a controller freshly built from its parameters -----------------
+# The fresh controller is the template: the saved state must hold the same attributes, those configure()
+# derives from the parameters identical to the fresh ones, the others of the same types and structure,
+# recursively (objects of the same classes, dicts with the same keys, fixed-length lists as long). Where
+# the fresh controller holds nothing to compare with (None, an empty list), a value must be plain data or
+# objects of ncfmu's dataclasses whose fields have their declared types; what it means is the controller's
+# to judge (``Controller.check_state``).
+def _text(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _kind(value: Any) -> str:
+    return type(value).__name__
+
+
+def _cached(cls: type) -> set[str]:
+    """Names of the class's cached properties: an object may hold their values (computed) or not yet."""
+    return {k for c in cls.__mro__ for k, v in vars(c).items() if isinstance(v, cached_property)}
+
+
+def _identical(a: Any, b: Any) -> bool:
+    """Equal values of the same types, recursively (``1 == 1.0 == True`` is not enough; NaN equals NaN)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, float):
+        return a == b or (math.isnan(a) and math.isnan(b))
+    if a is None or isinstance(a, (bool, int, str)):
+        return bool(a == b)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_identical(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return ({(type(k), k) for k in a} == {(type(k), k) for k in b}
+                and all(_identical(a[k], b[k]) for k in a))
+    if isinstance(a, _NP_ARRAY):
+        return a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
+    va, vb = vars(a), vars(b)
+    cached = _cached(type(a))
+    if any(k not in cached for k in va.keys() ^ vb.keys()):
+        return False
+    fields = [k for k in va if k in vb and k not in cached]
+    if not all(_identical(va[k], vb[k]) for k in fields):
+        return False
+    # a cached value is what its property computes from the fields (checked equal just above)
+    return all(_identical(getattr(a, k), getattr(b, k)) for k in cached if k in va or k in vb)
+
+
+def _number(value: Any, template: float, where: str) -> None:
+    if math.isnan(value):
+        raise StateError(f"{where} = nan: must be finite")
+    if math.isinf(value) and math.isfinite(template):
+        raise StateError(f"{where} = {value!r}: must be finite")
+
+
+def _conform(value: Any, template: Any, where: str) -> None:
+    """``value`` has the type and the structure of ``template`` (see above), else StateError naming it."""
+    if template is None or (isinstance(template, (list, tuple)) and not template):
+        if template is not None and type(value) is not type(template):
+            raise StateError(f"{where}: a {_kind(value)}, not a {_kind(template)}")
+        _plain(value, where)
+        return
+    if type(value) is not type(template):
+        raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {_kind(template)}")
+    if isinstance(value, float):
+        _number(value, template, where)
+    elif isinstance(value, (list, tuple)):
+        if len(value) != len(template):
+            raise StateError(f"{where}: {len(value)} items, not {len(template)}")
+        for i, (v, t) in enumerate(zip(value, template)):
+            _conform(v, t, f"{where}[{i}]")
+    elif isinstance(value, dict):
+        if {(type(k), k) for k in value} != {(type(k), k) for k in template}:
+            raise StateError(f"{where}: keys {_text(list(value))}, not {_text(list(template))}")
+        for k, t in template.items():
+            _conform(value[k], t, f"{where}[{k!r}]")
+    elif isinstance(value, _NP_ARRAY):
+        if value.dtype != template.dtype or value.shape != template.shape:
+            raise StateError(f"{where}: a {value.dtype} array of shape {value.shape}, not {template.dtype} "
+                             f"{template.shape}")
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            raise StateError(f"{where}: must be finite")
+    elif not isinstance(value, (bool, int, str)):
+        va, vt = vars(value), vars(template)
+        cached = _cached(type(value))
+        if {k for k in va if k not in cached} != {k for k in vt if k not in cached}:
+            raise StateError(f"{where}: attributes {sorted(va)}, not those of a {_kind(template)} {sorted(vt)}")
+        for k, t in vt.items():
+            if k in va and k not in cached:
+                _conform(va[k], t, f"{where}.{k}")
+        _cached_values(value, where)
+
+
+def _cached_values(obj: Any, where: str) -> None:
+    """A cached property's saved value is the one it computes from the object's fields."""
+    for k in _cached(type(obj)) & set(vars(obj)):
+        saved = vars(obj).pop(k)
+        if not _identical(saved, getattr(obj, k)):
+            raise StateError(f"{where}.{k} = {_text(saved)}: not what the fields give ({_text(getattr(obj, k))})")
+
+
+def _plain(value: Any, where: str) -> None:
+    """Where the fresh controller holds nothing to compare with: plain data (no NaN), or objects of ncfmu's
+    dataclasses with exactly their fields, each of its declared type."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return
+    if isinstance(value, float):
+        if math.isnan(value):
+            raise StateError(f"{where} = nan: must be a number")
+    elif isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _plain(v, f"{where}[{i}]")
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            _plain(k, f"{where} key")
+            _plain(v, f"{where}[{k!r}]")
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        cls = type(value)
+        names = [f.name for f in dataclasses.fields(cls)]
+        extra = set(vars(value)) - set(names) - _cached(cls)
+        if extra or not all(n in vars(value) for n in names):
+            raise StateError(f"{where}: attributes {sorted(vars(value))}, not the fields of a {cls.__name__} "
+                             f"{names}")
+        hints = typing.get_type_hints(cls)
+        for n in names:
+            _typed(vars(value)[n], hints[n], f"{where}.{n}")
+        _cached_values(value, where)
+    else:
+        raise StateError(f"{where}: a {_kind(value)} is not state here")
+
+
+def _typed(value: Any, hint: Any, where: str) -> None:
+    """``value`` of the declared type ``hint`` (the types ncfmu's dataclasses use)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        for option in args:
+            try:
+                _typed(value, option, where)
+                return
+            except StateError:
+                pass
+        raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {hint}")
+    if origin is tuple:
+        if type(value) is not tuple:
+            raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a tuple")
+        items = args[:1] * len(value) if len(args) == 2 and args[1] is Ellipsis else args
+        if len(items) != len(value):
+            raise StateError(f"{where}: {len(value)} items, not {len(items)}")
+        for i, (v, h) in enumerate(zip(value, items)):
+            _typed(v, h, f"{where}[{i}]")
+        return
+    if hint is type(None):
+        if value is not None:
+            raise StateError(f"{where} = {_text(value)}: must be None")
+        return
+    if not isinstance(hint, type) or type(value) is not hint:
+        raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {getattr(hint, '__name__', hint)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise StateError(f"{where} = {value!r}: must be finite")
+    if dataclasses.is_dataclass(value):
+        _plain(value, where)
+
+
+def _port_value(port: Port, value: Any, where: str) -> None:
+    """A value of the port's FMI type (a Real a finite float, an Integer an int, a Boolean a bool)."""
+    want = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[port.type]
+    if type(value) is not want:
+        raise StateError(f"{where} = {_text(value)}: a {_kind(value)}, not a {port.type}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise StateError(f"{where} = {value!r}: must be finite")
+    if isinstance(value, int) and not -2 ** 31 <= value < 2 ** 31:
+        raise StateError(f"{where} = {_text(value)}: beyond the range of an fmi2Integer")
+
+
+def _check_inputs(logic_class: type[Controller], inputs: dict[str, object]) -> None:
+    """Every input of its port's type and rule; positions within reach."""
+    for port in logic_class.ports("input"):
+        value: Any = inputs[port.name]
+        if port.type == "Boolean" and type(value) is int and value in (0, 1):
+            continue                                   # the FMI Boolean a host wrote as 0/1
+        _port_value(port, value, f"inputs.{port.name}")
+        if port.min is not None or port.max is not None or port.allowed is not None:
+            try:
+                port.check(value)
+            except ConfigError as err:
+                raise StateError(f"inputs.{err}") from None
+        if port.unit == "mm" and abs(value) > POSITION_LIMIT:
+            raise StateError(f"inputs.{port.name} = {value!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long")
+        if port.unit == "mm/s" and abs(value) > SPEED_LIMIT:
+            raise StateError(f"inputs.{port.name} = {value!r}: faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
+
+
+def _check_outputs(logic_class: type[Controller], outputs: Any, where: str) -> None:
+    ports = logic_class.ports("output")
+    if not isinstance(outputs, dict) or set(outputs) != {p.name for p in ports}:
+        raise StateError(f"{where}: not the outputs of {logic_class.MODEL_NAME}")
+    for port in ports:
+        _port_value(port, outputs[port.name], f"{where}[{port.name!r}]")
+        if port.unit == "mm" and abs(outputs[port.name]) > POSITION_LIMIT:
+            raise StateError(f"{where}[{port.name!r}] = {outputs[port.name]!r}: beyond {POSITION_LIMIT:g} mm")
+        if port.unit == "mm/s" and abs(outputs[port.name]) > SPEED_LIMIT:
+            raise StateError(f"{where}[{port.name!r}] = {outputs[port.name]!r}: faster than {SPEED_LIMIT:g} mm/s")
+
+
+def _configured(logic_class: type[Controller], parameters: Mapping[str, object]) -> set[str]:
+    """The attributes configure() derives from the parameters (before reset() adds the dynamic ones)."""
+    probe = object.__new__(logic_class)
+    probe.messages = []
+    probe.configure(logic_class.check_parameters(parameters))
+    return set(vars(probe)) - {"messages"}
+
+
+def _dry_step(logic: Controller, inputs: dict[str, object]) -> None:
+    """One step of a copy, on the state's own inputs: it runs, its outputs are of their port types, finite, and
+    no position command moves faster than any axis (``SPEED_LIMIT``) -- unless onto the axis's actual position
+    (a follow-up re-bases the command there)."""
+    dry = copy.deepcopy(logic)
+    before = dict(dry.outputs())
+    dt = type(logic).PERIOD
+    try:
+        after = dry.step(0.0, dt, dict(inputs))
+    except Exception as err:
+        raise StateError(f"logic: a step from this state fails ({type(err).__name__}: {err})") from None
+    _check_outputs(type(logic), after, "logic: a step from this state gives the output")
+    for name, value in after.items():
+        actual = inputs.get(name[:-len("_cmd")] + "_pos")
+        if name.endswith("_cmd") and abs(value - before[name]) > SPEED_LIMIT * dt + 1e-9 and value != actual:  # type: ignore[operator]
+            raise StateError(f"logic: a step from this state moves {name} {before[name]!r} -> {value!r} in {dt:g} s: "
+                             f"faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
+
+
+def _restore_logic(logic: Controller, saved: Mapping[str, Any], parameters: Mapping[str, object],
+                   inputs: dict[str, object]) -> None:
+    """Fill the freshly built ``logic`` with the saved attributes, each checked against its fresh value."""
+    cls = type(logic)
+    model = cls.MODEL_NAME
+    attrs = {str(k): _decode(v, f"logic.{k}") for k, v in saved.items()}
+    fresh = dict(vars(logic))
+    expected = set(fresh) - set(getattr(cls, "DERIVED", ()))
+    if set(attrs) != expected:
+        unknown, missing = sorted(set(attrs) - expected), sorted(expected - set(attrs))
+        raise StateError(f"logic: attributes {unknown} are not state of {model}" if unknown else
+                         f"logic: attributes {missing} of {model} are missing")
+    configured = _configured(cls, parameters)
+    for name, value in attrs.items():
+        if name in configured:
+            if not _identical(value, fresh[name]):
+                raise StateError(f"logic.{name} = {_text(value)}: not {_text(fresh[name])}, what the parameters give")
+        else:
+            _conform(value, fresh[name], f"logic.{name}")
+    _check_outputs(cls, attrs.get("_outputs"), "logic._outputs")
+    vars(logic).update(attrs)
+    why = logic.check_state(inputs)
+    if why:
+        raise StateError(f"logic.{why}")
+    _dry_step(logic, inputs)
+
+
 def loads(data: bytes, logic_class: type[Controller], build_logic: Callable[[dict[str, object]], Controller]
           ) -> tuple[Controller | None, dict[str, object], dict[str, object]]:
     """Check ``data`` against this FMU and decode it: ``(logic, parameters, inputs)``.
 
     ``build_logic(parameters)`` rebuilds the controller from the saved parameters; its dynamic
-    attributes are then restored from the state.
+    attributes are then restored from the state, each checked (see "checking" above, and the
+    controller's own ``check_state``), and one step of a copy must run sanely.
 
     Raises
     ------
     StateError
-        for anything that is not a state of this model and build.
+        for anything that is not a state of this model and build, or a value it carries that breaks its
+        rule (the message names the field); ConfigError for a saved parameter that breaks its port's rule.
+        No other exception leaves this function.
     """
+    try:
+        return _loads(data, logic_class, build_logic)
+    except (StateError, ConfigError):
+        raise
+    except RecursionError:
+        raise StateError("nested too deeply to be a state") from None
+    except Exception as err:             # a value no rule above foresaw: refused, never passed to the host
+        raise StateError(f"not a usable state ({type(err).__name__}: {_text(str(err))})") from None
+
+
+def _loads(data: bytes, logic_class: type[Controller], build_logic: Callable[[dict[str, object]], Controller]
+           ) -> tuple[Controller | None, dict[str, object], dict[str, object]]:
     if len(data) > MAX_STATE_BYTES:
         raise StateError(f"{len(data)} bytes: larger than any state ({MAX_STATE_BYTES} bytes)")
     try:
@@ -182,23 +472,23 @@ def loads(data: bytes, logic_class: type[Controller], build_logic: Callable[[dic
         raise StateError(f"a state of {doc.get('model')!r}, not of this {model!r} FMU")
     if doc.get("build") != build_digest():
         raise StateError(f"a state of build {doc.get('build')!r}; this FMU is build {build_digest()!r}")
-    try:
-        parameters, inputs = _decode(doc.get("parameters"), "parameters"), _decode(doc.get("inputs"), "inputs")
-        saved = doc.get("logic")
-        if (not isinstance(parameters, dict) or not isinstance(inputs, dict)
-                or not isinstance(saved, (dict, type(None)))):
-            raise StateError("parameters, inputs or logic missing")
-        expected = set(logic_class.default_parameters()), set(logic_class.default_inputs())
-        if set(parameters) != expected[0] or set(inputs) != expected[1]:
-            raise StateError(f"parameters or inputs are not those of {model}")
-        logic = None
-        if saved is not None:
-            logic = build_logic(parameters)
-            attrs = {str(k): _decode(v, f"logic.{k}") for k, v in saved.items()}
-            unknown = set(attrs) - set(vars(logic))
-            if unknown:
-                raise StateError(f"attributes {sorted(unknown)} are not state of {model}")
-            vars(logic).update(attrs)
-        return logic, parameters, inputs
-    except RecursionError:
-        raise StateError("nested too deeply to be a state") from None
+    parameters, inputs = _decode(doc.get("parameters"), "parameters"), _decode(doc.get("inputs"), "inputs")
+    saved = doc.get("logic")
+    if not isinstance(parameters, dict) or not isinstance(inputs, dict) or not isinstance(saved, (dict, type(None))):
+        raise StateError("parameters, inputs or logic missing")
+    if set(parameters) != set(logic_class.default_parameters()) or set(inputs) != set(logic_class.default_inputs()):
+        raise StateError(f"parameters or inputs are not those of {model}")
+    for port in logic_class.ports("parameter"):
+        if port.type == "Boolean" and type(parameters[port.name]) is int and parameters[port.name] in (0, 1):
+            continue
+        want = {"Real": (float, int), "Integer": (int,), "Boolean": (bool,), "String": (str,)}[port.type]
+        if type(parameters[port.name]) not in want:
+            raise StateError(f"parameters.{port.name} = {_text(parameters[port.name])}: a "
+                             f"{_kind(parameters[port.name])}, not a {port.type}")
+    _check_inputs(logic_class, inputs)
+    if saved is None:                     # saved before exitInitializationMode: checked when it is left
+        return None, parameters, inputs
+    logic = build_logic(parameters)
+    parameters = logic_class.check_parameters(parameters)          # each as its port's type (as the FMU holds it)
+    _restore_logic(logic, saved, parameters, inputs)
+    return logic, parameters, inputs

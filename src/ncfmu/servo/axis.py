@@ -44,7 +44,7 @@ class ServoAxis(Controller):
     MODEL_NAME = "ServoAxis"
     DESCRIPTION = ("Servo feed axis: P position loop with velocity feed-forward, PI velocity loop, current lag, "
                    "motor + ball screw + load, friction, torque/speed limits, encoder, in-position band")
-    SEED = "SPEC.md section 4"
+    SEED = ""              # none: a feed axis of ncfmu's own design (ncfmu.servo.model)
     STOP_TIME = 1.0
     #: python-control models rebuilt by configure() from the parameters: not part of a saved FMU state.
     DERIVED = ("linear", "plant")

@@ -1,7 +1,7 @@
 /*
  * ncfmu: the FMI 2.0 co-simulation state machine, written once.
  *
- * Included by both of ncfmu's FMI layers: the status shim in front of pythonfmu's library (the
+ * Included by both of ncfmu's FMI layers: the Python FMUs' binary, status_shim.c (the
  * controller FMUs) and the native layer of the C FMUs (ServoAxis). It says which call is allowed in
  * which state, what a refused call returns (fmi2Error: the instance stays usable and freeable;
  * fmi2Fatal is kept for a broken instance, never for bad input), and checks what every FMU checks
@@ -62,6 +62,26 @@ static inline int fmi2_step_ok(const Fmi2Log *log, double t, double h)
     if (isfinite(t) && isfinite(h) && h > 0.0) return 1;
     FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %g, communicationStepSize = %g: "
              "the step size must be finite and > 0, the time finite", t, h);
+    return 0;
+}
+
+/* 1 when the step, counted in whole nanoseconds as ncfmu's FMUs count it, is at least 1 ns. */
+static inline int fmi2_step_ns_ok(const Fmi2Log *log, double h)
+{
+    if (nearbyint(h * 1e9) > 0.0) return 1;
+    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
+    return 0;
+}
+
+/* 1 when a step at ``t`` continues from ``next`` (where the last successful step ended, or the start time,
+ * or the time of a restored state), as the Reference-FMUs require; within half a nanosecond (steps are
+ * whole nanoseconds) and the rounding of the host's own time arithmetic. */
+static inline int fmi2_continues_ok(const Fmi2Log *log, double next, double t)
+{
+    if (fabs(t - next) <= 0.5e-9 + 1e-12 * fabs(next)) return 1;
+    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
+             "last step ended): an FMU steps on from where it is, or from a state restored with fmi2SetFMUstate",
+             t, next);
     return 0;
 }
 

@@ -1,317 +1,49 @@
 /*
- * ncfmu status shim: the FMU's binary in front of pythonfmu's export library.
+ * ncfmu's Python FMUs: the FMU's binary (the "shim").
  *
- * pythonfmu reports every Python exception as fmi2Fatal (the instance is gone). A parameter that
- * breaks a rule should be refused with fmi2Error (the importer may reset and try again). The
- * Python adapter therefore does not raise on a bad parameter when this shim is present; it logs the
- * reason and raises a flag that the shim reads after fmi2ExitInitializationMode through a reserved
- * Integer value reference, and turns into fmi2Error. Every other call is forwarded unchanged to
- * pythonfmu's library, loaded from next to this one (<modelIdentifier>.pythonfmu.so).
+ * It is the whole FMI 2.0 co-simulation interface of a controller FMU. It checks every call (the
+ * instance handle, the FMI state machine of fmi2_machine.h, value references and their types, step
+ * times), and drives the Python slave (fmi/adapter.py) through the calls listed in the contract
+ * (fmi/contract.py, generated into ncfmu_contract.h; see docs/architecture.md). Each call returns its
+ * status; the log messages it queued are taken after the call and sent to the host's logger: errors
+ * and warnings always, the rest only with debug logging on. pythonfmu provides the Python slave API
+ * (Fmi2Slave) and the packaging; its export library is not used.
  *
- * Fast path: fmi2Get/Set{Real,Integer,Boolean} of plain inputs and outputs -- what a master calls
- * every step -- read and write the adapter's ``out`` and ``inputs`` dicts directly through the Python
- * C API instead of pythonfmu's generic path (method lookup by name, Python lists, log flushing).
- * The Python functions are looked up at run time; where they or the adapter are not found, or a value
- * reference is anything else, the call goes to pythonfmu unchanged. doStep and everything that may
- * log still go through pythonfmu.
+ * Hosts hold opaque handles, not addresses: an instance or an FMU state handle is a number never
+ * handed out twice in a process, so a NULL, freed, made-up or foreign handle is recognised and
+ * refused with fmi2Error (a second fmi2FreeInstance of the same handle does nothing).
+ *
+ * Built per FMU by ncfmu.fmi.builder with -DNCFMU_GUID, -DNCFMU_MODULE (the model script's module in
+ * resources/) and -DNCFMU_CLASS (its slave class, the model identifier).
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
-/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code), and the state
- * machine this shim shares with ncfmu's native FMUs. */
+/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code), the state machine
+ * shared with ncfmu's native FMUs, and the contract with the Python side. */
 #include "fmi2Functions.h"
 #include "fmi2_machine.h"
+#include "ncfmu_contract.h"
 
-/* ---- the Python C API, resolved at run time ------------------------------------------------- */
-typedef struct _object PyObject;
-typedef int PyGILState_STATE;
-typedef long Py_ssize_t_;
-static struct {
-    int ready;
-    PyGILState_STATE (*GILEnsure)(void);
-    void (*GILRelease)(PyGILState_STATE);
-    PyObject *(*DictGetItem)(PyObject *, PyObject *);
-    int (*DictSetItem)(PyObject *, PyObject *, PyObject *);
-    int (*DictNext)(PyObject *, Py_ssize_t_ *, PyObject **, PyObject **);
-    double (*FloatAs)(PyObject *);
-    PyObject *(*FloatFrom)(double);
-    long (*LongAs)(PyObject *);
-    PyObject *(*LongFrom)(long);
-    int (*IsTrue)(PyObject *);
-    PyObject *(*BoolFrom)(long);
-    PyObject *(*GetAttr)(PyObject *, const char *);
-    PyObject *(*TupleGet)(PyObject *, Py_ssize_t_);
-    PyObject *(*ImportAdd)(const char *);
-    PyObject *(*CallMethod)(PyObject *, PyObject *, ...);
-    PyObject *(*StrFrom)(const char *);
-    Py_ssize_t_ (*Length)(PyObject *);
-    PyObject *(*Occurred)(void);
-    void (*Clear)(void);
-    void (*IncRef)(PyObject *);
-    void (*DecRef)(PyObject *);
-    const char *(*Utf8)(PyObject *);
-} py;
-
-static int py_load(void)
-{
-    if (py.ready) return py.ready > 0;
-    void *h = RTLD_DEFAULT;
-#define L(field, name) if (!(py.field = (__typeof__(py.field))dlsym(h, name))) { py.ready = -1; return 0; }
-    L(GILEnsure, "PyGILState_Ensure") L(GILRelease, "PyGILState_Release") L(DictGetItem, "PyDict_GetItem")
-    L(DictSetItem, "PyDict_SetItem") L(DictNext, "PyDict_Next") L(FloatAs, "PyFloat_AsDouble")
-    L(FloatFrom, "PyFloat_FromDouble") L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong")
-    L(IsTrue, "PyObject_IsTrue") L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttrString")
-    L(TupleGet, "PyTuple_GetItem") L(ImportAdd, "PyImport_AddModule") L(Occurred, "PyErr_Occurred")
-    L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef") L(Utf8, "PyUnicode_AsUTF8")
-    L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString") L(Length, "PyObject_Length")
-#undef L
-    py.ready = 1;
-    return 1;
-}
-
-/* ---- one record per instance: its FMI state, and the fast path to the adapter ---------------- */
-typedef struct Inst {
-    fmi2Component c;
-    int phase;
-    double last_time;                     /* end of the last successful doStep */
-    char name[128];
-    fmi2CallbackLogger logger;
-    fmi2ComponentEnvironment env;
-    struct Fast *fast;                    /* the fast path, once the adapter is found (NULL before) */
-    void **states;                        /* the FMU states this instance handed out and not freed */
-    size_t n_states, cap_states;
-    struct Inst *next;
-} Inst;
-static Inst *inst_list = NULL;
-/* Hosts such as ecos instantiate, step and free instances on several threads at once. */
-static pthread_mutex_t inst_lock = PTHREAD_MUTEX_INITIALIZER;
-
-static Inst *inst_find(fmi2Component c)
-{
-    pthread_mutex_lock(&inst_lock);
-    Inst *found = NULL;
-    for (Inst *i = inst_list; i; i = i->next)
-        if (i->c == c) { found = i; break; }
-    pthread_mutex_unlock(&inst_lock);
-    return found;
-}
-
-static void fast_drop(fmi2Component c);
-
-static void inst_drop(fmi2Component c)
-{
-    fast_drop(c);
-    pthread_mutex_lock(&inst_lock);
-    for (Inst **p = &inst_list; *p; p = &(*p)->next)
-        if ((*p)->c == c) { Inst *i = *p; *p = i->next; free(i->states); free(i); break; }
-    pthread_mutex_unlock(&inst_lock);
-}
-
-/* ---- the fast path: the adapter and its ports by value reference --------------------- */
-enum { K_NONE = 0, K_REAL = 1, K_INTEGER = 2, K_BOOLEAN = 3 };
-enum { C_OTHER = 0, C_INPUT = 1, C_OUTPUT = 2 };
-typedef struct Fast {
-    PyObject *slave;          /* the ControllerSlave (a reference held) */
-    PyObject *inputs;         /* slave.inputs: the same dict for the instance's life */
-    PyObject *queue;          /* slave.log_queue: pythonfmu's log list, flushed by any pythonfmu call */
-    unsigned n;
-    PyObject **names;         /* by value reference: the port's name (borrowed from slave._causality) */
-    unsigned char *kind, *causality, *fixed;
-} Fast;
-
-static Fast *fast_find(fmi2Component c)
-{
-    Inst *i = inst_find(c);
-    return i ? i->fast : NULL;
-}
-
-static void fast_drop(fmi2Component c)
-{
-    Inst *i = inst_find(c);
-    Fast *f = i ? i->fast : NULL;
-    if (!f) return;
-    i->fast = NULL;
-    if (py_load()) {
-        PyGILState_STATE g = py.GILEnsure();
-        py.DecRef(f->slave);
-        py.DecRef(f->inputs);
-        py.DecRef(f->queue);
-        py.GILRelease(g);
-    }
-    free(f->names); free(f->kind); free(f->causality); free(f->fixed); free(f);
-}
-
-/* The adapter puts itself in module _ncfmu_fast (attribute "last") when pythonfmu creates it. */
-static void fast_register(fmi2Component c, fmi2String instance_name)
-{
-    Inst *inst = inst_find(c);
-    if (!inst || !py_load()) return;
-    fast_drop(c);
-    PyGILState_STATE g = py.GILEnsure();
-    PyObject *mod = py.ImportAdd("_ncfmu_fast");                  /* borrowed */
-    PyObject *slave = mod ? py.GetAttr(mod, "last") : NULL;        /* new */
-    PyObject *caus = NULL, *inputs = NULL, *name = NULL;
-    Fast *f = NULL;
-    if (!slave) goto done;
-    name = py.GetAttr(slave, "instance_name");
-    if (!name || !py.Utf8(name) || strcmp(py.Utf8(name), instance_name) != 0) goto done;
-    caus = py.GetAttr(slave, "_causality");
-    inputs = py.GetAttr(slave, "inputs");
-    PyObject *queue = py.GetAttr(slave, "log_queue");
-    if (!caus || !inputs || !queue) { if (queue) py.DecRef(queue); goto done; }
-    unsigned n = 0;
-    Py_ssize_t_ pos = 0;
-    PyObject *k, *v;
-    while (py.DictNext(caus, &pos, &k, &v)) {
-        long vr = py.LongAs(k);
-        if (vr >= 0 && (unsigned)vr + 1 > n) n = (unsigned)vr + 1;
-    }
-    f = calloc(1, sizeof *f);
-    f->names = calloc(n ? n : 1, sizeof(PyObject *));
-    f->kind = calloc(n ? n : 1, 1);
-    f->causality = calloc(n ? n : 1, 1);
-    f->fixed = calloc(n ? n : 1, 1);
-    f->n = n;
-    pos = 0;
-    while (py.DictNext(caus, &pos, &k, &v)) {
-        long vr = py.LongAs(k);
-        const char *c_s = py.Utf8(py.TupleGet(v, 0)), *k_s = py.Utf8(py.TupleGet(v, 1));
-        if (vr < 0 || !c_s || !k_s) continue;
-        f->names[vr] = py.TupleGet(v, 2);
-        PyObject *variability = py.TupleGet(v, 3);
-        const char *var_s = variability ? py.Utf8(variability) : NULL;
-        if (!variability && py.Occurred()) py.Clear();
-        f->fixed[vr] = var_s && !strcmp(var_s, "fixed") && !strcmp(c_s, "parameter");
-        f->causality[vr] = !strcmp(c_s, "input") ? C_INPUT : !strcmp(c_s, "output") ? C_OUTPUT : C_OTHER;
-        f->kind[vr] = !strcmp(k_s, "Real") ? K_REAL : !strcmp(k_s, "Integer") ? K_INTEGER
-                    : !strcmp(k_s, "Boolean") ? K_BOOLEAN : K_NONE;
-    }
-    f->slave = slave; slave = NULL;                                /* keeps the names alive too */
-    f->inputs = inputs; inputs = NULL;
-    f->queue = queue;
-    inst->fast = f;
-done:
-    if (py.Occurred()) py.Clear();
-    if (slave) py.DecRef(slave);
-    if (inputs) py.DecRef(inputs);
-    if (caus) py.DecRef(caus);
-    if (name) py.DecRef(name);
-    py.GILRelease(g);
-}
-
-/* Reads: every vr an output of ``kind``; returns 0 to fall back to pythonfmu. */
-static int fast_get(Fast *f, const fmi2ValueReference vr[], size_t n, int kind, void *values)
-{
-    if (!f) return 0;
-    for (size_t i = 0; i < n; i++)
-        if (vr[i] >= f->n || f->kind[vr[i]] != kind || f->causality[vr[i]] != C_OUTPUT) return 0;
-    PyGILState_STATE g = py.GILEnsure();
-    int ok = 0;
-    PyObject *out = py.GetAttr(f->slave, "out");
-    if (out) {
-        ok = 1;
-        for (size_t i = 0; i < n && ok; i++) {
-            PyObject *v = py.DictGetItem(out, f->names[vr[i]]);
-            if (!v) { ok = 0; break; }
-            if (kind == K_REAL) ((fmi2Real *)values)[i] = py.FloatAs(v);
-            else if (kind == K_INTEGER) ((fmi2Integer *)values)[i] = (fmi2Integer)py.LongAs(v);
-            else ((fmi2Boolean *)values)[i] = py.IsTrue(v) > 0;
-        }
-        py.DecRef(out);
-    }
-    if (py.Occurred()) { py.Clear(); ok = 0; }
-    py.GILRelease(g);
-    return ok;
-}
-
-/* Writes: every vr an input of ``kind`` (tunable parameters go through pythonfmu: they retune). */
-static int fast_set(Fast *f, const fmi2ValueReference vr[], size_t n, int kind, const void *values)
-{
-    if (!f) return 0;
-    for (size_t i = 0; i < n; i++)
-        if (vr[i] >= f->n || f->kind[vr[i]] != kind || f->causality[vr[i]] != C_INPUT) return 0;
-    PyGILState_STATE g = py.GILEnsure();
-    int ok = 1;
-    for (size_t i = 0; i < n && ok; i++) {
-        PyObject *v = kind == K_REAL ? py.FloatFrom(((const fmi2Real *)values)[i])
-                    : kind == K_INTEGER ? py.LongFrom(((const fmi2Integer *)values)[i])
-                    : py.BoolFrom(((const fmi2Boolean *)values)[i] != 0);
-        if (!v || py.DictSetItem(f->inputs, f->names[vr[i]], v) != 0) ok = 0;
-        if (v) py.DecRef(v);
-    }
-    if (py.Occurred()) { py.Clear(); ok = 0; }
-    py.GILRelease(g);
-    return ok;
-}
-
-/* doStep straight into the adapter: 1 done (status in *st), 0 fall back to pythonfmu. */
-static PyObject *s_do_step = NULL, *s_failed = NULL;
-static int fast_step(Fast *f, fmi2Real t, fmi2Real h, fmi2Status *st, int *flush)
-{
-    if (!f) return 0;
-    PyGILState_STATE g = py.GILEnsure();
-    if (!s_do_step) { s_do_step = py.StrFrom("do_step"); s_failed = py.StrFrom("step_failed"); }
-    PyObject *pt = py.FloatFrom(t), *ph = py.FloatFrom(h);
-    PyObject *r = (pt && ph) ? py.CallMethod(f->slave, s_do_step, pt, ph, NULL) : NULL;
-    if (pt) py.DecRef(pt);
-    if (ph) py.DecRef(ph);
-    if (!r) {
-        py.Clear();
-        *st = fmi2Fatal;                      /* the adapter catches its own errors: this is not expected */
-    } else {
-        int good = py.IsTrue(r) > 0;
-        py.DecRef(r);
-        PyObject *failed = py.GetAttr(f->slave, "step_failed");
-        *st = good ? fmi2OK : (failed && py.IsTrue(failed) > 0) ? fmi2Error : fmi2Discard;
-        if (failed) py.DecRef(failed);
-    }
-    *flush = py.Length(f->queue) > 0;
-    if (py.Occurred()) py.Clear();
-    py.GILRelease(g);
-    return 1;
-}
-
-/* ---- the FMI 2.0 co-simulation state machine, per instance -------------------------------------
- * pythonfmu checks no call against the state of the instance; the checks live here, in one place:
- * which call is allowed in which phase, a step size that is not a positive finite number, and the
- * time of the last successful step (fmi2LastSuccessfulTime). A refused call logs why (through the
- * host's logger) and returns fmi2Error; the instance stays usable (fmi2Reset) and freeable. */
-/* 1 when ``call`` is allowed in the instance's phase (fmi2_machine.h); else logs and returns 0. */
-static int allowed(Inst *i, const char *call, int phases)
-{
-    if (!i) return 0;                      /* NULL, freed, or not made here: never handed to pythonfmu */
-    Fmi2Log log = {i->logger, i->env, i->name};
-    return fmi2_allowed(&log, i->phase, call, phases);
-}
-
-static void inst_phase(fmi2Component c, int phase)
-{
-    Inst *i = inst_find(c);
-    if (i) i->phase = phase;
-}
-
-/* Must match ncfmu.fmi.adapter.INIT_REFUSED_VR */
-#define NCFMU_INIT_REFUSED_VR 2147483000u
-/* Must match ncfmu.fmi.adapter.CALL_REFUSED_VR */
-#define NCFMU_CALL_REFUSED_VR 2147483001u
+#if !defined(NCFMU_GUID) || !defined(NCFMU_MODULE) || !defined(NCFMU_CLASS)
+#error "the builder passes NCFMU_GUID, NCFMU_MODULE and NCFMU_CLASS"
+#endif
 
 /* ---- a Python runtime for native hosts ------------------------------------------------------------
- * pythonfmu's library does not link libpython: in a Python host the symbols are there, in a native
- * host (fmusim, ecos, libcosim) they are not. Before pythonfmu's library is loaded, the shim makes sure
- * a libpython is loaded with RTLD_GLOBAL, choosing, in this order:
+ * In a Python host (fmpy, ncfmu) the interpreter is there. In a native host (fmusim, ecos, libcosim)
+ * the shim loads a libpython with RTLD_GLOBAL, choosing, in this order:
  *   1. $NCFMU_LIBPYTHON (a path or a soname), and nothing else when it is set;
  *   2. the library recorded at build time in resources/ncfmu_python.txt (path, then its soname);
- * and starts the interpreter itself (then releases the GIL). pythonfmu then finds it initialised and
- * leaves it alone: it never runs Py_Finalize from a static destructor at process exit, where numpy's
- * and scipy's clean-up crashed native hosts (SIGSEGV/SIGABRT after the run). The interpreter lives
- * until the process ends. If no runtime loads, one message says so, once, and every instantiation
- * fails (fmi2Instantiate returns NULL). */
+ * and starts the interpreter itself (then releases the GIL). It is never finalised: it lives until the
+ * process ends (numpy's and scipy's clean-up at Py_Finalize crashed native hosts). If no runtime loads,
+ * one message says so, and every instantiation fails (fmi2Instantiate returns NULL). */
 static char python_problem[1024] = "";
 
 static int python_runtime(const char *fmu_binary)
@@ -378,461 +110,916 @@ static int python_runtime(const char *fmu_binary)
     return 1;
 }
 
-static void *inner = NULL;
-static void *sym(const char *name);
-static void *sym_locked(const char *name, int *failed);
+/* ---- the Python C API, resolved at run time (the binary links no libpython) ------------------------- */
+typedef struct _object PyObject;
+typedef int PyGILState_STATE;
+typedef long Py_ssize_t_;
+static struct {
+    PyGILState_STATE (*GILEnsure)(void);
+    void (*GILRelease)(PyGILState_STATE);
+    PyObject *(*DictGetItem)(PyObject *, PyObject *);
+    int (*DictSetItem)(PyObject *, PyObject *, PyObject *);
+    double (*FloatAs)(PyObject *);
+    PyObject *(*FloatFrom)(double);
+    long (*LongAs)(PyObject *);
+    PyObject *(*LongFrom)(long);
+    int (*IsTrue)(PyObject *);
+    PyObject *(*BoolFrom)(long);
+    PyObject *(*GetAttr)(PyObject *, PyObject *);
+    PyObject *(*GetAttrString)(PyObject *, const char *);
+    PyObject *(*CallMethod)(PyObject *, PyObject *, ...);
+    PyObject *(*StrFrom)(const char *);
+    PyObject *(*InternFrom)(const char *);
+    const char *(*Utf8)(PyObject *);
+    Py_ssize_t_ (*SeqSize)(PyObject *);
+    PyObject *(*SeqGetItem)(PyObject *, Py_ssize_t_);
+    int (*SeqContains)(PyObject *, PyObject *);
+    PyObject *(*ListNew)(Py_ssize_t_);
+    int (*ListSetItem)(PyObject *, Py_ssize_t_, PyObject *);
+    int (*ListInsert)(PyObject *, Py_ssize_t_, PyObject *);
+    PyObject *(*SysGet)(const char *);
+    PyObject *(*Import)(const char *);
+    PyObject *(*BytesFrom)(const char *, Py_ssize_t_);
+    int (*BytesAs)(PyObject *, char **, Py_ssize_t_ *);
+    PyObject *(*Occurred)(void);
+    void (*Fetch)(PyObject **, PyObject **, PyObject **);
+    PyObject *(*Str)(PyObject *);
+    void (*Clear)(void);
+    void (*IncRef)(PyObject *);
+    void (*DecRef)(PyObject *);
+    PyObject *None;
+} py;
 
-/* pythonfmu 0.7 defect: its global std::shared_ptr<PyState> is released twice at process exit -- by its
- * static destructor, then again by its __attribute__((destructor)) finalizePythonInterpreter, which
- * reads the freed control block (valgrind: "Invalid read ... finalizePythonInterpreter", then
- * "free(): corrupted unsorted chunks", rc 134, in about 1 run of 3 of a native host). Calling that
- * function first, from an exit handler registered after pythonfmu's library is loaded (so it runs
- * before pythonfmu's static destructors), releases the state once and leaves both later releases
- * nothing to do. */
-static void (*pythonfmu_release)(void) = NULL;
-static void release_pythonfmu_state(void)
+static int py_load(void)
 {
-    if (pythonfmu_release) pythonfmu_release();
+    static int ready = 0;
+    if (ready) return ready > 0;
+    void *h = RTLD_DEFAULT;
+#define L(field, name) if (!(py.field = (__typeof__(py.field))dlsym(h, name))) { ready = -1; return 0; }
+    L(GILEnsure, "PyGILState_Ensure") L(GILRelease, "PyGILState_Release") L(DictGetItem, "PyDict_GetItem")
+    L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
+    L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
+    L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
+    L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString")
+    L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
+    L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
+    L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(SysGet, "PySys_GetObject")
+    L(Import, "PyImport_ImportModule") L(BytesFrom, "PyBytes_FromStringAndSize")
+    L(BytesAs, "PyBytes_AsStringAndSize") L(Occurred, "PyErr_Occurred") L(Fetch, "PyErr_Fetch")
+    L(Str, "PyObject_Str") L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef")
+    L(None, "_Py_NoneStruct")
+#undef L
+    ready = 1;
+    return 1;
 }
-#define INNER_(ret, name, params) static ret(*inner_##name) params = NULL; \
-    if (!inner_##name) inner_##name = (ret(*) params)sym(#name);
 
-static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
-
-static void *sym(const char *name)
+static void py_drop(PyObject *o)
 {
-    static int inner_failed = 0;           /* say a load failure once, not on every call */
-    /* Hosts instantiate on several threads: the runtime and pythonfmu's library are loaded once, under a lock. */
-    pthread_mutex_lock(&load_lock);
-    void *loaded = sym_locked(name, &inner_failed);
-    pthread_mutex_unlock(&load_lock);
-    return loaded;
+    if (o) py.DecRef(o);
 }
 
-static void *sym_locked(const char *name, int *failed)
+/* The pending Python exception as text (and cleared). */
+static void py_error_text(char *out, size_t size)
 {
-    if (!inner) {
-        Dl_info info;
-        char path[4096];
-        if (*failed) return NULL;
-        if (!dladdr((void *)&sym, &info) || !info.dli_fname) return NULL;
-        if (!python_runtime(info.dli_fname)) { *failed = 1; return NULL; }
-        const char *dot = strrchr(info.dli_fname, '.');
-        size_t stem = dot ? (size_t)(dot - info.dli_fname) : strlen(info.dli_fname);
-        if (stem + 32 >= sizeof path) return NULL;
-        memcpy(path, info.dli_fname, stem);
-        strcpy(path + stem, ".pythonfmu.so");
-        inner = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
-        if (inner) {
-            pythonfmu_release = (void (*)(void))dlsym(inner, "finalizePythonInterpreter");
-            if (pythonfmu_release) atexit(release_pythonfmu_state);
+    PyObject *type = NULL, *value = NULL, *tb = NULL;
+    py.Fetch(&type, &value, &tb);
+    PyObject *s = value ? py.Str(value) : type ? py.Str(type) : NULL;
+    const char *text = s ? py.Utf8(s) : NULL;
+    snprintf(out, size, "%s", text ? text : "an exception without text");
+    if (py.Occurred()) py.Clear();
+    py_drop(s); py_drop(type); py_drop(value); py_drop(tb);
+}
+
+/* The contract's names, interned once (under the GIL). */
+#define NAME_ENUM(m) N_##m,
+enum { NCFMU_CONTRACT_NAMES(NAME_ENUM) N_COUNT };
+#define NAME_TEXT(m) NCFMU_##m,
+static const char *const name_text[N_COUNT] = { NCFMU_CONTRACT_NAMES(NAME_TEXT) };
+static PyObject *names[N_COUNT];
+
+static int names_ready(void)
+{
+    if (names[0]) return 1;
+    for (int k = 0; k < N_COUNT; k++)
+        if (!(names[k] = py.InternFrom(name_text[k]))) { py.Clear(); return 0; }
+    return 1;
+}
+
+/* ---- instances and FMU states: opaque handles, never reused ---------------------------------------
+ * A handle is a number tagged high in the address space (never a valid address, so a host that
+ * dereferences one faults at once instead of corrupting memory), counted up, never handed out twice. */
+#define INSTANCE_TAG ((uintptr_t)0x4E43460000000000ull)
+#define STATE_TAG    ((uintptr_t)0x4E43530000000000ull)
+
+typedef struct {
+    uintptr_t handle;
+    PyObject *object;                     /* the adapter's state object */
+    double time;                          /* where the instance was when the state was taken */
+} State;
+
+typedef struct Inst {
+    uintptr_t handle;
+    int phase;
+    double next_time;                     /* where the next step must start: start time, last step's end, restored */
+    char name[128];
+    Fmi2Log log;                          /* the host's logger; log.name points to name */
+    char resources[4096];                 /* the resources folder, for fmi2Reset's new slave */
+    int visible;
+    int debug;                            /* debug logging on: info messages reach the logger too */
+    unsigned categories;                  /* with debug on: which categories (bit k: CATEGORIES[k]); all if 0 */
+    PyObject *slave, *inputs;
+    unsigned n;                           /* value references 0 .. n-1 */
+    PyObject **port_name;                 /* by value reference: the variable's name (NULL: none) */
+    unsigned char *type, *causality, *fixed;
+    PyObject *strings;                    /* the last fmi2GetString's values, kept alive until the next */
+    State *states;
+    size_t n_states, cap_states;
+    struct Inst *next;
+} Inst;
+
+static Inst *instances = NULL;
+/* Hosts such as ecos instantiate, step and free instances on several threads at once. */
+static pthread_mutex_t instances_lock = PTHREAD_MUTEX_INITIALIZER;
+static uintptr_t handles_made = 0;        /* under instances_lock */
+
+static const char *const CATEGORIES[] = {"logStatusWarning", "logStatusDiscard", "logStatusError",
+                                         "logStatusFatal", "logAll"};
+#define N_CATEGORIES (sizeof CATEGORIES / sizeof *CATEGORIES)
+
+static Inst *inst_find(fmi2Component c)
+{
+    if (!c) return NULL;
+    pthread_mutex_lock(&instances_lock);
+    Inst *found = NULL;
+    for (Inst *i = instances; i; i = i->next)
+        if (i->handle == (uintptr_t)c) { found = i; break; }
+    pthread_mutex_unlock(&instances_lock);
+    return found;
+}
+
+/* The instance behind ``c`` when ``call`` is allowed in its phase; else NULL (and fmi2Error). A NULL,
+ * freed or made-up handle has no logger to tell: the call just returns fmi2Error. */
+static Inst *checked(fmi2Component c, const char *call, int phases)
+{
+    Inst *i = inst_find(c);
+    if (!i || !fmi2_allowed(&i->log, i->phase, call, phases)) return NULL;
+    if (!i->slave) {                      /* a failed fmi2Reset: the instance can only be freed */
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: the instance has no slave (its reset failed): "
+                 "free it", call);
+        return NULL;
+    }
+    return i;
+}
+
+/* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
+/* Send what the slave logged to the host: errors and warnings always, the rest with debug logging on. */
+static void flush_log(Inst *i)
+{
+    PyObject *taken = i->slave ? py.CallMethod(i->slave, names[N_TAKE_LOG], NULL) : NULL;
+    Py_ssize_t_ n = taken ? py.SeqSize(taken) : 0;
+    for (Py_ssize_t_ k = 0; k < n; k++) {
+        PyObject *m = py.SeqGetItem(taken, k);
+        PyObject *st = m ? py.SeqGetItem(m, 0) : NULL, *cat = m ? py.SeqGetItem(m, 1) : NULL;
+        PyObject *text = m ? py.SeqGetItem(m, 2) : NULL;
+        long status = st ? py.LongAs(st) : fmi2Error;
+        const char *c_s = cat ? py.Utf8(cat) : NULL, *t_s = text ? py.Utf8(text) : NULL;
+        int shown = status >= fmi2Warning;
+        if (!shown && i->debug) {
+            shown = i->categories == 0;
+            for (unsigned b = 0; !shown && b < N_CATEGORIES; b++)
+                shown = (i->categories & (1u << b)) && c_s && !strcmp(c_s, CATEGORIES[b]);
         }
-        if (!inner) {
-            snprintf(python_problem, sizeof python_problem, "ncfmu status shim: cannot load %s: %s", path, dlerror());
-            fprintf(stderr, "%s\n", python_problem);
-            *failed = 1;
-            return NULL;
-        }
+        if (shown && t_s)
+            FMI2_SAY(&i->log, status < fmi2OK || status > fmi2Fatal ? fmi2Error : (fmi2Status)status,
+                     c_s ? c_s : "logAll", "%s", t_s);
+        py_drop(st); py_drop(cat); py_drop(text); py_drop(m);
     }
-    return dlsym(inner, name);
+    if (py.Occurred()) py.Clear();
+    py_drop(taken);
 }
 
-#define FWD(ret, fail, name, params, args)                       \
-    ret name params                                              \
-    {                                                            \
-        static ret(*f) params = NULL;                            \
-        if (!f) f = (ret(*) params)sym(#name);                   \
-        if (!f) return fail;                                     \
-        return f args;                                           \
+/* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
+static PyObject *call(Inst *i, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
+{
+    PyObject *r = py.CallMethod(i->slave, names[entry], a, b, c, NULL);
+    if (!r) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: the Python slave raised: %s", fmi_call, text);
     }
-#define FWDV(name, params, args)                                 \
-    void name params                                             \
-    {                                                            \
-        static void(*f) params = NULL;                           \
-        if (!f) f = (void(*) params)sym(#name);                  \
-        if (f) f args;                                           \
-    }
-
-FWD(const char *, "cs", fmi2GetTypesPlatform, (void), ())
-FWD(const char *, "2.0", fmi2GetVersion, (void), ())
-FWD(fmi2Status, fmi2Fatal, fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]), (c, on, n, cats))
-FWD(fmi2Status, fmi2Fatal, fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]), (c, vr, n, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference u[], size_t nu, const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]), (c, u, nu, z, nz, dv, dz))
-FWD(fmi2Status, fmi2Fatal, fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], const fmi2Real v[]), (c, vr, n, order, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer order[], fmi2Real v[]), (c, vr, n, order, v))
-FWD(fmi2Status, fmi2Fatal, fmi2CancelStep, (fmi2Component c), (c))
-FWD(fmi2Status, fmi2Fatal, fmi2GetStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Status *v), (c, k, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Integer *v), (c, k, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v), (c, k, v))
-FWD(fmi2Status, fmi2Fatal, fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind k, fmi2String *v), (c, k, v))
-
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real tol, fmi2Real start,
-                               fmi2Boolean stop_def, fmi2Real stop)
-{
-    INNER_(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real))
-    Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2SetupExperiment", P_SETUP)) return fmi2Error;
-    Fmi2Log log = {i ? i->logger : NULL, i ? i->env : NULL, i ? i->name : ""};
-    if (!fmi2_experiment_ok(&log, start, stop_def, stop)) return fmi2Error;
-    if (i) i->last_time = start;
-    return inner_fmi2SetupExperiment ? inner_fmi2SetupExperiment(c, tol_def, tol, start, stop_def, stop) : fmi2Fatal;
+    return r;
 }
 
-/* A state transition: allowed from ``from``, forwarded, and in ``to`` when pythonfmu agrees. */
-static fmi2Status transition(fmi2Component c, const char *call, int from, int to, fmi2Status (*inner_call)(fmi2Component))
+/* A call that returns a status (the contract's STATUS). */
+static fmi2Status call_status(Inst *i, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
-    Inst *i = inst_find(c);
-    if (!allowed(i, call, from)) return fmi2Error;
-    fmi2Status s = inner_call ? inner_call(c) : fmi2Fatal;
-    if (s <= fmi2Warning) i->phase = to;
-    return s;
+    PyObject *r = call(i, fmi_call, entry, a, b, c);
+    long st = r ? py.LongAs(r) : NCFMU_STATUS_ERROR;
+    if (py.Occurred()) { py.Clear(); st = NCFMU_STATUS_ERROR; }
+    py_drop(r);
+    if (st < NCFMU_STATUS_OK || st > NCFMU_STATUS_FATAL) st = NCFMU_STATUS_ERROR;
+    return st == NCFMU_STATUS_FATAL ? fmi2Error : (fmi2Status)st;   /* nothing the slave says breaks the instance */
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+static fmi2Status simple_call(fmi2Component c, const char *fmi_call, int phases, int entry)
 {
-    INNER_(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))
-    return transition(c, "fmi2EnterInitializationMode", P_SETUP, P_INIT, inner_fmi2EnterInitializationMode);
-}
-
-fmi2Status fmi2Terminate(fmi2Component c)
-{
-    INNER_(fmi2Status, fmi2Terminate, (fmi2Component))
-    return transition(c, "fmi2Terminate", P_STEP, P_TERMINATED, inner_fmi2Terminate);
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
-{
-    Inst *i = inst_find(c);
-    if (i && k == fmi2LastSuccessfulTime && v) { *v = i->last_time; return fmi2OK; }
-    if (i && i->logger)
-        i->logger(i->env, i->name, fmi2Discard, "warning", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is "
-                  "available (no asynchronous steps)");
-    return fmi2Discard;
-}
-
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
-{
-    INNER_(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]))
-    if (!allowed(inst_find(c), "fmi2SetString", P_SETTABLE)) return fmi2Error;
-    for (size_t k = 0; k < n; k++) {
-        if (!v || !v[k] || !fmi2_utf8_ok((const unsigned char *)v[k])) {
-            Inst *i = inst_find(c);
-            if (i && i->logger)
-                i->logger(i->env, i->name, fmi2Error, "error", "fmi2SetString: value reference %u: %s",
-                          vr ? vr[k] : 0u, v && v[k] ? "not valid UTF-8 text" : "a NULL string");
-            return fmi2Error;
-        }
-    }
-    return inner_fmi2SetString ? inner_fmi2SetString(c, vr, n, v) : fmi2Fatal;
-}
-
-fmi2Status fmi2ExitInitializationMode(fmi2Component c)
-{
-    if (!allowed(inst_find(c), "fmi2ExitInitializationMode", P_INIT)) return fmi2Error;
-    static fmi2Status (*exit_init)(fmi2Component) = NULL;
-    static fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]) = NULL;
-    if (!exit_init) exit_init = (fmi2Status(*)(fmi2Component))sym("fmi2ExitInitializationMode");
-    if (!get_integer)
-        get_integer = (fmi2Status(*)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]))sym("fmi2GetInteger");
-    if (!exit_init || !get_integer) return fmi2Fatal;
-    fmi2Status status = exit_init(c);
-    if (status > fmi2Warning) return status;
-    fmi2ValueReference vr = NCFMU_INIT_REFUSED_VR;
-    fmi2Integer refused = 0;
-    if (get_integer(c, &vr, 1, &refused) == fmi2OK && refused) return fmi2Error;
-    inst_phase(c, P_STEP);
-    return status;
-}
-
-/* FMU-state calls the adapter may refuse (garbage bytes, a state of another FMU): it logs why and
- * raises a flag, read (and cleared) here through a reserved value reference, that becomes fmi2Error.
- * A refused deserialisation frees the empty state pythonfmu made, so the host gets nothing to misuse. */
-static int call_refused(fmi2Component c)
-{
-    static fmi2Status (*get_integer)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]) = NULL;
-    if (!get_integer)
-        get_integer = (fmi2Status(*)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]))sym("fmi2GetInteger");
-    fmi2ValueReference vr = NCFMU_CALL_REFUSED_VR;
-    fmi2Integer refused = 0;
-    return get_integer && get_integer(c, &vr, 1, &refused) == fmi2OK && refused;
-}
-
-/* ---- FMU states: only the live ones of this instance reach pythonfmu ------------------------------
- * pythonfmu dereferences whatever pointer it is given: a freed state, one of another instance, or a
- * made-up pointer crashed the host. The shim keeps the states each instance handed out and not yet
- * freed, and refuses any other with fmi2Error (the pointer is never dereferenced). */
-static int state_index(Inst *i, void *s)
-{
-    for (size_t k = 0; i && k < i->n_states; k++)
-        if (i->states[k] == s) return (int)k;
-    return -1;
-}
-
-static void state_add(Inst *i, void *s)
-{
-    if (!i || !s || state_index(i, s) >= 0) return;
-    if (i->n_states == i->cap_states) {
-        size_t cap = i->cap_states ? 2 * i->cap_states : 8;
-        void **grown = realloc(i->states, cap * sizeof *grown);
-        if (!grown) return;
-        i->states = grown;
-        i->cap_states = cap;
-    }
-    i->states[i->n_states++] = s;
-}
-
-static int state_live(Inst *i, const char *call, void *s)
-{
-    if (state_index(i, s) >= 0) return 1;
-    if (i->logger)
-        i->logger(i->env, i->name, fmi2Error, "error", "%s: %p is not a live FMU state of this instance "
-                  "(freed, of another instance or FMU, or never made)", call, s);
-    return 0;
-}
-
-/* A call on the state ``s``: a known instance, and one of its live states. */
-static int state_call_ok(Inst *i, const char *call, void *s)
-{
-    return allowed(i, call, P_ANY) && state_live(i, call, s);
-}
-
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
-{
-    INNER_(fmi2Status, fmi2GetFMUstate, (fmi2Component, fmi2FMUstate *))
-    INNER_(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))
-    Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2GetFMUstate", P_ANY) || !s) return fmi2Error;
-    if (*s && !state_live(i, "fmi2GetFMUstate", *s)) return fmi2Error;
-    if (*s) {                              /* FMI: a given state is overwritten -- pythonfmu makes a new one */
-        int k = state_index(i, *s);
-        if (k >= 0) i->states[k] = i->states[--i->n_states];
-        if (inner_fmi2FreeFMUstate) inner_fmi2FreeFMUstate(c, s);
-        *s = NULL;
-    }
-    fmi2Status st = inner_fmi2GetFMUstate ? inner_fmi2GetFMUstate(c, s) : fmi2Fatal;
-    if (st <= fmi2Warning) state_add(i, *s);
+    Inst *i = checked(c, fmi_call, phases);
+    if (!i) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = call_status(i, fmi_call, entry, NULL, NULL, NULL);
+    flush_log(i);
+    py.GILRelease(g);
     return st;
 }
 
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
+/* ---- making and dropping the Python slave -------------------------------------------------------- */
+static void slave_drop(Inst *i)
 {
-    INNER_(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))
-    Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2FreeFMUstate", P_ANY)) return fmi2Error;
-    if (!s || !*s) return fmi2OK;
-    if (!state_live(i, "fmi2FreeFMUstate", *s)) return fmi2Error;
-    int k = state_index(i, *s);
-    if (k >= 0) i->states[k] = i->states[--i->n_states];
-    return inner_fmi2FreeFMUstate ? inner_fmi2FreeFMUstate(c, s) : fmi2Fatal;
+    py_drop(i->slave); py_drop(i->inputs); py_drop(i->strings);
+    for (unsigned k = 0; k < i->n; k++) py_drop(i->port_name[k]);
+    free(i->port_name); free(i->type); free(i->causality); free(i->fixed);
+    i->slave = i->inputs = i->strings = NULL;
+    i->port_name = NULL; i->type = i->causality = i->fixed = NULL;
+    i->n = 0;
 }
 
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size)
+/* The slave class: the model script's module, imported once from the FMU's resources folder. */
+static PyObject *slave_class(const Fmi2Log *log, const char *resources)
 {
-    INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
-    Inst *i = inst_find(c);
-    if (!state_call_ok(i, "fmi2SerializedFMUstateSize", s) || !size) return fmi2Error;
-    return inner_fmi2SerializedFMUstateSize ? inner_fmi2SerializedFMUstateSize(c, s, size) : fmi2Fatal;
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size)
-{
-    INNER_(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte[], size_t))
-    INNER_(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))
-    Inst *i = inst_find(c);
-    if (!state_call_ok(i, "fmi2SerializeFMUstate", s)) return fmi2Error;
-    /* pythonfmu copies ``size`` bytes out of its state, whatever its length: only the exact size passes. */
-    size_t needed = 0;
-    if (!inner_fmi2SerializedFMUstateSize || inner_fmi2SerializedFMUstateSize(c, s, &needed) > fmi2Warning)
-        return fmi2Error;
-    if (!b || size < needed) {
-        if (i->logger)
-            i->logger(i->env, i->name, fmi2Error, "error", "fmi2SerializeFMUstate: %s (%zu bytes given, %zu needed)",
-                      !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
-        return fmi2Error;
+    PyObject *path = py.SysGet("path");                          /* borrowed */
+    PyObject *dir = py.StrFrom(resources);
+    if (path && dir && py.SeqContains(path, dir) == 0) py.ListInsert(path, 0, dir);
+    py_drop(dir);
+    PyObject *module = py.Import(NCFMU_MODULE);
+    PyObject *cls = module ? py.GetAttrString(module, NCFMU_CLASS) : NULL;
+    py_drop(module);
+    if (!cls) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2Instantiate: the model %s could not be loaded from %s: %s",
+                 NCFMU_MODULE, resources, text);
     }
-    return inner_fmi2SerializeFMUstate ? inner_fmi2SerializeFMUstate(c, s, b, needed) : fmi2Fatal;
+    return cls;
 }
 
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
+/* A new Python slave for ``i`` and its table of variables; 0 (logged) if it cannot be made. */
+static int slave_make(Inst *i)
 {
-    if (!state_call_ok(inst_find(c), "fmi2SetFMUstate", s)) return fmi2Error;
-    static fmi2Status (*f)(fmi2Component, fmi2FMUstate) = NULL;
-    if (!f) f = (fmi2Status(*)(fmi2Component, fmi2FMUstate))sym("fmi2SetFMUstate");
-    if (!f) return fmi2Fatal;
-    fmi2Status status = f(c, s);
-    if (status <= fmi2Warning && call_refused(c)) return fmi2Error;
-    return status;
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s)
-{
-    static fmi2Status (*f)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *) = NULL;
-    static fmi2Status (*free_state)(fmi2Component, fmi2FMUstate *) = NULL;
-    if (!f) f = (fmi2Status(*)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *))sym("fmi2DeSerializeFMUstate");
-    if (!free_state) free_state = (fmi2Status(*)(fmi2Component, fmi2FMUstate *))sym("fmi2FreeFMUstate");
-    if (!allowed(inst_find(c), "fmi2DeSerializeFMUstate", P_ANY) || !s || (size && !b)) return fmi2Error;
-    if (!f) return fmi2Fatal;
-    fmi2Status status = f(c, b, size, s);
-    if (status <= fmi2Warning && call_refused(c)) {
-        if (free_state && *s) free_state(c, s);
-        *s = NULL;
-        return fmi2Error;
+    const char *resources = i->resources;
+    int visible = i->visible;
+    PyObject *cls = slave_class(&i->log, resources);
+    if (!cls) return 0;
+    PyObject *n = py.StrFrom(i->name), *res = py.StrFrom(resources), *vis = py.BoolFrom(visible);
+    PyObject *slave = (n && res && vis) ? py.CallMethod(cls, names[N_INSTANTIATE], n, res, vis, NULL) : NULL;
+    py_drop(n); py_drop(res); py_drop(vis); py_drop(cls);
+    PyObject *ports = slave ? py.CallMethod(slave, names[N_PORTS], NULL) : NULL;
+    PyObject *inputs = slave ? py.GetAttr(slave, names[N_INPUTS]) : NULL;
+    if (!slave || !ports || !inputs) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2Instantiate: the slave %s could not be made: %s",
+                 NCFMU_CLASS, text);
+        py_drop(slave); py_drop(ports); py_drop(inputs);
+        return 0;
     }
-    if (status <= fmi2Warning) state_add(inst_find(c), *s);
-    return status;
+    Py_ssize_t_ count = py.SeqSize(ports);
+    unsigned n_vr = 0;
+    for (Py_ssize_t_ k = 0; k < count; k++) {
+        PyObject *p = py.SeqGetItem(ports, k), *vr = p ? py.SeqGetItem(p, 0) : NULL;
+        long v = vr ? py.LongAs(vr) : -1;
+        if (v >= 0 && v < 1000000 && (unsigned)v + 1 > n_vr) n_vr = (unsigned)v + 1;
+        py_drop(vr); py_drop(p);
+    }
+    i->n = n_vr;
+    i->port_name = calloc(n_vr ? n_vr : 1, sizeof *i->port_name);
+    i->type = calloc(n_vr ? n_vr : 1, 1);
+    i->causality = calloc(n_vr ? n_vr : 1, 1);
+    i->fixed = calloc(n_vr ? n_vr : 1, 1);
+    for (Py_ssize_t_ k = 0; k < count && i->port_name && i->type && i->causality && i->fixed; k++) {
+        PyObject *p = py.SeqGetItem(ports, k);
+        PyObject *f[5] = {NULL, NULL, NULL, NULL, NULL};
+        for (int j = 0; p && j < 5; j++) f[j] = py.SeqGetItem(p, j);
+        long vr = f[0] ? py.LongAs(f[0]) : -1;
+        if (vr >= 0 && (unsigned long)vr < n_vr && f[4] && !i->port_name[vr]) {
+            i->type[vr] = (unsigned char)(f[1] ? py.LongAs(f[1]) : 0);
+            i->causality[vr] = (unsigned char)(f[2] ? py.LongAs(f[2]) : 0);
+            i->fixed[vr] = f[3] && py.IsTrue(f[3]) > 0;
+            i->port_name[vr] = f[4];
+            f[4] = NULL;                                          /* kept */
+        }
+        for (int j = 0; j < 5; j++) py_drop(f[j]);
+        py_drop(p);
+    }
+    py_drop(ports);
+    if (py.Occurred()) py.Clear();
+    i->slave = slave;
+    i->inputs = inputs;
+    if (!i->port_name || !i->type || !i->causality || !i->fixed) { slave_drop(i); return 0; }
+    return 1;
 }
 
-/* ---- the wrapped calls --------------------------------------------------------------------------- */
-#define INNER(ret, name, params) static ret(*inner_##name) params = NULL; \
-    if (!inner_##name) inner_##name = (ret(*) params)sym(#name);
-
-fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
-                              const fmi2CallbackFunctions *cb, fmi2Boolean vis, fmi2Boolean log)
+/* ``file:`` URI -> path (percent-decoded); 0 when it is not a file URI. */
+static int uri_path(const char *uri, char *out, size_t size)
 {
-    INNER(fmi2Component, fmi2Instantiate, (fmi2String, fmi2Type, fmi2String, fmi2String,
-                                           const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean))
-    if (!inner_fmi2Instantiate) {
-        if (cb && cb->logger)               /* the host's log says why, too */
-            cb->logger(cb->componentEnvironment, name ? name : "", fmi2Error, "error", "%s",
-                       python_problem[0] ? python_problem : "ncfmu: pythonfmu's library could not be loaded");
-        return NULL;
-    }
-    /* The adapter announces itself in one global (_ncfmu_fast.last): instantiations are serialised so that
-     * each instance's fast path binds to its own adapter, whatever threads the host uses. */
-    static pthread_mutex_t instantiate_lock = PTHREAD_MUTEX_INITIALIZER;
-    pthread_mutex_lock(&instantiate_lock);
-    fmi2Component c = inner_fmi2Instantiate(name, type, guid, res, cb, vis, log);
-    if (c) {
-        Inst *i = calloc(1, sizeof *i);
-        if (i) {
-            i->c = c;
-            i->phase = P_INSTANTIATED;
-            snprintf(i->name, sizeof i->name, "%s", name ? name : "");
-            i->logger = cb ? cb->logger : NULL;
-            i->env = cb ? cb->componentEnvironment : NULL;
-            pthread_mutex_lock(&inst_lock);
-            i->next = inst_list;
-            inst_list = i;
-            pthread_mutex_unlock(&inst_lock);
+    const char *p;
+    if (!strncmp(uri, "file:///", 8)) p = uri + 7;
+    else if (!strncmp(uri, "file://localhost/", 17)) p = uri + 16;
+    else if (!strncmp(uri, "file:/", 6)) p = uri + 5;
+    else return 0;
+    size_t n = 0;
+    for (; *p && n + 1 < size; p++) {
+        int hi, lo;
+        if (*p == '%' && sscanf(p + 1, "%1x%1x", &hi, &lo) == 2) {
+            if (hi == 0 && lo == 0) return 0;
+            out[n++] = (char)(hi * 16 + lo);
+            p += 2;
+        } else {
+            out[n++] = *p;
         }
     }
-    if (c && name) fast_register(c, name);
-    pthread_mutex_unlock(&instantiate_lock);
-    return c;
+    if (*p) return 0;                                             /* too long */
+    while (n > 1 && out[n - 1] == '/') n--;
+    out[n] = 0;
+    return 1;
+}
+
+static int binary_ready(void)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    pthread_mutex_lock(&lock);
+    Dl_info info;
+    int ok = dladdr((void *)&binary_ready, &info) && info.dli_fname && python_runtime(info.dli_fname) && py_load();
+    pthread_mutex_unlock(&lock);
+    return ok;
+}
+
+/* ---- the FMI 2.0 interface ------------------------------------------------------------------------ */
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
+                              const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging)
+{
+    int name_ok = name && fmi2_utf8_ok((const unsigned char *)name);
+    Fmi2Log early_log = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name_ok ? name : ""};
+    const Fmi2Log *early = &early_log;
+    char dir[4096];
+    struct stat st;
+    if (!name_ok) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: instanceName is %s",
+                 name ? "not valid UTF-8 text" : "NULL");
+        return NULL;
+    }
+    if (type != fmi2CoSimulation) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: %s is a co-simulation FMU (fmuType = %d "
+                 "asked, fmi2CoSimulation = %d)", NCFMU_CLASS, (int)type, (int)fmi2CoSimulation);
+        return NULL;
+    }
+    if (!guid || strcmp(guid, NCFMU_GUID) != 0) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s is not this FMU's (%s): the "
+                 "modelDescription and the binary are from different builds", guid ? guid : "(NULL)", NCFMU_GUID);
+        return NULL;
+    }
+    if (!res || !uri_path(res, dir, sizeof dir) || stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: fmuResourceLocation %s is not a file: URI of "
+                 "an existing folder (the FMU's resources)", res ? res : "(NULL)");
+        return NULL;
+    }
+    if (!binary_ready()) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "%s",
+                 python_problem[0] ? python_problem : "ncfmu: the Python runtime's API could not be found");
+        return NULL;
+    }
+    Inst *i = calloc(1, sizeof *i);
+    if (!i) return NULL;
+    snprintf(i->name, sizeof i->name, "%s", name);
+    snprintf(i->resources, sizeof i->resources, "%s", dir);
+    i->visible = visible != fmi2False;
+    i->log = (Fmi2Log){early->logger, early->env, i->name};
+    i->phase = P_INSTANTIATED;
+    i->debug = logging != fmi2False;
+    PyGILState_STATE g = py.GILEnsure();
+    int made = names_ready() && slave_make(i);
+    if (made) flush_log(i);
+    py.GILRelease(g);
+    if (!made) { free(i); return NULL; }
+    pthread_mutex_lock(&instances_lock);
+    i->handle = INSTANCE_TAG + (++handles_made << 4);
+    i->next = instances;
+    instances = i;
+    pthread_mutex_unlock(&instances_lock);
+    return (fmi2Component)i->handle;
+}
+
+static void states_drop(Inst *i)
+{
+    for (size_t k = 0; k < i->n_states; k++) py_drop(i->states[k].object);
+    free(i->states);
+    i->states = NULL;
+    i->n_states = i->cap_states = 0;
 }
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    INNER(void, fmi2FreeInstance, (fmi2Component))
-    inst_drop(c);                                  /* and its fast path */
-    if (inner_fmi2FreeInstance) inner_fmi2FreeInstance(c);
+    pthread_mutex_lock(&instances_lock);
+    Inst *i = NULL;
+    for (Inst **p = &instances; c && *p; p = &(*p)->next)
+        if ((*p)->handle == (uintptr_t)c) { i = *p; *p = i->next; break; }
+    pthread_mutex_unlock(&instances_lock);
+    if (!i) return;                       /* NULL, freed already, or not ours: nothing to do */
+    PyGILState_STATE g = py.GILEnsure();
+    flush_log(i);
+    states_drop(i);
+    slave_drop(i);
+    py.GILRelease(g);
+    free(i);
 }
 
 fmi2Status fmi2Reset(fmi2Component c)
 {
-    INNER(fmi2Status, fmi2Reset, (fmi2Component))
-    if (!inner_fmi2Reset) return fmi2Fatal;
-    Fast *f = fast_find(c);
-    char name[512] = "";
-    if (f && py_load()) {                          /* pythonfmu creates a new adapter on reset */
-        PyGILState_STATE g = py.GILEnsure();
-        PyObject *n = py.GetAttr(f->slave, "instance_name");
-        if (n && py.Utf8(n)) snprintf(name, sizeof name, "%s", py.Utf8(n));
-        if (n) py.DecRef(n);
-        if (py.Occurred()) py.Clear();
-        py.GILRelease(g);
+    Inst *i = checked(c, "fmi2Reset", P_ANY);
+    if (!i) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    flush_log(i);
+    slave_drop(i);
+    int made = slave_make(i);
+    if (made) flush_log(i);
+    py.GILRelease(g);
+    if (!made) return fmi2Error;          /* logged; the instance can only be freed (every call refuses) */
+    i->phase = P_INSTANTIATED;
+    i->next_time = 0.0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
+{
+    Inst *i = checked(c, "fmi2SetDebugLogging", P_ANY);
+    if (!i) return fmi2Error;
+    unsigned mask = 0;
+    if (n > 0 && !categories) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %zu categories, but the array is NULL", n);
+        return fmi2Error;
     }
-    fast_drop(c);
-    fmi2Status s = inner_fmi2Reset(c);
-    if (s <= fmi2Warning && name[0]) fast_register(c, name);
-    if (s <= fmi2Warning) inst_phase(c, P_INSTANTIATED);
-    return s;
+    for (size_t k = 0; k < n; k++) {
+        unsigned b = 0;
+        while (b < N_CATEGORIES && !(categories[k] && !strcmp(categories[k], CATEGORIES[b]))) b++;
+        if (b == N_CATEGORIES) {
+            FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %s is not a log category of this "
+                     "FMU (logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll)",
+                     categories[k] && fmi2_utf8_ok((const unsigned char *)categories[k]) ? categories[k] : "(not text)");
+            return fmi2Error;
+        }
+        mask |= 1u << b;
+    }
+    i->debug = on != fmi2False;
+    i->categories = mask;
+    return fmi2OK;
 }
 
-/* The value references of a Get/Set: known, of the call's type, and (for a set) settable now. 1 when
- * fine (or not checkable: no record), else logs the first offender and returns 0. */
-static const char *kind_name(int kind)
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_def, fmi2Real tol, fmi2Real start,
+                               fmi2Boolean stop_def, fmi2Real stop)
 {
-    return kind == K_REAL ? "Real" : kind == K_INTEGER ? "Integer" : kind == K_BOOLEAN ? "Boolean" : "String";
+    Inst *i = checked(c, "fmi2SetupExperiment", P_SETUP);
+    if (!i || !fmi2_experiment_ok(&i->log, start, stop_def, stop)) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *a = py.FloatFrom(start), *b = stop_def ? py.FloatFrom(stop) : (py.IncRef(py.None), py.None);
+    PyObject *t = tol_def ? py.FloatFrom(tol) : (py.IncRef(py.None), py.None);
+    fmi2Status st = (a && b && t) ? call_status(i, "fmi2SetupExperiment", N_SETUP_EXPERIMENT, a, b, t) : fmi2Error;
+    py_drop(a); py_drop(b); py_drop(t);
+    flush_log(i);
+    py.GILRelease(g);
+    if (st <= fmi2Warning) i->next_time = start;
+    return st;
 }
 
-static int check_refs(Inst *i, const char *call, const fmi2ValueReference vr[], size_t n, int kind, int set)
+static fmi2Status transition(fmi2Component c, const char *call, int from, int to, int entry)
 {
-    Fast *f = i ? i->fast : NULL;
-    if (!f) return 1;
+    Inst *i = checked(c, call, from);
+    if (!i) return fmi2Error;
+    fmi2Status st = simple_call(c, call, from, entry);
+    if (st <= fmi2Warning) i->phase = to;
+    return st;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    return transition(c, "fmi2EnterInitializationMode", P_SETUP, P_INIT, N_ENTER_INITIALIZATION);
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    return transition(c, "fmi2ExitInitializationMode", P_INIT, P_STEP, N_EXIT_INITIALIZATION);
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    return transition(c, "fmi2Terminate", P_STEP, P_TERMINATED, N_TERMINATE);
+}
+
+/* ---- values ---------------------------------------------------------------------------------------- */
+static const char *type_name(int type)
+{
+    return type == NCFMU_TYPE_REAL ? "Real" : type == NCFMU_TYPE_INTEGER ? "Integer"
+         : type == NCFMU_TYPE_BOOLEAN ? "Boolean" : "String";
+}
+
+/* The value references of a Get/Set: arrays given, every vr a variable of the call's type, and (for a set)
+ * settable now. 1 when fine, else logs the first offender and returns 0. */
+static int refs_ok(Inst *i, const char *call, const fmi2ValueReference vr[], size_t n, const void *v, int type,
+                   int set)
+{
+    if (n > 0 && (!vr || !v)) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: %zu values asked, but the %s array is NULL", call, n,
+                 !vr ? "value reference" : "value");
+        return 0;
+    }
     for (size_t k = 0; k < n; k++) {
         unsigned r = vr[k];
         const char *why = NULL;
-        if (!set && kind == K_INTEGER && (r == NCFMU_INIT_REFUSED_VR || r == NCFMU_CALL_REFUSED_VR)) continue;
-        if (r >= f->n || !f->names[r]) why = "is not a variable of this FMU";
-        else if (f->kind[r] != kind) why = "is not of this call's type";
-        else if (set && f->causality[r] == C_OUTPUT) why = "is an output: it cannot be set";
-        else if (set && f->fixed[r] && i && i->phase == P_STEP)
+        if (r >= i->n || !i->port_name[r]) why = "is not a variable of this FMU";
+        else if (i->type[r] != type) why = type == NCFMU_TYPE_STRING ? "is not a String variable"
+                                                                     : "is not of this call's type";
+        else if (set && i->causality[r] == NCFMU_CAUSALITY_OUTPUT) why = "is an output: it cannot be set";
+        else if (set && i->causality[r] == NCFMU_CAUSALITY_PARAMETER && i->fixed[r] && i->phase == P_STEP)
             why = "is a fixed parameter: it cannot be set after initialisation";
         if (why) {
-            if (i && i->logger)
-                i->logger(i->env, i->name, fmi2Error, "error", "%s: value reference %u %s (%s call)", call, r, why,
-                          kind_name(kind));
+            FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: value reference %u %s (a %s call)", call, r, why,
+                     type_name(type));
             return 0;
         }
     }
     return 1;
 }
 
-/* n values asked: both arrays must be there. */
-static int arrays_ok(Inst *i, const char *call, const fmi2ValueReference vr[], size_t n, const void *v)
+static void value_out(PyObject *v, int type, void *values, size_t k)
 {
-    if (n == 0 || (vr && v)) return 1;
-    if (i && i->logger)
-        i->logger(i->env, i->name, fmi2Error, "error", "%s: %zu values asked, but the %s array is NULL", call, n,
-                  !vr ? "value reference" : "value");
-    return 0;
+    if (type == NCFMU_TYPE_REAL) ((fmi2Real *)values)[k] = py.FloatAs(v);
+    else if (type == NCFMU_TYPE_INTEGER) ((fmi2Integer *)values)[k] = (fmi2Integer)py.LongAs(v);
+    else if (type == NCFMU_TYPE_BOOLEAN) ((fmi2Boolean *)values)[k] = py.IsTrue(v) > 0;
+    else ((fmi2String *)values)[k] = py.Utf8(v);
 }
 
-#define GETTER(name, type, kind)                                                                  \
-    fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, type v[])           \
-    {                                                                                             \
-        INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, type[]))      \
-        Inst *i = inst_find(c);                                                                   \
-        if (!allowed(i, #name, P_GETTABLE) || !arrays_ok(i, #name, vr, n, v)) return fmi2Error;   \
-        if (fast_get(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
-        if (!check_refs(i, #name, vr, n, kind, 0)) return fmi2Error;                              \
-        return inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                              \
-    }
-#define SETTER(name, type, kind)                                                                  \
-    fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, const type v[])     \
-    {                                                                                             \
-        INNER(fmi2Status, name, (fmi2Component, const fmi2ValueReference[], size_t, const type[]))\
-        Inst *i = inst_find(c);                                                                   \
-        if (!allowed(i, #name, P_SETTABLE) || !arrays_ok(i, #name, vr, n, v)) return fmi2Error;   \
-        if (fast_set(i ? i->fast : NULL, vr, n, kind, v)) return fmi2OK;                          \
-        if (!check_refs(i, #name, vr, n, kind, 1)) return fmi2Error;                              \
-        fmi2Status st = inner_##name ? inner_##name(c, vr, n, v) : fmi2Fatal;                     \
-        if (st <= fmi2Warning && n > 0 && call_refused(c)) return fmi2Error;                      \
-        return st;                                                                                \
-    }
-GETTER(fmi2GetReal, fmi2Real, K_REAL)
-GETTER(fmi2GetInteger, fmi2Integer, K_INTEGER)
-GETTER(fmi2GetBoolean, fmi2Boolean, K_BOOLEAN)
-SETTER(fmi2SetReal, fmi2Real, K_REAL)
-SETTER(fmi2SetInteger, fmi2Integer, K_INTEGER)
-SETTER(fmi2SetBoolean, fmi2Boolean, K_BOOLEAN)
-
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean discard)
+static PyObject *value_in(int type, const void *values, size_t k)
 {
-    INNER(fmi2Status, fmi2DoStep, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean))
-    INNER(fmi2Status, fmi2SetReal, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]))
-    fmi2Status st;
-    int flush = 0;
-    Inst *i = inst_find(c);
-    if (!allowed(i, "fmi2DoStep", P_STEP)) return fmi2Error;
-    Fmi2Log log = {i ? i->logger : NULL, i ? i->env : NULL, i ? i->name : ""};
-    if (!fmi2_step_ok(&log, t, h)) return fmi2Error;
-    if (fast_step(i ? i->fast : NULL, t, h, &st, &flush)) {
-        if (flush && inner_fmi2SetReal) inner_fmi2SetReal(c, NULL, 0, NULL);   /* pythonfmu flushes the log */
+    if (type == NCFMU_TYPE_REAL) return py.FloatFrom(((const fmi2Real *)values)[k]);
+    if (type == NCFMU_TYPE_INTEGER) return py.LongFrom(((const fmi2Integer *)values)[k]);
+    if (type == NCFMU_TYPE_BOOLEAN) return py.BoolFrom(((const fmi2Boolean *)values)[k] != fmi2False);
+    return py.StrFrom(((const fmi2String *)values)[k]);
+}
+
+static int all_of(Inst *i, const fmi2ValueReference vr[], size_t n, int causality)
+{
+    for (size_t k = 0; k < n; k++)
+        if (i->causality[vr[k]] != causality) return 0;
+    return 1;
+}
+
+static fmi2Status get_values(fmi2Component c, const char *fmi_call, const fmi2ValueReference vr[], size_t n,
+                             void *values, int type)
+{
+    Inst *i = checked(c, fmi_call, P_GETTABLE);
+    if (!i || !refs_ok(i, fmi_call, vr, n, values, type, 0)) return fmi2Error;
+    if (n == 0) return fmi2OK;
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = fmi2OK;
+    if (type != NCFMU_TYPE_STRING && all_of(i, vr, n, NCFMU_CAUSALITY_OUTPUT)) {
+        /* the master's every-step call: straight from the outputs dict */
+        PyObject *out = py.GetAttr(i->slave, names[N_OUT]);
+        for (size_t k = 0; out && k < n; k++) {
+            PyObject *v = py.DictGetItem(out, i->port_name[vr[k]]);         /* borrowed */
+            if (!v) { st = fmi2Error; break; }
+            value_out(v, type, values, k);
+        }
+        if (!out) st = fmi2Error;
+        py_drop(out);
     } else {
-        st = inner_fmi2DoStep ? inner_fmi2DoStep(c, t, h, discard) : fmi2Fatal;
+        PyObject *list = py.ListNew((Py_ssize_t_)n);
+        for (size_t k = 0; list && k < n; k++) py.ListSetItem(list, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
+        PyObject *got = list ? call(i, fmi_call, N_GET, list, NULL, NULL) : NULL;
+        py_drop(list);
+        if (!got || py.SeqSize(got) != (Py_ssize_t_)n) st = fmi2Error;
+        for (size_t k = 0; st == fmi2OK && k < n; k++) {
+            PyObject *v = py.SeqGetItem(got, (Py_ssize_t_)k);
+            if (!v) { st = fmi2Error; break; }
+            value_out(v, type, values, k);
+            py_drop(v);                   /* a string stays alive in ``got``, kept below */
+        }
+        if (type == NCFMU_TYPE_STRING && st == fmi2OK) { py_drop(i->strings); i->strings = got; got = NULL; }
+        py_drop(got);
     }
-    if (i && st <= fmi2Warning) i->last_time = t + h;
+    if (py.Occurred()) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: a value could not be read as %s: %s", fmi_call,
+                 type_name(type), text);
+        st = fmi2Error;
+    }
+    flush_log(i);
+    py.GILRelease(g);
+    return st;
+}
+
+static fmi2Status set_values(fmi2Component c, const char *fmi_call, const fmi2ValueReference vr[], size_t n,
+                             const void *values, int type)
+{
+    Inst *i = checked(c, fmi_call, P_SETTABLE);
+    if (!i || !refs_ok(i, fmi_call, vr, n, values, type, 1)) return fmi2Error;
+    for (size_t k = 0; type == NCFMU_TYPE_STRING && k < n; k++) {
+        fmi2String s = ((const fmi2String *)values)[k];
+        if (!s || !fmi2_utf8_ok((const unsigned char *)s)) {
+            FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: value reference %u: %s", fmi_call, vr[k],
+                     s ? "not valid UTF-8 text" : "a NULL string");
+            return fmi2Error;
+        }
+    }
+    if (n == 0) return fmi2OK;
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = fmi2OK;
+    if (type != NCFMU_TYPE_STRING && all_of(i, vr, n, NCFMU_CAUSALITY_INPUT)) {
+        /* the master's every-step call: straight into the inputs dict */
+        for (size_t k = 0; k < n && st == fmi2OK; k++) {
+            PyObject *v = value_in(type, values, k);
+            if (!v || py.DictSetItem(i->inputs, i->port_name[vr[k]], v) != 0) st = fmi2Error;
+            py_drop(v);
+        }
+    } else {
+        PyObject *refs = py.ListNew((Py_ssize_t_)n), *vals = py.ListNew((Py_ssize_t_)n);
+        for (size_t k = 0; refs && vals && k < n; k++) {
+            py.ListSetItem(refs, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
+            py.ListSetItem(vals, (Py_ssize_t_)k, value_in(type, values, k));
+        }
+        st = refs && vals ? call_status(i, fmi_call, N_SET, refs, vals, NULL) : fmi2Error;
+        py_drop(refs); py_drop(vals);
+    }
+    if (py.Occurred()) py.Clear();
+    flush_log(i);
+    py.GILRelease(g);
+    return st;
+}
+
+#define GETTER(name, ctype, type) \
+    fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, ctype v[]) \
+    { return get_values(c, #name, vr, n, v, type); }
+#define SETTER(name, ctype, type) \
+    fmi2Status name(fmi2Component c, const fmi2ValueReference vr[], size_t n, const ctype v[]) \
+    { return set_values(c, #name, vr, n, v, type); }
+GETTER(fmi2GetReal, fmi2Real, NCFMU_TYPE_REAL)
+GETTER(fmi2GetInteger, fmi2Integer, NCFMU_TYPE_INTEGER)
+GETTER(fmi2GetBoolean, fmi2Boolean, NCFMU_TYPE_BOOLEAN)
+GETTER(fmi2GetString, fmi2String, NCFMU_TYPE_STRING)
+SETTER(fmi2SetReal, fmi2Real, NCFMU_TYPE_REAL)
+SETTER(fmi2SetInteger, fmi2Integer, NCFMU_TYPE_INTEGER)
+SETTER(fmi2SetBoolean, fmi2Boolean, NCFMU_TYPE_BOOLEAN)
+SETTER(fmi2SetString, fmi2String, NCFMU_TYPE_STRING)
+
+/* ---- stepping ------------------------------------------------------------------------------------- */
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior_state)
+{
+    (void)no_set_prior_state;
+    Inst *i = checked(c, "fmi2DoStep", P_STEP);
+    if (!i || !fmi2_step_ok(&i->log, t, h) || !fmi2_step_ns_ok(&i->log, h)
+        || !fmi2_continues_ok(&i->log, i->next_time, t)) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
+    fmi2Status st = (a && b) ? call_status(i, "fmi2DoStep", N_DO_STEP, a, b, NULL) : fmi2Error;
+    py_drop(a); py_drop(b);
+    flush_log(i);
+    py.GILRelease(g);
+    if (st <= fmi2Warning) i->next_time = t + h;
+    return st;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    Inst *i = checked(c, "fmi2CancelStep", P_STEP);
+    if (!i) return fmi2Error;
+    FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2CancelStep: no step is pending (this FMU steps synchronously)");
+    return fmi2Error;
+}
+
+static fmi2Status not_provided(fmi2Component c, const char *call, const char *why)
+{
+    Inst *i = checked(c, call, P_ANY);
+    if (!i) return fmi2Error;
+    FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: %s", call, why);
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[])
+{
+    (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz;
+    return not_provided(c, "fmi2GetDirectionalDerivative", "not provided (providesDirectionalDerivative is false)");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real v[])
+{
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_provided(c, "fmi2SetRealInputDerivatives", "not provided (canInterpolateInputs is false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer order[], fmi2Real v[])
+{
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_provided(c, "fmi2GetRealOutputDerivatives", "not provided (maxOutputDerivativeOrder is 0)");
+}
+
+/* Status queries: only fmi2LastSuccessfulTime means something (no asynchronous steps). */
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
+{
+    Inst *i = checked(c, "fmi2GetRealStatus", P_ANY);
+    if (!i || !v) return fmi2Error;
+    if (k == fmi2LastSuccessfulTime) { *v = i->next_time; return fmi2OK; }
+    FMI2_SAY(&i->log, fmi2Discard, "logStatusDiscard", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is "
+             "available (no asynchronous steps)");
+    return fmi2Discard;
+}
+
+#define STATUS_QUERY(name, ctype)                                                                   \
+    fmi2Status name(fmi2Component c, const fmi2StatusKind k, ctype *v)                               \
+    {                                                                                                \
+        (void)k;                                                                                     \
+        Inst *i = checked(c, #name, P_ANY);                                                          \
+        if (!i || !v) return fmi2Error;                                                              \
+        FMI2_SAY(&i->log, fmi2Discard, "logStatusDiscard", #name ": nothing to report (no asynchronous steps)"); \
+        return fmi2Discard;                                                                          \
+    }
+STATUS_QUERY(fmi2GetStatus, fmi2Status)
+STATUS_QUERY(fmi2GetIntegerStatus, fmi2Integer)
+STATUS_QUERY(fmi2GetBooleanStatus, fmi2Boolean)
+STATUS_QUERY(fmi2GetStringStatus, fmi2String)
+
+/* ---- FMU states: handles of this instance; any other is refused, never dereferenced ------------------ */
+static State *state_find(Inst *i, const char *call, fmi2FMUstate s)
+{
+    for (size_t k = 0; k < i->n_states; k++)
+        if (i->states[k].handle == (uintptr_t)s) return &i->states[k];
+    FMI2_SAY(&i->log, fmi2Error, "logStatusError", "%s: %p is not a live FMU state of this instance (freed, of "
+             "another instance or FMU, or never made)", call, s);
+    return NULL;
+}
+
+static fmi2FMUstate state_add(Inst *i, PyObject *object, double time)
+{
+    if (i->n_states == i->cap_states) {
+        size_t cap = i->cap_states ? 2 * i->cap_states : 8;
+        State *grown = realloc(i->states, cap * sizeof *grown);
+        if (!grown) { py_drop(object); return NULL; }
+        i->states = grown;
+        i->cap_states = cap;
+    }
+    pthread_mutex_lock(&instances_lock);
+    uintptr_t handle = STATE_TAG + (++handles_made << 4);
+    pthread_mutex_unlock(&instances_lock);
+    i->states[i->n_states++] = (State){handle, object, time};
+    return (fmi2FMUstate)handle;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s)
+{
+    Inst *i = checked(c, "fmi2GetFMUstate", P_ANY);
+    if (!i) return fmi2Error;
+    if (!s) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2GetFMUstate: the FMUstate pointer is NULL");
+        return fmi2Error;
+    }
+    State *old = *s ? state_find(i, "fmi2GetFMUstate", *s) : NULL;
+    if (*s && !old) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *object = call(i, "fmi2GetFMUstate", N_GET_STATE, NULL, NULL, NULL);
+    if (object && old) {                  /* FMI: a given state is overwritten */
+        py_drop(old->object);
+        old->object = object;
+        old->time = i->next_time;
+    } else if (object) {
+        *s = state_add(i, object, i->next_time);
+    }
+    flush_log(i);
+    py.GILRelease(g);
+    return object && *s ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s)
+{
+    Inst *i = checked(c, "fmi2SetFMUstate", P_ANY);
+    State *state = i ? state_find(i, "fmi2SetFMUstate", s) : NULL;
+    if (!state) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = call_status(i, "fmi2SetFMUstate", N_SET_STATE, state->object, NULL, NULL);
+    flush_log(i);
+    py.GILRelease(g);
+    if (st <= fmi2Warning) i->next_time = state->time;      /* steps go on from the state's time */
+    return st;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s)
+{
+    Inst *i = checked(c, "fmi2FreeFMUstate", P_ANY);
+    if (!i) return fmi2Error;
+    if (!s || !*s) return fmi2OK;
+    State *state = state_find(i, "fmi2FreeFMUstate", *s);
+    if (!state) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    py_drop(state->object);
+    py.GILRelease(g);
+    *state = i->states[--i->n_states];
+    *s = NULL;
+    return fmi2OK;
+}
+
+/* The serialized state: the Python side's bytes, then STATE_TRAILER and the state's time, so that a state
+ * restored from bytes continues from its own time. */
+#define TRAILER_SIZE NCFMU_STATE_TRAILER_SIZE
+#define STATE_TRAILER NCFMU_STATE_TRAILER
+_Static_assert(sizeof NCFMU_STATE_TRAILER - 1 + sizeof(double) == NCFMU_STATE_TRAILER_SIZE, "trailer: 8 bytes + a double");
+
+static PyObject *serialized(Inst *i, const char *fmi_call, fmi2FMUstate s)
+{
+    State *state = state_find(i, fmi_call, s);
+    return state ? call(i, fmi_call, N_SERIALIZE, state->object, NULL, NULL) : NULL;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size)
+{
+    Inst *i = checked(c, "fmi2SerializedFMUstateSize", P_ANY);
+    if (!i || !size) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *bytes = serialized(i, "fmi2SerializedFMUstateSize", s);
+    char *data = NULL;
+    Py_ssize_t_ n = 0;
+    int ok = bytes && py.BytesAs(bytes, &data, &n) == 0;
+    if (ok) *size = (size_t)n + TRAILER_SIZE;
+    if (py.Occurred()) py.Clear();
+    py_drop(bytes);
+    flush_log(i);
+    py.GILRelease(g);
+    return ok ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size)
+{
+    Inst *i = checked(c, "fmi2SerializeFMUstate", P_ANY);
+    if (!i) return fmi2Error;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *bytes = serialized(i, "fmi2SerializeFMUstate", s);
+    char *data = NULL;
+    Py_ssize_t_ n = 0;
+    fmi2Status st = fmi2Error;
+    if (bytes && py.BytesAs(bytes, &data, &n) == 0) {
+        size_t needed = (size_t)n + TRAILER_SIZE;
+        if (!b || size < needed) {
+            FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2SerializeFMUstate: %s (%zu bytes given, %zu needed)",
+                     !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
+        } else {
+            double time = state_find(i, "fmi2SerializeFMUstate", s)->time;
+            memcpy(b, data, (size_t)n);
+            memcpy(b + n, STATE_TRAILER, sizeof STATE_TRAILER - 1);
+            memcpy(b + n + sizeof STATE_TRAILER - 1, &time, sizeof time);
+            st = fmi2OK;
+        }
+    }
+    if (py.Occurred()) py.Clear();
+    py_drop(bytes);
+    flush_log(i);
+    py.GILRelease(g);
+    return st;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s)
+{
+    Inst *i = checked(c, "fmi2DeSerializeFMUstate", P_ANY);
+    if (!i) return fmi2Error;
+    if (!s || (size && !b)) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: the %s is NULL",
+                 !s ? "FMUstate pointer" : "byte array");
+        return fmi2Error;
+    }
+    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, sizeof STATE_TRAILER - 1) != 0) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: %zu bytes that are not a "
+                 "state this FMU serialized (no time trailer)", size);
+        return fmi2Error;
+    }
+    double time;
+    memcpy(&time, b + size - sizeof time, sizeof time);
+    if (!isfinite(time)) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: the state's time is %g", time);
+        return fmi2Error;
+    }
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *bytes = py.BytesFrom((const char *)b, (Py_ssize_t_)(size - TRAILER_SIZE));
+    PyObject *object = bytes ? call(i, "fmi2DeSerializeFMUstate", N_DESERIALIZE, bytes, NULL, NULL) : NULL;
+    py_drop(bytes);
+    fmi2Status st = fmi2Error;
+    if (object && object != py.None) {
+        *s = state_add(i, object, time);
+        st = *s ? fmi2OK : fmi2Error;
+    } else {
+        py_drop(object);                  /* None: refused, the reason is in the log */
+    }
+    if (py.Occurred()) py.Clear();
+    flush_log(i);
+    py.GILRelease(g);
     return st;
 }

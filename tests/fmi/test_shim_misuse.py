@@ -1,0 +1,70 @@
+"""The Python FMUs' binary (the shim) against a hostile host: bad fmi2Instantiate arguments, NULL, freed and
+made-up components in every exported function, String calls on variables that are not Strings, steps that go
+back in time or round to 0 ns. Each FMU's cases run in one process of their own (tests/fmi/misuse_host.py):
+a crash is a failure that names the case it died in.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from ncfmu.controllers import __name__ as _controllers  # noqa: F401 -- the package is importable
+
+HOST = Path(__file__).with_name("misuse_host.py")
+PYTHON_FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed"]
+# Functions without a component (nothing to misuse) and the two the host calls in its own cases.
+NO_COMPONENT = {"fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2Instantiate", "fmi2FreeInstance"}
+
+def exported_fmi_functions(fmu: Path) -> set[str]:
+    with zipfile.ZipFile(fmu) as z, tempfile.TemporaryDirectory() as tmp:
+        binary = z.extract(f"binaries/linux64/{fmu.stem}.so", tmp)
+        out = subprocess.run(["nm", "-D", "--defined-only", binary], capture_output=True, text=True, check=True)
+    return {line.split()[-1] for line in out.stdout.splitlines() if line.split()[-1].startswith("fmi2")}
+
+@pytest.mark.parametrize("model", PYTHON_FMUS)
+def test_every_misuse_is_refused_and_nothing_crashes(fmus, model):
+    proc = subprocess.run([sys.executable, str(HOST), str(fmus[model])], capture_output=True, text=True,
+                          timeout=300)
+    tried = re.findall(r"^TRY (\S+)", proc.stdout, re.MULTILINE)
+    assert proc.returncode == 0, f"died in case {tried[-1] if tried else '?'}: {proc.stderr[-2000:]}"
+    broken = [line for line in proc.stdout.splitlines() if line.startswith("CASE") and " BROKEN " in line]
+    assert broken == []
+    n, held = map(int, re.search(r"^CASES (\d+) HELD (\d+)$", proc.stdout, re.MULTILINE).groups())
+    print(f"{model}: {n} misuse cases tried, {held} held")
+    assert n == held == 121
+    # the NULL/freed/made-up component cases cover every function the binary exports
+    covered = set(re.search(r"^CALLS (.*)$", proc.stdout, re.MULTILINE).group(1).split())
+    assert covered == exported_fmi_functions(fmus[model]) - NO_COMPONENT
+
+
+@pytest.fixture(scope="module")
+def native_host(tmp_path_factory) -> Path:
+    from ncfmu.fmi.builder import fmi_headers
+    exe = tmp_path_factory.mktemp("host") / "fmi_host"
+    host_c = Path(__file__).parents[1] / "native" / "fmi_host.c"
+    subprocess.run(["cc", "-O1", "-Wall", f"-I{fmi_headers()}", "-o", str(exe), str(host_c), "-ldl", "-lpthread"],
+                   check=True)
+    return exe
+
+
+@pytest.mark.slow                                      # compiles the host, a process per FMU
+@pytest.mark.parametrize("model", PYTHON_FMUS)
+def test_misuse_in_a_native_host_without_python(fmus, native_host, model, tmp_path):
+    """The same refusals in a C host with an empty environment, where the FMU loads Python itself."""
+    from fmpy import extract, read_model_description
+    md = read_model_description(str(fmus[model]))
+    folder = Path(extract(str(fmus[model]), unzipdir=str(tmp_path)))
+    binary = folder / "binaries" / "linux64" / f"{model}.so"
+    proc = subprocess.run(["env", "-i", str(native_host), str(binary), md.guid, (folder / "resources").as_uri(), "0"],
+                          capture_output=True, text=True, timeout=120)
+    cases = re.findall(r"^CASE (\S+) (HELD|BROKEN)$", proc.stdout, re.MULTILINE)
+    assert proc.returncode == 0, f"died after {cases[-1:]}: {proc.stderr[-2000:]}"
+    assert [name for name, result in cases if result != "HELD"] == []
+    assert re.search(r"^CASES 36 HELD 36$", proc.stdout, re.MULTILINE), proc.stdout[-500:]
