@@ -297,3 +297,10 @@ def test_pockets_roughed_without_cutting_below_profile_plus_allowance(u):
     path = np.column_stack([run["z_cmd"][g70], run["x_cmd"][g70]])
     assert distances(path, POCKETS.points(0.01)).max() <= 0.005
     assert distances(POCKETS.points(0.01), path).max() <= 0.005
+
+
+def test_a_program_leaves_the_registers_unread():
+    unread = CutSequencer.unread({"program": EXAMPLE.read_text()})
+    assert "block[1].Xd" in unread and "block[2].Zp" in unread and "n_blocks" in unread
+    assert "block[1].rapid" not in unread and "x_start" not in unread and "accel" not in unread
+    assert not {k for k in CutSequencer.unread({"program": ""}) if k.startswith("block[1]")}
