@@ -238,7 +238,14 @@ def cmd_plot(args) -> int:
     except ImportError:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
-    if src.name == "summary.csv":
+    if out.is_dir():
+        raise NcfmuError(f"--png {out}: is a folder; give the PNG file's name")
+    if out.suffix.lower() != ".png":
+        raise NcfmuError(f"--png {out}: must end in .png (the plot is a PNG image)")
+    with open(src, encoding="utf-8-sig", errors="replace") as f:
+        header = f.readline()
+    # a sweep's summary by its columns (a status per variant), not by its file name alone
+    if "status" in (cell.strip().strip('"') for cell in header.split(",")):
         print(plots.plot_sweep(src, out))
     else:
         from .systems import SYSTEMS, report_for
@@ -250,6 +257,10 @@ def cmd_plot(args) -> int:
         # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
         # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
         if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            missing = [q for q in report_for(name).record() if q not in result]
+            if args.system and len(missing) == len(report_for(name).record()):
+                raise NcfmuError(f"{src}: has none of the signals a {name} plot draws ({', '.join(missing[:4])}, ...): "
+                                 "not a result of that system (leave --system out to draw the CSV's own signals)")
             result.system = name
             print(plots.plot_result(result, out))
         else:
