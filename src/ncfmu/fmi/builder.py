@@ -55,7 +55,7 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
     (12 hex digits)."""
     h = hashlib.sha256()
     for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
-                 package_dir / "docs.py"]:
+                 package_dir / "fmi" / "documentation.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
@@ -198,7 +198,7 @@ The interpreter is started once per process and never finalised.</p>"""
 
 def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str) -> None:
     """The FMU as shipped: pythonfmu's model description enriched, our binary, no other platform's."""
-    from ..docs import fmu_html
+    from .documentation import fmu_html
     binary = f"binaries/linux64/{cls}.so"
     with zipfile.ZipFile(src) as zin:
         description = enrich(zin.read("modelDescription.xml"), logic, version)
