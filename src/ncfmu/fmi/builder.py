@@ -225,7 +225,17 @@ def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str
 
 
 def model_scripts(models_dir: Path) -> list[Path]:
-    return sorted(p for p in Path(models_dir).glob("*.py") if not p.name.startswith("_"))
+    """The model script of every Python model of the catalogue, in its order; a model without its script, or a
+    script of no model, is a BuildError naming it."""
+    from ..catalogue import python_models
+    scripts = {p.stem: p for p in Path(models_dir).glob("*.py") if not p.name.startswith("_")}
+    missing = [name for name in python_models() if name not in scripts]
+    if missing:
+        raise BuildError(f"{models_dir}: no model script for {', '.join(missing)} (models/<MODEL_NAME>.py)")
+    unknown = sorted(set(scripts) - set(python_models()))
+    if unknown:
+        raise BuildError(f"{models_dir}: {', '.join(unknown)}.py names no controller of ncfmu.controllers")
+    return [scripts[name] for name in python_models()]
 
 
 def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> list[Path]:

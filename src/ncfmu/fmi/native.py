@@ -77,14 +77,20 @@ class NativeModel:
 
 
 def native_models() -> list[NativeModel]:
-    # servo/model.py is named by its path, not imported: importing it imports python-control (~1.3 s), which
-    # every run's staleness check would pay; only an actual build needs it
-    from ..servo import axis
-    # fmi/documentation.py and servo/bode.py write its documentation (the pages, the Bode plot): a change there
-    # rebuilds it too
-    return [NativeModel(axis.ServoAxis, PACKAGE_DIR / "servo" / "native" / "servo_model.c",
-                        (Path(axis.__file__), PACKAGE_DIR / "servo" / "model.py", PACKAGE_DIR / "ports.py",
-                         PACKAGE_DIR / "fmi" / "documentation.py", PACKAGE_DIR / "servo" / "bode.py"))]
+    """The catalogue's native models, each with its C source and what it is defined by."""
+    from ..catalogue import models, native_models
+    # the design files are named by their paths, not imported: servo/model.py imports python-control (~1.3 s),
+    # which every run's staleness check would pay; only an actual build needs it. fmi/documentation.py writes
+    # its documentation: a change there rebuilds it too
+    out = []
+    for name in native_models():
+        logic = models()[name]
+        module = Path(sys.modules[logic.__module__].__file__ or "")
+        defined_by = tuple(module.parent / f for f in logic.NATIVE_DEFINED_BY)
+        out.append(NativeModel(logic, module.parent / logic.NATIVE_SOURCE,
+                               (module, *defined_by, PACKAGE_DIR / "ports.py",
+                                PACKAGE_DIR / "fmi" / "documentation.py")))
+    return out
 
 
 # -- generated files ------------------------------------------------------------------------------
