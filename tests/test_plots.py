@@ -115,7 +115,7 @@ AXES = {"defaults": {}, "stiffer": {"Kv": 60.0, "vel_bandwidth": 800.0, "tau_cur
 
 @pytest.mark.parametrize("which", sorted(AXES))
 def test_the_bode_band_and_margins_are_the_designs(which):
-    from ncfmu.plots import bode_design
+    from ncfmu.servo.bode import bode_design
     from ncfmu.servo.model import AxisParameters, design
     p = AxisParameters(**AXES[which])
     d, bode = design(p), bode_design(p)
@@ -138,7 +138,7 @@ def test_the_bode_band_and_margins_are_the_designs(which):
 def test_the_bode_figure_draws_the_band_and_the_margins():
     import matplotlib.pyplot as plt
 
-    from ncfmu.plots import bode_figure
+    from ncfmu.servo.bode import bode_figure
     from ncfmu.servo.model import design
     d = design()
     fig, bode = bode_figure()
@@ -170,7 +170,7 @@ def test_the_bode_figure_draws_the_band_and_the_margins():
 def test_the_servo_fmu_documentation_carries_the_band_and_margins(fmus):
     import zipfile
 
-    from ncfmu.plots import bode_design
+    from ncfmu.servo.bode import bode_design
     bode = bode_design()
     with zipfile.ZipFile(fmus["ServoAxis"]) as z:
         page = z.read("documentation/index.html").decode()
@@ -198,7 +198,7 @@ def test_fmu_documentation_shows_names_as_code_not_sphinx_markup(fmus, model):
 
 
 def test_roles_and_literals_render_as_their_names():
-    from ncfmu.docs import _rendered
+    from ncfmu.fmi.documentation import _rendered
     text = "see :func:`~ncfmu.servo.model.servo_axis`, :mod:`.rs274`, :meth:`A.b` and ``x < 1``"
     assert _rendered(text, str, lambda n: f"[{n}]") == \
         "see [ncfmu.servo.model.servo_axis()], [rs274], [A.b()] and [x < 1]"

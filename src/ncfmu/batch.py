@@ -33,6 +33,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 import time
 import xml.etree.ElementTree as ET
 import zipfile
@@ -249,13 +250,26 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     from dask.distributed import Client
     option = f"--scheduler {scheduler}" if scheduler_file is None else f"--scheduler-file {scheduler_file}"
     address = scheduler if scheduler_file is None else _scheduler_address(scheduler_file)
-    try:
-        client = Client(address, timeout=connect_timeout)
-    except (OSError, TimeoutError):
+    # dask's Client(timeout=) bounds the TCP connect, not the handshake: a port that accepts and never answers
+    # (a stopped scheduler) held it for minutes. The client is made in a daemon thread, waited for here.
+    made: list = []
+
+    def connect() -> None:
+        try:
+            made.append(Client(address, timeout=connect_timeout))
+        except Exception as err:                        # handed to the caller's thread below
+            made.append(err)
+    thread = threading.Thread(target=connect, name="ncfmu-connect", daemon=True)
+    thread.start()
+    thread.join(connect_timeout + 1.0)
+    client = made[0] if made else TimeoutError()
+    if isinstance(client, (OSError, TimeoutError)):
         raise NcfmuError(f"{option}: no dask scheduler answered within {connect_timeout:g} s at {address} "
-                         "(--connect-timeout S waits longer)") from None
-    except ValueError as err:                           # an address dask cannot parse (an unknown scheme)
-        raise NcfmuError(f"{option}: {err}") from None
+                         "(--connect-timeout S waits longer)")
+    if isinstance(client, (ValueError, TypeError)):    # an address dask cannot use (an unknown scheme, tls:// bare)
+        raise NcfmuError(f"{option}: {address}: {client}")
+    if isinstance(client, Exception):
+        raise NcfmuError(f"{option}: cannot connect to {address}: {type(client).__name__}: {client}")
     try:
         client.wait_for_workers(1, timeout=connect_timeout)
     except (OSError, TimeoutError):

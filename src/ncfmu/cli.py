@@ -12,9 +12,14 @@ from typing import NoReturn
 
 from .errors import NcfmuError
 
-EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
-          "Instances: lathe panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; "
-          "mill panel, contour, x_axis, y_axis.")
+
+def epilog() -> str:
+    """The systems and their instances, from their definitions (nothing here restates them)."""
+    from .systems import SYSTEMS, get_system
+    systems = [get_system(name) for name in SYSTEMS]
+    listed = ", ".join(f"{s.name}{' (default)' if s.name == 'lathe_roughing' else ''}" for s in systems)
+    instances = "; ".join(f"{s.name} {', '.join(c.name for c in s.components)}" for s in systems)
+    return f"Systems: {listed}. Instances: {instances}."
 
 
 class _Parser(argparse.ArgumentParser):
@@ -238,7 +243,14 @@ def cmd_plot(args) -> int:
     except ImportError:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
-    if src.name == "summary.csv":
+    if out.is_dir():
+        raise NcfmuError(f"--png {out}: is a folder; give the PNG file's name")
+    if out.suffix.lower() != ".png":
+        raise NcfmuError(f"--png {out}: must end in .png (the plot is a PNG image)")
+    with open(src, encoding="utf-8-sig", errors="replace") as f:
+        header = f.readline()
+    # a sweep's summary by its columns (a status per variant), not by its file name alone
+    if "status" in (cell.strip().strip('"') for cell in header.split(",")):
         print(plots.plot_sweep(src, out))
     else:
         from .systems import SYSTEMS, report_for
@@ -250,6 +262,10 @@ def cmd_plot(args) -> int:
         # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
         # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
         if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            missing = [q for q in report_for(name).record() if q not in result]
+            if args.system and len(missing) == len(report_for(name).record()):
+                raise NcfmuError(f"{src}: has none of the signals a {name} plot draws ({', '.join(missing[:4])}, ...): "
+                                 "not a result of that system (leave --system out to draw the CSV's own signals)")
             result.system = name
             print(plots.plot_result(result, out))
         else:
@@ -317,8 +333,9 @@ def cmd_validate(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
-                     "run closed loop with servo axes.", epilog=EPILOG)
+                     "run closed loop with servo axes.", epilog=help_epilog)
     parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -326,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=EPILOG)
+    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
     p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
     p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
     p.add_argument("--step", type=float, default=None, help="communication step in s (default 0.001)")
@@ -394,7 +411,7 @@ def main(argv: list[str] | None = None) -> int:
                        description="Every settable variable of a system (what --set, --branch-set, --vary and "
                                    "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
                                    "value the system gives it, its rule, the output a connection drives an input "
-                                   "from, and its description.", epilog=EPILOG)
+                                   "from, and its description.", epilog=help_epilog)
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
     p.set_defaults(func=cmd_vars)

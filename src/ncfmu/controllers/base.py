@@ -38,6 +38,11 @@ class Controller:
     #: Default stop time of a stand-alone run, s.
     STOP_TIME: ClassVar[float] = 1.0
     PORTS: ClassVar[tuple[Port, ...]] = ()
+    #: A model built from C sources instead of a pythonfmu model script: its C file, relative to the class's package
+    #: (the class is then the executable specification of the native FMU), and the other files of that package it
+    #: is made from. Empty: a Python FMU.
+    NATIVE_SOURCE: ClassVar[str] = ""
+    NATIVE_DEFINED_BY: ClassVar[tuple[str, ...]] = ()
     #: The outputs a parameter or input acts on, for one that acts on only some of them (an operator panel's
     #: button time acts on that button alone); one not named here may act on every output.
     ACTS_ON: ClassVar[Mapping[str, tuple[str, ...]]] = {}

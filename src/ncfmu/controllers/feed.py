@@ -176,7 +176,7 @@ class ProgrammableFeed(CycleController):
              min_exclusive=True),
         real("return_rate", "parameter", 10.0, "mm/s", "rate of the return to the feed origin before a start away "
              "from it", min=0.0, min_exclusive=True),
-        *cycle_ports("a feed word"),
+        *cycle_ports("a feed word", "max_following_error", "inpos_timeout"),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
@@ -195,6 +195,7 @@ class ProgrammableFeed(CycleController):
         real("return_counter_x", "output", None, "mm", "X feed counted from the feed origin (S4 excluded)"),
         real("return_counter_y", "output", None, "mm", "Y feed counted from the feed origin (S4 excluded)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input)"),
+        *cycle_ports("a feed word", "inpos_band"),          # appended: the ports before keep their value references
     )
 
     @classmethod

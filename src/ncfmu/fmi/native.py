@@ -77,13 +77,20 @@ class NativeModel:
 
 
 def native_models() -> list[NativeModel]:
-    # servo/model.py is named by its path, not imported: importing it imports python-control (~1.3 s), which
-    # every run's staleness check would pay; only an actual build needs it
-    from ..servo import axis
-    # docs.py and plots.py write its documentation (the pages, the Bode plot): a change there rebuilds it too
-    return [NativeModel(axis.ServoAxis, PACKAGE_DIR / "servo" / "native" / "servo_model.c",
-                        (Path(axis.__file__), PACKAGE_DIR / "servo" / "model.py", PACKAGE_DIR / "ports.py",
-                         PACKAGE_DIR / "docs.py", PACKAGE_DIR / "plots.py"))]
+    """The catalogue's native models, each with its C source and what it is defined by."""
+    from ..catalogue import models, native_models
+    # the design files are named by their paths, not imported: servo/model.py imports python-control (~1.3 s),
+    # which every run's staleness check would pay; only an actual build needs it. fmi/documentation.py writes
+    # its documentation: a change there rebuilds it too
+    out = []
+    for name in native_models():
+        logic = models()[name]
+        module = Path(sys.modules[logic.__module__].__file__ or "")
+        defined_by = tuple(module.parent / f for f in logic.NATIVE_DEFINED_BY)
+        out.append(NativeModel(logic, module.parent / logic.NATIVE_SOURCE,
+                               (module, *defined_by, PACKAGE_DIR / "ports.py",
+                                PACKAGE_DIR / "fmi" / "documentation.py")))
+    return out
 
 
 # -- generated files ------------------------------------------------------------------------------
@@ -167,8 +174,8 @@ def build_description(m: NativeModel) -> str:
 
 def _design_html(m: NativeModel, stage: Path) -> str:
     """Design figures of the default parameters, and a Bode plot, for the FMU's documentation."""
-    from ..plots import bode_design
     from ..servo.axis import ServoAxis
+    from ..servo.bode import bode_design
     from ..servo.model import MIN_PHASE_MARGIN
     logic = m.logic()
     assert isinstance(logic, ServoAxis), "the native models are servo axes"
@@ -187,7 +194,7 @@ def _design_html(m: NativeModel, stage: Path) -> str:
     table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
     figure = ""
     try:
-        from ..plots import bode_figure
+        from ..servo.bode import bode_figure
         fig, _ = bode_figure(p)
         out = io.BytesIO()
         fig.savefig(out, format="png", dpi=80)
@@ -242,7 +249,7 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
     """Build the native FMU ``m`` into ``dest_dir``; return its path."""
     from fmpy.build import build_platform_binary
 
-    from ..docs import fmu_html
+    from .documentation import fmu_html
     if shutil.which("cmake") is None:
         raise BuildError(f"{m.name}: building the native FMU needs cmake (pip install cmake) and a C compiler")
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"ncfmu:{m.name}:{m.version()}")) + "}"
