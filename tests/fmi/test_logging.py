@@ -128,3 +128,7 @@ def test_the_native_servo_logs_errors_and_warnings_whatever_the_debug_logging(fm
         host.fmu.setDebugLogging(True, ["verbose"])
     assert len(host.log) == 1 and host.log[0][0] == 3 and "verbose is not a log category" in host.log[0][1]
     host.close()
+    # the categories it takes are the ones its modelDescription declares (those of the Python FMUs)
+    declared = [c.name for c in read_model_description(str(fmus["ServoAxis"])).logCategories]
+    assert declared == ["logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal", "logAll"]
+    assert declared == [c.name for c in read_model_description(str(fmus["CutSequencer"])).logCategories]

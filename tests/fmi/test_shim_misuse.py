@@ -119,3 +119,42 @@ def test_a_component_of_another_fmu_is_refused(fmus, pair):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert re.findall(r"^(FOREIGN|OWN) (.*)$", proc.stdout, re.MULTILINE) == \
         [("FOREIGN", "3 3 3"), ("FOREIGN", "3 3 3"), ("OWN", "0"), ("OWN", "0")]
+
+
+RELOADED = """
+import _ctypes, ctypes, sys, tempfile
+from ctypes import c_char_p, c_double, c_int, c_void_p
+from pathlib import Path
+from fmpy import extract, read_model_description
+md = read_model_description(sys.argv[1])
+folder = Path(extract(sys.argv[1], tempfile.mkdtemp()))
+binary = str(folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so")
+
+def instance(name):
+    lib = ctypes.CDLL(binary)
+    lib.fmi2Instantiate.restype = c_void_p
+    lib.fmi2Instantiate.argtypes = [c_char_p, c_int, c_char_p, c_char_p, c_void_p, c_int, c_int]
+    c = lib.fmi2Instantiate(name, 1, md.guid.encode(), (folder / "resources").as_uri().encode(), None, 0, 0)
+    return lib, c_void_p(c)
+
+lib, first = instance(b"first")
+_ctypes.dlclose(lib._handle)                     # the host lets go of the library: the instance lives on
+lib, second = instance(b"second")
+print("HANDLES", first.value != second.value, flush=True)
+for c in (first, second):
+    print("SETUP", lib.fmi2SetupExperiment(c, 0, c_double(0.0), c_double(0.0), 0, c_double(0.0)),
+          lib.fmi2EnterInitializationMode(c), lib.fmi2ExitInitializationMode(c), flush=True)
+for c in (first, second):
+    print("STEP", lib.fmi2DoStep(c, c_double(0.0), c_double(1e-3), 0), flush=True)
+"""
+
+
+@pytest.mark.parametrize("model", ["ServoAxis", "CutSequencer"])
+def test_instances_stay_apart_when_the_host_reopens_the_library(fmus, model):
+    """ecos opens an FMU's library once per component and closes the first copy while its instance lives:
+    the binary stays loaded (-z nodelete), so the second instance gets a handle of its own."""
+    proc = subprocess.run([sys.executable, "-c", RELOADED, str(fmus[model])], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert re.findall(r"^(HANDLES|SETUP|STEP) (.*)$", proc.stdout, re.MULTILINE) == \
+        [("HANDLES", "True"), ("SETUP", "0 0 0"), ("SETUP", "0 0 0"), ("STEP", "0"), ("STEP", "0")]
