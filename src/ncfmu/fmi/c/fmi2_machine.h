@@ -114,8 +114,10 @@ static inline int fmi2_utf8_ok(const unsigned char *s)
  * process, so a NULL, freed, made-up or foreign handle is recognised and refused with fmi2Error instead of
  * being dereferenced. A handle is never a valid address either ("NC" in the top bits makes it non-canonical
  * on 64-bit machines): a host that dereferences one faults at once instead of corrupting memory. The bits
- * below name the binary (from where it was loaded: two FMUs in one process almost surely differ) and count
- * up; when the count runs out no new handle is made (the call fails) rather than an old one reused. */
+ * below name the binary (12 bits mixed from where it was loaded: two FMUs in one process differ but for a
+ * 1 in 4096 chance) and count up; when the count (2^32) runs out no new handle is made (the call fails)
+ * rather than an old one reused. The binary is linked with -z nodelete so that a host that closes and
+ * reopens the library keeps the count and the live instances. */
 #define FMI2_HANDLE_NC       ((uint64_t)0x4E43u << 48)
 #define FMI2_HANDLE_INSTANCE ((uint64_t)0x1u << 44)
 #define FMI2_HANDLE_STATE    ((uint64_t)0x2u << 44)
@@ -140,8 +142,10 @@ static struct {
 static inline uintptr_t fmi2_handle_locked(uint64_t kind)
 {
     if (sizeof(uintptr_t) < 8 || fmi2_handles.made == UINT32_MAX) return 0;
-    uintptr_t here = (uintptr_t)&fmi2_handles;
-    uint64_t binary = (uint64_t)((here >> 12) ^ (here >> 24) ^ (here >> 36)) & 0xFFFu;
+    uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles;          /* where this binary was loaded, mixed */
+    binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;      /* (splitmix64's finaliser) */
+    binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
+    binary = (binary ^ (binary >> 31)) & 0xFFFu;
     return (uintptr_t)(FMI2_HANDLE_NC | kind | binary << 32 | ++fmi2_handles.made);
 }
 
