@@ -158,3 +158,52 @@ def test_instances_stay_apart_when_the_host_reopens_the_library(fmus, model):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert re.findall(r"^(HANDLES|SETUP|STEP) (.*)$", proc.stdout, re.MULTILINE) == \
         [("HANDLES", "True"), ("SETUP", "0 0 0"), ("SETUP", "0 0 0"), ("STEP", "0"), ("STEP", "0")]
+
+
+CONTINUITY = """
+import sys, tempfile
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+from hypothesis import given, settings, strategies as st
+
+md = read_model_description(sys.argv[1])
+fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(sys.argv[1], tempfile.mkdtemp()),
+                modelIdentifier=md.coSimulation.modelIdentifier, instanceName="dut")
+fmu.instantiate()
+fmu.setupExperiment(startTime=0.0)
+fmu.enterInitializationMode()
+fmu.exitInitializationMode()
+now = [0.0]
+
+def step(t, h):
+    try:
+        fmu.doStep(t, h)
+        return True
+    except FMICallException:
+        return False
+
+@settings(derandomize=True, max_examples=150, deadline=None)
+@given(h_ns=st.integers(1, 5_000_000), off_ns=st.floats(-3.0, 3.0).filter(lambda x: abs(abs(x) - 0.5) > 0.05))
+def steps_continue_from_where_the_last_ended(h_ns, off_ns):
+    h = h_ns * 1e-9
+    accepted = step(now[0] + off_ns * 1e-9, h)
+    assert accepted == (abs(off_ns) < 0.5), (now[0], h, off_ns)
+    if accepted:
+        now[0] += off_ns * 1e-9 + h
+    assert step(now[0], h)                      # a refused step changed nothing: the instance steps on
+    now[0] += h
+
+steps_continue_from_where_the_last_ended()
+print("HELD", now[0], flush=True)
+"""
+
+
+@pytest.mark.parametrize("model", ["ServoAxis", "CutSequencer"])
+def test_a_step_must_continue_from_where_the_last_ended(fmus, model):
+    """Any step size from 1 ns to 5 ms, any offset of the next step's time: within half a nanosecond of where the
+    last step ended it is taken, further off it is refused and the instance steps on as if it had not been asked."""
+    proc = subprocess.run([sys.executable, "-c", CONTINUITY, str(fmus[model])], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "HELD" in proc.stdout
