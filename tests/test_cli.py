@@ -49,7 +49,7 @@ def test_input_csv_drives_an_unconnected_input(project, tmp_path):
 
 @pytest.mark.slow
 def test_run_changes_no_file_of_the_checkout(project, tmp_path):
-    """Issue 14: a run builds what is missing and nothing else; the checkout (sources, generated SSP and docs,
+    """A run builds what is missing and nothing else; the checkout (sources, generated SSP and docs,
     built FMUs and archives) is byte-for-byte and timestamp-for-timestamp as before."""
     import os
     import shutil

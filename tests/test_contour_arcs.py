@@ -1,4 +1,4 @@
-"""Issue 15: arcs, bounded corners, corner speed and part programs -- as properties and through the FMUs."""
+"""Arcs, bounded corners, corner speed and part programs -- as properties and through the FMUs."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Defects a red-team review of the contour rewrite found (issue 15), each a test that failed before its fix."""
+"""Defects a red-team review of the contour rewrite found, each a test that failed before its fix."""
 
 import math
 

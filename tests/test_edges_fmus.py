@@ -1,5 +1,5 @@
-"""Issue 11 through the built FMUs: every reproduction of the report, closed loop (fmpy master) or stepped
-by hand. Each failed on the main it was reported on."""
+"""Stops, interlocks and restarts through the built FMUs: every reproduction of a reported defect, closed loop
+(fmpy master) or stepped by hand. Each failed before its fix."""
 
 import math
 from dataclasses import replace
@@ -120,7 +120,7 @@ def unwired(name, folder):
 
 @pytest.mark.slow
 def test_taper_pass_held_in_x_never_ends_short_with_the_alarm_unwired(project, tmp_path):
-    """Issue 11, 3: with limiter.alarm -> seq.alarm_in removed and X limited to >= 27.2 (a shoulder), the first
+    """With limiter.alarm -> seq.alarm_in removed and X limited to >= 27.2 (a shoulder), the first
     taper pass (X 28.5 -> 27.0 over the cut) was held at X 27.2 while Z went on, and ended there: 'done',
     no alarm. Now the sequencer waits for its own end point and raises its in-position alarm."""
     r = simulate(unwired("lathe_taper", tmp_path), stop_time=20.0, start_values={"limiter.region[2].lim_min": 27.2})

@@ -1,5 +1,5 @@
 """Ordinary mistakes get one line and exit status 2, never a traceback, a silent rounding or an ignored value
-(issue 14: the reproductions, each through the CLI in its own process)."""
+(the reproductions, each through the CLI in its own process)."""
 
 from __future__ import annotations
 

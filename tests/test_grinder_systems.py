@@ -1,4 +1,4 @@
-"""Closed loop through the built FMUs: grinder_feed and grinder_envelope (SPEC section 5)."""
+"""Closed loop through the built FMUs: grinder_feed and grinder_envelope."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Closed loop through the built FMUs (fmpy master): the lathe systems of SPEC section 5."""
+"""Closed loop through the built FMUs (fmpy master): the lathe systems."""
 
 import numpy as np
 import pytest

@@ -12,7 +12,7 @@ from ncfmu.errors import ConfigError
 from ncfmu.servo.axis import ServoAxis
 
 DT = 1e-3
-# the grinder table of SPEC 5: reference Y (table), limited X (infeed)
+# the grinder_envelope system's table: reference Y (table), limited X (infeed)
 GRINDER = [(200.0, -1e6, 250.0), (350.0, -1e6, 80.0), (800.0, -1e6, 180.0), (1000.0, -1e6, 60.0)]
 
 
@@ -143,7 +143,7 @@ def test_predictive_mode_stops_at_the_boundary(v):
 
 
 def test_predictive_ramp_inside_the_envelope_is_followed():
-    """Issue 11, 1: Y held at 100 (X <= 250), X ramped 50 -> 240 mm in 1 s: never a deadlock."""
+    """Y held at 100 (X <= 250), X ramped 50 -> 240 mm in 1 s: never a deadlock."""
     d = Drive(GRINDER, ref=100.0, lim=50.0, predictive=True, use_actual=True)
     trace = [d.out]
     for _k in range(3000):

@@ -77,7 +77,7 @@ def test_jacobi_uses_the_previous_communication_point():
 @pytest.mark.parametrize("conn, message", [
     (Connection("a", "y", "c", "u"), "no component 'c'"),
     (Connection("a", "nope", "b", "u"), "a has no variable 'nope'"),
-    (Connection("a", "u", "b", "u"), "is a input, not an output"),
+    (Connection("a", "u", "b", "u"), "is an input, not an output"),
     (Connection("a", "y", "b", "k"), "is a parameter, not an input"),
 ])
 def test_bad_connections_named_before_running(conn, message):

@@ -1,4 +1,4 @@
-"""Issue 13: the master's steps in C (cosim/loop.c) are the Python loop's steps, bit for bit.
+"""The master's steps in C (cosim/loop.c) are the Python loop's steps, bit for bit.
 
 The same systems run through both loops (``Master(native=False)`` is the Python loop) and every recorded
 value must be equal, not close: the C loop makes the same FMI calls in the same order with the same values.

@@ -1,4 +1,4 @@
-"""A safe FMU state (issue 12): host bytes are data, never code; a wrong state is fmi2Error, not a crash.
+"""A safe FMU state: host bytes are data, never code; a wrong state is fmi2Error, not a crash.
 
 Every case runs in its own process against the built FMU, so a crash is a failure, not a lost run.
 """

@@ -1,4 +1,4 @@
-"""Stops, interlocks and restarts on the plain controllers (issue 11), as seeded hypothesis properties.
+"""Stops, interlocks and restarts on the plain controllers, as seeded hypothesis properties.
 
 Feed holds, alarms, excess following errors, bad inputs and EMB strike at random instants in every
 phase. Whatever strikes, a command never accelerates faster than the controller's ``accel`` (a stop
@@ -284,7 +284,7 @@ def test_feed_excess_following_error_stops_the_feed():
 
 
 def test_m_words_in_a_row_each_wait_for_their_own_mfin():
-    """Issue 11, 6: M1 then M2 at once: M2 must not complete on M1's MFIN."""
+    """M1 then M2 at once: M2 must not complete on M1's MFIN."""
     g = Grinder(mfin_delay=0.2, program="M0: M1; M1: M2; M2: END; M41: END; M43: END")
     g.step(start=True)
     while g.trace[-1]["run"] or len(g.trace) < 3:

@@ -1,4 +1,4 @@
-"""Issue 14: the wheel works -- installed (not editable) into a fresh venv, `ncfmu run` from a folder outside the
+"""The wheel works -- installed (not editable) into a fresh venv, `ncfmu run` from a folder outside the
 checkout builds its FMUs into the user cache and runs a system closed loop."""
 
 import os

@@ -33,6 +33,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 import time
 import xml.etree.ElementTree as ET
 import zipfile
@@ -51,7 +52,12 @@ if TYPE_CHECKING:
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
-STATUSES = ("ok", "failed", "timeout")
+#: A variant's status: ``ok`` (ran to the stop time and every cycle of the system's report finished),
+#: ``unfinished`` (ran to the stop time with a cycle still running or never started: the error column says
+#: ``cycle not finished by t = <stop> s``), ``failed`` (refused or crashed: the error says why), ``timeout``.
+STATUSES = ("ok", "unfinished", "failed", "timeout")
+#: The statuses of a variant that ran to its stop time: its trajectory file is written.
+RAN = ("ok", "unfinished")
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
@@ -93,6 +99,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         kept = result.data[["time", *keep]][::every]
         trajectory = csv_bytes(kept)           # formatted here, on the worker: the client only writes bytes
         row.update(status="ok", error="", rows=len(kept))
+        if not report.finished(result):
+            row.update(status="unfinished", error=f"cycle not finished by t = {result.time[-1]:g} s")
         row.update(report.metrics(result, result.parameters))
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
@@ -198,7 +206,8 @@ def output_names(archive: Path) -> list[str]:
 class Progress:
     """A tqdm bar with done / failed / timeout and an ETA, on a terminal only."""
 
-    def __init__(self, total: int, stream=sys.stderr) -> None:
+    def __init__(self, total: int, stream=None) -> None:
+        stream = sys.stderr if stream is None else stream      # the stderr of now, not of import time
         self.bar = None
         self.counts = {s: 0 for s in STATUSES}
         if total and hasattr(stream, "isatty") and stream.isatty():
@@ -208,8 +217,8 @@ class Progress:
     def update(self, status: str) -> None:
         self.counts[status] = self.counts.get(status, 0) + 1
         if self.bar is not None:
-            self.bar.set_postfix(done=self.counts["ok"], failed=self.counts["failed"],
-                                 timeout=self.counts["timeout"], refresh=False)
+            self.bar.set_postfix(unfinished=self.counts["unfinished"], done=self.counts["ok"],
+                                 failed=self.counts["failed"], timeout=self.counts["timeout"], refresh=False)
             self.bar.update(1)
 
     def close(self) -> None:
@@ -241,13 +250,26 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     from dask.distributed import Client
     option = f"--scheduler {scheduler}" if scheduler_file is None else f"--scheduler-file {scheduler_file}"
     address = scheduler if scheduler_file is None else _scheduler_address(scheduler_file)
-    try:
-        client = Client(address, timeout=connect_timeout)
-    except (OSError, TimeoutError):
+    # dask's Client(timeout=) bounds the TCP connect, not the handshake: a port that accepts and never answers
+    # (a stopped scheduler) held it for minutes. The client is made in a daemon thread, waited for here.
+    made: list = []
+
+    def connect() -> None:
+        try:
+            made.append(Client(address, timeout=connect_timeout))
+        except Exception as err:                        # handed to the caller's thread below
+            made.append(err)
+    thread = threading.Thread(target=connect, name="ncfmu-connect", daemon=True)
+    thread.start()
+    thread.join(connect_timeout + 1.0)
+    client = made[0] if made else TimeoutError()
+    if isinstance(client, (OSError, TimeoutError)):
         raise NcfmuError(f"{option}: no dask scheduler answered within {connect_timeout:g} s at {address} "
-                         "(--connect-timeout S waits longer)") from None
-    except ValueError as err:                           # an address dask cannot parse (an unknown scheme)
-        raise NcfmuError(f"{option}: {err}") from None
+                         "(--connect-timeout S waits longer)")
+    if isinstance(client, (ValueError, TypeError)):    # an address dask cannot use (an unknown scheme, tls:// bare)
+        raise NcfmuError(f"{option}: {address}: {client}")
+    if isinstance(client, Exception):
+        raise NcfmuError(f"{option}: cannot connect to {address}: {type(client).__name__}: {client}")
     try:
         client.wait_for_workers(1, timeout=connect_timeout)
     except (OSError, TimeoutError):
@@ -332,7 +354,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         key = variant_key(v)
         old = rows.get(key)
         done = old is not None and old.get("status") in STATUSES and (
-            old["status"] != "ok" or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
+            old["status"] not in RAN or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
         if not done:
             todo.append((key, v))
         if key not in rows:

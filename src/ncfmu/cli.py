@@ -3,16 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
+import os
 import sys
 from pathlib import Path
 from typing import NoReturn
 
 from .errors import NcfmuError
 
-EPILOG = ("Systems: lathe_roughing (default), lathe_taper, grinder_feed, grinder_envelope, mill_contour. "
-          "Instances: lathe panel, seq, limiter, x_axis, z_axis; grinder panel, feed, limiter, x_axis, y_axis; "
-          "mill panel, contour, x_axis, y_axis.")
+
+def epilog() -> str:
+    """The systems and their instances, from their definitions (nothing here restates them)."""
+    from .systems import SYSTEMS, get_system
+    systems = [get_system(name) for name in SYSTEMS]
+    listed = ", ".join(f"{s.name}{' (default)' if s.name == 'lathe_roughing' else ''}" for s in systems)
+    instances = "; ".join(f"{s.name} {', '.join(c.name for c in s.components)}" for s in systems)
+    return f"Systems: {listed}. Instances: {instances}."
 
 
 class _Parser(argparse.ArgumentParser):
@@ -98,6 +105,27 @@ def _summary(result) -> str:
     return "\n".join(lines)
 
 
+def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str]) -> list[str]:
+    """Summary lines warning of the settings (of any of ``runs``) that reach no connected port of ``system``
+    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting."""
+    from .cosim.ssp import read_ssp
+    from .systems import SYSTEMS, get_system
+    from .systems.reach import unreached
+    definition = read_ssp(Path(system)) if system.endswith(".ssp") else get_system(system) if system in SYSTEMS \
+        else None
+    if definition is None:
+        return []
+    why: dict[str, str] = {}
+    where: dict[str, list[object]] = {}
+    for values in runs:
+        for name, reason in unreached(definition, values).items():
+            why.setdefault(name, reason)
+            if values[name] not in where.setdefault(name, []):
+                where[name].append(values[name])
+    return [f"  [warning] {option.get(name, '--set')} {name}={','.join(map(str, where[name]))}: {reason}"
+            for name, reason in why.items()]
+
+
 def cmd_build(args) -> int:
     from .project import build
     out = build(args.root, only_stale=not args.force)
@@ -138,6 +166,10 @@ def cmd_run(args) -> int:
             print(f"branch {i} from t = {args.branch_at} s ({label}):")
             print(_summary(result))
             print(f"  results: {csv}")
+        base = _parse_set(args.set)
+        for line in _unreached_lines(args.system, [{**base, **v} for v in variants],
+                                     dict.fromkeys(variants[0], "--branch-set")):
+            print(line)
         return 0
     start_values = _parse_set(args.set)
     result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
@@ -145,6 +177,8 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     csv = result.to_csv(out / f"{result.system}.csv")
     print(_summary(result))
+    for line in _unreached_lines(args.system, [start_values], {}):
+        print(line)
     print(f"  results: {csv}")
     if args.plot:
         try:
@@ -170,8 +204,13 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     return vary
 
 
+#: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
+#: command line, as for every command.
+SWEEP_INCOMPLETE = 1
+
+
 def cmd_sweep(args) -> int:
-    from .batch import sweep
+    from .batch import STATUSES, sweep
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -180,14 +219,17 @@ def cmd_sweep(args) -> int:
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
                  output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
-    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "failed", "timeout")}
-    print(f"{args.system}: {len(rows)} variants, {counts['ok']} ok, {counts['failed']} failed, "
-          f"{counts['timeout']} timeout -> {Path(args.out) / 'summary.csv'}")
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
+          + f" -> {Path(args.out) / 'summary.csv'}")
     for r in rows:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
             print(f"  {r['status']}: {varied}: {r['error']}")
-    return 0
+    for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
+                                 dict.fromkeys(vary, "--vary")):
+        print(line)
+    return 0 if counts["ok"] == len(rows) else SWEEP_INCOMPLETE
 
 
 def cmd_plot(args) -> int:
@@ -201,7 +243,14 @@ def cmd_plot(args) -> int:
     except ImportError:
         raise NcfmuError("plotting needs matplotlib: pip install -e '.[plot]'") from None
     out = Path(args.png) if args.png else src.with_suffix(".png")
-    if src.name == "summary.csv":
+    if out.is_dir():
+        raise NcfmuError(f"--png {out}: is a folder; give the PNG file's name")
+    if out.suffix.lower() != ".png":
+        raise NcfmuError(f"--png {out}: must end in .png (the plot is a PNG image)")
+    with open(src, encoding="utf-8-sig", errors="replace") as f:
+        header = f.readline()
+    # a sweep's summary by its columns (a status per variant), not by its file name alone
+    if "status" in (cell.strip().strip('"') for cell in header.split(",")):
         print(plots.plot_sweep(src, out))
     else:
         from .systems import SYSTEMS, report_for
@@ -213,6 +262,10 @@ def cmd_plot(args) -> int:
         # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
         # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
         if name in SYSTEMS and (args.system or any(f"{a}.pos" in result for a in report_for(name).axes)):
+            missing = [q for q in report_for(name).record() if q not in result]
+            if args.system and len(missing) == len(report_for(name).record()):
+                raise NcfmuError(f"{src}: has none of the signals a {name} plot draws ({', '.join(missing[:4])}, ...): "
+                                 "not a result of that system (leave --system out to draw the CSV's own signals)")
             result.system = name
             print(plots.plot_result(result, out))
         else:
@@ -221,18 +274,68 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_vars(args) -> int:
+    """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
+    import zipfile
+
+    from .cosim.ssp import read_ssp
+    from .systems import get_system
+    from .systems.settable import settable
+    if args.system.endswith(".ssp"):
+        archive = Path(args.system)
+        system = read_ssp(archive)
+
+        def model_description(model: str) -> bytes:
+            source = next(c.source for c in system.components if c.model == model)
+            try:
+                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
+                    return fmu.read("modelDescription.xml")
+            except (KeyError, zipfile.BadZipFile) as err:
+                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
+        rows = settable(system, model_description)
+    else:
+        system = get_system(args.system)
+        rows = settable(system)
+    if args.instance:
+        known = [c.name for c in system.components]
+        if args.instance not in known:
+            raise NcfmuError(f"--instance {args.instance!r}: {system.name} has no such instance "
+                             f"(instances: {', '.join(known)})")
+        rows = [r for r in rows if r.name.split(".", 1)[0] == args.instance]
+    lines = [f"{system.name}: {len(rows)} parameters and inputs. Set one with --set INSTANCE.VARIABLE=VALUE "
+             "(ncfmu run); tunable parameters and free inputs also with --branch-set, free inputs with --input "
+             "FILE.csv. An input a connection drives cannot be set: set its source. START is the system's value."]
+    header = ("NAME", "KIND", "TYPE", "UNIT", "START", "RULE", "DRIVEN BY", "DESCRIPTION")
+    long = 30                        # a longer start value (a program) goes on a line of its own, below
+    table = [(r.name, r.kind, r.type, r.unit, r.start if len(r.start) <= long else "(below)", r.rule,
+              r.driven_by or "-", r.description) for r in rows]
+    widths = [max(len(row[i]) for row in [header, *table]) for i in range(len(header) - 1)]
+    for r, row in zip([None, *rows], [header, *table]):
+        lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
+        if r is not None and len(r.start) > long:
+            lines.append(f"    start: {r.start}")
+    try:
+        sys.stdout.write("\n".join(lines) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:          # `ncfmu vars SYSTEM | head`: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
 def cmd_validate(args) -> int:
-    from .project import validate
-    problems = validate(args.root)
-    for p in problems:
+    from .project import validation
+    checked = validation(args.root)
+    print("checked " + ";\nchecked ".join(checked.checked()))
+    for p in checked.problems:
         print(p)
-    print("all FMUs and SSPs valid" if not problems else f"{len(problems)} problem(s)")
-    return 1 if problems else 0
+    print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
+    return 1 if checked.problems else 0
 
 
 def main(argv: list[str] | None = None) -> int:
+    help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
-                     "run closed loop with servo axes.", epilog=EPILOG)
+                     "run closed loop with servo axes.", epilog=help_epilog)
     parser.add_argument("--root", type=Path, default=None, help="project folder (with models/, fmus/, ssp/)")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -240,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=EPILOG)
+    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
     p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
     p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
     p.add_argument("--step", type=float, default=None, help="communication step in s (default 0.001)")
@@ -261,8 +364,12 @@ def main(argv: list[str] | None = None) -> int:
                        description="Run every combination of the --vary values on dask workers (they need ncfmu "
                                    "installed, nothing else: the system is shipped to them, results come back). "
                                    "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
-                                   "ok/failed/timeout, error, wall time, metrics), atomically. A sweep into an "
-                                   "existing OUT merges into it; variants already done are not run again.",
+                                   "ok/unfinished/failed/timeout, error, wall time, metrics), atomically; "
+                                   "'unfinished': the run reached the stop time with the cycle not finished "
+                                   "(error 'cycle not finished by t = ...'). A sweep into an existing OUT merges "
+                                   "into it; variants already done are not run again. Exit status 0 when every "
+                                   "variant is ok, 1 when any is unfinished, failed or timed out, 2 for a bad "
+                                   "command line.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")
@@ -298,6 +405,16 @@ def main(argv: list[str] | None = None) -> int:
                                                   "that names none is drawn as signals over time)")
     p.add_argument("--png", default=None, help="output file (default: the CSV's name with .png)")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser("vars", help="list every parameter and input of a system: unit, start value, rule, "
+                       "description, tunable or fixed, the connection that drives an input",
+                       description="Every settable variable of a system (what --set, --branch-set, --vary and "
+                                   "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
+                                   "value the system gives it, its rule, the output a connection drives an input "
+                                   "from, and its description.", epilog=help_epilog)
+    p.add_argument("system", help="system name or path of an .ssp file")
+    p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
+    p.set_defaults(func=cmd_vars)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)

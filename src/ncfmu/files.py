@@ -1,7 +1,7 @@
 """Writing files: atomically, and generated files only when their content changes.
 
 A run builds what is missing and nothing else, so it must not touch a file whose content is already right
-(issue 14: ``ncfmu run`` changes no file of the checkout, not even a timestamp).
+(``ncfmu run`` changes no file of the checkout, not even a timestamp).
 """
 
 from __future__ import annotations

@@ -4,6 +4,8 @@
   plane the system's report names, with its envelope or contour (lathe X-Z with the chuck zone, grinder
   Y-X with its four regions, mill X-Y with the programmed and the corrected contour).
 - :func:`plot_sweep`: a sweep's summary metrics against the varied value.
+- :func:`bode_figure`: the ServoAxis's open loops over the band that matters, with their margins (for the
+  FMU's documentation).
 - :func:`plot_signals`: a result of no known system (a single FMU's, a CSV fmpy wrote): its signals over time.
 """
 
@@ -44,8 +46,14 @@ def plot_result(result, path: Path) -> Path:
             ax_err.plot(t, result[f"{a}.following_error"] * 1000, label=f"{a}")
     ax_pos.set(title=f"{result.system}: axis positions", xlabel="time [s]", ylabel="position [mm]")
     ax_err.set(title="following error (command - actual)", xlabel="time [s]", ylabel="error [µm]")
+    if not ax_err.lines:                      # a trajectory recorded without them (a sweep's --record)
+        ax_err.text(0.5, 0.5, "no following_error recorded", transform=ax_err.transAxes, ha="center",
+                    va="center", color="0.4")
+        ax_err.set_xlim(ax_pos.get_xlim())
+        ax_err.set_yticks([])
     for ax in (ax_pos, ax_err):
-        ax.legend(loc="best", fontsize=8)
+        if ax.lines:
+            ax.legend(loc="best", fontsize=8)
         ax.grid(True, alpha=0.3)
     if has_plane:
         report.draw_plane(panels[2], result, run_parameters(result))
@@ -57,47 +65,98 @@ def plot_result(result, path: Path) -> Path:
     return path
 
 
+#: Columns of a sweep's summary that are bookkeeping, not metrics of the machine (``ncfmu.batch`` writes them).
+SWEEP_BOOKKEEPING = ("key", "status", "error", "rows", "wall_time", "sim_time")
+
+
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def sweep_figure(rows: list[dict[str, str]], title: str):
+    """The figure of :func:`plot_sweep` (a matplotlib Figure), from the summary's rows.
+
+    One panel per metric (every column after ``error`` but the bookkeeping ones), against the first varied
+    parameter, one line per combination of the others. A variant that ran but did not finish its cycle is an
+    open marker (its value at the stop time); a metric it has no value for (nan: e.g. the cycle time of an
+    unfinished cycle) is an x on the panel's lower edge; a failed or timed-out variant is a triangle on the
+    upper edge. Nothing is left out silently.
+    """
+    plt = _plt()
+    columns = list(rows[0])
+    varied = columns[1:columns.index("status")]
+    metrics = [c for c in columns[columns.index("error") + 1:] if c not in SWEEP_BOOKKEEPING
+               and any(_number(r[c]) is not None for r in rows if r[c] != "")]
+    x_name = varied[0]
+    xs = [r[x_name] for r in rows]
+    numeric = all(_number(x) is not None for x in xs)
+    categories = list(dict.fromkeys(xs))
+
+    def x_of(r: dict[str, str]) -> float:
+        return float(r[x_name]) if numeric else float(categories.index(r[x_name]))
+    ran = [r for r in rows if r["status"] in ("ok", "unfinished")]
+    stopped = [r for r in rows if r["status"] not in ("ok", "unfinished")]
+    groups = list(dict.fromkeys(", ".join(f"{v}={r[v]}" for v in varied[1:]) for r in rows))
+    colours = {g: f"C{i % 10}" for i, g in enumerate(groups)}
+    fig, axes = plt.subplots(len(metrics) or 1, 1, figsize=(10, 2.6 * max(1, len(metrics))), squeeze=False)
+    for ax, metric in zip(axes[:, 0], metrics):
+        edges = ax.get_xaxis_transform()              # x in data, y in axes fractions: the panel's edges
+        said: set[str] = set()
+
+        def once(text: str, said: set[str] = said) -> str:
+            """The legend label the first time in this panel, none after."""
+            if text in said:
+                return "_nolegend_"
+            said.add(text)
+            return text
+        ax.margins(y=0.2)                             # bands at the edges for the markers of missing values
+        for group in groups:
+            mine = [r for r in ran if ", ".join(f"{v}={r[v]}" for v in varied[1:]) == group]
+            colour = colours[group]
+            if not mine:
+                continue
+            done = sorted((x_of(r), float(r[metric])) for r in mine
+                          if r["status"] == "ok" and np.isfinite(float(r[metric])))
+            ax.plot([p[0] for p in done], [p[1] for p in done], "o-", color=colour, label=group or metric)
+            open_ = [(x_of(r), float(r[metric])) for r in mine
+                     if r["status"] == "unfinished" and np.isfinite(float(r[metric]))]
+            if open_:
+                ax.plot([p[0] for p in open_], [p[1] for p in open_], "o", mfc="none", color=colour,
+                        label=once("unfinished: value at the stop time"))
+            nans = [x_of(r) for r in mine if not np.isfinite(float(r[metric]))]
+            if nans:
+                ax.plot(nans, [0.05] * len(nans), "x", ms=9, mew=2, color=colour, transform=edges, clip_on=False,
+                        label=once("no value (nan): cycle not finished"))
+        for status, edge in (("failed", "tab:red"), ("timeout", "tab:purple")):
+            for group in groups:
+                at = [x_of(r) for r in stopped if r["status"] == status
+                      and ", ".join(f"{v}={r[v]}" for v in varied[1:]) == group]
+                if at:
+                    ax.plot(at, [0.95] * len(at), "v", ms=9, mfc=colours[group], mec=edge, mew=2, ls="none",
+                            transform=edges, clip_on=False, label=f"{status}, no value" + (f": {group}" if group
+                                                                                           else ""))
+        ax.set(xlabel=x_name, ylabel=metric)
+        if not numeric:
+            ax.set_xticks(range(len(categories)), categories)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "unfinished", "failed", "timeout")}
+    axes[0, 0].set_title(f"{title}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
+    fig.tight_layout()
+    return fig
+
+
 def plot_sweep(summary_csv: Path, path: Path) -> Path:
-    """Each numeric metric of a sweep's summary against the first varied parameter."""
+    """Each metric of a sweep's summary against the first varied parameter (see :func:`sweep_figure`)."""
     plt = _plt()
     with open(summary_csv, newline="") as f:
         rows = list(csv.DictReader(f))
     if not rows:
         raise ValueError(f"{summary_csv} has no rows")
-    columns = list(rows[0])
-    varied = columns[1:columns.index("status")]
-    metrics = [c for c in columns[columns.index("error") + 1:] if c not in ("wall_time", "sim_time")]
-    ok = [r for r in rows if r["status"] == "ok"]
-
-    def finite(metric):
-        try:
-            return any(np.isfinite(float(r[metric])) for r in ok)
-        except ValueError:
-            return False
-    metrics = [m for m in metrics if finite(m)]
-    x_name = varied[0]
-    fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 2.6 * max(1, len(metrics))), squeeze=False)
-    for ax, metric in zip(axes[:, 0], metrics):
-        groups: dict[str, list[tuple[float, float]]] = {}
-        for r in ok:
-            label = ", ".join(f"{v}={r[v]}" for v in varied[1:]) or metric
-            try:
-                groups.setdefault(label, []).append((float(r[x_name]), float(r[metric])))
-            except ValueError:
-                continue
-        for label, pts in groups.items():
-            pts.sort()
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=label)
-        failed = [float(r[x_name]) for r in rows if r["status"] != "ok"]
-        for xf in failed:
-            ax.axvline(xf, color="tab:red", ls=":", lw=1)
-        ax.set(xlabel=x_name, ylabel=metric)
-        ax.grid(True, alpha=0.3)
-        if len(groups) > 1:
-            ax.legend(fontsize=7)
-    axes[0, 0].set_title(f"sweep {Path(summary_csv).parent.name}: {len(ok)} ok, {len(rows) - len(ok)} failed "
-                         "(red: failed variants)")
-    fig.tight_layout()
+    fig = sweep_figure(rows, f"sweep {Path(summary_csv).parent.name}")
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)

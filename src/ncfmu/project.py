@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from . import __version__
@@ -140,8 +141,33 @@ def simulate(system: str = "lathe_roughing", stop_time: float | None = None, ste
                           inputs=inputs, progress=progress)
 
 
+@dataclass(frozen=True)
+class Validation:
+    """What :func:`validation` checked, and the problems it found."""
+
+    problems: list[str]
+    root: Path
+    fmus: int
+    systems: int
+    parameter_sets: int
+
+    def checked(self) -> list[str]:
+        """What was checked, in words."""
+        return [f"{self.fmus} FMUs ({self.root / 'fmus'}) with fmpy.validation: modelDescription.xml against the "
+                "FMI 2.0 schema, unique and valid variable names, a complete ModelStructure, the required start "
+                "values, causality/variability combinations, units; no backslash in a file path",
+                f"{self.systems} systems ({self.root / 'ssp'}/<system>.ssp): SystemStructure.ssd against the SSP 1.0 "
+                "schema (fmpy) and one flat ssd:System with literal prefixes (as libcosim reads it); their "
+                f"{self.parameter_sets} .ssv parameter sets against the SSP 1.0 parameter-values schema"]
+
+
 def validate(root: Path | None = None) -> list[str]:
     """Check every FMU with fmpy and every system with fmpy's SSP 1.0 schema; return the problems."""
+    return validation(root).problems
+
+
+def validation(root: Path | None = None) -> Validation:
+    """Check every FMU with fmpy and every system with fmpy's SSP 1.0 schema: what was checked, what failed."""
     import zipfile
 
     from fmpy.ssp.ssd import read_ssd as fmpy_read_ssd
@@ -151,7 +177,9 @@ def validate(root: Path | None = None) -> list[str]:
     root = Path(root or project_root())
     build(root, only_stale=True)
     problems = []
-    for fmu in sorted((root / "fmus").glob("*.fmu")):
+    fmus = sorted((root / "fmus").glob("*.fmu"))
+    n_ssv = 0
+    for fmu in fmus:
         for p in validate_fmu(str(fmu)):
             problems.append(f"{fmu}: {p}")
     for name in SYSTEMS:
@@ -163,6 +191,7 @@ def validate(root: Path | None = None) -> list[str]:
         with zipfile.ZipFile(archive) as z:
             ssd_text = z.read(SSD_NAME).decode()
             ssvs = [n for n in z.namelist() if n.endswith(".ssv")]
+        n_ssv += len(ssvs)
         if "<ssd:SystemStructureDescription" not in ssd_text or ssd_text.count("<ssd:System ") != 1:
             problems.append(f"{archive}: SystemStructure.ssd must be one flat ssd:System with literal prefixes "
                             "(libcosim reads the prefixes literally)")
@@ -171,7 +200,7 @@ def validate(root: Path | None = None) -> list[str]:
                 fmpy_read_ssv(str(archive), resource=ssv, validate=True)
             except Exception as err:
                 problems.append(f"{archive}: {ssv} breaks the SSP 1.0 parameter-values schema: {err}")
-    return problems
+    return Validation(problems, root, len(fmus), len(SYSTEMS), n_ssv)
 
 
 def simulate_branches(system: str, branch_time: float, variants: Sequence[Mapping[str, object]],

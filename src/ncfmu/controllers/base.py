@@ -8,11 +8,15 @@ through ``dt`` (``t`` is for messages). Nothing here imports pythonfmu or fmpy.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import Port, boolean, real, to_float, to_int
+
+#: An entry of a counted table: ``block[3].Xd`` (counted by ``n_blocks``).
+_TABLE_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
 class Controller:
@@ -34,6 +38,14 @@ class Controller:
     #: Default stop time of a stand-alone run, s.
     STOP_TIME: ClassVar[float] = 1.0
     PORTS: ClassVar[tuple[Port, ...]] = ()
+    #: A model built from C sources instead of a pythonfmu model script: its C file, relative to the class's package
+    #: (the class is then the executable specification of the native FMU), and the other files of that package it
+    #: is made from. Empty: a Python FMU.
+    NATIVE_SOURCE: ClassVar[str] = ""
+    NATIVE_DEFINED_BY: ClassVar[tuple[str, ...]] = ()
+    #: The outputs a parameter or input acts on, for one that acts on only some of them (an operator panel's
+    #: button time acts on that button alone); one not named here may act on every output.
+    ACTS_ON: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     def __init__(self, **parameters: object) -> None:
         self.messages: list[tuple[str, str]] = []
@@ -69,6 +81,31 @@ class Controller:
     def retune(self, values: Mapping[str, object]) -> None:
         """Apply parameters changed during a run (tunable ones): checked as at construction."""
         self.configure(self.check_parameters(values))
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """The parameters that the parameter set ``values`` leaves unread, each with why (``reads block[1..2] only
+        (n_blocks = 2)``): a setting of one of them changes nothing, and ncfmu says so. Here, the entries
+        ``<head>[k].<field>`` of a counted table (a parameter ``n_<head>s``) beyond its count; a controller
+        whose program or mode leaves parameters unread adds them."""
+        ports = {p.name: p for p in cls.ports("parameter")}
+        counts: dict[str, int | None] = {}
+        out: dict[str, str] = {}
+        for name in ports:
+            entry = _TABLE_ENTRY.match(name)
+            count_name = f"n_{entry['head']}s" if entry else ""
+            if not entry or count_name not in ports:
+                continue
+            if count_name not in counts:
+                try:
+                    counts[count_name] = to_int(ports[count_name].check(values.get(count_name,
+                                                                                   ports[count_name].start)))
+                except ConfigError:          # a count its rule refuses: the run says so
+                    counts[count_name] = None
+            count = counts[count_name]
+            if count is not None and int(entry["k"]) > count:
+                out[name] = f"reads {entry['head']}[1..{count}] only ({count_name} = {count})"
+        return out
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, object]) -> Controller:
@@ -155,7 +192,7 @@ class Controller:
 
 
 def servo_ports(*axes: tuple[str, float]) -> tuple[Port, ...]:
-    """The ports by which a controller drives servo axes (SPEC 2): per axis ``(letter, start position)``,
+    """The ports by which a controller drives servo axes: per axis ``(letter, start position)``,
     inputs ``<a>_pos`` and ``<a>_in_position``, outputs ``<a>_cmd`` and ``<a>_vff``."""
     inputs, outputs = [], []
     for a, start in axes:

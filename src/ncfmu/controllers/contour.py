@@ -41,7 +41,7 @@ from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
 from .base import POSITION_LIMIT, int_param, real_param, servo_ports
-from .cycle import ARRIVED, LATE, CycleController, cycle_ports
+from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
 from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
 from .motion import stop_speed
 
@@ -162,7 +162,7 @@ class ContourInterpolator(CycleController):
              min=0.0, min_exclusive=True),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration limit (start, stop, corners, arcs, "
              "override, hold)", min=0.0, min_exclusive=True),
-        *cycle_ports("the contour"),
+        *cycle_ports("the contour", "inpos_timeout"),
         real("dda_unit", "parameter", 0.001, "mm", "DDA output increment (one pulse)", min=1e-6, max=1.0),
         real("x_start", "parameter", 0.0, "mm", "X command before the cycle (the axis's start position; a "
              "program starts here)", min=-POSITION_LIMIT, max=POSITION_LIMIT),
@@ -177,7 +177,21 @@ class ContourInterpolator(CycleController):
         boolean("busy", "output", None, "a contour is running"),
         boolean("done", "output", None, "the contour is finished (until the next start)"),
         boolean("alarm", "output", None, "geometry cannot be corrected, or a bad input"),
+        # appended: the ports before keep their value references
+        *cycle_ports("the contour", "max_following_error", "inpos_band"),
     )
+
+    #: What only the point path reads: a program replaces it (its own G41/G42, F and path).
+    POINT_PATH_ONLY = ("n_points", "closed", "side", "feed")
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        out = super().unread(values)
+        if str(values.get("program", "")).strip():
+            for p in cls.ports("parameter"):
+                if p.name.startswith("point[") or p.name in cls.POINT_PATH_ONLY:
+                    out[p.name] = "runs its program (program is set), not the point path"
+        return out
 
     def configure(self, values: Mapping[str, object]) -> None:
         self.program = str(values["program"])
@@ -333,12 +347,24 @@ class ContourInterpolator(CycleController):
             if self.geometry_error:
                 self.say("error", f"t = {t:.4f} s: start refused: {self.geometry_error}")
             else:
+                if self.alarm:
+                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+                    self._follow_up(t, inputs)
                 self.alarm, self.done, self.busy = False, False, True
                 self._begin_cycle()
         if self.busy:
             scale = 0.0 if inputs["feed_hold"] else self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             self._advance(dt, scale, inputs)
         return self._publish()
+
+    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
+        """Re-base the command on the actual position where a stop left them apart (an axis held or lagging when
+        the alarm came): the next cycle's approach starts where the tool stands."""
+        actual = dict(zip(self.AXES, self.actual(inputs)))
+        if follow_up(actual, dict(zip(self.AXES, self.cmd)), self.inpos_band):
+            self.say("info", f"t = {t:.4f} s: follow-up: command ({self.cmd[0]:.4f}, {self.cmd[1]:.4f}) re-based on "
+                             f"the actual position ({actual['x']:.4f}, {actual['y']:.4f})")
+            self.cmd = [actual["x"], actual["y"]]
 
     def _advance(self, dt: float, scale: float, inputs: Mapping[str, object], finishing: bool = True) -> None:
         """Advance the path by one step at ``scale`` times the programmed feed (override; 0: hold or halt)."""

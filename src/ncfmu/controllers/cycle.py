@@ -33,19 +33,23 @@ from .base import Controller, OverrideDial, PositionGuard, finite_inputs, real_p
 MOVING, WAITING, ARRIVED, LATE = 0, 1, 2, 3
 
 
-def cycle_ports(what: str = "a motion") -> tuple[Port, ...]:
-    """The parameters of the cycle skeleton, in every cycle controller: the in-position band and timeout,
-    and the excess-following-error limit. ``what`` names the controller's motion in the descriptions."""
-    return (
-        real("max_following_error", "parameter", 2.0, "mm",
-             "excess following error alarm: |command - actual position| above this raises alarm", min=0.0,
-             min_exclusive=True),
-        real("inpos_band", "parameter", 0.005, "mm",
-             f"{what} ends only when the actual positions are this close to the controller's own command",
-             min=0.0, min_exclusive=True),
-        real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have not reached the "
-             "command this long after it stopped (an axis held downstream)", min=0.0, min_exclusive=True),
-    )
+def cycle_ports(what: str = "a motion", *names: str) -> tuple[Port, ...]:
+    """The parameters of the cycle skeleton, in every cycle controller: the excess-following-error limit, the
+    in-position band and timeout (``names``: these only, in this order; default all three). ``what`` names
+    the controller's motion in the descriptions. A controller that gains one of them appends it to the END of
+    its ports: a port's index is its value reference, which hosts keep."""
+    ports = {
+        "max_following_error": real("max_following_error", "parameter", 2.0, "mm",
+                                    "excess following error alarm: |command - actual position| above this raises "
+                                    "alarm", min=0.0, min_exclusive=True),
+        "inpos_band": real("inpos_band", "parameter", 0.005, "mm",
+                           f"{what} ends only when the actual positions are this close to the controller's own "
+                           "command", min=0.0, min_exclusive=True),
+        "inpos_timeout": real("inpos_timeout", "parameter", 2.0, "s", "in-position check: alarm when the axes have "
+                              "not reached the command this long after it stopped (an axis held downstream)",
+                              min=0.0, min_exclusive=True),
+    }
+    return tuple(ports[n] for n in (names or tuple(ports)))
 
 
 class Button:

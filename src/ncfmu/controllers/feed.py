@@ -176,7 +176,7 @@ class ProgrammableFeed(CycleController):
              min_exclusive=True),
         real("return_rate", "parameter", 10.0, "mm/s", "rate of the return to the feed origin before a start away "
              "from it", min=0.0, min_exclusive=True),
-        *cycle_ports("a feed word"),
+        *cycle_ports("a feed word", "max_following_error", "inpos_timeout"),
         boolean("start", "input", False, "START1: normal cycle (rising edge)"),
         boolean("wear_start", "input", False, "START2: wheel-wear compensation cycle (rising edge)"),
         boolean("emergency", "input", False, "EMB: emergency return (rising edge), at any moment"),
@@ -195,7 +195,24 @@ class ProgrammableFeed(CycleController):
         real("return_counter_x", "output", None, "mm", "X feed counted from the feed origin (S4 excluded)"),
         real("return_counter_y", "output", None, "mm", "Y feed counted from the feed origin (S4 excluded)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input)"),
+        *cycle_ports("a feed word", "inpos_band"),          # appended: the ports before keep their value references
     )
+
+    @classmethod
+    def unread(cls, values: Mapping[str, object]) -> dict[str, str]:
+        """Also the D, F and T settings no word of the program names."""
+        out = super().unread(values)
+        try:
+            words = parse_program(str(values.get("program", EMPTY_PROGRAM))).values()
+        except ProgramError:            # the run refuses the program, naming line and column
+            return out
+        for letter, index in (("D", "d"), ("F", "f"), ("T", "t")):
+            used = sorted({getattr(w, index) for w in words} - {0})
+            for k in range(1, 8):
+                if k not in used:
+                    out[f"{letter}{k}"] = (f"reads {', '.join(f'{letter}{i}' for i in used) or f'no {letter} setting'}"
+                                           f"{' only' if used else ''} (the {letter} settings its program names)")
+        return out
 
     def configure(self, values: Mapping[str, object]) -> None:
         self.D = [real_param(values, f"D{k}") for k in range(1, 8)]

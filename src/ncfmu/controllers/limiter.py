@@ -11,9 +11,9 @@ blocks the direction that was being commanded -- on whichever axis moved into th
 seed resets that bit of its movement-axis register. Motion in the opposite direction passes at once,
 so the axis can be backed out without re-homing.
 
-Stops are controlled (SPEC 2): a blocked direction is not a frozen command. The gated output of that
-axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the command
-never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
+Stops are controlled, as in every ncfmu controller: a blocked direction is not a frozen command. The gated
+output of that axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the
+command never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
 gated command may pass the boundary by at most ``v * (monitor_period + dt) + v**2 / (2 * decel)``
 (``v``: its speed; :meth:`AreaLimiter.overshoot_bound`). With ``predictive`` the limiter governs
 the speed every step: each axis may move toward a boundary only as fast as it can still stop

@@ -50,6 +50,13 @@ class OperatorPanel(Controller):
         real("feed_override", "output", None, "1", "feed override dial"),
     )
 
+    # Each time, dial and delay drives one output (pulse: the push buttons): a system that does not connect
+    # that output cannot feel the setting (ncfmu warns about a --set of it).
+    ACTS_ON = {"start_at": ("start",), "restart_at": ("start",), "wear_start_at": ("wear_start",),
+               "emergency_at": ("emergency",), "hold_at": ("feed_hold",), "release_at": ("feed_hold",),
+               "pulse": ("start", "wear_start", "emergency"), "mfin_delay": ("mfin",),
+               "override": ("feed_override",), "m_active": ("mfin",)}
+
     def configure(self, values: Mapping[str, object]) -> None:
         self.start_at = real_param(values, "start_at")
         self.restart_at = real_param(values, "restart_at")

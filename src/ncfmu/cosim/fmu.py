@@ -33,7 +33,7 @@ from ..errors import ConfigError, SimulationError, SystemDefinitionError
 from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
-from .ssp import is_link
+from .ssp import MAX_UNPACKED, is_link
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -53,8 +53,6 @@ _LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
 
 
 INT32 = (-2 ** 31, 2 ** 31 - 1)
-#: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
-MAX_UNPACKED = 2 ** 30
 
 #: fmi2DoStep's noSetFMUStatePriorToCurrentPoint: fmi2False, because a branch run sets an FMU back to a saved
 #: state before the current point (an FMU may drop that history after fmi2True).

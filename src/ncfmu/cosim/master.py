@@ -120,6 +120,11 @@ def _output_slots(slaves, kind, ext_names):
     return slots
 
 
+def _a(causality: str) -> str:
+    """``an output``, ``a parameter``: a causality with its article, for messages."""
+    return f"{'an' if causality[:1] in 'aeiou' else 'a'} {causality}"
+
+
 class Master:
     """Run a :class:`~ncfmu.cosim.ssp.System` whose components are given as slaves.
 
@@ -157,11 +162,11 @@ class Master:
             if dst is None:
                 raise SystemDefinitionError(f"connection {c}: {c.end_element} has no variable {c.end_connector!r}")
             if src.causality != "output":
-                raise SystemDefinitionError(f"connection {c}: {c.start_element}.{c.start_connector} is a "
-                                            f"{src.causality}, not an output")
+                raise SystemDefinitionError(f"connection {c}: {c.start_element}.{c.start_connector} is "
+                                            f"{_a(src.causality)}, not an output")
             if dst.causality != "input":
-                raise SystemDefinitionError(f"connection {c}: {c.end_element}.{c.end_connector} is a "
-                                            f"{dst.causality}, not an input")
+                raise SystemDefinitionError(f"connection {c}: {c.end_element}.{c.end_connector} is "
+                                            f"{_a(dst.causality)}, not an input")
             if src.type != dst.type or src.type not in KINDS:
                 raise SystemDefinitionError(f"connection {c}: type mismatch ({src.type} -> {dst.type})")
             key = (c.end_element, c.end_connector)
@@ -278,7 +283,7 @@ class Master:
             for qualified in inputs.columns:
                 slave, v = self.variable(qualified)
                 if v.causality != "input":
-                    raise SystemDefinitionError(f"input CSV column {qualified!r} is a {v.causality}, not an input")
+                    raise SystemDefinitionError(f"input CSV column {qualified!r} is {_a(v.causality)}, not an input")
                 if any(c.end_element == slave.name and c.end_connector == v.name for c in self.system.connections):
                     raise SystemDefinitionError(f"input CSV column {qualified!r} is driven by a connection already")
                 ext[qualified] = v.type

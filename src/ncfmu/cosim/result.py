@@ -97,7 +97,7 @@ class Result:
         from ..errors import SystemDefinitionError
         path = Path(path)
         try:
-            with open(path, newline="") as f:
+            with open(path, newline="", encoding="utf-8-sig") as f:    # a BOM (Excel's "CSV UTF-8") is not a name
                 lines = list(csv.reader(f))
         except (OSError, UnicodeDecodeError, csv.Error) as err:
             raise SystemDefinitionError(f"{path}: cannot read the result CSV: {err}") from None

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import math
+import posixpath
 import stat
 import xml.etree.ElementTree as ET
 import zipfile
@@ -24,6 +25,9 @@ from pathlib import Path
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
 from ..ports import UNITS, parse_text
+
+#: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
+MAX_UNPACKED = 2 ** 30
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -357,11 +361,18 @@ def read_ssp(archive: Path) -> System:
         raise SystemDefinitionError(f"{archive}: not an SSP archive (a zip file): {err}") from None
     with z:
         names = set(z.namelist())
+        # before anything is read: a few MB can unpack to GBs (one entry of spaces is enough)
+        total = sum(info.file_size for info in z.infolist())
+        if total > MAX_UNPACKED:
+            raise SystemDefinitionError(f"{archive}: unpacks to more than {MAX_UNPACKED / 2 ** 30:g} GiB "
+                                        f"({total / 2 ** 30:.1f} GiB): refused")
 
         def read_file(rel: str) -> bytes:
-            if rel not in names:
+            # SSP sources are relative URIs: "./resources/x.ssv" names the entry "resources/x.ssv"
+            entry = posixpath.normpath(rel)
+            if entry == ".." or entry.startswith(("../", "/")) or entry not in names:
                 raise SystemDefinitionError(f"{archive}: {rel!r} is not in the archive")
-            return z.read(rel)
+            return z.read(entry)
         system = read_ssd(archive, read_file)
         for comp in system.components:
             if comp.source in names and is_link(z.getinfo(comp.source)):

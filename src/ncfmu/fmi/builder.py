@@ -51,9 +51,11 @@ def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
 
 
 def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
-    """Digest of the model script and every module the FMU carries (12 hex digits)."""
+    """Digest of the model script, every module the FMU carries and the generator of its documentation
+    (12 hex digits)."""
     h = hashlib.sha256()
-    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h", CONTRACT_HEADER]:
+    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
+                 package_dir / "fmi" / "documentation.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
@@ -200,7 +202,7 @@ The interpreter is started once per process and never finalised.</p>"""
 
 def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str) -> None:
     """The FMU as shipped: pythonfmu's model description enriched, our binary, no other platform's."""
-    from ..docs import fmu_html
+    from .documentation import fmu_html
     binary = f"binaries/linux64/{cls}.so"
     with zipfile.ZipFile(src) as zin:
         description = enrich(zin.read("modelDescription.xml"), logic, version)
@@ -227,7 +229,17 @@ def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str
 
 
 def model_scripts(models_dir: Path) -> list[Path]:
-    return sorted(p for p in Path(models_dir).glob("*.py") if not p.name.startswith("_"))
+    """The model script of every Python model of the catalogue, in its order; a model without its script, or a
+    script of no model, is a BuildError naming it."""
+    from ..catalogue import python_models
+    scripts = {p.stem: p for p in Path(models_dir).glob("*.py") if not p.name.startswith("_")}
+    missing = [name for name in python_models() if name not in scripts]
+    if missing:
+        raise BuildError(f"{models_dir}: no model script for {', '.join(missing)} (models/<MODEL_NAME>.py)")
+    unknown = sorted(set(scripts) - set(python_models()))
+    if unknown:
+        raise BuildError(f"{models_dir}: {', '.join(unknown)}.py names no controller of ncfmu.controllers")
+    return [scripts[name] for name in python_models()]
 
 
 def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> list[Path]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import html
 import io
 import os
 import re
@@ -76,11 +77,20 @@ class NativeModel:
 
 
 def native_models() -> list[NativeModel]:
-    # servo/model.py is named by its path, not imported: importing it imports python-control (~1.3 s), which
-    # every run's staleness check would pay; only an actual build needs it
-    from ..servo import axis
-    return [NativeModel(axis.ServoAxis, PACKAGE_DIR / "servo" / "native" / "servo_model.c",
-                        (Path(axis.__file__), PACKAGE_DIR / "servo" / "model.py", PACKAGE_DIR / "ports.py"))]
+    """The catalogue's native models, each with its C source and what it is defined by."""
+    from ..catalogue import models, native_models
+    # the design files are named by their paths, not imported: servo/model.py imports python-control (~1.3 s),
+    # which every run's staleness check would pay; only an actual build needs it. fmi/documentation.py writes
+    # its documentation: a change there rebuilds it too
+    out = []
+    for name in native_models():
+        logic = models()[name]
+        module = Path(sys.modules[logic.__module__].__file__ or "")
+        defined_by = tuple(module.parent / f for f in logic.NATIVE_DEFINED_BY)
+        out.append(NativeModel(logic, module.parent / logic.NATIVE_SOURCE,
+                               (module, *defined_by, PACKAGE_DIR / "ports.py",
+                                PACKAGE_DIR / "fmi" / "documentation.py")))
+    return out
 
 
 # -- generated files ------------------------------------------------------------------------------
@@ -179,31 +189,39 @@ def build_description(m: NativeModel) -> str:
 def _design_html(m: NativeModel, stage: Path) -> str:
     """Design figures of the default parameters, and a Bode plot, for the FMU's documentation."""
     from ..servo.axis import ServoAxis
-    from ..servo.model import MIN_PHASE_MARGIN, position_loop, velocity_loop
+    from ..servo.bode import bode_design
+    from ..servo.model import MIN_PHASE_MARGIN
     logic = m.logic()
     assert isinstance(logic, ServoAxis), "the native models are servo axes"
     d, p = logic.design, logic.p
+    bode = bode_design(p)
+    velocity, position = bode.loops
     rows = [("velocity loop: phase margin", f"{d.velocity_margin:.1f} deg"),
             ("velocity loop: crossover", f"{d.velocity_crossover:.1f} rad/s"),
+            ("velocity loop: gain margin", velocity.gain_margin_text().removeprefix("GM ")),
             ("velocity loop: closed-loop bandwidth (-3 dB)", f"{d.velocity_bandwidth:.1f} rad/s"),
             ("position loop: phase margin", f"{d.position_margin:.1f} deg"),
             ("position loop: crossover", f"{d.position_crossover:.1f} rad/s"),
-            ("position loop: closed-loop bandwidth (-3 dB)", f"{d.position_bandwidth:.1f} rad/s")]
-    table = "\n".join(f"<tr><td>{a}</td><td>{b}</td></tr>" for a, b in rows)
+            ("position loop: gain margin", position.gain_margin_text().removeprefix("GM ")),
+            ("position loop: closed-loop bandwidth (-3 dB)", f"{d.position_bandwidth:.1f} rad/s"),
+            ("current loop: corner 1/tau_current", f"{1.0 / p.tau_current:.0f} rad/s")]
+    table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
     figure = ""
     try:
-        import control as ct
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        plt.figure(figsize=(7, 6))
-        ct.bode_plot([velocity_loop(p), position_loop(p)], display_margins=True)
+        from ..servo.bode import bode_figure
+        fig, _ = bode_figure(p)
         out = io.BytesIO()
-        plt.savefig(out, format="png", dpi=80)
-        plt.close("all")
+        fig.savefig(out, format="png", dpi=80)
+        import matplotlib.pyplot as plt
+        plt.close(fig)
         (stage / "documentation").mkdir(exist_ok=True)
         (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
-        figure = '<p><img src="bode.png" alt="Bode plot of the open velocity and position loops"></p>'
+        figure = (f'<p><img src="bode.png" alt="Bode plot of the open velocity and position loops from '
+                  f'{bode.band[0]:.1f} to {bode.band[1]:.0f} rad/s, with their margins"></p>\n'
+                  f"<p>The band that matters: from a decade below the position loop's closed-loop bandwidth "
+                  f"({bode.band[0]:.1f} rad/s) to a decade above the current loop's corner ({bode.band[1]:.0f} "
+                  "rad/s). Dotted: each loop's gain crossover, its phase margin the bar up from -180 deg; dashed: "
+                  "the phase crossover, the gain margin the bar up to 0 dB.</p>")
     except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
         pass
     return f"""<h2>Design (python-control, default parameters)</h2>
@@ -245,7 +263,7 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
     """Build the native FMU ``m`` into ``dest_dir``; return its path."""
     from fmpy.build import build_platform_binary
 
-    from ..docs import fmu_html
+    from .documentation import fmu_html
     if shutil.which("cmake") is None:
         raise BuildError(f"{m.name}: building the native FMU needs cmake (pip install cmake) and a C compiler")
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"ncfmu:{m.name}:{m.version()}")) + "}"

@@ -44,10 +44,14 @@ class ServoAxis(Controller):
     MODEL_NAME = "ServoAxis"
     DESCRIPTION = ("Servo feed axis: P position loop with velocity feed-forward, PI velocity loop, current lag, "
                    "motor + ball screw + load, friction, torque/speed limits, encoder, in-position band")
-    SEED = "SPEC.md section 4"
+    SEED = ""              # none: a feed axis of ncfmu's own design (ncfmu.servo.model)
     STOP_TIME = 1.0
     #: python-control models rebuilt by configure() from the parameters: not part of a saved FMU state.
     DERIVED = ("linear", "plant")
+    #: The native FMU's C model, relative to this package (ncfmu.servo); it is built from that, not from Python.
+    NATIVE_SOURCE = "native/servo_model.c"
+    #: The other files of this package the native FMU is made from (its design; its documentation's Bode plot).
+    NATIVE_DEFINED_BY = ("model.py", "bode.py")
 
     # The ranges are physical (a machine-tool feed axis) and keep the discretisation well conditioned:
     # a parameter outside them is refused naming itself, not a derived quantity.

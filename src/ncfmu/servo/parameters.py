@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class AxisParameters:
-    """Physical and control parameters of one feed axis (SPEC 4 defaults: a mid-size feed axis).
+    """Physical and control parameters of one feed axis (the defaults: a mid-size feed axis).
 
     Attributes
     ----------

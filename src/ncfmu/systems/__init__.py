@@ -1,4 +1,4 @@
-"""The systems of SPEC section 5, each defined once: components, parameters, connections, and its report.
+"""The systems ncfmu ships, each defined once: components, parameters, connections, and its report.
 
 A system is data: :func:`get_system` gives its :class:`~ncfmu.cosim.ssp.System` (written to
 ``ssp/<system>/`` as SSP 1.0), :func:`report_for` its :class:`~ncfmu.systems.report.Report` (summary

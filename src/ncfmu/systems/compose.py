@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..controllers import AreaLimiter, ContourInterpolator, CutSequencer, OperatorPanel, ProgrammableFeed
+from ..catalogue import models
 from ..controllers.base import Controller
 from ..cosim.ssp import Component, Connection
 from ..errors import ConfigError, SystemDefinitionError
-from ..servo.axis import ServoAxis
 
-MODELS: dict[str, type[Controller]] = {c.MODEL_NAME: c for c in (CutSequencer, OperatorPanel, ServoAxis, AreaLimiter,
-                                                                  ProgrammableFeed, ContourInterpolator)}
+#: Model name -> its logic class (the catalogue: every model ncfmu builds).
+MODELS: dict[str, type[Controller]] = models()
 
 
 def component(name: str, model: str, **parameters: object) -> Component:

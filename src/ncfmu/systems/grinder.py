@@ -1,4 +1,4 @@
-"""The grinder systems (SPEC 5): programmable feed on the wheel head, alone or inside a limit envelope."""
+"""The grinder systems: programmable feed on the wheel head, alone or inside a limit envelope."""
 
 from __future__ import annotations
 
@@ -6,11 +6,12 @@ from ..cosim.ssp import System
 from .compose import component, table, wire
 from .report import Axes, Envelope, FeedCycle, Plane, Report
 
-#: The seed's Table 1 (SPEC 3.3): rapid approach, rough, fine, spark-out, return; EMB and wear cycles.
+#: The seed's Table 1 (programmable-feed-JPS6043522.txt): rapid approach, rough, fine, spark-out, return;
+#: EMB and wear cycles.
 SEED_PROGRAM = ("M0: X+D3F7; M1: X+D2F1; M2: X+D5F2; M3: T1; M4: X-D4F7; M5: END; "
                 "M41: XF7S1; M42: END; M43: X+D1F2S4; M44: END")
 
-#: Grinder envelope (SPEC 5): reference Y (table), limited X (infeed).
+#: Grinder envelope: reference Y (table), limited X (infeed).
 GRINDER_TABLE = [(200.0, -100.0, 250.0),    # dresser
                  (350.0, -100.0, 80.0),     # headstock
                  (800.0, -100.0, 180.0),    # work
@@ -30,7 +31,9 @@ ENVELOPE_REPORT = Report(
           xlabel="Y (table) [mm]", ylabel="X (infeed) [mm]", path_label="wheel (actual)"))
 
 _PANEL_TO_FEED = ("panel.start -> feed.start", "panel.wear_start -> feed.wear_start",
-                  "panel.emergency -> feed.emergency", "panel.mfin -> feed.mfin", "feed.m_active -> panel.m_active")
+                  "panel.emergency -> feed.emergency", "panel.feed_hold -> feed.feed_hold",
+                  "panel.feed_override -> feed.feed_override", "panel.mfin -> feed.mfin",
+                  "feed.m_active -> panel.m_active")
 
 
 def grinder_feed() -> System:

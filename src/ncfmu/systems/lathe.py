@@ -1,4 +1,4 @@
-"""The lathe systems (SPEC 5): operator panel -> cut sequencer -> area limiter -> X and Z servos."""
+"""The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The mill system (SPEC 5): contour interpolator with cutter compensation -> X and Y servos."""
+"""The mill system: contour interpolator with cutter compensation -> X and Y servos."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from ..cosim.ssp import System
 from .compose import component, points, wire
 from .report import Axes, ContourCycle, Plane, Report
 
-#: The contour of SPEC 5, closed, programmed as terminal points.
+#: The mill's contour, closed, programmed as terminal points.
 CONTOUR = [(0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0)]
 
 REPORT = Report(

@@ -58,6 +58,10 @@ class Part:
     def alarmed(self, result) -> bool:
         return self.alarm is not None and bool(result[self.alarm].any())
 
+    def finished(self, result) -> bool | None:
+        """Whether the part's cycle ran to its end within the run; None for a part without a cycle."""
+        return None
+
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Add to the machine-plane panel (path, envelope, contour)."""
 
@@ -123,6 +127,9 @@ class LatheCycle(Part):
                      f"alarm: {'yes' if self.alarmed(result) else 'no'}")
         return lines
 
+    def finished(self, result) -> bool | None:
+        return bool(result[f"{self.seq}.done"].any())
+
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         cut = result[f"{self.seq}.subcycle"] == 2
         return {"final_radius_mm": float(result[f"{self.x}.pos"][cut].min()) if cut.any() else float("nan"),
@@ -160,6 +167,9 @@ class FeedCycle(Part):
                 f"X at the end {x[-1]:.4f} mm; return counter X {result[f'{self.feed}.return_counter_x'][-1]:.4f} mm",
                 f"  alarm: {'yes' if self.alarmed(result) else 'no'}"]
 
+    def finished(self, result) -> bool | None:
+        return not np.isnan(_ended(result, self._active(result)))
+
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         return {"deepest_x_mm": float(result[f"{self.x}.pos"].max()),
                 "cycle_time_s": _ended(result, self._active(result))}
@@ -181,10 +191,21 @@ class Envelope(Part):
     def alarm(self) -> str | None:
         return f"{self.limiter}.alarm"
 
+    def legend(self) -> tuple[str, ...]:
+        """What each bit of the limiter's ``blocked`` mask stops (its port says: 1 ref+, 2 ref-, 4 lim+, 8 lim-),
+        in the system's axis names."""
+        return (f"{self.ref} +", f"{self.ref} -", f"{self.lim} +", f"{self.lim} -")
+
     def summary(self, result, parameters: Parameters) -> list[str]:
-        verdict = (f"ALARM, blocked mask {result[f'{self.limiter}.blocked'].max()}" if self.alarmed(result)
-                   else "no violation")
-        return [f"  area limiter: {verdict}"]
+        if not self.alarmed(result):
+            return ["  area limiter: no violation"]
+        mask = int(np.bitwise_or.reduce(np.asarray(result[f"{self.limiter}.blocked"], dtype=np.int64)))
+        bits = ", ".join(f"{1 << i} {d}" for i, d in enumerate(self.legend()))
+        stopped = [d for i, d in enumerate(self.legend()) if mask & (1 << i)]
+        what = (f"blocked {' and '.join(stopped)}" if stopped
+                else "no direction blocked (a fault: an absurd input, see the log)")
+        first = _first_time(result, result[f"{self.limiter}.alarm"].astype(bool))
+        return [f"  area limiter: ALARM from t = {first:.3f} s, {what} (blocked mask {mask}; bits {bits})"]
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Shade what the table forbids, region by region, over the span the path covers (a bound beyond
@@ -197,16 +218,29 @@ class Envelope(Part):
         finite = [v for _, lo, hi in table for v in (lo, hi) if abs(v) < POSITION_LIMIT]
         bottom, top = min(lim.min(), *finite) - 20, max(lim.max(), *finite) + 20
         edge = left
+        # A region's name goes on its boundary, on the forbidden side; a boundary outside the view (the chuck's
+        # X >= 40 above a lathe's work, whose cycle part has set the limits already) gets its name at the view's
+        # edge nearest to it, with the bound: a label outside the axes would have tight_layout shrink the figure.
+        view = (bottom, top) if ax.get_autoscaley_on() else ax.get_ylim()
+        edge_of_view = ax.get_xaxis_transform()          # x in data, y in axes fractions
         for i, (ref_max, lo, hi) in enumerate(table):
             end = min(ref_max, right)
             if end <= edge:
                 continue
             name = self.region_names[i] if i < len(self.region_names) else f"region {i + 1}"
-            for low, high, bound in ((bottom, lo, lo), (hi, top, hi)):
+            for low, high, bound, above in ((bottom, lo, lo, False), (hi, top, hi, True)):
                 if low < high and abs(bound) < POSITION_LIMIT:
                     ax.fill_between([edge, end], low, high, color="tab:red", alpha=0.15, lw=0)
                     ax.hlines(bound, edge, end, color="tab:red", lw=1)
-                    ax.text((edge + end) / 2, bound, name, ha="center", va="bottom", fontsize=8)
+                    mid = (edge + end) / 2
+                    if view[0] <= bound <= view[1]:
+                        label = ax.text(mid, bound, name, ha="center", va="bottom" if above else "top", fontsize=8)
+                    else:
+                        over = bound > view[1]
+                        label = ax.text(mid, 0.97 if over else 0.03, f"{name}: {self.lim} {'>' if above else '<'} "
+                                        f"{bound:g} forbidden", transform=edge_of_view, ha="center",
+                                        va="top" if over else "bottom", fontsize=8)
+                    label.set_in_layout(False)
             edge = end
         ax.fill_between([], [], [], color="tab:red", alpha=0.15, label="forbidden by the limit table")
 
@@ -236,6 +270,9 @@ class ContourCycle(Part):
         end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
         return [f"  contour done: {end}; last segment (point path) or program line: "
                 f"{int(result[f'{self.contour}.segment'][-1])}; alarm: {'yes' if self.alarmed(result) else 'no'}"]
+
+    def finished(self, result) -> bool | None:
+        return bool(result[f"{self.contour}.done"].any())
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         from ..checks import path_distance
@@ -285,6 +322,10 @@ class Report:
 
     def summary(self, result, parameters: Parameters) -> list[str]:
         return [line for p in self.parts for line in p.summary(result, parameters)]
+
+    def finished(self, result) -> bool:
+        """False when a cycle of the report's parts was still running, or never ran, at the end of the run."""
+        return all(p.finished(result) is not False for p in self.parts)
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         out = {"sim_time": float(result.time[-1]), "wall_time": float(result.wall_time)}

@@ -1,0 +1,65 @@
+"""Summary lines say what they mean: the area limiter's blocked mask with its legend, what validate checked."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from ncfmu.cli import main
+from ncfmu.systems import SYSTEMS, get_system
+
+
+def _line(out: str, start: str) -> str:
+    return next(line.strip() for line in out.splitlines() if line.strip().startswith(start))
+
+
+@pytest.mark.slow
+def test_the_lathe_limiter_alarm_names_the_blocked_direction_and_the_bits(project, capsys, tmp_path):
+    # a cut lengthened into the chuck zone (Z <= -45) at 40 mm/s: Z- is blocked at the boundary
+    assert main(["run", "lathe_roughing", "--stop-time", "4", "--set", "seq.block[1].Zp=50", "--set",
+                 "seq.block[1].feed=40", "--out", str(tmp_path)]) == 0
+    line = _line(capsys.readouterr().out, "area limiter:")
+    m = re.fullmatch(r"area limiter: ALARM from t = (\d+\.\d{3}) s, blocked z_axis - \(blocked mask 2; bits "
+                     r"1 z_axis \+, 2 z_axis -, 4 x_axis \+, 8 x_axis -\)", line)
+    assert m, line
+    # START at 0.1 s; the infeed X 30 -> 28.5 at accel 500 is a triangle, 2*sqrt(1.5/500) s; then the cut from
+    # Z 2 reaches the boundary Z -45 after 47 mm at 40 mm/s plus half a ramp (40/500/2 s)
+    assert float(m[1]) == pytest.approx(0.1 + 2 * (1.5 / 500) ** 0.5 + 47 / 40 + 40 / 500 / 2, abs=0.02)
+
+
+@pytest.mark.slow
+def test_the_grinder_limiter_alarm_names_its_own_axes(project, capsys, tmp_path):
+    """The table sent back into the headstock zone with the wheel in: Y- (the reference, the table) blocked."""
+    program = "M0: Y+D1F7; M1: X+D2F7; M2: Y-D6F7; M3: END; M41: XF7S1; M42: YF7S1; M43: END; M45: END"
+    assert main(["run", "grinder_envelope", "--stop-time", "9", "--set", f"feed.program={program}",
+                 "--set", "feed.D6=250", "--out", str(tmp_path)]) == 0
+    line = _line(capsys.readouterr().out, "area limiter:")
+    assert re.fullmatch(r"area limiter: ALARM from t = \d+\.\d{3} s, blocked y_axis - \(blocked mask 2; bits "
+                        r"1 y_axis \+, 2 y_axis -, 4 x_axis \+, 8 x_axis -\)", line), line
+
+
+@pytest.mark.slow                       # fmpy validates every FMU again (test_cli's fast check does it once)
+def test_validate_says_what_it_checked(project, capsys):
+    assert main(["validate"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    n_fmus = len(project["fmus"])
+    n_ssv = sum(len(get_system(name).components) for name in SYSTEMS)
+    assert n_fmus == 6 and len(SYSTEMS) == 5
+    assert out[0].startswith(f"checked {n_fmus} FMUs (") and "with fmpy.validation: modelDescription.xml against " \
+        "the FMI 2.0 schema" in out[0]
+    assert out[1].startswith(f"checked {len(SYSTEMS)} systems (")
+    assert "SystemStructure.ssd against the SSP 1.0 schema" in out[1]
+    assert f"their {n_ssv} .ssv parameter sets against the SSP 1.0 parameter-values schema" in out[1]
+    assert out[-1] == "all FMUs and SSPs valid"
+
+
+@pytest.mark.slow                       # opens the system twice (the master's own test covers connections fast)
+def test_an_input_csv_column_that_is_an_output_is_said_in_good_grammar(project, capsys, tmp_path):
+    csv_file = tmp_path / "inputs.csv"
+    csv_file.write_text('"time","x_axis.pos"\n0.0,1\n')
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'x_axis.pos' is an output, not an input\n")
+    csv_file.write_text('"time","seq.accel"\n0.0,100\n')
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'seq.accel' is a parameter, not an input\n")

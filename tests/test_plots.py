@@ -1,0 +1,204 @@
+"""Plots a controls engineer puts in a report: the lathe's machine plane without empty space, a sweep summary
+of metrics only with unfinished and failed variants visible, the ServoAxis Bode plot over the band that matters
+with the design's margins."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")     # the plot extra; the test extra installs it (CI runs these)
+
+
+def _longest_blank_band(png) -> float:
+    """The tallest run of all-white pixel rows, as a fraction of the image's height."""
+    import matplotlib.image as mpimg
+    image = mpimg.imread(str(png))[..., :3]
+    blank = (image > 0.99).all(axis=(1, 2))
+    best = run = 0
+    for row_blank in blank:
+        run = run + 1 if row_blank else 0
+        best = max(best, run)
+    return best / len(blank)
+
+
+# -- the lathe: the chuck's label stays inside its panel -----------------------------------------------------
+@pytest.mark.slow
+def test_the_lathe_plot_has_no_empty_band_and_names_the_chuck_inside_its_panel(lathe_taper, tmp_path):
+    import matplotlib.pyplot as plt
+
+    from ncfmu.plots import plot_result
+    from ncfmu.systems import report_of, run_parameters
+    png = plot_result(lathe_taper, tmp_path / "lathe_taper.png")
+    # before: the chuck's name drawn at X = 40, above the panel's X 25..32, and tight_layout squeezed the three
+    # panels to make room for it: 26 % of the figure's height was blank rows
+    assert _longest_blank_band(png) < 0.03
+    fig, ax = plt.subplots()
+    report_of(lathe_taper).draw_plane(ax, lathe_taper, run_parameters(lathe_taper))
+    fig.canvas.draw()
+    low, high = ax.get_ylim()
+    assert high < 40.0                                       # the chuck's bound is out of this view ...
+    labels = {t.get_text(): t for t in ax.texts}
+    chuck = labels["chuck: x_axis < 40 forbidden"]           # ... so its name says the bound, inside the panel
+    box, frame = chuck.get_window_extent(), ax.get_window_extent()
+    assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+    plt.close(fig)
+
+
+# -- the sweep summary ------------------------------------------------------------------------------------
+#: A summary as ncfmu.batch writes it: the varied values, status, error, rows, then the metrics.
+HEADER = ["key", "panel.override", "feed.D3", "status", "error", "rows", "sim_time", "wall_time", "deepest_x_mm",
+          "cycle_time_s", "max_following_error_mm", "alarms"]
+ROWS = [
+    ["a", "1", "4", "ok", "", "40001", "40.0", "0.5", "4.3", "32.475", "0.0014", "0"],
+    ["b", "1.2", "4", "ok", "", "40001", "40.0", "0.5", "4.3", "27.3", "0.0015", "0"],
+    ["c", "0.5", "4", "unfinished", "cycle not finished by t = 40 s", "40001", "40.0", "0.5", "4.25", "nan",
+     "0.0008", "0"],
+    ["d", "0.8", "4", "failed", "feed: D3 = -1.0: must be >= 0", "", "", "0.1", "", "", "", ""],
+    ["e", "0.9", "4", "timeout", "over the time allowed", "", "", "0.1", "", "", "", ""],
+]
+
+
+def _sweep_figure():
+    from ncfmu.plots import sweep_figure
+    return sweep_figure([dict(zip(HEADER, r)) for r in ROWS], "sweep sw")
+
+
+def test_the_sweep_plot_draws_metrics_only():
+    import matplotlib.pyplot as plt
+    fig = _sweep_figure()
+    assert [ax.get_ylabel() for ax in fig.axes] == ["deepest_x_mm", "cycle_time_s", "max_following_error_mm",
+                                                    "alarms"]                         # no rows, no times of the run
+    assert fig.axes[0].get_title() == "sweep sw: 2 ok, 1 unfinished, 1 failed, 1 timeout"
+    plt.close(fig)
+
+
+def _legend(ax) -> list[str]:
+    return [text.get_text() for text in ax.get_legend().get_texts()]
+
+
+def test_the_sweep_plot_shows_unfinished_nan_and_failed_variants():
+    import matplotlib.pyplot as plt
+    fig = _sweep_figure()
+    deepest, cycle = fig.axes[0], fig.axes[1]
+    lines = {line.get_label(): line for line in cycle.get_lines()}
+    # the cycle time of the unfinished variant is nan: an x at its override, not dropped
+    nan = lines["no value (nan): cycle not finished"]
+    assert list(nan.get_xdata()) == [0.5] and nan.get_marker() == "x"
+    # the ok variants are the line; the unfinished one's deepest point (at the stop time) an open marker
+    assert sorted(lines["feed.D3=4"].get_xdata()) == [1.0, 1.2]
+    open_ = {line.get_label(): line for line in deepest.get_lines()}["unfinished: value at the stop time"]
+    assert list(open_.get_xdata()) == [0.5] and list(open_.get_ydata()) == [4.25] and open_.get_mfc() == "none"
+    # failed and timed-out variants: a marker each at their override, on every panel
+    for ax in fig.axes:
+        marks = {line.get_label(): list(line.get_xdata()) for line in ax.get_lines()}
+        assert marks["failed, no value: feed.D3=4"] == [0.8] and marks["timeout, no value: feed.D3=4"] == [0.9]
+        assert set(_legend(ax)) >= {"feed.D3=4", "failed, no value: feed.D3=4", "timeout, no value: feed.D3=4"}
+    plt.close(fig)
+
+
+def test_plot_sweep_writes_the_png(tmp_path):
+    import csv
+
+    from ncfmu.plots import plot_sweep
+    summary = tmp_path / "sw" / "summary.csv"
+    summary.parent.mkdir()
+    with open(summary, "w", newline="") as f:
+        csv.writer(f).writerows([HEADER, *ROWS])
+    png = plot_sweep(summary, tmp_path / "sw.png")
+    assert png.read_bytes()[:4] == b"\x89PNG" and _longest_blank_band(png) < 0.05
+
+
+# -- the ServoAxis Bode plot ------------------------------------------------------------------------------
+AXES = {"defaults": {}, "stiffer": {"Kv": 60.0, "vel_bandwidth": 800.0, "tau_current": 0.25e-3}}
+
+
+@pytest.mark.parametrize("which", sorted(AXES))
+def test_the_bode_band_and_margins_are_the_designs(which):
+    from ncfmu.servo.bode import bode_design
+    from ncfmu.servo.model import AxisParameters, design
+    p = AxisParameters(**AXES[which])
+    d, bode = design(p), bode_design(p)
+    low, high = bode.band
+    # a decade below the position loop's bandwidth to a decade above the current loop's corner
+    assert low == pytest.approx(d.position_bandwidth / 10) and high == pytest.approx(10 / p.tau_current)
+    velocity, position = bode.loops
+    assert low < d.position_crossover < d.velocity_crossover < high
+    assert velocity.phase_margin == pytest.approx(d.velocity_margin) and \
+        velocity.gain_crossover == pytest.approx(d.velocity_crossover)
+    assert position.phase_margin == pytest.approx(d.position_margin) and \
+        position.gain_crossover == pytest.approx(d.position_crossover)
+    # the velocity loop (PI, current lag, mechanics) tends to -180 deg but never reaches it: an infinite gain
+    # margin, said in words; the position loop (one more integrator) crosses -180 inside the band
+    assert velocity.gain_margin == np.inf and np.isnan(velocity.phase_crossover)
+    assert velocity.gain_margin_text() == "GM infinite (the phase never reaches -180 deg)"
+    assert low < position.phase_crossover < high and 1 < position.gain_margin < np.inf
+
+
+def test_the_bode_figure_draws_the_band_and_the_margins():
+    import matplotlib.pyplot as plt
+
+    from ncfmu.servo.bode import bode_figure
+    from ncfmu.servo.model import design
+    d = design()
+    fig, bode = bode_figure()
+    ax_mag, ax_ph = fig.axes
+    assert ax_ph.get_xlim() == pytest.approx(bode.band)
+    velocity, position = bode.loops
+    curves = [line for line in ax_ph.get_lines() if len(line.get_xdata()) > 2]
+    mags = [line for line in ax_mag.get_lines() if len(line.get_xdata()) > 2]
+    for curve, mag, margins in zip(curves, mags, bode.loops):
+        w, phase = np.asarray(curve.get_xdata()), np.asarray(curve.get_ydata())
+        # no artefact: in the band every loop's phase lies between -270 and -90 deg, its gain within 150 dB
+        assert phase.max() <= -90 + 1e-6 and phase.min() > -270
+        assert np.abs(np.asarray(mag.get_ydata())).max() < 150
+        # the curve drawn crosses 0 dB where the margin is read, with the phase margin the design says
+        assert np.interp(np.log(margins.gain_crossover), np.log(w), phase) == pytest.approx(
+            -180 + margins.phase_margin, abs=0.2)
+    texts = [t.get_text() for t in ax_ph.texts]
+    assert f"PM {d.velocity_margin:.1f}°" in texts and f"PM {d.position_margin:.1f}°" in texts
+    assert [t.get_text() for t in ax_mag.texts if t.get_text().startswith("GM")] == \
+        [f"GM {20 * np.log10(position.gain_margin):.1f} dB"]
+    legend = [t.get_text() for t in ax_mag.get_legend().get_texts()]
+    assert legend == [f"velocity_loop: PM {d.velocity_margin:.1f} deg at {d.velocity_crossover:.1f} rad/s; "
+                      "GM infinite (the phase never reaches -180 deg)",
+                      f"position_loop: PM {d.position_margin:.1f} deg at {d.position_crossover:.1f} rad/s; "
+                      f"GM {20 * np.log10(position.gain_margin):.1f} dB at {position.phase_crossover:.0f} rad/s"]
+    plt.close(fig)
+
+
+def test_the_servo_fmu_documentation_carries_the_band_and_margins(fmus):
+    import zipfile
+
+    from ncfmu.servo.bode import bode_design
+    bode = bode_design()
+    with zipfile.ZipFile(fmus["ServoAxis"]) as z:
+        page = z.read("documentation/index.html").decode()
+        assert z.read("documentation/bode.png")[:4] == b"\x89PNG"
+    assert f"from {bode.band[0]:.1f} to {bode.band[1]:.0f} rad/s" in page
+    assert "<td>velocity loop: gain margin</td><td>infinite (the phase never reaches -180 deg)</td>" in page
+    assert "Gm = inf" not in page and "nan rad/s" not in page
+
+
+@pytest.mark.parametrize("model", ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel",
+                                   "ProgrammableFeed", "ServoAxis"])
+def test_fmu_documentation_shows_names_as_code_not_sphinx_markup(fmus, model):
+    import re
+    import zipfile
+
+    from conftest import ROOT
+    with zipfile.ZipFile(fmus[model]) as z:
+        page = z.read("documentation/index.html").decode()
+    markdown = (ROOT / "docs" / "fmus" / f"{model}.md").read_text()
+    for text in (page, markdown):
+        assert not re.search(r":(func|meth|class|mod|data|attr):`", text)
+        assert "``" not in text.replace("```", "")
+    behaviour = page.split("<pre>", 1)[1].split("</pre>", 1)[0]
+    assert "<code>" in behaviour
+
+
+def test_roles_and_literals_render_as_their_names():
+    from ncfmu.fmi.documentation import _rendered
+    text = "see :func:`~ncfmu.servo.model.servo_axis`, :mod:`.rs274`, :meth:`A.b` and ``x < 1``"
+    assert _rendered(text, str, lambda n: f"[{n}]") == \
+        "see [ncfmu.servo.model.servo_axis()], [rs274], [A.b()] and [x < 1]"
