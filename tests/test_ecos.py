@@ -10,6 +10,7 @@ the parameter-set log line), in a child process with its own working directory (
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import time
@@ -103,10 +104,12 @@ def run_ecos(exe: Path, name: str, stop_time: float, compared: list[str], workdi
     hint = " (ecos needs libtbb.so.12: pip's tbb wheel, a test extra)" if "libtbb" in log else ""
     assert rc == 0, f"ecos on {name}: {why}{hint}; its output ends:\n{log[-3000:]}"
     # ecos goes on (and may exit 0) when an FMU call fails: any warning, error or line that is not
-    # ecos's own log (an FMU's or the C library's stderr) is a failure.
+    # ecos's own log (an FMU's or the C library's stderr) is a failure, and so is an FMU's own error or
+    # warning (ecos logs those at debug level: "[debug] [<fmu>] fmi2Error ...").
     bad = [line for line in log.splitlines()
            if line.strip() and (not line.startswith("[") or any(f"] [{lvl}]" in line for lvl in
-                                                                  ("warn", "warning", "error", "critical")))]
+                                                                  ("warn", "warning", "error", "critical"))
+                                or re.search(r"\] fmi2(Warning|Discard|Error|Fatal) ", line))]
     assert not bad, f"ecos on {name} reported {len(bad)} problem lines, the first:\n" + "\n".join(bad[:5])
     csv = workdir / f"{name}.csv"
     assert csv.is_file(), f"ecos wrote no {csv.name}; its output ends:\n{log[-3000:]}"

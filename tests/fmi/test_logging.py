@@ -106,3 +106,29 @@ def test_warnings_reach_the_logger_without_debug_logging(fmus, model):
     warnings = [m for s, m in host.log if s == 1]
     assert len(warnings) == 1 and "input feed_override = 3.0: outside 0..1.5, clamped to 1.5" in warnings[0]
     host.close()
+
+
+def test_the_native_servo_logs_errors_and_warnings_whatever_the_debug_logging(fmus):
+    """ServoAxis (C, no Python) tells its reasons as the Python FMUs do: a refused parameter and a non-finite
+    command reach the logger with debug logging off; fmi2SetDebugLogging takes the declared categories only."""
+    host = Host(fmus["ServoAxis"], debug_logging=False)
+    with pytest.raises(FMICallException):
+        host.fmu.setReal([host.vr["Kv"]], [float("nan")])
+    assert host.log == [(3, "Kv = nan: must be finite")]
+    host.fmu.setDebugLogging(False, [])
+    host.fmu.exitInitializationMode()
+    host.log.clear()
+    host.steps(3)
+    host.fmu.setReal([host.vr["pos_cmd"]], [float("nan")])
+    host.steps(3)                                                      # said once, not every step
+    assert host.log == [(1, "t = 0.0030 s: pos_cmd = nan is not finite; holding the last command")]
+    host.log.clear()
+    host.fmu.setDebugLogging(True, ["logStatusWarning", "logAll"])
+    with pytest.raises(FMICallException):
+        host.fmu.setDebugLogging(True, ["verbose"])
+    assert len(host.log) == 1 and host.log[0][0] == 3 and "verbose is not a log category" in host.log[0][1]
+    host.close()
+    # the categories it takes are the ones its modelDescription declares (those of the Python FMUs)
+    declared = [c.name for c in read_model_description(str(fmus["ServoAxis"])).logCategories]
+    assert declared == ["logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal", "logAll"]
+    assert declared == [c.name for c in read_model_description(str(fmus["CutSequencer"])).logCategories]

@@ -59,11 +59,15 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
+    h.update(" ".join(SHIM_LINK).encode())             # how the binary is linked is part of what it is
     return h.hexdigest()[:12]
 
 
 C_LAYER = Path(__file__).with_name("c")
 SHIM_SOURCE = C_LAYER / "status_shim.c"
+#: -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts such as
+#: ecos close a library while an instance made through it lives on.
+SHIM_LINK = ("-ldl", "-lm", "-lpthread", "-Wl,-z,nodelete")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
 
 
@@ -94,7 +98,7 @@ def compile_shim(guid: str, module: str, cls: str) -> bytes:
             if shutil.which(cc) is None:
                 continue
             proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-Wall", *defines, f"-I{fmi_headers()}",
-                                   f"-I{C_LAYER}", "-o", str(out), str(SHIM_SOURCE), "-ldl", "-lm", "-lpthread"],
+                                   f"-I{C_LAYER}", "-o", str(out), str(SHIM_SOURCE), *SHIM_LINK],
                                   capture_output=True, text=True)
             if proc.returncode != 0:
                 raise BuildError(f"compiling the FMU's binary (status_shim.c) with {cc} failed: "

@@ -129,6 +129,14 @@ def vars_header(m: NativeModel, guid: str) -> str:
     return "\n".join(lines)
 
 
+def log_categories() -> list[str]:
+    """The log categories fmi2SetDebugLogging takes: FMI2_CATEGORIES of fmi2_machine.h, their one home."""
+    table = re.search(r"FMI2_CATEGORIES\[\][^{]*\{([^}]*)\}", (C_LAYER / "fmi2_machine.h").read_text())
+    if table is None:
+        raise BuildError("fmi2_machine.h: no FMI2_CATEGORIES table")
+    return re.findall(r'"(\w+)"', table.group(1))
+
+
 def model_description(m: NativeModel, guid: str) -> bytes:
     """The modelDescription: variables from the ports (in value-reference order), completed by
     :func:`~ncfmu.fmi.modeldesc.enrich` exactly as the Python FMUs' are."""
@@ -144,6 +152,9 @@ def model_description(m: NativeModel, guid: str) -> bytes:
     files = ET.SubElement(cs, "SourceFiles")
     for name in ("fmi2_native.c", m.model_c.name):
         ET.SubElement(files, "File", name=name)
+    categories = ET.SubElement(root, "LogCategories")          # what fmi2SetDebugLogging takes (fmi2_machine.h)
+    for name in log_categories():
+        ET.SubElement(categories, "Category", name=name)
     ET.SubElement(root, "DefaultExperiment")
     mv = ET.SubElement(root, "ModelVariables")
     for vr, p in enumerate(logic.PORTS):
@@ -160,13 +171,16 @@ def model_description(m: NativeModel, guid: str) -> bytes:
 def build_description(m: NativeModel) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 form, which FMI 2.0 tools that compile sources also read)."""
     files = "\n".join(f'      <SourceFile name="{n}"/>' for n in ("fmi2_native.c", m.model_c.name))
+    how = ("C99; link with -lm -lpthread (and -Wl,-z,nodelete where the linker has it: the binary keeps its live "
+           "instances)")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiBuildDescription fmiVersion="3.0">
-  <BuildConfiguration modelIdentifier="{m.name}" description="C99; link with the math library (-lm)">
+  <BuildConfiguration modelIdentifier="{m.name}" description="{how}">
     <SourceFileSet language="C99">
 {files}
     </SourceFileSet>
     <Library name="m"/>
+    <Library name="pthread"/>
   </BuildConfiguration>
 </fmiBuildDescription>
 """
@@ -265,17 +279,24 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
         (sources / "buildDescription.xml").write_text(build_description(m))
         md = model_description(m, guid)
         (stage / "modelDescription.xml").write_bytes(md)
+        # The model needs no resources, but fmi2Instantiate checks the host's fmuResourceLocation names an
+        # existing folder (as every ncfmu FMU does): the folder is there, with a note of the build.
+        (stage / "resources").mkdir()
+        (stage / "resources" / "build.txt").write_text(f"{m.name} {m.version()}\nGUID {guid}\n")
         (stage / "documentation").mkdir()
         extra = _design_html(m, stage)
         (stage / "documentation" / "index.html").write_bytes(fmu_html(md, m.logic, "its C sources", extra))
         log = Path(tmp) / "cmake.log"
         try:
             # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint).
+            # -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts
+            # such as ecos close the library while an instance made through it lives on.
             (Path(tmp) / "build").mkdir()
             with _output_to(log):
                 build_platform_binary(stage, build_dir=Path(tmp) / "build",
-                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm",
-                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
+                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread",
+                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE",
+                                                     "CMAKE_SHARED_LINKER_FLAGS:STRING": "-Wl,-z,nodelete"})
         except Exception as err:  # fmpy raises CalledProcessError; the compiler's messages are in the log
             tail = log.read_text(errors="replace").strip().splitlines()[-30:] if log.exists() else []
             raise BuildError(f"{m.name}: compiling the native FMU failed: {err}\n" + "\n".join(tail)) from err

@@ -11,6 +11,12 @@
 #define NCFMU_FMI2_MACHINE_H
 
 #include <math.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
 #include "fmi2Functions.h"
 
 /* The states of an instance (FMI 2.0 co-simulation, section 4.2.4), as bits so a call lists the
@@ -99,6 +105,179 @@ static inline int fmi2_utf8_ok(const unsigned char *s)
         }
         if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000)
             || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
+    }
+    return 1;
+}
+
+/* ---- opaque handles ------------------------------------------------------------------------------
+ * A host holds handles, not addresses: an instance or an FMU state is a number never handed out twice in a
+ * process, so a NULL, freed, made-up or foreign handle is recognised and refused with fmi2Error instead of
+ * being dereferenced. A handle is never a valid address either ("NC" in the top bits makes it non-canonical
+ * on 64-bit machines): a host that dereferences one faults at once instead of corrupting memory. The bits
+ * below name the binary (12 bits mixed from where it was loaded: two FMUs in one process differ but for a
+ * 1 in 4096 chance) and count up; when the count (2^32) runs out no new handle is made (the call fails)
+ * rather than an old one reused. The binary is linked with -z nodelete so that a host that closes and
+ * reopens the library keeps the count and the live instances. */
+#define FMI2_HANDLE_NC       ((uint64_t)0x4E43u << 48)
+#define FMI2_HANDLE_INSTANCE ((uint64_t)0x1u << 44)
+#define FMI2_HANDLE_STATE    ((uint64_t)0x2u << 44)
+
+typedef struct { uintptr_t handle; void *object; } Fmi2Entry;
+
+#if defined(__GNUC__)
+#define FMI2_UNUSED __attribute__((unused))     /* a model's file includes this header and uses none of it */
+#else
+#define FMI2_UNUSED
+#endif
+
+/* The live instances of this binary (hosts such as ecos instantiate, step and free on several threads). */
+static struct {
+    pthread_mutex_t lock;
+    Fmi2Entry *live;
+    size_t n, cap;
+    uint32_t made;
+} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0};
+
+/* A new handle of ``kind``; 0 when the count ran out. Called with fmi2_handles.lock held. */
+static inline uintptr_t fmi2_handle_locked(uint64_t kind)
+{
+    if (sizeof(uintptr_t) < 8 || fmi2_handles.made == UINT32_MAX) return 0;
+    uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles;          /* where this binary was loaded, mixed */
+    binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;      /* (splitmix64's finaliser) */
+    binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
+    binary = (binary ^ (binary >> 31)) & 0xFFFu;
+    return (uintptr_t)(FMI2_HANDLE_NC | kind | binary << 32 | ++fmi2_handles.made);
+}
+
+/* A new FMU-state handle; 0 when none can be made. */
+static inline uintptr_t fmi2_state_handle(void)
+{
+    pthread_mutex_lock(&fmi2_handles.lock);
+    uintptr_t h = fmi2_handle_locked(FMI2_HANDLE_STATE);
+    pthread_mutex_unlock(&fmi2_handles.lock);
+    return h;
+}
+
+/* Registers ``object`` as a live instance; its handle, or NULL when none can be made. */
+static inline fmi2Component fmi2_instance_add(void *object)
+{
+    pthread_mutex_lock(&fmi2_handles.lock);
+    uintptr_t h = 0;
+    if (fmi2_handles.n == fmi2_handles.cap) {
+        size_t cap = fmi2_handles.cap ? 2 * fmi2_handles.cap : 8;
+        Fmi2Entry *grown = realloc(fmi2_handles.live, cap * sizeof *grown);
+        if (grown) { fmi2_handles.live = grown; fmi2_handles.cap = cap; }
+    }
+    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0)
+        fmi2_handles.live[fmi2_handles.n++] = (Fmi2Entry){h, object};
+    pthread_mutex_unlock(&fmi2_handles.lock);
+    return (fmi2Component)h;
+}
+
+/* The instance behind ``c``, or NULL (NULL, freed, made-up or another binary's handle). With ``remove``,
+ * it is no longer live: the handle is refused from now on. */
+static inline void *fmi2_instance_find(fmi2Component c, int remove)
+{
+    if (!c) return NULL;
+    void *found = NULL;
+    pthread_mutex_lock(&fmi2_handles.lock);
+    for (size_t k = 0; k < fmi2_handles.n; k++) {
+        if (fmi2_handles.live[k].handle != (uintptr_t)c) continue;
+        found = fmi2_handles.live[k].object;
+        if (remove) fmi2_handles.live[k] = fmi2_handles.live[--fmi2_handles.n];
+        break;
+    }
+    pthread_mutex_unlock(&fmi2_handles.lock);
+    return found;
+}
+
+/* ---- fmi2Instantiate's arguments ---------------------------------------------------------------- */
+/* ``file:`` URI -> path (percent-decoded, no trailing slash); 0 when it is not a file URI or too long. */
+static inline int fmi2_uri_path(const char *uri, char *out, size_t size)
+{
+    const char *p;
+    if (!strncmp(uri, "file:///", 8)) p = uri + 7;
+    else if (!strncmp(uri, "file://localhost/", 17)) p = uri + 16;
+    else if (!strncmp(uri, "file:/", 6)) p = uri + 5;
+    else return 0;
+    size_t n = 0;
+    for (; *p && n + 1 < size; p++) {
+        int hi, lo;
+        if (*p == '%' && sscanf(p + 1, "%1x%1x", &hi, &lo) == 2) {
+            if (hi == 0 && lo == 0) return 0;
+            out[n++] = (char)(hi * 16 + lo);
+            p += 2;
+        } else {
+            out[n++] = *p;
+        }
+    }
+    if (*p) return 0;                                             /* too long */
+    while (n > 1 && out[n - 1] == '/') n--;
+    out[n] = 0;
+    return 1;
+}
+
+/* The checks every ncfmu FMU makes of fmi2Instantiate's arguments: the instance name is UTF-8 text, a
+ * co-simulation instance is asked, the GUID is this build's (``own_guid``), the resources location is a
+ * file: URI of an existing folder (its path goes to ``dir``). 1 when all hold; else one log line (to
+ * the host's logger, if it gave one) and 0: fmi2Instantiate returns NULL. */
+static inline int fmi2_instantiate_ok(const fmi2CallbackFunctions *cb, fmi2String name, fmi2Type type,
+                                      fmi2String guid, const char *own_guid, const char *model, fmi2String res,
+                                      char *dir, size_t dir_size)
+{
+    int name_ok = name && fmi2_utf8_ok((const unsigned char *)name);
+    Fmi2Log early_log = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name_ok ? name : ""};
+    const Fmi2Log *early = &early_log;
+    struct stat st;
+    if (!name_ok) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: instanceName is %s",
+                 name ? "not valid UTF-8 text" : "NULL");
+        return 0;
+    }
+    if (type != fmi2CoSimulation) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: %s is a co-simulation FMU (fmuType = %d "
+                 "asked, fmi2CoSimulation = %d)", model, (int)type, (int)fmi2CoSimulation);
+        return 0;
+    }
+    if (!guid || strcmp(guid, own_guid) != 0) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s is not this FMU's (%s): the "
+                 "modelDescription and the binary are from different builds", guid ? guid : "(NULL)", own_guid);
+        return 0;
+    }
+    if (!res || !fmi2_uri_path(res, dir, dir_size) || stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: fmuResourceLocation %s is not a file: URI "
+                 "of an existing folder (the FMU's resources)", res ? res : "(NULL)");
+        return 0;
+    }
+    return 1;
+}
+
+/* ---- fmi2SetDebugLogging ---------------------------------------------------------------------------- */
+/* The log categories of ncfmu's FMUs (their modelDescriptions list them). Errors and warnings reach the
+ * host's logger whatever the debug-logging setting; the rest only with debug logging on, in the chosen
+ * categories (all when none is named). */
+static const char *const FMI2_CATEGORIES[] FMI2_UNUSED = {"logStatusWarning", "logStatusDiscard", "logStatusError",
+                                              "logStatusFatal", "logAll"};
+#define FMI2_N_CATEGORIES (sizeof FMI2_CATEGORIES / sizeof *FMI2_CATEGORIES)
+
+/* The categories named, as bits (bit k: FMI2_CATEGORIES[k]) in ``mask``; 0 (logged) for an unknown one. */
+static inline int fmi2_categories_ok(const Fmi2Log *log, size_t n, const fmi2String categories[], unsigned *mask)
+{
+    *mask = 0;
+    if (n > 0 && !categories) {
+        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %zu categories, but the array is NULL", n);
+        return 0;
+    }
+    for (size_t k = 0; k < n; k++) {
+        unsigned b = 0;
+        while (b < FMI2_N_CATEGORIES && !(categories[k] && !strcmp(categories[k], FMI2_CATEGORIES[b]))) b++;
+        if (b == FMI2_N_CATEGORIES) {
+            FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %s is not a log category of this "
+                     "FMU (logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll)",
+                     categories[k] && fmi2_utf8_ok((const unsigned char *)categories[k]) ? categories[k] : "(not text)");
+            return 0;
+        }
+        *mask |= 1u << b;
     }
     return 1;
 }

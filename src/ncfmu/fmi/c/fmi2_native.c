@@ -7,6 +7,11 @@
  * output, a fixed parameter after initialisation, a value outside the port's rule: fmi2Error naming
  * the variable, the value and the rule), and the FMU state (plain data, serialized in a versioned
  * format checked against the model and its build). No call reaches fmi2Fatal on bad input.
+ *
+ * Hosts hold opaque handles, not addresses (fmi2_machine.h, as the Python FMUs' binary does): a NULL,
+ * freed, made-up or foreign instance or FMU-state handle is refused with fmi2Error, never dereferenced.
+ * Every message this layer and the model log is an error or a warning: each reaches the host's logger
+ * whatever the debug-logging setting.
  */
 #include <stdint.h>
 #include <stdio.h>
@@ -24,7 +29,7 @@ typedef struct State State;
 
 typedef struct {
     int phase;
-    double last_time;                   /* end of the last successful doStep */
+    double next_time;                   /* where the next step starts: start time, last step's end, restored */
     char name[128];
     Fmi2Log log;
     fmi2CallbackFunctions cb;
@@ -37,10 +42,11 @@ typedef struct {
 #define STATE_MAGIC 0x4e43534du          /* "NCSM": a live state record (never trusted from bytes) */
 struct State {
     uint32_t magic;
+    uintptr_t handle;                   /* what the host holds */
     Instance *owner;
     State *next;
     int phase;
-    double last_time;
+    double next_time;
     double values[NVARS];
     unsigned char model[];              /* model_state_size() bytes */
 };
@@ -60,6 +66,12 @@ static void mem_free(Instance *i, void *p)
 
 #define LOG(i) (&(i)->log)
 
+/* The instance behind a host's handle; NULL for a NULL, freed, made-up or foreign one. */
+static Instance *instance_of(fmi2Component c)
+{
+    return fmi2_instance_find(c, 0);
+}
+
 static void set_defaults(Instance *i)
 {
     for (unsigned vr = 0; vr < NVARS; vr++) i->values[vr] = MODEL_VARS[vr].start;
@@ -68,39 +80,35 @@ static void set_defaults(Instance *i)
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String resources,
                               const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging)
 {
-    (void)resources; (void)visible; (void)logging;
-    Fmi2Log early = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name ? name : ""};
-    if (type != fmi2CoSimulation) {
-        FMI2_SAY(&early, fmi2Error, "error", "fmi2Instantiate: %s is a co-simulation FMU (fmuType = %d asked)",
-                 MODEL_IDENTIFIER, (int)type);
+    (void)visible; (void)logging;
+    char dir[4096];                     /* the model needs nothing from its resources; the location is checked */
+    if (!fmi2_instantiate_ok(cb, name, type, guid, MODEL_GUID, MODEL_IDENTIFIER, resources, dir, sizeof dir))
         return NULL;
-    }
-    if (!guid || strcmp(guid, MODEL_GUID) != 0) {
-        FMI2_SAY(&early, fmi2Error, "error", "fmi2Instantiate: GUID %s is not this FMU's (%s): the "
-                 "modelDescription and the binary are from different builds", guid ? guid : "(null)", MODEL_GUID);
-        return NULL;
-    }
     Instance tmp = {0};
-    if (cb) tmp.cb = *cb;
+    if (cb) tmp.cb = *cb;               /* no callbacks: calloc/free, and nobody to log to */
     Instance *i = mem_alloc(&tmp, sizeof *i);
     if (!i) return NULL;
     *i = tmp;
     i->model = mem_alloc(i, model_state_size());
     i->before = mem_alloc(i, model_state_size());
-    if (!i->model || !i->before) { mem_free(i, i->model); mem_free(i, i->before); mem_free(i, i); return NULL; }
-    snprintf(i->name, sizeof i->name, "%s", name ? name : "");
+    snprintf(i->name, sizeof i->name, "%s", name);
     i->log.logger = i->cb.logger;
     i->log.env = i->cb.componentEnvironment;
     i->log.name = i->name;
     i->phase = P_INSTANTIATED;
     set_defaults(i);
-    return i;
+    fmi2Component handle = i->model && i->before ? fmi2_instance_add(i) : NULL;
+    if (!handle) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2Instantiate: out of memory or of instance handles");
+        mem_free(i, i->model); mem_free(i, i->before); mem_free(i, i);
+    }
+    return handle;
 }
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    Instance *i = c;
-    if (!i) return;
+    Instance *i = fmi2_instance_find(c, 1);
+    if (!i) return;                     /* NULL, freed already, or not ours: nothing to do */
     for (State *s = i->states, *next; s; s = next) {
         next = s->next;
         s->magic = 0;
@@ -115,10 +123,13 @@ void fmi2FreeInstance(fmi2Component c)
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
+/* Only the categories are checked: this FMU logs errors and warnings only, and those always. */
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
 {
-    (void)on; (void)n; (void)categories;
-    return c ? fmi2OK : fmi2Error;
+    Instance *i = instance_of(c);
+    unsigned mask;
+    (void)on;
+    return i && fmi2_categories_ok(LOG(i), n, categories, &mask) ? fmi2OK : fmi2Error;
 }
 
 /* ---- the state machine ------------------------------------------------------------------------ */
@@ -128,17 +139,17 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Real tol, fmi2Real start,
                                fmi2Boolean stop_defined, fmi2Real stop)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     (void)tol_defined; (void)tol;
     ALLOWED(i, "fmi2SetupExperiment", P_SETUP);
     if (!fmi2_experiment_ok(LOG(i), start, stop_defined, stop)) return fmi2Error;
-    i->last_time = start;
+    i->next_time = start;
     return fmi2OK;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2EnterInitializationMode", P_SETUP);
     /* Outputs are initial unknowns: compute them now when the parameters allow (quietly; the
      * parameters may still change, and are judged at fmi2ExitInitializationMode). */
@@ -149,7 +160,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2ExitInitializationMode", P_INIT);
     if (model_init(i->values, i->model, LOG(i)) != 0) return fmi2Error;   /* stays in init: fix and retry */
     i->phase = P_STEP;
@@ -158,7 +169,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 fmi2Status fmi2Terminate(fmi2Component c)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2Terminate", P_STEP);
     i->phase = P_TERMINATED;
     return fmi2OK;
@@ -166,45 +177,41 @@ fmi2Status fmi2Terminate(fmi2Component c)
 
 fmi2Status fmi2Reset(fmi2Component c)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2Reset", P_ANY);
     set_defaults(i);
     memset(i->model, 0, model_state_size());
     i->phase = P_INSTANTIATED;
-    i->last_time = 0.0;
+    i->next_time = 0.0;
     return fmi2OK;
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior_state)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     (void)no_set_prior_state;
     ALLOWED(i, "fmi2DoStep", P_STEP);
-    if (!fmi2_step_ok(LOG(i), t, h)) return fmi2Error;
+    if (!fmi2_step_ok(LOG(i), t, h) || !fmi2_step_ns_ok(LOG(i), h) || !fmi2_continues_ok(LOG(i), i->next_time, t))
+        return fmi2Error;
     /* Tools count time in integer nanoseconds (libcosim) and their conversion to seconds differs in the
      * last bit from step to step; whole nanoseconds make every tool's step equal (as the Python FMUs'
      * adapter does), so the same SSP gives the same trajectories in every host. */
     double step = nearbyint(h * 1e9) * 1e-9;
-    if (!(step > 0.0)) {
-        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
-        return fmi2Error;
-    }
-    h = step;
     double outputs[NVARS];
     memcpy(outputs, i->values, sizeof outputs);
     memcpy(i->before, i->model, model_state_size());
-    if (model_step(i->values, i->model, t, h, LOG(i)) != 0) {
+    if (model_step(i->values, i->model, t, step, LOG(i)) != 0) {
         memcpy(i->model, i->before, model_state_size());   /* the instance stays where it was */
         memcpy(i->values, outputs, sizeof outputs);
         return fmi2Error;
     }
-    i->last_time = t + h;
+    i->next_time = t + h;               /* the host's own arithmetic: its next step starts there */
     return fmi2OK;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2CancelStep", P_STEP);
     FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2CancelStep: steps are synchronous, there is nothing to cancel");
     return fmi2Error;
@@ -260,7 +267,7 @@ static int value_ok(Instance *i, unsigned vr, double x)
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2GetReal", P_GETTABLE);
     if (!refs_ok(i, "fmi2GetReal", vr, n, V_REAL, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]];
@@ -269,7 +276,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2GetInteger", P_GETTABLE);
     if (!refs_ok(i, "fmi2GetInteger", vr, n, V_INTEGER, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = (fmi2Integer)i->values[vr[k]];
@@ -278,7 +285,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2GetBoolean", P_GETTABLE);
     if (!refs_ok(i, "fmi2GetBoolean", vr, n, V_BOOLEAN, 0, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) v[k] = i->values[vr[k]] != 0.0 ? fmi2True : fmi2False;
@@ -287,7 +294,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     (void)v;
     ALLOWED(i, "fmi2GetString", P_GETTABLE);
     if (n == 0) return fmi2OK;
@@ -308,7 +315,7 @@ static void parameters_changed(Instance *i, const fmi2ValueReference vr[], size_
 /* Sets are all-or-nothing: every value is checked before any is stored. */
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SetReal", P_SETTABLE);
     if (!refs_ok(i, "fmi2SetReal", vr, n, V_REAL, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++)
@@ -320,7 +327,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SetInteger", P_SETTABLE);
     if (!refs_ok(i, "fmi2SetInteger", vr, n, V_INTEGER, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++)
@@ -332,7 +339,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SetBoolean", P_SETTABLE);
     if (!refs_ok(i, "fmi2SetBoolean", vr, n, V_BOOLEAN, 1, v)) return fmi2Error;
     for (size_t k = 0; k < n; k++) i->values[vr[k]] = v[k] ? 1.0 : 0.0;
@@ -342,7 +349,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[])
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     (void)v;
     ALLOWED(i, "fmi2SetString", P_SETTABLE);
     if (n == 0) return fmi2OK;
@@ -354,41 +361,62 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* ---- FMU state -------------------------------------------------------------------------------- */
 static size_t state_bytes(void) { return sizeof(State) + model_state_size(); }
 
-/* The state ``s`` if this instance handed it out and it is not freed; else NULL (never dereferenced). */
+/* The state behind handle ``s`` if this instance handed it out and it is not freed; else NULL. */
 static State *live_state(Instance *i, fmi2FMUstate s)
 {
-    for (State *k = i->states; k; k = k->next)
-        if ((void *)k == s) return k;
+    for (State *k = i->states; s && k; k = k->next)
+        if (k->handle == (uintptr_t)s) return k;
     return NULL;
+}
+
+/* ``s`` (just made) becomes one of this instance's live states; 0 (and ``s`` freed) when no handle is left. */
+static int state_add(Instance *i, State *s, const char *call)
+{
+    s->handle = fmi2_state_handle();
+    if (!s->handle) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "%s: no new FMU-state handle can be made", call);
+        mem_free(i, s);
+        return 0;
+    }
+    s->magic = STATE_MAGIC;
+    s->owner = i;
+    s->next = i->states;
+    i->states = s;
+    return 1;
 }
 
 static void capture(Instance *i, State *s)
 {
     s->phase = i->phase;
-    s->last_time = i->last_time;
+    s->next_time = i->next_time;
     memcpy(s->values, i->values, sizeof s->values);
     memcpy(s->model, i->model, model_state_size());
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *out)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2GetFMUstate", P_ANY);
-    if (!out) return fmi2Error;
+    if (!out) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2GetFMUstate: the FMUstate pointer is NULL");
+        return fmi2Error;
+    }
     State *s = *out ? live_state(i, *out) : NULL;       /* FMI: a given state is overwritten */
+    if (*out && !s) {
+        FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2GetFMUstate: %p is not a live FMU state of this instance "
+                 "(freed, of another instance or FMU, or never made)", *out);
+        return fmi2Error;
+    }
     if (!s) {
         s = mem_alloc(i, state_bytes());
         if (!s) {
             FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2GetFMUstate: out of memory");
             return fmi2Error;
         }
-        s->magic = STATE_MAGIC;
-        s->owner = i;
-        s->next = i->states;
-        i->states = s;
+        if (!state_add(i, s, "fmi2GetFMUstate")) return fmi2Error;
     }
     capture(i, s);
-    *out = s;
+    *out = (fmi2FMUstate)s->handle;
     return fmi2OK;
 }
 
@@ -422,15 +450,15 @@ static fmi2Status restore(Instance *i, const State *s, const char *call)
     }
     mem_free(i, saved);
     i->phase = s->phase;
-    i->last_time = s->last_time;
+    i->next_time = s->next_time;        /* steps go on from the state's time */
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SetFMUstate", P_ANY);
-    State *s = state ? live_state(i, state) : NULL;
+    State *s = live_state(i, state);
     if (!s) {
         FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SetFMUstate: %p is not a live FMU state of this instance "
                  "(freed, of another instance or FMU, or never made)", state);
@@ -441,11 +469,11 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     if (!i) return fmi2Error;
     if (!state || !*state) return fmi2OK;
     for (State **p = &i->states; *p; p = &(*p)->next) {
-        if ((void *)*p == *state) {
+        if ((*p)->handle == (uintptr_t)*state) {
             State *s = *p;
             *p = s->next;
             s->magic = 0;
@@ -461,7 +489,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 
 /* The serialized form: a header that names the format, the model and its build, then the plain data.
  *   "NCFMU-FMUSTATE-1\0" | model identifier [32] | build [64] | u32 nvars | u32 model bytes |
- *   i32 phase | f64 last time | f64 values[nvars] | model state bytes                          */
+ *   i32 phase | f64 time (where its steps go on) | f64 values[nvars] | model state bytes        */
 #define SER_MAGIC "NCFMU-FMUSTATE-1"
 typedef struct {
     char magic[17];
@@ -469,7 +497,7 @@ typedef struct {
     char build[64];
     uint32_t nvars, model_bytes;
     int32_t phase;
-    double last_time;
+    double time;
 } SerHeader;
 
 static size_t ser_size(void) { return sizeof(SerHeader) + NVARS * sizeof(double) + model_state_size(); }
@@ -486,7 +514,7 @@ static void ser_header(SerHeader *h)
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SerializedFMUstateSize", P_ANY);
     if (!size || !live_state(i, state)) {
         FMI2_SAY(LOG(i), fmi2Error, "error", "fmi2SerializedFMUstateSize: %p is not a live FMU state of this "
@@ -499,7 +527,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2SerializeFMUstate", P_ANY);
     State *s = live_state(i, state);
     if (!s || !bytes || size < ser_size()) {
@@ -510,7 +538,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
     SerHeader h;
     ser_header(&h);
     h.phase = s->phase;
-    h.last_time = s->last_time;
+    h.time = s->next_time;
     memcpy(bytes, &h, sizeof h);
     memcpy(bytes + sizeof h, s->values, NVARS * sizeof(double));
     memcpy(bytes + sizeof h + NVARS * sizeof(double), s->model, model_state_size());
@@ -519,7 +547,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *out)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     ALLOWED(i, "fmi2DeSerializeFMUstate", P_ANY);
     if (!out) return fmi2Error;
     const char *why = NULL;
@@ -534,7 +562,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
         else if (h.nvars != want.nvars || h.model_bytes != want.model_bytes || size != ser_size())
             why = "its size does not match this build";
         else if (!(h.phase == P_INSTANTIATED || h.phase == P_INIT || h.phase == P_STEP || h.phase == P_TERMINATED)
-                 || !isfinite(h.last_time))
+                 || !isfinite(h.time))
             why = "its FMI state is not one a state is taken in";
     }
     State *s = NULL;
@@ -546,7 +574,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
         memcpy(s->values, bytes + sizeof h, NVARS * sizeof(double));
         memcpy(s->model, bytes + sizeof h + NVARS * sizeof(double), model_state_size());
         s->phase = h.phase;
-        s->last_time = h.last_time;
+        s->next_time = h.time;
         for (unsigned vr = 0; vr < NVARS && !why; vr++) {
             double x = s->values[vr];
             const VarInfo *v = &MODEL_VARS[vr];
@@ -578,18 +606,15 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
         *out = NULL;
         return fmi2Error;
     }
-    s->magic = STATE_MAGIC;
-    s->owner = i;
-    s->next = i->states;
-    i->states = s;
-    *out = s;
+    if (!state_add(i, s, "fmi2DeSerializeFMUstate")) { *out = NULL; return fmi2Error; }
+    *out = (fmi2FMUstate)s->handle;
     return fmi2OK;
 }
 
 /* ---- what this FMU does not offer: refused with a reason, never Fatal --------------------------- */
 static fmi2Status not_offered(fmi2Component c, const char *call, const char *why)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);       /* NULL for a bad handle: nobody to tell */
     if (i) FMI2_SAY(LOG(i), fmi2Error, "error", "%s: %s", call, why);
     return fmi2Error;
 }
@@ -617,14 +642,14 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v)
 {
-    Instance *i = c;
-    if (i && k == fmi2LastSuccessfulTime && v) { *v = i->last_time; return fmi2OK; }
+    Instance *i = instance_of(c);
+    if (i && k == fmi2LastSuccessfulTime && v) { *v = i->next_time; return fmi2OK; }
     return not_offered(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime is available");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v)
 {
-    Instance *i = c;
+    Instance *i = instance_of(c);
     if (i && k == fmi2Terminated && v) { *v = fmi2False; return fmi2OK; }
     return not_offered(c, "fmi2GetBooleanStatus", "only fmi2Terminated is available");
 }

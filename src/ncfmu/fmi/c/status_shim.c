@@ -9,9 +9,9 @@
  * and warnings always, the rest only with debug logging on. pythonfmu provides the Python slave API
  * (Fmi2Slave) and the packaging; its export library is not used.
  *
- * Hosts hold opaque handles, not addresses: an instance or an FMU state handle is a number never
- * handed out twice in a process, so a NULL, freed, made-up or foreign handle is recognised and
- * refused with fmi2Error (a second fmi2FreeInstance of the same handle does nothing).
+ * Hosts hold opaque handles, not addresses (fmi2_machine.h): a NULL, freed, made-up or foreign instance
+ * or FMU-state handle is recognised and refused with fmi2Error (a second fmi2FreeInstance of the same
+ * handle does nothing).
  *
  * Built per FMU by ncfmu.fmi.builder with -DNCFMU_GUID, -DNCFMU_MODULE (the model script's module in
  * resources/) and -DNCFMU_CLASS (its slave class, the model identifier).
@@ -205,11 +205,7 @@ static int names_ready(void)
     return 1;
 }
 
-/* ---- instances and FMU states: opaque handles, never reused ---------------------------------------
- * A handle is a number tagged high in the address space (never a valid address, so a host that
- * dereferences one faults at once instead of corrupting memory), counted up, never handed out twice. */
-#define INSTANCE_TAG ((uintptr_t)0x4E43460000000000ull)
-#define STATE_TAG    ((uintptr_t)0x4E43530000000000ull)
+/* ---- instances and FMU states: opaque handles of fmi2_machine.h, never reused ---------------------- */
 
 typedef struct {
     uintptr_t handle;
@@ -218,7 +214,6 @@ typedef struct {
 } State;
 
 typedef struct Inst {
-    uintptr_t handle;
     int phase;
     double next_time;                     /* where the next step must start: start time, last step's end, restored */
     char name[128];
@@ -226,7 +221,7 @@ typedef struct Inst {
     char resources[4096];                 /* the resources folder, for fmi2Reset's new slave */
     int visible;
     int debug;                            /* debug logging on: info messages reach the logger too */
-    unsigned categories;                  /* with debug on: which categories (bit k: CATEGORIES[k]); all if 0 */
+    unsigned categories;                  /* with debug on: which categories (bit k: FMI2_CATEGORIES[k]); all if 0 */
     PyObject *slave, *inputs;
     unsigned n;                           /* value references 0 .. n-1 */
     PyObject **port_name;                 /* by value reference: the variable's name (NULL: none) */
@@ -234,27 +229,11 @@ typedef struct Inst {
     PyObject *strings;                    /* the last fmi2GetString's values, kept alive until the next */
     State *states;
     size_t n_states, cap_states;
-    struct Inst *next;
 } Inst;
-
-static Inst *instances = NULL;
-/* Hosts such as ecos instantiate, step and free instances on several threads at once. */
-static pthread_mutex_t instances_lock = PTHREAD_MUTEX_INITIALIZER;
-static uintptr_t handles_made = 0;        /* under instances_lock */
-
-static const char *const CATEGORIES[] = {"logStatusWarning", "logStatusDiscard", "logStatusError",
-                                         "logStatusFatal", "logAll"};
-#define N_CATEGORIES (sizeof CATEGORIES / sizeof *CATEGORIES)
 
 static Inst *inst_find(fmi2Component c)
 {
-    if (!c) return NULL;
-    pthread_mutex_lock(&instances_lock);
-    Inst *found = NULL;
-    for (Inst *i = instances; i; i = i->next)
-        if (i->handle == (uintptr_t)c) { found = i; break; }
-    pthread_mutex_unlock(&instances_lock);
-    return found;
+    return fmi2_instance_find(c, 0);
 }
 
 /* The instance behind ``c`` when ``call`` is allowed in its phase; else NULL (and fmi2Error). A NULL,
@@ -286,8 +265,8 @@ static void flush_log(Inst *i)
         int shown = status >= fmi2Warning;
         if (!shown && i->debug) {
             shown = i->categories == 0;
-            for (unsigned b = 0; !shown && b < N_CATEGORIES; b++)
-                shown = (i->categories & (1u << b)) && c_s && !strcmp(c_s, CATEGORIES[b]);
+            for (unsigned b = 0; !shown && b < FMI2_N_CATEGORIES; b++)
+                shown = (i->categories & (1u << b)) && c_s && !strcmp(c_s, FMI2_CATEGORIES[b]);
         }
         if (shown && t_s)
             FMI2_SAY(&i->log, status < fmi2OK || status > fmi2Fatal ? fmi2Error : (fmi2Status)status,
@@ -418,31 +397,6 @@ static int slave_make(Inst *i)
     return 1;
 }
 
-/* ``file:`` URI -> path (percent-decoded); 0 when it is not a file URI. */
-static int uri_path(const char *uri, char *out, size_t size)
-{
-    const char *p;
-    if (!strncmp(uri, "file:///", 8)) p = uri + 7;
-    else if (!strncmp(uri, "file://localhost/", 17)) p = uri + 16;
-    else if (!strncmp(uri, "file:/", 6)) p = uri + 5;
-    else return 0;
-    size_t n = 0;
-    for (; *p && n + 1 < size; p++) {
-        int hi, lo;
-        if (*p == '%' && sscanf(p + 1, "%1x%1x", &hi, &lo) == 2) {
-            if (hi == 0 && lo == 0) return 0;
-            out[n++] = (char)(hi * 16 + lo);
-            p += 2;
-        } else {
-            out[n++] = *p;
-        }
-    }
-    if (*p) return 0;                                             /* too long */
-    while (n > 1 && out[n - 1] == '/') n--;
-    out[n] = 0;
-    return 1;
-}
-
 static int binary_ready(void)
 {
     static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
@@ -460,31 +414,10 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
                               const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging)
 {
-    int name_ok = name && fmi2_utf8_ok((const unsigned char *)name);
-    Fmi2Log early_log = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name_ok ? name : ""};
-    const Fmi2Log *early = &early_log;
     char dir[4096];
-    struct stat st;
-    if (!name_ok) {
-        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: instanceName is %s",
-                 name ? "not valid UTF-8 text" : "NULL");
-        return NULL;
-    }
-    if (type != fmi2CoSimulation) {
-        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: %s is a co-simulation FMU (fmuType = %d "
-                 "asked, fmi2CoSimulation = %d)", NCFMU_CLASS, (int)type, (int)fmi2CoSimulation);
-        return NULL;
-    }
-    if (!guid || strcmp(guid, NCFMU_GUID) != 0) {
-        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s is not this FMU's (%s): the "
-                 "modelDescription and the binary are from different builds", guid ? guid : "(NULL)", NCFMU_GUID);
-        return NULL;
-    }
-    if (!res || !uri_path(res, dir, sizeof dir) || stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
-        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: fmuResourceLocation %s is not a file: URI of "
-                 "an existing folder (the FMU's resources)", res ? res : "(NULL)");
-        return NULL;
-    }
+    if (!fmi2_instantiate_ok(cb, name, type, guid, NCFMU_GUID, NCFMU_CLASS, res, dir, sizeof dir)) return NULL;
+    Fmi2Log early_log = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name};
+    const Fmi2Log *early = &early_log;
     if (!binary_ready()) {
         FMI2_SAY(early, fmi2Error, "logStatusError", "%s",
                  python_problem[0] ? python_problem : "ncfmu: the Python runtime's API could not be found");
@@ -502,13 +435,15 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     int made = names_ready() && slave_make(i);
     if (made) flush_log(i);
     py.GILRelease(g);
-    if (!made) { free(i); return NULL; }
-    pthread_mutex_lock(&instances_lock);
-    i->handle = INSTANCE_TAG + (++handles_made << 4);
-    i->next = instances;
-    instances = i;
-    pthread_mutex_unlock(&instances_lock);
-    return (fmi2Component)i->handle;
+    fmi2Component handle = made ? fmi2_instance_add(i) : NULL;
+    if (made && !handle) {
+        FMI2_SAY(early, fmi2Error, "logStatusError", "fmi2Instantiate: no new instance handle can be made");
+        g = py.GILEnsure();
+        slave_drop(i);
+        py.GILRelease(g);
+    }
+    if (!handle) free(i);
+    return handle;
 }
 
 static void states_drop(Inst *i)
@@ -521,11 +456,7 @@ static void states_drop(Inst *i)
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    pthread_mutex_lock(&instances_lock);
-    Inst *i = NULL;
-    for (Inst **p = &instances; c && *p; p = &(*p)->next)
-        if ((*p)->handle == (uintptr_t)c) { i = *p; *p = i->next; break; }
-    pthread_mutex_unlock(&instances_lock);
+    Inst *i = fmi2_instance_find(c, 1);
     if (!i) return;                       /* NULL, freed already, or not ours: nothing to do */
     PyGILState_STATE g = py.GILEnsure();
     flush_log(i);
@@ -555,22 +486,8 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
 {
     Inst *i = checked(c, "fmi2SetDebugLogging", P_ANY);
     if (!i) return fmi2Error;
-    unsigned mask = 0;
-    if (n > 0 && !categories) {
-        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %zu categories, but the array is NULL", n);
-        return fmi2Error;
-    }
-    for (size_t k = 0; k < n; k++) {
-        unsigned b = 0;
-        while (b < N_CATEGORIES && !(categories[k] && !strcmp(categories[k], CATEGORIES[b]))) b++;
-        if (b == N_CATEGORIES) {
-            FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %s is not a log category of this "
-                     "FMU (logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll)",
-                     categories[k] && fmi2_utf8_ok((const unsigned char *)categories[k]) ? categories[k] : "(not text)");
-            return fmi2Error;
-        }
-        mask |= 1u << b;
-    }
+    unsigned mask;
+    if (!fmi2_categories_ok(&i->log, n, categories, &mask)) return fmi2Error;
     i->debug = on != fmi2False;
     i->categories = mask;
     return fmi2OK;
@@ -870,9 +787,12 @@ static fmi2FMUstate state_add(Inst *i, PyObject *object, double time)
         i->states = grown;
         i->cap_states = cap;
     }
-    pthread_mutex_lock(&instances_lock);
-    uintptr_t handle = STATE_TAG + (++handles_made << 4);
-    pthread_mutex_unlock(&instances_lock);
+    uintptr_t handle = fmi2_state_handle();
+    if (!handle) {
+        FMI2_SAY(&i->log, fmi2Error, "logStatusError", "no new FMU-state handle can be made");
+        py_drop(object);
+        return NULL;
+    }
     i->states[i->n_states++] = (State){handle, object, time};
     return (fmi2FMUstate)handle;
 }
