@@ -73,6 +73,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
     completed) and the summary computed as the run goes; only ``--plot`` keeps the trajectory in memory.
     Prints the summary; returns the result and where its CSV is."""
+    import math
     import signal
 
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
@@ -88,7 +89,13 @@ def _run_streamed(args, start_values: dict[str, object]):
         inst, _, var = qualified.partition(".")
         parameters.setdefault(inst, {})[var] = value
     record = None if args.record is None else list(dict.fromkeys(args.record))
-    csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv")
+    step = system.step_size if args.step is None else args.step
+    stop = system.stop_time if args.stop_time is None else args.stop_time
+    rows = None
+    if step > 0 and math.isfinite(stop / step):
+        rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+    csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
+                       run=f"stop time {stop:g} s at a step of {step:g} s")
     accumulator = None
     sinks: list[RecordSink]
     interval = args.output_interval
@@ -99,7 +106,7 @@ def _run_streamed(args, start_values: dict[str, object]):
         accumulator = _Summary(report, parameters)
         run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
         csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
-        every = steps_per_row(interval, system.step_size if args.step is None else args.step)
+        every = steps_per_row(interval, step)
         sinks = [csv_view if every == 1 else EveryKth(csv_view, every), accumulator]
         interval = None
     try:

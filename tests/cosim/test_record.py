@@ -126,3 +126,14 @@ def test_only_what_is_kept_in_memory_is_refused(project):
         session = opened.master.open_session(stop_time=100000)          # keeps nothing: no refusal
         session.advance(10)
         assert session.close().end_time == pytest.approx(0.01)
+
+
+def test_a_csv_that_cannot_fit_on_the_disk_is_refused_before_the_run(project, tmp_path):
+    """Streaming lifts the memory limit, not every limit: a billion seconds would not fit on any disk."""
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--out", str(tmp_path)]) == 0   # fits
+    with pytest.raises(SystemDefinitionError, match=r"stop time 1e\+09 s at a step of 0.001 s: 1000000000001 rows "
+                                                    r"of 38 columns: the CSV may need up to .* GiB free"):
+        simulate("lathe_taper", stop_time=1e9, keep=False,
+                 sinks=[CsvSink(tmp_path / "huge.csv", expected_rows=10 ** 12 + 1,
+                                run="stop time 1e+09 s at a step of 0.001 s")])
+    assert not (tmp_path / "huge.csv").exists() and not (tmp_path / "huge.csv.partial").exists()

@@ -15,6 +15,7 @@ half-way. :attr:`CsvSink.final_path` says which of the two holds the rows after 
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import BinaryIO, Protocol, runtime_checkable
 
@@ -103,8 +104,15 @@ class CsvSink:
     run completed, and leaves it as ``PATH.partial`` (a valid CSV of every row written) when it did not.
     """
 
-    def __init__(self, path: Path | str) -> None:
+    #: Bytes a value of each column dtype takes in the CSV at most (a float's repr, a sign, the comma).
+    WIDTH = {"f": 25, "i": 12, "b": 2}
+
+    def __init__(self, path: Path | str, expected_rows: int | None = None, run: str = "") -> None:
+        """``expected_rows``: when given, :meth:`open` refuses a run whose CSV could not fit in the free space of
+        the folder (a stop time of a billion seconds is a mistake, not a run); ``run`` names it in the message."""
         self.path = Path(path)
+        self.expected_rows = expected_rows
+        self.run = run
         self.partial = self.path.with_name(self.path.name + ".partial")
         self.final_path: Path | None = None
         self.rows = 0
@@ -113,6 +121,16 @@ class CsvSink:
 
     def open(self, columns: list[tuple[str, np.dtype]]) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.expected_rows is not None:
+            row = sum(self.WIDTH.get(np.dtype(dtype).kind, 25) for _, dtype in columns)
+            need = self.expected_rows * row
+            free = shutil.disk_usage(self.path.parent).free
+            if need > free:
+                label = f"{self.run}: " if self.run else ""
+                raise SystemDefinitionError(
+                    f"{label}{self.expected_rows} rows of {len(columns)} columns: the CSV may need up to "
+                    f"{need / 2 ** 30:.3g} GiB and {self.path.parent} has {free / 2 ** 30:.3g} GiB free: shorten the "
+                    "run, record fewer variables or write fewer rows (a longer output interval)")
         self._file = open(self.partial, "wb")
         self._file.write(csv_header([name for name, _ in columns]))
         self.rows = 0
