@@ -789,6 +789,14 @@ class Session:
     :meth:`reset` ends the recording: the sinks are closed (complete, reason ``reset``) and the session
     starts again at its start time recording into the sinks given to ``reset`` (none by default), with
     :attr:`writes` emptied.
+
+    Details the agreed interface left open: ``open_session(stop_time=None)`` is the system's stop time and
+    ``math.inf`` runs until closed (then ``keep`` must be False: ``keep=True`` holds the rows for the Result);
+    :meth:`close` always returns a Result (rows only when kept); releasing what is not forced does nothing and
+    is not logged; an input nothing drives (no connection, no input-CSV column) is forced by setting it in the
+    FMU directly and released by setting its start value again; a forced value is checked against the
+    modelDescription's type and min/max (a list of allowed values is not in a modelDescription: the FMU refuses
+    such a value at its next step, a SimulationError).
     """
 
     def __init__(self, master: Master, run: _Run, sinks: list[RecordSink], keep: bool,
