@@ -53,6 +53,7 @@ import numpy as np
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems import report_for
+from .systems.report import start_parameters
 
 if TYPE_CHECKING:
     from .project import OpenSystem
@@ -83,39 +84,6 @@ def _cached_archive(digest: str, data: bytes) -> Path:
     return path
 
 
-class EveryKth:
-    """A recording sink passing on to ``sink`` only the columns ``names`` (after ``time``) of every
-    ``every``-th row of the run, the start row first -- while the run feeds every row to the others (the
-    metrics read every step)."""
-
-    def __init__(self, sink, names: Sequence[str], every: int) -> None:
-        self.sink, self.names, self.every = sink, ["time", *names], every
-        self.seen = 0                 # rows of the run so far
-
-    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
-        dtypes = dict(columns)
-        self.sink.open([(n, dtypes[n]) for n in self.names])
-        self.seen = 0
-
-    def write(self, rows: np.ndarray) -> None:
-        picked = rows[self.names][(-self.seen) % self.every::self.every]
-        self.seen += len(rows)
-        if len(picked):
-            self.sink.write(picked)
-
-    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
-        self.sink.close(complete, stopped_at, reason)
-
-
-def _parameters(components, variant: Mapping[str, object]) -> dict[str, dict[str, object]]:
-    """The parameters a variant's run applies: the system's parameter sets, the variant's values on top."""
-    applied: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in components}
-    for qualified, value in variant.items():
-        instance, _, name = qualified.partition(".")
-        applied.setdefault(instance, {})[name] = value
-    return applied
-
-
 def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_time: float | None,
                 record: Sequence[str] | None, every: int, timeout: float | None) -> dict:
     """Run one variant in this process; never raises.
@@ -124,7 +92,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
     client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
-    from .cosim.record import CsvSink
+    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
     from .project import OpenSystem
     t0 = time.perf_counter()
     row: dict[str, object] = {}
@@ -142,11 +110,13 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         keep = list(record) if record is not None else report.record()
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
-        metrics = report.accumulator(_parameters(system.components, variant))
+        metrics = report.accumulator(start_parameters(system.components, variant))
+        # the metrics read every step of what the report needs; the file gets the kept columns every k-th row
+        kept: RecordSink = SelectColumns(csv, keep)
         deadline = None if timeout is None else time.perf_counter() + timeout
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
                    record=list(dict.fromkeys([*keep, *report.record()])),
-                   sinks=[EveryKth(csv, keep, every), metrics])
+                   sinks=[kept if every == 1 else EveryKth(kept, every), metrics])
         row.update(status="ok", error="")
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant

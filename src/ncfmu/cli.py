@@ -79,13 +79,11 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.ssp import read_ssp
     from .project import simulate, system_archive
     from .systems import report_for
+    from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
     report = report_for(system.name, {c.name: c.model for c in system.components})
-    parameters: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in system.components}
-    for qualified, value in start_values.items():
-        inst, _, var = qualified.partition(".")
-        parameters.setdefault(inst, {})[var] = value
+    parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))
     csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv")
     accumulator = None

@@ -30,6 +30,17 @@ from ..ports import to_float, to_int
 Parameters = Mapping[str, Mapping[str, object]]      # instance -> parameter -> value
 
 
+def start_parameters(components, start_values: Mapping[str, object]) -> dict[str, dict[str, object]]:
+    """The parameters a run applies, known before it starts: each component's parameter set (``components``
+    of a System) with the run's start values (``INSTANCE.VARIABLE`` -> value) on top -- what the run's
+    Result.parameters will say, for an accumulator that must know them from the first row."""
+    applied: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in components}
+    for qualified, value in start_values.items():
+        instance, _, name = qualified.partition(".")
+        applied.setdefault(instance, {})[name] = value
+    return applied
+
+
 class FirstTime:
     """The time of the first row at which a flag is set (NaN until it is), over chunks of rows."""
 
