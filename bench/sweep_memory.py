@@ -7,6 +7,10 @@ read every 1 ms step). Each duration runs in a fresh process (peak RSS only grow
 cluster, runs the sweep through it and then reads every worker's peak RSS (``getrusage`` ``ru_maxrss``, in the
 worker) and its own. Printed: wall time, client and worker peak RSS, and their growth from the shortest to the
 longest duration -- flat memory means the growth stays a few MB while the variants get 6x longer.
+
+Side by side (``--in-memory-durations``, default 600 and 1800): the same sweep as the workers ran variants
+before they streamed -- the whole run kept in memory (every output, every step), the kept columns formatted
+as CSV bytes on the worker and sent back in the answer, written by the client.
 """
 
 from __future__ import annotations
@@ -28,7 +32,31 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def one(system: str, duration: float, variants: int, workers: int, output_interval: float) -> dict:
+def in_memory_variant(ssp: bytes, digest: str, variant: dict, stop_time: float, every: int) -> dict:
+    """A variant as sweep workers ran it before they streamed (kept here as the baseline)."""
+    import time as _time
+
+    from ncfmu.batch import _OPEN, _cached_archive
+    from ncfmu.cosim.result import csv_bytes
+    from ncfmu.project import OpenSystem
+    from ncfmu.systems import report_of
+    t0 = _time.perf_counter()
+    opened = _OPEN.get(digest)
+    if opened is None:
+        opened = _OPEN[digest] = OpenSystem(_cached_archive(digest, ssp))
+    else:
+        for slave in opened.slaves:
+            slave.reset()
+    result = opened.run(stop_time=stop_time, start_values=dict(variant))
+    report = report_of(result)
+    kept = result.data[["time", *report.record()]][::every]
+    row = {"status": "ok", "rows": len(kept), **report.metrics(result, result.parameters),
+           "wall_time": _time.perf_counter() - t0}
+    return {"row": row, "trajectory": csv_bytes(kept)}
+
+
+def one(system: str, duration: float, variants: int, workers: int, output_interval: float,
+        in_memory: bool = False) -> dict:
     from dask.distributed import Client, LocalCluster
 
     from ncfmu.batch import sweep
@@ -39,8 +67,11 @@ def one(system: str, duration: float, variants: int, workers: int, output_interv
             Client(cluster) as client, tempfile.TemporaryDirectory() as tmp:
         before = {"client": peak_rss_mb(), "workers": list(client.run(peak_rss_mb).values())}
         t0 = time.perf_counter()
-        rows = sweep(system, {"feed.D3": values}, Path(tmp), scheduler=cluster.scheduler_address,
-                     stop_time=duration, output_interval=output_interval, progress=False)
+        if in_memory:
+            rows = in_memory_sweep(client, system, values, Path(tmp), duration, output_interval)
+        else:
+            rows = sweep(system, {"feed.D3": values}, Path(tmp), scheduler=cluster.scheduler_address,
+                         stop_time=duration, output_interval=output_interval, progress=False)
         wall = time.perf_counter() - t0
         workers_peak = list(client.run(peak_rss_mb).values())
         files = sorted((Path(tmp) / "variants").glob("*.csv"))
@@ -48,13 +79,39 @@ def one(system: str, duration: float, variants: int, workers: int, output_interv
     bad = [r for r in rows if r["status"] != "ok"]
     if bad:
         raise SystemExit(f"variants failed: {bad}")
-    return {"duration_s": duration, "variants": variants, "workers": workers, "wall_s": round(wall, 2),
+    return {"mode": "in memory (before)" if in_memory else "streamed", "duration_s": duration,
+            "variants": variants, "workers": workers, "wall_s": round(wall, 2),
             "steps_per_variant": int(round(duration / 1e-3)),
             "rows_per_variant": int(rows[0]["rows"]), "csv_mb_per_variant": round(size / len(files) / 2 ** 20, 2),
             "client_peak_mb": round(peak_rss_mb(), 1), "client_before_mb": round(before["client"], 1),
             "worker_peak_mb": [round(w, 1) for w in workers_peak],
             "worker_before_mb": [round(w, 1) for w in before["workers"]],
             "deepest_x_mm": [float(r["deepest_x_mm"]) for r in rows]}
+
+
+def in_memory_sweep(client, system: str, values: list[float], out: Path, duration: float,
+                    output_interval: float) -> list[dict]:
+    import hashlib
+
+    from dask.distributed import as_completed
+
+    from ncfmu.files import write_atomic
+    from ncfmu.project import system_archive
+    data = system_archive(system).read_bytes()
+    digest = hashlib.sha256(data).hexdigest()
+    shipped = client.scatter(data, broadcast=True, hash=False)
+    (out / "variants").mkdir(parents=True, exist_ok=True)
+    every = int(round(output_interval / 1e-3))
+    futures = {client.submit(in_memory_variant, shipped, digest, {"feed.D3": v}, duration, every, pure=False): v
+               for v in values}
+    rows = []
+    for future in as_completed(futures):
+        answer = future.result()
+        write_atomic(out / "variants" / f"{futures[future]}.csv", answer["trajectory"])
+        rows.append(answer["row"])
+        del answer
+        future.release()
+    return rows
 
 
 def main() -> None:
@@ -64,21 +121,25 @@ def main() -> None:
     ap.add_argument("--variants", type=int, default=4)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--output-interval", type=float, default=0.1)
+    ap.add_argument("--in-memory-durations", type=float, nargs="*", default=[600.0, 1800.0])
     ap.add_argument("--json", type=Path)
     ap.add_argument("--one", type=float, help=argparse.SUPPRESS)       # one duration, in this process
+    ap.add_argument("--in-memory", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one is not None:
-        print(json.dumps(one(args.system, args.one, args.variants, args.workers, args.output_interval)))
+        print(json.dumps(one(args.system, args.one, args.variants, args.workers, args.output_interval,
+                             args.in_memory)))
         return
-    results = []
-    for duration in args.durations:
+    results, baseline = [], []
+    runs = [(d, False) for d in args.durations] + [(d, True) for d in args.in_memory_durations]
+    for duration, in_memory in runs:
         out = subprocess.run([sys.executable, __file__, "--one", str(duration), "--system", args.system,
                               "--variants", str(args.variants), "--workers", str(args.workers),
-                              "--output-interval", str(args.output_interval)],
+                              "--output-interval", str(args.output_interval), *(["--in-memory"] * in_memory)],
                              capture_output=True, text=True, check=True)
         r = json.loads(out.stdout.strip().splitlines()[-1])
-        results.append(r)
-        print(f"{duration / 60:6.1f} min x {r['variants']} variants on {r['workers']} workers: "
+        (baseline if in_memory else results).append(r)
+        print(f"{r['mode']:>18}: {duration / 60:5.1f} min x {r['variants']} variants on {r['workers']} workers: "
               f"wall {r['wall_s']:7.1f} s "
               f"({r['wall_s'] * r['workers'] / r['variants'] / r['steps_per_variant'] * 1e6:.1f} us a step per "
               f"worker); client peak {r['client_peak_mb']:.0f} MB; worker peaks "
@@ -87,10 +148,16 @@ def main() -> None:
     first, last = results[0], results[-1]
     growth = {"client_mb": round(last["client_peak_mb"] - first["client_peak_mb"], 1),
               "worker_mb": round(max(last["worker_peak_mb"]) - max(first["worker_peak_mb"]), 1)}
-    print(f"growth {first['duration_s'] / 60:g} min -> {last['duration_s'] / 60:g} min variants: "
+    print(f"streamed growth {first['duration_s'] / 60:g} min -> {last['duration_s'] / 60:g} min variants: "
           f"client {growth['client_mb']:+.1f} MB, largest worker {growth['worker_mb']:+.1f} MB")
+    if len(baseline) > 1:
+        b0, b1 = baseline[0], baseline[-1]
+        print(f"in memory (before) growth {b0['duration_s'] / 60:g} min -> {b1['duration_s'] / 60:g} min variants: "
+              f"client {b1['client_peak_mb'] - b0['client_peak_mb']:+.1f} MB, largest worker "
+              f"{max(b1['worker_peak_mb']) - max(b0['worker_peak_mb']):+.1f} MB")
     if args.json:
-        args.json.write_text(json.dumps({"runs": results, "growth": growth}, indent=2) + "\n")
+        args.json.write_text(json.dumps({"runs": results, "in_memory_runs": baseline, "growth": growth},
+                                        indent=2) + "\n")
 
 
 if __name__ == "__main__":

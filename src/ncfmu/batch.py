@@ -61,7 +61,7 @@ if TYPE_CHECKING:
 SUMMARY = "summary.csv"
 STATUSES = ("ok", "failed", "timeout")
 #: Bytes of a variant's trajectory file per message from a worker to the client.
-FETCH_CHUNK = 4 * 2 ** 20
+FETCH_CHUNK = 2 ** 20
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once

@@ -47,9 +47,9 @@ class FirstTime:
     def __init__(self) -> None:
         self.value = float("nan")
 
-    def write(self, time: np.ndarray, flag: np.ndarray) -> None:
+    def write(self, t: np.ndarray, flag: np.ndarray) -> None:
         if np.isnan(self.value) and flag.any():
-            self.value = float(time[np.argmax(flag)])
+            self.value = float(t[np.argmax(flag)])
 
 
 class EndOfActivity:
@@ -60,13 +60,13 @@ class EndOfActivity:
         self.ended = float("nan")        # the last active -> inactive transition seen so far
         self.active = False              # the last row seen
 
-    def write(self, time: np.ndarray, active: np.ndarray) -> None:
+    def write(self, t: np.ndarray, active: np.ndarray) -> None:
         if not len(active):
             return
         before = np.concatenate(([self.active], active[:-1]))      # each row's predecessor
         stops = np.flatnonzero(before & ~active)
         if len(stops):
-            self.ended = float(time[stops[-1]])
+            self.ended = float(t[stops[-1]])
         self.active = bool(active[-1])
 
     @property
