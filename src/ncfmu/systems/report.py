@@ -74,6 +74,20 @@ class EndOfActivity:
         return float("nan") if self.active else self.ended
 
 
+def _first_time(result, mask: np.ndarray) -> float:
+    """:class:`FirstTime` over a whole trajectory."""
+    first = FirstTime()
+    first.write(result.time, mask)
+    return first.value
+
+
+def _ended(result, active: np.ndarray) -> float:
+    """:class:`EndOfActivity` over a whole trajectory."""
+    end = EndOfActivity()
+    end.write(result.time, active)
+    return end.value
+
+
 def table_of(parameters: Mapping[str, object]) -> list[tuple[float, float, float]]:
     """An AreaLimiter's limit table ``(ref_max, lim_min, lim_max)`` from its parameters."""
     n = to_int(parameters.get("n_regions", 0))
@@ -100,6 +114,10 @@ class PartAccumulator:
 
     def metrics(self) -> dict[str, float]:
         return {}
+
+    def finished(self) -> bool | None:
+        """Whether the part's cycle ran to its end in the rows so far; None for a part without a cycle."""
+        return None
 
 
 class Part:
@@ -251,6 +269,9 @@ class _LatheAccumulator(PartAccumulator):
         return {"final_radius_mm": self.x_cut if self.cut else float("nan"),
                 "cycle_time_s": self.done.value}
 
+    def finished(self) -> bool | None:
+        return not math.isnan(self.done.value)
+
 
 @dataclass(frozen=True)
 class FeedCycle(Part):
@@ -299,6 +320,9 @@ class _FeedAccumulator(PartAccumulator):
 
     def metrics(self) -> dict[str, float]:
         return {"deepest_x_mm": self.deepest, "cycle_time_s": self.ended.value}
+
+    def finished(self) -> bool | None:
+        return not math.isnan(self.ended.value)
 
 
 @dataclass(frozen=True)
@@ -351,34 +375,42 @@ class Envelope(Part):
 
 
 class _EnvelopeAccumulator(PartAccumulator):
-    """The limiter's line reads only whether its alarm was ever raised and the largest blocked mask: the rows
-    so far reduce to one row holding both, and :meth:`Envelope.summary` words that row -- one home for the
-    line, on a run of any length."""
+    """The limiter's line is worded by :meth:`Envelope.summary` (one home for it) from the rows that witness
+    every state the limiter was in: the first row of each (alarm, blocked mask) pair it showed, and the last
+    row -- a few dozen rows at most (the mask has four bits), however long the run. Whatever the line reads
+    of those columns that depends only on which states occurred, when each first occurred and how the run
+    ended (any, max, OR of the masks, the first alarm's time, the last value) is the same on the witness
+    rows as on the whole trajectory."""
 
     part: Envelope
 
     def __init__(self, part: Envelope, parameters: Parameters) -> None:
         super().__init__(part)
         self.parameters = parameters
-        self.reduced: np.ndarray | None = None
+        self.firsts: dict[int, np.ndarray] = {}      # (alarm, mask) state -> the row where it first occurred
+        self.last: np.ndarray | None = None
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
         alarm, blocked = self.part.alarm, f"{self.part.limiter}.blocked"
         assert alarm is not None
-        chunk = rows[[alarm, blocked]]
-        one = np.empty(1, dtype=chunk.dtype)
-        one[alarm], one[blocked] = chunk[alarm].any(), chunk[blocked].max()
-        if self.reduced is not None:
-            one[alarm] |= self.reduced[alarm]
-            one[blocked] = np.maximum(one[blocked], self.reduced[blocked])
-        self.reduced = one
+        chunk = rows[["time", alarm, blocked]]
+        # one integer per (alarm, mask) pair: the mask is an int32, the alarm a Boolean
+        states = (chunk[alarm] != 0).astype(np.int64) << 32 | (chunk[blocked].astype(np.int64) & 0xFFFFFFFF)
+        values, first = np.unique(states, return_index=True)
+        for state, i in zip(values.tolist(), first.tolist()):
+            if state not in self.firsts:
+                self.firsts[state] = chunk[i:i + 1].copy()
+        self.last = chunk[-1:].copy()
 
     def summary(self) -> list[str]:
-        if self.reduced is None:
+        if self.last is None:
             return []
         from ..cosim.result import Result
-        return self.part.summary(Result(self.reduced), self.parameters)
+        witness = np.concatenate(sorted(self.firsts.values(), key=lambda r: float(r["time"][0])))
+        if witness["time"][-1] != self.last["time"][0]:
+            witness = np.concatenate([witness, self.last])
+        return self.part.summary(Result(witness), self.parameters)
 
 
 @dataclass(frozen=True)
@@ -461,6 +493,9 @@ class _ContourAccumulator(PartAccumulator):
     def metrics(self) -> dict[str, float]:
         return {"max_contour_error_mm": self.error if self.on else float("nan"), "cycle_time_s": self.done.value}
 
+    def finished(self) -> bool | None:
+        return not math.isnan(self.done.value)
+
 
 class ReportAccumulator:
     """A report's summary and metrics computed as a run goes: a recording sink (``open(columns)``,
@@ -504,6 +539,10 @@ class ReportAccumulator:
 
     def summary(self) -> list[str]:
         return [line for acc in self.parts for line in acc.summary()]
+
+    def finished(self) -> bool:
+        """False when a part's cycle was still running, or never ran, at the last row so far."""
+        return all(acc.finished() is not False for acc in self.parts)
 
     def metrics(self, wall_time: float | None = None) -> dict[str, float]:
         """``sim_time`` (the last row's time), ``wall_time`` (given, else from open to close), each part's
