@@ -501,11 +501,15 @@ class ReportAccumulator:
     """A report's summary and metrics computed as a run goes: a recording sink (``open(columns)``,
     ``write(rows)`` chunk by chunk, ``close(...)``) that keeps running values only, so its memory does not
     grow with the simulated time. The rows must carry every column of :meth:`Report.record`; a run may
-    record them at its output interval, and then the metrics are those of the recorded rows."""
+    record them at its output interval, and then the metrics are those of the recorded rows.
+
+    The parts' accumulators are made when the run opens its sinks, i.e. after the master checked every start
+    value: a bad one is named by the master's rule, not by a controller built here from the parameters."""
 
     def __init__(self, report: Report, parameters: Parameters) -> None:
         self.report = report
-        self.parts = [p.accumulator(parameters) for p in report.parts]
+        self.parameters = parameters
+        self.parts: list[PartAccumulator] = []
         self.rows = 0                           # rows written so far
         self.start_time = self.last_time = math.nan
         self.complete: bool | None = None       # None while open; then what close() said
@@ -520,6 +524,7 @@ class ReportAccumulator:
         if missing:
             raise SystemDefinitionError(f"the run's summary needs {', '.join(missing)} recorded; record them "
                                         f"(--record) or leave the record at its default")
+        self.parts = [p.accumulator(self.parameters) for p in self.report.parts]
         self._opened_at = time.perf_counter()
 
     def write(self, rows: np.ndarray) -> None:
