@@ -8,6 +8,10 @@ cluster, runs the sweep through it and then reads every worker's peak RSS (``get
 worker) and its own. Printed: wall time, client and worker peak RSS, and their growth from the shortest to the
 longest duration -- flat memory means the growth stays a few MB while the variants get 6x longer.
 
+``--soak``: each variant is the README's soak, the grinder grinding part after part (the panel's
+``repeat_every`` 80 s: wear compensation at 0.1 s, a part at 5 s and at 45 s of every period), given to the
+sweep as single-valued varied values.
+
 Side by side (``--in-memory-durations``, default 600 and 1800): the same sweep as the workers ran variants
 before they streamed -- the whole run kept in memory (every output, every step), the kept columns formatted
 as CSV bytes on the worker and sent back in the answer, written by the client.
@@ -55,8 +59,13 @@ def in_memory_variant(ssp: bytes, digest: str, variant: dict, stop_time: float, 
     return {"row": row, "trajectory": csv_bytes(kept)}
 
 
+#: The README's soak: the grinder's button schedule repeated every 80 s.
+SOAK = {"panel.repeat_every": [80.0], "panel.wear_start_at": [0.1], "panel.start_at": [5.0],
+        "panel.restart_at": [45.0]}
+
+
 def one(system: str, duration: float, variants: int, workers: int, output_interval: float,
-        in_memory: bool = False) -> dict:
+        in_memory: bool = False, soak: bool = False) -> dict:
     from dask.distributed import Client, LocalCluster
 
     from ncfmu.batch import sweep
@@ -67,10 +76,11 @@ def one(system: str, duration: float, variants: int, workers: int, output_interv
             Client(cluster) as client, tempfile.TemporaryDirectory() as tmp:
         before = {"client": peak_rss_mb(), "workers": list(client.run(peak_rss_mb).values())}
         t0 = time.perf_counter()
+        vary = {"feed.D3": values, **(SOAK if soak else {})}
         if in_memory:
-            rows = in_memory_sweep(client, system, values, Path(tmp), duration, output_interval)
+            rows = in_memory_sweep(client, system, vary, Path(tmp), duration, output_interval)
         else:
-            rows = sweep(system, {"feed.D3": values}, Path(tmp), scheduler=cluster.scheduler_address,
+            rows = sweep(system, vary, Path(tmp), scheduler=cluster.scheduler_address,
                          stop_time=duration, output_interval=output_interval, progress=False)
         wall = time.perf_counter() - t0
         workers_peak = list(client.run(peak_rss_mb).values())
@@ -79,17 +89,18 @@ def one(system: str, duration: float, variants: int, workers: int, output_interv
     bad = [r for r in rows if r["status"] != "ok"]
     if bad:
         raise SystemExit(f"variants failed: {bad}")
-    return {"mode": "in memory (before)" if in_memory else "streamed", "duration_s": duration,
+    return {"mode": "in memory (before)" if in_memory else "streamed", "soak": soak, "duration_s": duration,
             "variants": variants, "workers": workers, "wall_s": round(wall, 2),
             "steps_per_variant": int(round(duration / 1e-3)),
             "rows_per_variant": int(rows[0]["rows"]), "csv_mb_per_variant": round(size / len(files) / 2 ** 20, 2),
             "client_peak_mb": round(peak_rss_mb(), 1), "client_before_mb": round(before["client"], 1),
             "worker_peak_mb": [round(w, 1) for w in workers_peak],
             "worker_before_mb": [round(w, 1) for w in before["workers"]],
-            "deepest_x_mm": [float(r["deepest_x_mm"]) for r in rows]}
+            "deepest_x_mm": [float(r["deepest_x_mm"]) for r in rows],
+            "cycle_time_s": [float(r["cycle_time_s"]) for r in rows]}
 
 
-def in_memory_sweep(client, system: str, values: list[float], out: Path, duration: float,
+def in_memory_sweep(client, system: str, vary: dict[str, list[float]], out: Path, duration: float,
                     output_interval: float) -> list[dict]:
     import hashlib
 
@@ -102,8 +113,9 @@ def in_memory_sweep(client, system: str, values: list[float], out: Path, duratio
     shipped = client.scatter(data, broadcast=True, hash=False)
     (out / "variants").mkdir(parents=True, exist_ok=True)
     every = int(round(output_interval / 1e-3))
-    futures = {client.submit(in_memory_variant, shipped, digest, {"feed.D3": v}, duration, every, pure=False): v
-               for v in values}
+    from ncfmu.batch import product, variant_key
+    futures = {client.submit(in_memory_variant, shipped, digest, v, duration, every, pure=False): variant_key(v)
+               for v in product(vary)}
     rows = []
     for future in as_completed(futures):
         answer = future.result()
@@ -121,6 +133,7 @@ def main() -> None:
     ap.add_argument("--variants", type=int, default=4)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--output-interval", type=float, default=0.1)
+    ap.add_argument("--soak", action="store_true", help="each variant a soak: part after part, wear compensation")
     ap.add_argument("--in-memory-durations", type=float, nargs="*", default=[600.0, 1800.0])
     ap.add_argument("--json", type=Path)
     ap.add_argument("--one", type=float, help=argparse.SUPPRESS)       # one duration, in this process
@@ -128,14 +141,15 @@ def main() -> None:
     args = ap.parse_args()
     if args.one is not None:
         print(json.dumps(one(args.system, args.one, args.variants, args.workers, args.output_interval,
-                             args.in_memory)))
+                             args.in_memory, args.soak)))
         return
     results, baseline = [], []
     runs = [(d, False) for d in args.durations] + [(d, True) for d in args.in_memory_durations]
     for duration, in_memory in runs:
         out = subprocess.run([sys.executable, __file__, "--one", str(duration), "--system", args.system,
                               "--variants", str(args.variants), "--workers", str(args.workers),
-                              "--output-interval", str(args.output_interval), *(["--in-memory"] * in_memory)],
+                              "--output-interval", str(args.output_interval), *(["--in-memory"] * in_memory),
+                              *(["--soak"] * args.soak)],
                              capture_output=True, text=True, check=True)
         r = json.loads(out.stdout.strip().splitlines()[-1])
         (baseline if in_memory else results).append(r)
