@@ -12,6 +12,10 @@ longest duration -- flat memory means the growth stays a few MB while the varian
 ``repeat_every`` 80 s: wear compensation at 0.1 s, a part at 5 s and at 45 s of every period), given to the
 sweep as single-valued varied values.
 
+Step cost (``--step-cost S``, default 300): one variant of S simulated seconds run in this process by the
+streaming worker function and by the pre-streaming one, interleaved five times, medians: the cluster's start-up
+and the client's bookkeeping, which differ between the two sweeps above, are not in it.
+
 Side by side (``--in-memory-durations``, default 600 and 1800): the same sweep as the workers ran variants
 before they streamed -- the whole run kept in memory (every output, every step), the kept columns formatted
 as CSV bytes on the worker and sent back in the answer, written by the client.
@@ -126,6 +130,32 @@ def in_memory_sweep(client, system: str, vary: dict[str, list[float]], out: Path
     return rows
 
 
+def step_cost(system: str, duration: float, output_interval: float, soak: bool, repeats: int = 5) -> dict:
+    import hashlib
+    import statistics
+
+    from ncfmu.batch import product, remove_rows, run_variant
+    from ncfmu.project import system_archive
+    data = system_archive(system).read_bytes()
+    digest = hashlib.sha256(data).hexdigest()
+    variant = product({"feed.D3": [4.0], **(SOAK if soak else {})})[0]
+    every = int(round(output_interval / 1e-3))
+    in_memory_variant(data, digest, variant, 1.0, every)             # the system opened once, as on a worker
+    streamed, kept = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        answer = run_variant(data, digest, variant, duration, None, every, None)
+        streamed.append(time.perf_counter() - t0)
+        remove_rows(answer["trajectory"]["path"])
+        t0 = time.perf_counter()
+        in_memory_variant(data, digest, variant, duration, every)
+        kept.append(time.perf_counter() - t0)
+    steps = duration / 1e-3
+    s, k = statistics.median(streamed), statistics.median(kept)
+    return {"duration_s": duration, "streamed_us_per_step": round(s / steps * 1e6, 2),
+            "in_memory_us_per_step": round(k / steps * 1e6, 2), "streamed_over_in_memory": round(s / k, 3)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--system", default="grinder_feed")
@@ -135,6 +165,7 @@ def main() -> None:
     ap.add_argument("--output-interval", type=float, default=0.1)
     ap.add_argument("--soak", action="store_true", help="each variant a soak: part after part, wear compensation")
     ap.add_argument("--in-memory-durations", type=float, nargs="*", default=[600.0, 1800.0])
+    ap.add_argument("--step-cost", type=float, default=300.0, metavar="S")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--one", type=float, help=argparse.SUPPRESS)       # one duration, in this process
     ap.add_argument("--in-memory", action="store_true", help=argparse.SUPPRESS)
@@ -169,9 +200,15 @@ def main() -> None:
         print(f"in memory (before) growth {b0['duration_s'] / 60:g} min -> {b1['duration_s'] / 60:g} min variants: "
               f"client {b1['client_peak_mb'] - b0['client_peak_mb']:+.1f} MB, largest worker "
               f"{max(b1['worker_peak_mb']) - max(b0['worker_peak_mb']):+.1f} MB")
+    cost = None
+    if args.step_cost:
+        cost = step_cost(args.system, args.step_cost, args.output_interval, args.soak)
+        print(f"step cost, one process, {args.step_cost:g} s variants, medians of 5 interleaved: streamed "
+              f"{cost['streamed_us_per_step']} us, in memory {cost['in_memory_us_per_step']} us "
+              f"(ratio {cost['streamed_over_in_memory']})")
     if args.json:
-        args.json.write_text(json.dumps({"runs": results, "in_memory_runs": baseline, "growth": growth},
-                                        indent=2) + "\n")
+        args.json.write_text(json.dumps({"runs": results, "in_memory_runs": baseline, "growth": growth,
+                                         "step_cost": cost}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
