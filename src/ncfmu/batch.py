@@ -14,7 +14,8 @@ What goes where:
   trajectory -- its rows stream into a CSV file in the worker's own temp dir
   (``ncfmu-sweep-<uid>/rows/``) and into the report's accumulator, which computes the metrics on the fly
   from every step. The client then fetches the file from that worker in chunks of ``FETCH_CHUNK`` bytes
-  (through the cluster's own connection: no shared folder) and the worker deletes it.
+  (through the cluster's own connection: no shared folder) and the worker deletes it (a file whose client
+  went away before fetching it stays in that folder).
 - The client alone writes ``out``: ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
   per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename). A
   variant stopped by its timeout or an FMU error leaves the rows it recorded so far (a valid CSV, whole rows)
