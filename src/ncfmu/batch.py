@@ -8,10 +8,19 @@ What goes where:
 - The client reads the system's ``.ssp`` once and ships its bytes to the workers (scattered once, to
   every worker). A worker keeps them in its own cache (``<its temp dir>/ncfmu-sweep-<uid>/<digest>.ssp``,
   by content digest), opens the system once per process (FMUs instantiated once, ``fmi2Reset`` between
-  variants) and sends back the variant's row (status, error, wall time, metrics) and its recorded
-  trajectories. A worker needs ncfmu installed and nothing else: no path of the client's, no shared folder.
+  variants) and sends back the variant's row (status, error, wall time, metrics). A worker needs ncfmu
+  installed and nothing else: no path of the client's, no shared folder.
+- Memory does not grow with a variant's length, on the worker or the client: the worker's run keeps no
+  trajectory -- its rows stream into a CSV file in the worker's own temp dir
+  (``ncfmu-sweep-<uid>/rows/``) and into the report's accumulator, which computes the metrics on the fly
+  from every step. The client then fetches the file from that worker in chunks of ``FETCH_CHUNK`` bytes
+  (through the cluster's own connection: no shared folder) and the worker deletes it (a file whose client
+  went away before fetching it stays in that folder).
 - The client alone writes ``out``: ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
-  per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename).
+  per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename). A
+  variant stopped by its timeout or an FMU error leaves the rows it recorded so far (a valid CSV, whole rows)
+  as ``out/variants/<key>.csv.partial``, its row says how many (``rows``) and up to when (``sim_time``,
+  with the metrics of those rows).
 - Results that scale: ``record`` names the variables kept (default: the axes' positions and what the summary
   metrics read), ``output_interval`` keeps every k-th step.
 - Nothing lost: a sweep into an existing ``out`` merges into its summary (rows of other variants are kept);
@@ -39,14 +48,14 @@ import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .cosim.result import csv_bytes
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
-from .systems import report_of
+from .systems import report_for
+from .systems.report import start_parameters
 
 if TYPE_CHECKING:
     from .project import OpenSystem
@@ -58,16 +67,23 @@ SUMMARY = "summary.csv"
 STATUSES = ("ok", "unfinished", "failed", "timeout")
 #: The statuses of a variant that ran to its stop time: its trajectory file is written.
 RAN = ("ok", "unfinished")
+#: Bytes of a variant's trajectory file per message from a worker to the client.
+FETCH_CHUNK = 2 ** 20
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
 
 
-def _cached_archive(digest: str, data: bytes) -> Path:
-    """The archive in this process's own cache (written once per content digest, atomically)."""
+def _worker_folder() -> Path:
+    """This process's own cache folder (in its own temp dir: nothing of the client's)."""
     folder = Path(tempfile.gettempdir()) / f"ncfmu-sweep-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{digest}.ssp"
+    return folder
+
+
+def _cached_archive(digest: str, data: bytes) -> Path:
+    """The archive in this process's own cache (written once per content digest, atomically)."""
+    path = _worker_folder() / f"{digest}.ssp"
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
         part = path.with_suffix(f".{os.getpid()}.part")
         part.write_bytes(data)
@@ -79,29 +95,38 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
                 record: Sequence[str] | None, every: int, timeout: float | None) -> dict:
     """Run one variant in this process; never raises.
 
-    Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": CSV bytes or None}``.
+    Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": where its rows are or None}``:
+    the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
+    client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
+    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
     from .project import OpenSystem
     t0 = time.perf_counter()
     row: dict[str, object] = {}
-    trajectory = None
     opened = _OPEN.get(digest)
+    csv = None
+    metrics = None
     try:
         if opened is None:
             opened = _OPEN[digest] = OpenSystem(_cached_archive(digest, ssp))
         else:
             for slave in opened.slaves:
                 slave.reset()
+        system = opened.system
+        report = report_for(system.name, {c.name: c.model for c in system.components})
+        keep = list(record) if record is not None else report.record()
+        folder = _worker_folder() / "rows"
+        csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
+        metrics = report.accumulator(start_parameters(system.components, variant))
+        # the metrics read every step of what the report needs; the file gets the kept columns every k-th row
+        kept: RecordSink = SelectColumns(csv, keep)
         deadline = None if timeout is None else time.perf_counter() + timeout
-        result = opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline)
-        report = report_of(result)
-        keep = list(record) if record is not None else [n for n in report.record() if n in result]
-        kept = result.data[["time", *keep]][::every]
-        trajectory = csv_bytes(kept)           # formatted here, on the worker: the client only writes bytes
-        row.update(status="ok", error="", rows=len(kept))
-        if not report.finished(result):
-            row.update(status="unfinished", error=f"cycle not finished by t = {result.time[-1]:g} s")
-        row.update(report.metrics(result, result.parameters))
+        opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
+                   record=list(dict.fromkeys([*keep, *report.record()])),
+                   sinks=[kept if every == 1 else EveryKth(kept, every), metrics])
+        row.update(status="ok", error="")
+        if not metrics.finished():
+            row.update(status="unfinished", error=f"cycle not finished by t = {metrics.last_time:g} s")
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
     except NcfmuError as err:
@@ -110,8 +135,37 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     except Exception as err:           # a crash in one variant must not end the sweep
         row.update(status="failed", error=f"{type(err).__name__}: {err}")
         _discard(digest)
+    trajectory = None
+    if csv is not None and csv.final_path is not None and csv.rows:
+        # the rows written (all of them, or up to where the run stopped) and the metrics of those rows
+        trajectory = {"path": str(csv.final_path), "size": csv.final_path.stat().st_size,
+                      "complete": row["status"] in RAN, "worker": _worker_address()}
+        assert metrics is not None
+        row.update(rows=csv.rows, **metrics.metrics())
+    elif csv is not None and csv.final_path is not None:
+        csv.final_path.unlink(missing_ok=True)              # a header without rows: nothing to fetch
     row["wall_time"] = round(time.perf_counter() - t0, 4)
     return {"row": row, "trajectory": trajectory}
+
+
+def _worker_address() -> str | None:
+    """The dask worker running this task, or None outside one (a serial sweep)."""
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return None
+
+
+def read_rows(path: str, offset: int, size: int) -> bytes:
+    """Up to ``size`` bytes of a variant's rows file from ``offset`` (run where the file is)."""
+    with open(path, "rb") as f:
+        f.seek(offset)
+        return f.read(size)
+
+
+def remove_rows(path: str) -> None:
+    Path(path).unlink(missing_ok=True)
 
 
 def _discard(digest: str) -> None:
@@ -201,6 +255,29 @@ def output_names(archive: Path) -> list[str]:
             names += [f"{comp.name}.{sv.get('name')}" for sv in root.iter("ScalarVariable")
                       if sv.get("causality") == "output"]
     return names
+
+
+def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
+                read: Callable[[str, int, int], bytes]) -> None:
+    """Write a variant's rows from where the worker left them, chunk by chunk (``read(path, offset, size)``),
+    atomically: ``out/variants/<key>.csv`` for a run that completed, ``<key>.csv.partial`` for one that
+    stopped early (the other name removed, so a variant has one file)."""
+    final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
+    other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
+    part = final.with_name(final.name + ".part")
+    path, size = str(trajectory["path"]), int(trajectory["size"])
+    with open(part, "wb") as f:
+        offset = 0
+        while offset < size:
+            chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
+            if not chunk:
+                raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
+            f.write(chunk)
+            offset += len(chunk)
+        f.flush()
+        os.fsync(f.fileno())
+    part.replace(final)
+    other.unlink(missing_ok=True)
 
 
 class Progress:
@@ -293,7 +370,17 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
         futures = {client.submit(run_variant, shipped, digest, v, *args, pure=False): (key, v) for key, v in todo}
         for future in as_completed(futures):
             key, v = futures[future]
-            record_result(key, v, future.result())
+            answer = future.result()
+            worker = (answer["trajectory"] or {}).get("worker")
+
+            def read(path: str, offset: int, size: int, worker=worker) -> bytes:
+                # on the worker's own connection (Client.run), not as a task: the worker's thread may be
+                # running the next variant already
+                return client.run(read_rows, path, offset, size, workers=[worker])[worker]
+
+            def remove(path: str, worker=worker) -> None:
+                client.run(remove_rows, path, workers=[worker])
+            record_result(key, v, answer, read, remove)
     finally:
         client.close()
         if cluster is not None:
@@ -370,10 +457,15 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             _write_summary(summary_path, [rows[k] for k in order if k in rows], varied)
             last_write[0], dirty[0] = time.monotonic(), False
 
-    def record_result(key: str, variant: Mapping[str, object], answer: dict) -> None:
-        row = answer["row"]
-        if answer["trajectory"] is not None:
-            write_atomic(out / "variants" / f"{key}.csv", answer["trajectory"])
+    def record_result(key: str, variant: Mapping[str, object], answer: dict,
+                      read: Callable[[str, int, int], bytes] = read_rows,
+                      remove: Callable[[str], None] = remove_rows) -> None:
+        row, trajectory = answer["row"], answer["trajectory"]
+        if trajectory is not None:
+            try:
+                _write_rows(out, key, trajectory, read)
+            finally:
+                remove(str(trajectory["path"]))
         rows[key] = {"key": key, **variant, **row}
         dirty[0] = True
         flush_summary()

@@ -8,7 +8,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import NoReturn
 
 from .errors import NcfmuError
 
@@ -164,13 +164,11 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.ssp import read_ssp
     from .project import simulate, system_archive
     from .systems import report_for
+    from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
     report = report_for(system.name, {c.name: c.model for c in system.components})
-    parameters: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in system.components}
-    for qualified, value in start_values.items():
-        inst, _, var = qualified.partition(".")
-        parameters.setdefault(inst, {})[var] = value
+    parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))
     step = system.step_size if args.step is None else args.step
     stop = system.stop_time if args.stop_time is None else args.stop_time
@@ -186,7 +184,7 @@ def _run_streamed(args, start_values: dict[str, object]):
         sinks, run_record = [csv_sink], record
     else:
         # the summary reads every step; the CSV gets the --record columns at the --output-interval
-        accumulator = _Summary(report, parameters)
+        accumulator = report.accumulator(parameters)     # its parts are made when the run opens it
         run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
         csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
         every = steps_per_row(interval, step)
@@ -209,30 +207,6 @@ def _run_streamed(args, start_values: dict[str, object]):
     result.system = system.name
     print(_summary(result, None if accumulator is None else accumulator.summary()))
     return result, csv_sink.final_path
-
-
-class _Summary:
-    """The report's accumulator, made when the run opens its sinks: after the master checked every --set."""
-
-    def __init__(self, report, parameters: dict[str, dict[str, object]]) -> None:
-        self.report, self.parameters = report, parameters
-        self.accumulator: Any = None
-
-    def open(self, columns) -> None:
-        self.accumulator = self.report.accumulator(self.parameters)
-        self.accumulator.open(columns)
-
-    def write(self, rows) -> None:
-        assert self.accumulator is not None
-        self.accumulator.write(rows)
-
-    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
-        if self.accumulator is not None:
-            self.accumulator.close(complete, stopped_at, reason)
-
-    def summary(self) -> list[str]:
-        assert self.accumulator is not None
-        return self.accumulator.summary()
 
 
 def _where_stopped(sink) -> str:

@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ncfmu.checks import path_distance
+from ncfmu.cosim.result import Result
 from ncfmu.systems import report_of, run_parameters
 from ncfmu.systems.report import Axes, ContourCycle, Envelope, FeedCycle, LatheCycle, columns_of
 
@@ -55,7 +56,7 @@ def oracle(report, data, parameters) -> tuple[list[str], dict[str, float]]:
     t = data["time"]
     lines: list[str] = []
     metrics: dict[str, float] = {"sim_time": float(t[-1])}
-    alarms = 0
+    alarms, finished = 0, True
     for p in report.parts:
         alarmed = p.alarm is not None and bool(data[p.alarm].any())
         alarms += alarmed
@@ -76,6 +77,7 @@ def oracle(report, data, parameters) -> tuple[list[str], dict[str, float]]:
             lines.append(f"  cycle done: {_finished(t, done)}; tool at X {x[-1]:.4f}, Z {z[-1]:.4f} mm; alarm: {yes}")
             metrics["final_radius_mm"] = float(x[cut].min()) if cut.any() else float("nan")
             metrics["cycle_time_s"] = done
+            finished &= not math.isnan(done)
         elif isinstance(p, FeedCycle):
             x = data[f"{p.x}.pos"]
             active = data[f"{p.feed}.run"] | data[f"{p.feed}.emergency_active"]
@@ -84,9 +86,11 @@ def oracle(report, data, parameters) -> tuple[list[str], dict[str, float]]:
                       f"return counter X {data[f'{p.feed}.return_counter_x'][-1]:.4f} mm", f"  alarm: {yes}"]
             metrics["deepest_x_mm"] = float(x.max())
             metrics["cycle_time_s"] = end
+            finished &= not math.isnan(end)
         elif isinstance(p, Envelope):
-            verdict = f"ALARM, blocked mask {data[f'{p.limiter}.blocked'].max()}" if alarmed else "no violation"
-            lines.append(f"  area limiter: {verdict}")
+            # its line is worded in one place, over whatever rows it is given: here the whole trajectory (the
+            # accumulator gives it the rows that witness each state the limiter was in)
+            lines += p.summary(Result(data), parameters)
         elif isinstance(p, ContourCycle):
             done = _first(t, data[f"{p.contour}.done"])
             lines.append(f"  contour done: {_finished(t, done)}; last segment (point path) or program line: "
@@ -96,9 +100,11 @@ def oracle(report, data, parameters) -> tuple[list[str], dict[str, float]]:
             best = path_distance(data[f"{p.x}.pos"][on], data[f"{p.y}.pos"][on], path)
             metrics["max_contour_error_mm"] = float(best.max()) if len(best) else float("nan")
             metrics["cycle_time_s"] = done
+            finished &= not math.isnan(done)
         else:
             raise AssertionError(f"no oracle for {type(p).__name__}")
     metrics["alarms"] = alarms
+    metrics["finished"] = finished          # not a metric of the report: compared with the accumulator's finished()
     return lines, metrics
 
 
@@ -119,7 +125,7 @@ def streamed(report, data, parameters, rng, largest=5000, wall_time=0.0):
     for part in chunks(len(data), rng, largest):
         acc.write(data[part])
     acc.close(True, float(data["time"][-1]))
-    return acc.summary(), acc.metrics(wall_time=wall_time)
+    return acc.summary(), {**acc.metrics(wall_time=wall_time), "finished": acc.finished()}
 
 
 def same(a: dict[str, float], b: dict[str, float]) -> bool:
@@ -136,7 +142,7 @@ def test_streamed_summary_and_metrics_equal_the_whole_trajectorys(runs, name):
     metrics["wall_time"] = r.wall_time
     # the whole-trajectory API (one chunk) ...
     assert report.summary(r, parameters) == lines
-    assert same(report.metrics(r, parameters), metrics)
+    assert same({**report.metrics(r, parameters), "finished": metrics["finished"]}, metrics)
     # ... and chunks of random sizes, three seeds
     for seed in range(3):
         got_lines, got = streamed(report, r.data, parameters, np.random.default_rng(seed), wall_time=r.wall_time)
@@ -149,8 +155,9 @@ def test_the_runs_cover_what_the_lines_say(runs):
     _, normal = oracle(report_of(runs("grinder_feed")), runs("grinder_feed").data, {})
     _, alarm = oracle(report_of(runs("lathe_alarm")), runs("lathe_alarm").data, run_parameters(runs("lathe_alarm")))
     _, emergency = oracle(report_of(runs("grinder_emergency")), runs("grinder_emergency").data, {})
-    assert normal["alarms"] == 0 and normal["cycle_time_s"] > 30
+    assert normal["alarms"] == 0 and normal["cycle_time_s"] > 30 and normal["finished"]
     assert alarm["alarms"] == 2 and math.isnan(alarm["cycle_time_s"])       # limiter and sequencer
+    assert not alarm["finished"]
     assert 12.0 < emergency["cycle_time_s"] < 13.5                          # the emergency return ended
 
 

@@ -30,15 +30,26 @@ from ..ports import to_float, to_int
 Parameters = Mapping[str, Mapping[str, object]]      # instance -> parameter -> value
 
 
+def start_parameters(components, start_values: Mapping[str, object]) -> dict[str, dict[str, object]]:
+    """The parameters a run applies, known before it starts: each component's parameter set (``components``
+    of a System) with the run's start values (``INSTANCE.VARIABLE`` -> value) on top -- what the run's
+    Result.parameters will say, for an accumulator that must know them from the first row."""
+    applied: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in components}
+    for qualified, value in start_values.items():
+        instance, _, name = qualified.partition(".")
+        applied.setdefault(instance, {})[name] = value
+    return applied
+
+
 class FirstTime:
     """The time of the first row at which a flag is set (NaN until it is), over chunks of rows."""
 
     def __init__(self) -> None:
         self.value = float("nan")
 
-    def write(self, time: np.ndarray, flag: np.ndarray) -> None:
+    def write(self, t: np.ndarray, flag: np.ndarray) -> None:
         if np.isnan(self.value) and flag.any():
-            self.value = float(time[np.argmax(flag)])
+            self.value = float(t[np.argmax(flag)])
 
 
 class EndOfActivity:
@@ -49,13 +60,13 @@ class EndOfActivity:
         self.ended = float("nan")        # the last active -> inactive transition seen so far
         self.active = False              # the last row seen
 
-    def write(self, time: np.ndarray, active: np.ndarray) -> None:
+    def write(self, t: np.ndarray, active: np.ndarray) -> None:
         if not len(active):
             return
         before = np.concatenate(([self.active], active[:-1]))      # each row's predecessor
         stops = np.flatnonzero(before & ~active)
         if len(stops):
-            self.ended = float(time[stops[-1]])
+            self.ended = float(t[stops[-1]])
         self.active = bool(active[-1])
 
     @property
@@ -63,15 +74,25 @@ class EndOfActivity:
         return float("nan") if self.active else self.ended
 
 
+def _first_time(result, mask: np.ndarray) -> float:
+    """:class:`FirstTime` over a whole trajectory."""
+    first = FirstTime()
+    first.write(result.time, mask)
+    return first.value
+
+
+def _ended(result, active: np.ndarray) -> float:
+    """:class:`EndOfActivity` over a whole trajectory."""
+    end = EndOfActivity()
+    end.write(result.time, active)
+    return end.value
+
+
 def table_of(parameters: Mapping[str, object]) -> list[tuple[float, float, float]]:
     """An AreaLimiter's limit table ``(ref_max, lim_min, lim_max)`` from its parameters."""
     n = to_int(parameters.get("n_regions", 0))
     return [(to_float(parameters[f"region[{i}].ref_max"]), to_float(parameters[f"region[{i}].lim_min"]),
              to_float(parameters[f"region[{i}].lim_max"])) for i in range(1, n + 1)]
-
-
-def _first_time(result, mask: np.ndarray) -> float:
-    return float(result.time[np.argmax(mask)]) if mask.any() else float("nan")
 
 
 class PartAccumulator:
@@ -93,6 +114,10 @@ class PartAccumulator:
 
     def metrics(self) -> dict[str, float]:
         return {}
+
+    def finished(self) -> bool | None:
+        """Whether the part's cycle ran to its end in the rows so far; None for a part without a cycle."""
+        return None
 
 
 class Part:
@@ -126,9 +151,10 @@ class Part:
     def alarmed(self, result) -> bool:
         return self.alarm is not None and bool(result[self.alarm].any())
 
-    def finished(self, result) -> bool | None:
-        """Whether the part's cycle ran to its end within the run; None for a part without a cycle."""
-        return None
+    def finished(self, result, parameters: Parameters | None = None) -> bool | None:
+        """Whether the part's cycle ran to its end within the run; None for a part without a cycle (the
+        accumulator's judgement over the whole trajectory)."""
+        return self._fed(result, parameters or {}).finished()
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Add to the machine-plane panel (path, envelope, contour)."""
@@ -197,9 +223,6 @@ class LatheCycle(Part):
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _LatheAccumulator(self)
 
-    def finished(self, result) -> bool | None:
-        return bool(result[f"{self.seq}.done"].any())
-
     def draw(self, ax, result, parameters: Parameters) -> None:
         seq = parameters.get(self.seq, {})
         program = str(seq.get("program") or "")
@@ -264,6 +287,9 @@ class _LatheAccumulator(PartAccumulator):
         return {"final_radius_mm": self.x_cut if self.cut else float("nan"),
                 "cycle_time_s": self.done.value}
 
+    def finished(self) -> bool | None:
+        return not math.isnan(self.done.value)
+
 
 @dataclass(frozen=True)
 class FeedCycle(Part):
@@ -283,9 +309,6 @@ class FeedCycle(Part):
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _FeedAccumulator(self)
 
-
-    def finished(self, result) -> bool | None:
-        return not math.isnan(self._fed(result, {}).ended.value)  # type: ignore[attr-defined]
 
 
 class _FeedAccumulator(PartAccumulator):
@@ -316,6 +339,9 @@ class _FeedAccumulator(PartAccumulator):
 
     def metrics(self) -> dict[str, float]:
         return {"deepest_x_mm": self.deepest, "cycle_time_s": self.ended.value}
+
+    def finished(self) -> bool | None:
+        return not math.isnan(self.ended.value)
 
 
 @dataclass(frozen=True)
@@ -392,34 +418,42 @@ class Envelope(Part):
 
 
 class _EnvelopeAccumulator(PartAccumulator):
-    """The limiter's line reads only whether its alarm was ever raised and the largest blocked mask: the rows
-    so far reduce to one row holding both, and :meth:`Envelope.summary` words that row -- one home for the
-    line, on a run of any length."""
+    """The limiter's line is worded by :meth:`Envelope.summary` (one home for it) from the rows that witness
+    every state the limiter was in: the first row of each (alarm, blocked mask) pair it showed, and the last
+    row -- a few dozen rows at most (the mask has four bits), however long the run. Whatever the line reads
+    of those columns that depends only on which states occurred, when each first occurred and how the run
+    ended (any, max, OR of the masks, the first alarm's time, the last value) is the same on the witness
+    rows as on the whole trajectory."""
 
     part: Envelope
 
     def __init__(self, part: Envelope, parameters: Parameters) -> None:
         super().__init__(part)
         self.parameters = parameters
-        self.reduced: np.ndarray | None = None
+        self.firsts: dict[int, np.ndarray] = {}      # (alarm, mask) state -> the row where it first occurred
+        self.last: np.ndarray | None = None
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
         alarm, blocked = self.part.alarm, f"{self.part.limiter}.blocked"
         assert alarm is not None
-        chunk = rows[[alarm, blocked]]
-        one = np.empty(1, dtype=chunk.dtype)
-        one[alarm], one[blocked] = chunk[alarm].any(), chunk[blocked].max()
-        if self.reduced is not None:
-            one[alarm] |= self.reduced[alarm]
-            one[blocked] = np.maximum(one[blocked], self.reduced[blocked])
-        self.reduced = one
+        chunk = rows[["time", alarm, blocked]]
+        # one integer per (alarm, mask) pair: the mask is an int32, the alarm a Boolean
+        states = (chunk[alarm] != 0).astype(np.int64) << 32 | (chunk[blocked].astype(np.int64) & 0xFFFFFFFF)
+        values, first = np.unique(states, return_index=True)
+        for state, i in zip(values.tolist(), first.tolist()):
+            if state not in self.firsts:
+                self.firsts[state] = chunk[i:i + 1].copy()
+        self.last = chunk[-1:].copy()
 
     def summary(self) -> list[str]:
-        if self.reduced is None:
+        if self.last is None:
             return []
         from ..cosim.result import Result
-        return self.part.summary(Result(self.reduced), self.parameters)
+        witness = np.concatenate(sorted(self.firsts.values(), key=lambda r: float(r["time"][0])))
+        if witness["time"][-1] != self.last["time"][0]:
+            witness = np.concatenate([witness, self.last])
+        return self.part.summary(Result(witness), self.parameters)
 
 
 @dataclass(frozen=True)
@@ -444,9 +478,6 @@ class ContourCycle(Part):
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _ContourAccumulator(self, parameters)
-
-    def finished(self, result) -> bool | None:
-        return bool(result[f"{self.contour}.done"].any())
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         from ..controllers.geometry import sample
@@ -505,16 +536,23 @@ class _ContourAccumulator(PartAccumulator):
     def metrics(self) -> dict[str, float]:
         return {"max_contour_error_mm": self.error if self.on else float("nan"), "cycle_time_s": self.done.value}
 
+    def finished(self) -> bool | None:
+        return not math.isnan(self.done.value)
+
 
 class ReportAccumulator:
     """A report's summary and metrics computed as a run goes: a recording sink (``open(columns)``,
     ``write(rows)`` chunk by chunk, ``close(...)``) that keeps running values only, so its memory does not
     grow with the simulated time. The rows must carry every column of :meth:`Report.record`; a run may
-    record them at its output interval, and then the metrics are those of the recorded rows."""
+    record them at its output interval, and then the metrics are those of the recorded rows.
+
+    The parts' accumulators are made when the run opens its sinks, i.e. after the master checked every start
+    value: a bad one is named by the master's rule, not by a controller built here from the parameters."""
 
     def __init__(self, report: Report, parameters: Parameters) -> None:
         self.report = report
-        self.parts = [p.accumulator(parameters) for p in report.parts]
+        self.parameters = parameters
+        self.parts: list[PartAccumulator] = []
         self.rows = 0                           # rows written so far
         self.start_time = self.last_time = math.nan
         self.complete: bool | None = None       # None while open; then what close() said
@@ -529,6 +567,7 @@ class ReportAccumulator:
         if missing:
             raise SystemDefinitionError(f"the run's summary needs {', '.join(missing)} recorded; record them "
                                         f"(--record) or leave the record at its default")
+        self.parts = [p.accumulator(self.parameters) for p in self.report.parts]
         self._opened_at = time.perf_counter()
 
     def write(self, rows: np.ndarray) -> None:
@@ -548,6 +587,10 @@ class ReportAccumulator:
 
     def summary(self) -> list[str]:
         return [line for acc in self.parts for line in acc.summary()]
+
+    def finished(self) -> bool:
+        """False when a part's cycle was still running, or never ran, at the last row so far."""
+        return all(acc.finished() is not False for acc in self.parts)
 
     def metrics(self, wall_time: float | None = None) -> dict[str, float]:
         """``sim_time`` (the last row's time), ``wall_time`` (given, else from open to close), each part's
@@ -596,9 +639,9 @@ class Report:
     def summary(self, result, parameters: Parameters) -> list[str]:
         return self._fed(result, parameters).summary()
 
-    def finished(self, result) -> bool:
+    def finished(self, result, parameters: Parameters | None = None) -> bool:
         """False when a cycle of the report's parts was still running, or never ran, at the end of the run."""
-        return all(p.finished(result) is not False for p in self.parts)
+        return all(p.finished(result, parameters) is not False for p in self.parts)
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         return self._fed(result, parameters).metrics(wall_time=result.wall_time)
