@@ -365,9 +365,15 @@ class _Command:
 
 @dataclass
 class Snapshot:
+    """The values at one communication point, with the simulation's state as it was then."""
+
     time: float
     values: dict[str, object]
     forced: dict[str, object]
+    state: str = "running"
+    reason: str = ""
+    lag: float = 0.0
+    overruns: int = 0
 
 
 @dataclass
@@ -405,6 +411,11 @@ class Runner:
         self._on_state = on_state
         self.thread = threading.Thread(target=self._main, name="ncfmu-simulation", daemon=True)
         self._take_snapshot()
+        assert self._snapshot is not None
+        # fixed parameters (and the rest that no step changes): read once, published with the first snapshot
+        for p in self.points:
+            if p.name not in self._snapshot.values:
+                self._snapshot.values[p.name] = session.value(p.name)
 
     # -- called from the server's thread -----------------------------------------------------------
     def start(self) -> None:
@@ -432,7 +443,8 @@ class Runner:
             if p.causality == "input" or p.writes == "parameter":
                 values[p.name] = s.value(p.name)
         with self._snapshot_lock:
-            self._snapshot = Snapshot(float(s.time), values, dict(s.forced()))
+            self._snapshot = Snapshot(float(s.time), values, dict(s.forced()), self.state, self.reason, self.lag,
+                                      self.stats.overruns)
         self._want_snapshot = False
 
     def _apply(self, c: _Command) -> bool:
@@ -468,8 +480,7 @@ class Runner:
             refusal = str(err)
         if c.done is not None:
             c.done(refusal)
-        if c.what in ("force", "release", "set"):
-            self._want_snapshot = True
+        self._want_snapshot = True
         return rebase
 
     def _main(self) -> None:
@@ -792,18 +803,23 @@ class LiveServer:
         async def call(parent, *args):
             refusal = await self._submit(_Command(what))
             if refusal is not None:
-                raise self._refuse("BadInvalidState", refusal)
+                return self._method_refusal("BadInvalidState", refusal)
             return []
         return call
+
+    def _method_refusal(self, status: str, message: str):
+        # asyncua answers a method's exception with Bad_UnexpectedError; a returned StatusCode is the call's own
+        log.info("ncfmu serve: call refused (%s): %s", status, message)
+        return self.ua.StatusCode(getattr(self.ua.StatusCodes, status))
 
     async def _release_method(self, parent, name):
         ua = self.ua
         text = name.Value if isinstance(name, ua.Variant) else name
         if not isinstance(text, str) or text not in self.points or self.points[text].causality != "input":
-            raise self._refuse("BadInvalidArgument", f"Release({text!r}): not an input INSTANCE.VARIABLE")
+            return self._method_refusal("BadInvalidArgument", f"Release({text!r}): not an input INSTANCE.VARIABLE")
         refusal = await self._submit(_Command("release", text))
         if refusal is not None:
-            raise self._refuse("BadInvalidState", refusal)
+            return self._method_refusal("BadInvalidState", refusal)
         return []
 
     # -- publishing ---------------------------------------------------------------------------------------
@@ -828,11 +844,10 @@ class LiveServer:
                         await self.server.write_attribute_value(
                             self.nodes[key].nodeid, ua.DataValue(ua.Variant(forced, ua.VariantType.Boolean)))
             await self._sim_value("time", float(snap.time))
-        r = self.runner
-        await self._sim_value("lag", float(r.lag))
-        await self._sim_value("overruns", int(r.stats.overruns))
-        await self._sim_value("state", r.state)
-        await self._sim_value("reason", r.reason)
+            await self._sim_value("lag", float(snap.lag))
+            await self._sim_value("overruns", int(snap.overruns))
+            await self._sim_value("state", snap.state)
+            await self._sim_value("reason", snap.reason)
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
