@@ -31,7 +31,7 @@ def test_units_descriptions_and_types_are_browsable(ncfmu_serve):
             assert (await pos.read_browse_name()).Name == "pos"
             assert (await pos.read_data_type()) == ua.NodeId(ua.ObjectIds.Double)
             assert (await pos.read_description()).Text == "actual position (encoder)"
-            eu = await (await pos.get_child([f"0:EngineeringUnits"])).read_value()
+            eu = await (await pos.get_child(["0:EngineeringUnits"])).read_value()
             assert eu.DisplayName.Text == "mm" and eu.NamespaceUri == "http://www.opcfoundation.org/UA/units/un/cefact"
             assert eu.UnitId == int.from_bytes(b"MMT", "big")            # UNECE code MMT: millimetre
             assert not (await pos.get_access_level()) & {ua.AccessLevel.CurrentWrite}   # an output: read-only
