@@ -164,8 +164,16 @@ class UnpackedFmu:
                 except ValueError:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has start {start!r}, not a "
                                                 f"valid {v.type}") from None
+            bounds = []
+            for bound in (v.min, v.max):
+                try:
+                    bounds.append(None if bound is None else float(bound))
+                except ValueError:
+                    raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has a range bound "
+                                                f"{bound!r} that is not a number") from None
             self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
-                                              getattr(v, "unit", None), start, v.description or "")
+                                              getattr(v, "unit", None), start, v.description or "",
+                                              v.variability or "", bounds[0], bounds[1])
 
     def cleanup(self) -> None:
         if self._tmp:
@@ -264,7 +272,8 @@ class FmuSlave:
 
     def initialize(self, start_time: float, stop_time: float) -> None:
         for what, call in (("fmi2SetupExperiment", lambda: self._dll.fmi2SetupExperiment(
-                                self._component, 0, 0.0, start_time, 1, stop_time)),
+                                self._component, 0, 0.0, start_time, int(math.isfinite(stop_time)),
+                                stop_time if math.isfinite(stop_time) else 0.0)),
                            ("fmi2EnterInitializationMode",
                             lambda: self._dll.fmi2EnterInitializationMode(self._component)),
                            ("fmi2ExitInitializationMode",
@@ -363,8 +372,10 @@ class FmuSlave:
         return self.fmu.deSerializeFMUstate(bytes(data))
 
     def reset(self) -> None:
-        """fmi2Reset: back to the instantiated state (for batch runs); bindings are dropped."""
+        """fmi2Reset: back to the instantiated state (for batch runs); bindings and the log of the run before
+        are dropped (a run's messages are its own)."""
         self._check("fmi2Reset", self._dll.fmi2Reset(self._component))
+        self.messages.clear()
         self._reads.clear()
         self._writes.clear()
         self._sent.clear()

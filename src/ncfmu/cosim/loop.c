@@ -4,8 +4,11 @@
  *
  * It does exactly what the Python loop does, call for call: per slave, gather its inputs from the
  * global output vectors (one per kind), send a kind only when its values changed since last sent,
- * fmi2DoStep, get its outputs into its slice of the global vector; after each step copy the recorded
- * prefix of every global vector into that step's row of the record table. The plan (index arrays,
+ * fmi2DoStep, get its outputs into its slice of the global vector; after each step whose count is a
+ * multiple of the output interval (in steps), copy the recorded prefix of every global vector into that
+ * row of the record window (a bounded buffer: row r of the run goes to row r - row_base). The inputs'
+ * gather indices say where each input reads from: its source's output, or a slot Python writes (an
+ * input CSV, a forced value); Python changes them between calls, never during one. The plan (index arrays,
  * buffers, function pointers) is prepared by Python (ncfmu.cosim.native_loop); nothing is allocated
  * here. The first call returning more than fmi2Warning stops the loop; Python turns the report into
  * the same SimulationError as the Python loop raises.
@@ -127,13 +130,16 @@ static int do_step(const ncfmu_slave *s, double t, double h, ncfmu_failure *fail
     return 1;
 }
 
-/* Steps first .. last - 1 (step i runs from times[i] to times[i] + h and is recorded in row i + 1).
+/* Steps first .. last - 1: step i runs from start + h * i (the Python loop's time, the same operations;
+ * compiled without FMA contraction) and, when (i + 1) is a multiple of every, is recorded in row
+ * (i + 1) / every - row_base of the window. Python keeps the rows of a call inside the window.
  * Returns 0, or the failing call's status (details in *fail). */
-int ncfmu_loop(const ncfmu_slave *slaves, int32_t n_slaves, int32_t jacobi, const double *times, double h,
-               int64_t first, int64_t last, const ncfmu_record *records, int32_t n_records, ncfmu_failure *fail)
+int ncfmu_loop(const ncfmu_slave *slaves, int32_t n_slaves, int32_t jacobi, double start, double h,
+               int64_t first, int64_t last, const ncfmu_record *records, int32_t n_records, int64_t every,
+               int64_t row_base, ncfmu_failure *fail)
 {
     for (int64_t i = first; i < last; i++) {
-        double t = times[i];
+        double t = start + h * (double)i;
         fail->step = i;
         if (jacobi) {
             for (int32_t s = 0; s < n_slaves; s++) gather(&slaves[s]);
@@ -154,8 +160,10 @@ int ncfmu_loop(const ncfmu_slave *slaves, int32_t n_slaves, int32_t jacobi, cons
                     return fail->status;
             }
         }
+        if ((i + 1) % every) continue;
+        size_t row = (size_t)((i + 1) / every - row_base);
         for (int32_t r = 0; r < n_records; r++)
-            memcpy(records[r].table + (size_t)(i + 1) * records[r].bytes, records[r].vector, records[r].bytes);
+            memcpy(records[r].table + row * records[r].bytes, records[r].vector, records[r].bytes);
     }
     return 0;
 }

@@ -27,7 +27,8 @@ from ..errors import SimulationError
 from .slave import KINDS, Slave
 
 SOURCE = Path(__file__).with_name("loop.c")
-FLAGS = ("-shared", "-fPIC", "-O2")
+#: -ffp-contract=off: no fused multiply-add, so a step's time is computed exactly as the Python loop does
+FLAGS = ("-shared", "-fPIC", "-O2", "-ffp-contract=off")
 
 #: The calls a failure report names (loop.c's CALL_SET, CALL_DO_STEP, CALL_GET).
 CALLS = ("Set", "DoStep", "Get")
@@ -128,8 +129,9 @@ def library() -> ctypes.CDLL | None:
         return None
     fn = lib.ncfmu_loop
     fn.restype = ctypes.c_int
-    fn.argtypes = [ctypes.POINTER(_Slave), ctypes.c_int32, ctypes.c_int32, ctypes.c_void_p, ctypes.c_double,
-                   ctypes.c_int64, ctypes.c_int64, ctypes.POINTER(_Record), ctypes.c_int32, ctypes.POINTER(_Failure)]
+    fn.argtypes = [ctypes.POINTER(_Slave), ctypes.c_int32, ctypes.c_int32, ctypes.c_double, ctypes.c_double,
+                   ctypes.c_int64, ctypes.c_int64, ctypes.POINTER(_Record), ctypes.c_int32, ctypes.c_int64,
+                   ctypes.c_int64, ctypes.POINTER(_Failure)]
     return lib
 
 
@@ -137,8 +139,11 @@ class NativePlan:
     """One run's loop plan for the C loop: built from the master's bindings, kept alive with its arrays."""
 
     def __init__(self, slaves: list[NativeSlave], bindings: list[dict[str, tuple]], values: dict[str, np.ndarray],
-                 records: list[tuple[np.ndarray, np.ndarray]], times: np.ndarray, h: float, jacobi: bool) -> None:
-        """``bindings[i][kind]`` = ``(in_buf, input_vrs, gather_idx, out_view, output_vrs)`` of slave ``i``."""
+                 records: list[tuple[np.ndarray, np.ndarray]], start: float, h: float, jacobi: bool,
+                 every: int = 1) -> None:
+        """``bindings[i][kind]`` = ``(in_buf, input_vrs, gather_idx, out_view, output_vrs)`` of slave ``i``;
+        ``gather_idx`` is used as it is (the master changes it in place between calls: forced inputs),
+        ``records`` are (window table, vector) pairs: row r of the run goes to row r - row_base of the table."""
         lib = library()
         assert lib is not None
         self._loop = lib.ncfmu_loop
@@ -156,7 +161,8 @@ class NativePlan:
                 real = kind == "Real"
                 if len(in_vrs):
                     vrs = np.asarray(in_vrs, dtype=np.uintc)
-                    gather = np.ascontiguousarray(idx, dtype=np.intp)
+                    gather = idx
+                    assert gather.dtype == np.intp and gather.flags.c_contiguous
                     sent = np.zeros_like(in_buf)
                     valid = np.zeros(1, dtype=np.int32)
                     self._keep += [vrs, gather, sent, in_buf, values[kind]]
@@ -177,8 +183,8 @@ class NativePlan:
                                                            vector.nbytes) for table, vector in records])
         for table, vector in records:
             assert table.flags.c_contiguous and vector.flags.c_contiguous and table.shape[1:] == vector.shape
-        self._keep += [records, times]
-        self.times, self.h, self.jacobi = times, h, jacobi
+        self._keep += [records]
+        self.start, self.h, self.jacobi, self.every = start, h, jacobi, every
         self._failure = _Failure()
 
     def forget_sent(self) -> None:
@@ -186,16 +192,19 @@ class NativePlan:
         for valid in self._sent_valid:
             valid[0] = 0
 
-    def run(self, first: int, last: int) -> None:
-        """Steps ``first`` .. ``last - 1``; a failing FMI call raises the slave's SimulationError."""
-        status = self._loop(self._structs, len(self.slaves), int(self.jacobi), self.times.ctypes.data, self.h,
-                            first, last, self._records, len(self._records), ctypes.byref(self._failure))
+    def run(self, first: int, last: int, row_base: int = 0) -> None:
+        """Steps ``first`` .. ``last - 1``, recording into the window whose row 0 is the run's row ``row_base``;
+        a failing FMI call raises the slave's SimulationError (:attr:`failed_step` is its step)."""
+        status = self._loop(self._structs, len(self.slaves), int(self.jacobi), self.start, self.h,
+                            first, last, self._records, len(self._records), self.every, row_base,
+                            ctypes.byref(self._failure))
         if status:
             f = self._failure
+            self.failed_step = int(f.step)
             slave = self.slaves[f.slave]
             call = CALLS[f.call]
             if call == "DoStep":
-                what = f"fmi2DoStep at t = {float(self.times[f.step]):.6f} s"
+                what = f"fmi2DoStep at t = {self.start + self.h * f.step:.6f} s"
             else:
                 what = f"fmi2{call}{KINDS[f.kind]}"
             raise slave.fmi2_failure(what, status)

@@ -7,21 +7,34 @@ from pathlib import Path
 import numpy as np
 
 
-def csv_bytes(data: np.ndarray) -> bytes:
-    """A structured array as CSV text in fmpy's layout (``"time","x_axis.pos",...``), byte for byte what
-    :func:`fmpy.util.write_csv` writes and :func:`fmpy.util.read_csv` reads: floats in their shortest
-    round-trip form, Booleans as 0/1. Column by column: fmpy formats value by value (~4x slower, longer
-    than a lathe_roughing run itself)."""
+def csv_header(names) -> bytes:
+    """The header line of fmpy's CSV layout: every name quoted."""
+    return (",".join(f'"{n}"' for n in names) + "\n").encode()
+
+
+def csv_rows(data: np.ndarray) -> bytes:
+    """The rows of a structured array in fmpy's CSV layout, each ending in a newline (no header): floats in
+    their shortest round-trip form, Booleans as 0/1. Column by column: fmpy formats value by value (~4x
+    slower, longer than a lathe_roughing run itself)."""
     names = data.dtype.names
     assert names is not None, "a trajectory is a structured array"
+    if not len(data):
+        return b""
     columns = []
     for n in names:
         col = data[n]
         if col.dtype == np.bool_:
             col = col.astype(np.int8)
         columns.append(list(map(repr if col.dtype.kind == "f" else str, col.tolist())))
-    lines = [",".join(f'"{n}"' for n in names), *map(",".join, zip(*columns))]
-    return ("\n".join(lines) + "\n").encode()
+    return ("\n".join(map(",".join, zip(*columns))) + "\n").encode()
+
+
+def csv_bytes(data: np.ndarray) -> bytes:
+    """A structured array as CSV text in fmpy's layout (``"time","x_axis.pos",...``), byte for byte what
+    :func:`fmpy.util.write_csv` writes and :func:`fmpy.util.read_csv` reads (header, then :func:`csv_rows`)."""
+    names = data.dtype.names
+    assert names is not None, "a trajectory is a structured array"
+    return csv_header(names) + csv_rows(data)
 
 
 class Result:
@@ -32,14 +45,16 @@ class Result:
     (instance -> variable -> value) are the start values the run applied: the system's parameter sets
     with the caller's on top (the rest were the FMUs' defaults); a branch's also hold the tunable parameters
     and inputs set at its branch point. ``models`` maps instance -> FMU model.
-    A result read from a CSV has neither.
+    A result read from a CSV has neither. A run that kept no trajectory in memory (its rows went to sinks)
+    has zero rows; ``span`` then says which simulated time it covered (:attr:`start_time`, :attr:`end_time`).
     """
 
     def __init__(self, data: np.ndarray, system: str = "", wall_time: float = 0.0,
                  messages: dict[str, list[tuple[str, str]]] | None = None,
                  parameters: dict[str, dict[str, object]] | None = None,
-                 models: dict[str, str] | None = None) -> None:
+                 models: dict[str, str] | None = None, span: tuple[float, float] | None = None) -> None:
         self.data = data
+        self.span = span
         self.system = system
         self.wall_time = wall_time
         self.messages = messages or {}
@@ -71,9 +86,20 @@ class Result:
         return name in self._fields
 
     @property
+    def start_time(self) -> float:
+        return float(self.time[0]) if len(self.data) else (self.span[0] if self.span else 0.0)
+
+    @property
+    def end_time(self) -> float:
+        """The last simulated time: the last row's, or the span's end when no rows were kept."""
+        if self.span is not None:
+            return self.span[1]
+        return float(self.time[-1]) if len(self.data) else 0.0
+
+    @property
     def realtime_factor(self) -> float:
         """Simulated seconds per wall-clock second."""
-        span = float(self.time[-1] - self.time[0])
+        span = self.end_time - self.start_time
         return span / self.wall_time if self.wall_time > 0 else float("inf")
 
     def to_csv(self, path: Path) -> Path:

@@ -46,6 +46,9 @@ class Variable:
     unit: str | None = None
     start: object = None
     description: str = ""
+    variability: str = ""     # fixed, tunable, discrete, continuous ("" when the slave does not say)
+    min: float | None = None  # the modelDescription's range (Real and Integer)
+    max: float | None = None
 
 
 class Slave(Protocol):

@@ -6,28 +6,61 @@ variables, and the plot in the machine plane all come from it. Nothing here reco
 columns of its result. A part reads the parameters the run actually used (``Result.parameters``: the
 system's parameter sets with every ``--set`` applied), so a plot or a metric of a run with ``--set`` is
 that run's.
+
+Every summary line and metric is computed in one place, an accumulator (:meth:`Part.accumulator`,
+:meth:`Report.accumulator`) that reads the rows of a run in chunks as they come and keeps only running
+extremes, first and last values and counts -- never the trajectory -- so an eight-hour run is summarised in
+the memory of a short one. The whole-trajectory methods (``summary(result, parameters)``,
+``metrics(result, parameters)``) feed a finished Result to the same accumulator in one chunk.
 """
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..controllers.base import POSITION_LIMIT
+from ..errors import SystemDefinitionError
 from ..ports import to_float, to_int
 
 Parameters = Mapping[str, Mapping[str, object]]      # instance -> parameter -> value
 
 
-def _first_time(result, mask: np.ndarray) -> float:
-    return float(result.time[np.argmax(mask)]) if mask.any() else float("nan")
+class FirstTime:
+    """The time of the first row at which a flag is set (NaN until it is), over chunks of rows."""
+
+    def __init__(self) -> None:
+        self.value = float("nan")
+
+    def write(self, time: np.ndarray, flag: np.ndarray) -> None:
+        if np.isnan(self.value) and flag.any():
+            self.value = float(time[np.argmax(flag)])
 
 
-def _ended(result, active: np.ndarray) -> float:
-    """Time the last active stretch ended; NaN when it never ran or still runs."""
-    return float(result.time[np.flatnonzero(active)[-1] + 1]) if active.any() and not active[-1] else float("nan")
+class EndOfActivity:
+    """The time the last active stretch ended (the row after its last active row), over chunks of rows;
+    NaN when it never ran or still runs at the last row."""
+
+    def __init__(self) -> None:
+        self.ended = float("nan")        # the last active -> inactive transition seen so far
+        self.active = False              # the last row seen
+
+    def write(self, time: np.ndarray, active: np.ndarray) -> None:
+        if not len(active):
+            return
+        before = np.concatenate(([self.active], active[:-1]))      # each row's predecessor
+        stops = np.flatnonzero(before & ~active)
+        if len(stops):
+            self.ended = float(time[stops[-1]])
+        self.active = bool(active[-1])
+
+    @property
+    def value(self) -> float:
+        return float("nan") if self.active else self.ended
 
 
 def table_of(parameters: Mapping[str, object]) -> list[tuple[float, float, float]]:
@@ -37,6 +70,27 @@ def table_of(parameters: Mapping[str, object]) -> list[tuple[float, float, float
              to_float(parameters[f"region[{i}].lim_max"])) for i in range(1, n + 1)]
 
 
+class PartAccumulator:
+    """A part's summary lines and metrics over the rows of a run fed in chunks (time order): running values
+    only. This base tracks the part's alarm; a part's own accumulator adds what its lines need."""
+
+    def __init__(self, part: Part) -> None:
+        self.part = part
+        self.alarmed = False
+
+    def write(self, rows: np.ndarray) -> None:
+        """One chunk (a structured array with ``time`` and at least the part's variables), never empty."""
+        alarm = self.part.alarm
+        if alarm is not None and not self.alarmed:
+            self.alarmed = bool(rows[alarm].any())
+
+    def summary(self) -> list[str]:
+        return []
+
+    def metrics(self) -> dict[str, float]:
+        return {}
+
+
 class Part:
     """One instance's (or a few instances') share of a report; every method has a neutral default."""
 
@@ -44,11 +98,21 @@ class Part:
         """The recorded variables the part reads (a sweep records them by default)."""
         return ()
 
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        """The part's summary and metrics over rows fed in chunks, for a run with ``parameters``."""
+        return PartAccumulator(self)
+
+    def _fed(self, result, parameters: Parameters) -> PartAccumulator:
+        acc = self.accumulator(parameters)
+        if len(result.data):
+            acc.write(result.data)
+        return acc
+
     def summary(self, result, parameters: Parameters) -> list[str]:
-        return []
+        return self._fed(result, parameters).summary()
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        return {}
+        return self._fed(result, parameters).metrics()
 
     @property
     def alarm(self) -> str | None:
@@ -71,14 +135,27 @@ class Axes(Part):
     def variables(self) -> tuple[str, ...]:
         return tuple(f"{a}.{v}" for a in self.names for v in ("pos", "following_error"))
 
-    def summary(self, result, parameters: Parameters) -> list[str]:
-        return [f"  {a}: max |following error| {abs(result[f'{a}.following_error']).max() * 1000:.2f} um"
-                for a in self.names]
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _AxesAccumulator(self)
 
-    def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        if not self.names:
-            return {}
-        return {"max_following_error_mm": float(max(abs(result[f"{a}.following_error"]).max() for a in self.names))}
+
+class _AxesAccumulator(PartAccumulator):
+    part: Axes
+
+    def __init__(self, part: Axes) -> None:
+        super().__init__(part)
+        self.largest = dict.fromkeys(part.names, 0.0)        # axis -> max |following error| so far
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        for a in self.part.names:
+            self.largest[a] = float(np.maximum(self.largest[a], np.abs(rows[f"{a}.following_error"]).max()))
+
+    def summary(self) -> list[str]:
+        return [f"  {a}: max |following error| {e * 1000:.2f} um" for a, e in self.largest.items()]
+
+    def metrics(self) -> dict[str, float]:
+        return {"max_following_error_mm": max(self.largest.values())} if self.largest else {}
 
 
 @dataclass(frozen=True)
@@ -103,30 +180,14 @@ class LatheCycle(Part):
     z: str
 
     def variables(self) -> tuple[str, ...]:
-        return tuple(f"{self.seq}.{v}" for v in ("subcycle", "done", "alarm"))
+        return (*(f"{self.seq}.{v}" for v in ("subcycle", "done", "alarm")), f"{self.x}.pos", f"{self.z}.pos")
 
     @property
     def alarm(self) -> str | None:
         return f"{self.seq}.alarm"
 
-    def summary(self, result, parameters: Parameters) -> list[str]:
-        sub, x, z = result[f"{self.seq}.subcycle"], result[f"{self.x}.pos"], result[f"{self.z}.pos"]
-        cut = sub == 2
-        starts = np.flatnonzero((sub[1:] == 2) & (sub[:-1] != 2)) + 1
-        lines = [f"  cuts (SC2): {len(starts)}"]
-        if cut.any():
-            lines.append("  X at the start of each cut [mm]: " + ", ".join(f"{x[i]:.4f}" for i in starts))
-            lines.append(f"  smallest X during the cuts: {x[cut].min():.4f} mm; Z reached {z[cut].min():.4f} mm")
-        done = result[f"{self.seq}.done"]
-        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
-        lines.append(f"  cycle done: {end}; tool at X {x[-1]:.4f}, Z {z[-1]:.4f} mm; "
-                     f"alarm: {'yes' if self.alarmed(result) else 'no'}")
-        return lines
-
-    def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        cut = result[f"{self.seq}.subcycle"] == 2
-        return {"final_radius_mm": float(result[f"{self.x}.pos"][cut].min()) if cut.any() else float("nan"),
-                "cycle_time_s": _first_time(result, result[f"{self.seq}.done"])}
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _LatheAccumulator(self)
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         seq = parameters.get(self.seq, {})
@@ -137,6 +198,49 @@ class LatheCycle(Part):
             ax.set_ylim(min(x.min(), stock) - 1, max(x.max(), to_float(seq["x_start"])) + 2)
 
 
+class _LatheAccumulator(PartAccumulator):
+    """Cuts are the stretches of sub-cycle 2 (SC2); a run that starts in SC2 has not started a cut there."""
+
+    part: LatheCycle
+
+    def __init__(self, part: LatheCycle) -> None:
+        super().__init__(part)
+        self.sub: int | None = None            # the sub-cycle of the last row seen
+        self.cut_starts: list[float] = []      # X at the start of each cut (one value per cut, not per step)
+        self.cut = False                       # any row in SC2
+        self.x_cut = self.z_cut = math.inf     # smallest X and Z during the cuts
+        self.done = FirstTime()
+        self.x = self.z = math.nan             # the last row's tool position
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        p = self.part
+        sub, x, z = rows[f"{p.seq}.subcycle"], rows[f"{p.x}.pos"], rows[f"{p.z}.pos"]
+        cut = sub == 2
+        before = np.concatenate(([self.sub if self.sub is not None else 2], sub[:-1]))
+        self.cut_starts += x[cut & (before != 2)].tolist()
+        if cut.any():
+            self.cut = True
+            self.x_cut = float(np.minimum(self.x_cut, x[cut].min()))
+            self.z_cut = float(np.minimum(self.z_cut, z[cut].min()))
+        self.done.write(rows["time"], rows[f"{p.seq}.done"])
+        self.sub, self.x, self.z = int(sub[-1]), float(x[-1]), float(z[-1])
+
+    def summary(self) -> list[str]:
+        lines = [f"  cuts (SC2): {len(self.cut_starts)}"]
+        if self.cut:
+            lines.append("  X at the start of each cut [mm]: " + ", ".join(f"{x:.4f}" for x in self.cut_starts))
+            lines.append(f"  smallest X during the cuts: {self.x_cut:.4f} mm; Z reached {self.z_cut:.4f} mm")
+        end = "not finished" if math.isnan(self.done.value) else f"{self.done.value:.3f} s"
+        lines.append(f"  cycle done: {end}; tool at X {self.x:.4f}, Z {self.z:.4f} mm; "
+                     f"alarm: {'yes' if self.alarmed else 'no'}")
+        return lines
+
+    def metrics(self) -> dict[str, float]:
+        return {"final_radius_mm": self.x_cut if self.cut else float("nan"),
+                "cycle_time_s": self.done.value}
+
+
 @dataclass(frozen=True)
 class FeedCycle(Part):
     """A ProgrammableFeed infeeding the axis ``x``."""
@@ -145,24 +249,45 @@ class FeedCycle(Part):
     x: str
 
     def variables(self) -> tuple[str, ...]:
-        return tuple(f"{self.feed}.{v}" for v in ("pc", "run", "emergency_active", "alarm", "return_counter_x"))
+        return (*(f"{self.feed}.{v}" for v in ("pc", "run", "emergency_active", "alarm", "return_counter_x")),
+                f"{self.x}.pos")
 
     @property
     def alarm(self) -> str | None:
         return f"{self.feed}.alarm"
 
-    def _active(self, result) -> np.ndarray:
-        return result[f"{self.feed}.run"] | result[f"{self.feed}.emergency_active"]
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _FeedAccumulator(self)
 
-    def summary(self, result, parameters: Parameters) -> list[str]:
-        x, end = result[f"{self.x}.pos"], _ended(result, self._active(result))
-        return [f"  deepest X: {x.max():.4f} mm; cycle ended: {'not finished' if np.isnan(end) else f'{end:.3f} s'}; "
-                f"X at the end {x[-1]:.4f} mm; return counter X {result[f'{self.feed}.return_counter_x'][-1]:.4f} mm",
-                f"  alarm: {'yes' if self.alarmed(result) else 'no'}"]
 
-    def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        return {"deepest_x_mm": float(result[f"{self.x}.pos"].max()),
-                "cycle_time_s": _ended(result, self._active(result))}
+class _FeedAccumulator(PartAccumulator):
+    """The cycle is active while the feed runs or its emergency return does; it ended when the last active
+    stretch did."""
+
+    part: FeedCycle
+
+    def __init__(self, part: FeedCycle) -> None:
+        super().__init__(part)
+        self.deepest = -math.inf
+        self.ended = EndOfActivity()
+        self.x = self.counter = math.nan       # the last row's X and return counter
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        p = self.part
+        x = rows[f"{p.x}.pos"]
+        self.deepest = float(np.maximum(self.deepest, x.max()))
+        self.ended.write(rows["time"], rows[f"{p.feed}.run"] | rows[f"{p.feed}.emergency_active"])
+        self.x, self.counter = float(x[-1]), float(rows[f"{p.feed}.return_counter_x"][-1])
+
+    def summary(self) -> list[str]:
+        end = "not finished" if math.isnan(self.ended.value) else f"{self.ended.value:.3f} s"
+        return [f"  deepest X: {self.deepest:.4f} mm; cycle ended: {end}; "
+                f"X at the end {self.x:.4f} mm; return counter X {self.counter:.4f} mm",
+                f"  alarm: {'yes' if self.alarmed else 'no'}"]
+
+    def metrics(self) -> dict[str, float]:
+        return {"deepest_x_mm": self.deepest, "cycle_time_s": self.ended.value}
 
 
 @dataclass(frozen=True)
@@ -180,6 +305,9 @@ class Envelope(Part):
     @property
     def alarm(self) -> str | None:
         return f"{self.limiter}.alarm"
+
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _EnvelopeAccumulator(self, parameters)
 
     def summary(self, result, parameters: Parameters) -> list[str]:
         verdict = (f"ALARM, blocked mask {result[f'{self.limiter}.blocked'].max()}" if self.alarmed(result)
@@ -211,6 +339,37 @@ class Envelope(Part):
         ax.fill_between([], [], [], color="tab:red", alpha=0.15, label="forbidden by the limit table")
 
 
+class _EnvelopeAccumulator(PartAccumulator):
+    """The limiter's line reads only whether its alarm was ever raised and the largest blocked mask: the rows
+    so far reduce to one row holding both, and :meth:`Envelope.summary` words that row -- one home for the
+    line, on a run of any length."""
+
+    part: Envelope
+
+    def __init__(self, part: Envelope, parameters: Parameters) -> None:
+        super().__init__(part)
+        self.parameters = parameters
+        self.reduced: np.ndarray | None = None
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        alarm, blocked = self.part.alarm, f"{self.part.limiter}.blocked"
+        assert alarm is not None
+        chunk = rows[[alarm, blocked]]
+        one = np.empty(1, dtype=chunk.dtype)
+        one[alarm], one[blocked] = chunk[alarm].any(), chunk[blocked].max()
+        if self.reduced is not None:
+            one[alarm] |= self.reduced[alarm]
+            one[blocked] = np.maximum(one[blocked], self.reduced[blocked])
+        self.reduced = one
+
+    def summary(self) -> list[str]:
+        if self.reduced is None:
+            return []
+        from ..cosim.result import Result
+        return self.part.summary(Result(self.reduced), self.parameters)
+
+
 @dataclass(frozen=True)
 class ContourCycle(Part):
     """A ContourInterpolator on the axes ``x`` and ``y``: the programmed and the corrected contour."""
@@ -220,7 +379,7 @@ class ContourCycle(Part):
     y: str
 
     def variables(self) -> tuple[str, ...]:
-        return tuple(f"{self.contour}.{v}" for v in ("segment", "done", "alarm"))
+        return (*(f"{self.contour}.{v}" for v in ("segment", "done", "alarm")), f"{self.x}.pos", f"{self.y}.pos")
 
     @property
     def alarm(self) -> str | None:
@@ -231,19 +390,8 @@ class ContourCycle(Part):
         from ..controllers.contour import ContourInterpolator
         return ContourInterpolator(**parameters.get(self.contour, {}))
 
-    def summary(self, result, parameters: Parameters) -> list[str]:
-        done = result[f"{self.contour}.done"]
-        end = f"{result.time[done.argmax()]:.3f} s" if done.any() else "not finished"
-        return [f"  contour done: {end}; last segment (point path) or program line: "
-                f"{int(result[f'{self.contour}.segment'][-1])}; alarm: {'yes' if self.alarmed(result) else 'no'}"]
-
-    def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        from ..checks import path_distance
-        path = [move.element for move in self.interpolator(parameters).tool_path]
-        on = result[f"{self.contour}.segment"] >= 1
-        best = path_distance(result[f"{self.x}.pos"][on], result[f"{self.y}.pos"][on], path)
-        return {"max_contour_error_mm": float(best.max()) if len(best) else float("nan"),
-                "cycle_time_s": _first_time(result, result[f"{self.contour}.done"])}
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _ContourAccumulator(self, parameters)
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         from ..controllers.geometry import sample
@@ -267,6 +415,102 @@ class ContourCycle(Part):
         zoom.grid(True, alpha=0.3)
 
 
+class _ContourAccumulator(PartAccumulator):
+    """The contour error is the largest distance of the axes' position from the corrected tool path while
+    the interpolator is on the contour (segment >= 1): point by point, so chunk by chunk."""
+
+    part: ContourCycle
+
+    def __init__(self, part: ContourCycle, parameters: Parameters) -> None:
+        super().__init__(part)
+        self.path = [move.element for move in part.interpolator(parameters).tool_path]
+        self.on = False                     # any row on the contour
+        self.error = -math.inf              # largest distance from the path so far
+        self.done = FirstTime()
+        self.segment = 0                    # the last row's segment
+
+    def write(self, rows: np.ndarray) -> None:
+        from ..checks import path_distance
+        super().write(rows)
+        p = self.part
+        segment = rows[f"{p.contour}.segment"]
+        on = segment >= 1
+        if on.any():
+            self.on = True
+            best = path_distance(rows[f"{p.x}.pos"][on], rows[f"{p.y}.pos"][on], self.path)
+            self.error = float(np.maximum(self.error, best.max()))
+        self.done.write(rows["time"], rows[f"{p.contour}.done"])
+        self.segment = int(segment[-1])
+
+    def summary(self) -> list[str]:
+        end = "not finished" if math.isnan(self.done.value) else f"{self.done.value:.3f} s"
+        return [f"  contour done: {end}; last segment (point path) or program line: "
+                f"{self.segment}; alarm: {'yes' if self.alarmed else 'no'}"]
+
+    def metrics(self) -> dict[str, float]:
+        return {"max_contour_error_mm": self.error if self.on else float("nan"), "cycle_time_s": self.done.value}
+
+
+class ReportAccumulator:
+    """A report's summary and metrics computed as a run goes: a recording sink (``open(columns)``,
+    ``write(rows)`` chunk by chunk, ``close(...)``) that keeps running values only, so its memory does not
+    grow with the simulated time. The rows must carry every column of :meth:`Report.record`; a run may
+    record them at its output interval, and then the metrics are those of the recorded rows."""
+
+    def __init__(self, report: Report, parameters: Parameters) -> None:
+        self.report = report
+        self.parts = [p.accumulator(parameters) for p in report.parts]
+        self.rows = 0                           # rows written so far
+        self.start_time = self.last_time = math.nan
+        self.complete: bool | None = None       # None while open; then what close() said
+        self.stopped_at: float | None = None
+        self.reason = ""
+        self._opened_at: float | None = None
+        self._wall_time = math.nan
+
+    def open(self, columns: Sequence[tuple[str, np.dtype]]) -> None:
+        have = {name for name, _ in columns}
+        missing = [n for n in self.report.record() if n not in have]
+        if missing:
+            raise SystemDefinitionError(f"the run's summary needs {', '.join(missing)} recorded; record them "
+                                        f"(--record) or leave the record at its default")
+        self._opened_at = time.perf_counter()
+
+    def write(self, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        if not self.rows:
+            self.start_time = float(rows["time"][0])
+        self.rows += len(rows)
+        self.last_time = float(rows["time"][-1])
+        for acc in self.parts:
+            acc.write(rows)
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.complete, self.stopped_at, self.reason = complete, stopped_at, reason
+        if self._opened_at is not None:
+            self._wall_time = time.perf_counter() - self._opened_at
+
+    def summary(self) -> list[str]:
+        return [line for acc in self.parts for line in acc.summary()]
+
+    def metrics(self, wall_time: float | None = None) -> dict[str, float]:
+        """``sim_time`` (the last row's time), ``wall_time`` (given, else from open to close), each part's
+        metrics and, when a part has an alarm, ``alarms`` (how many parts raised theirs)."""
+        out = {"sim_time": self.last_time, "wall_time": self._wall_time if wall_time is None else float(wall_time)}
+        for acc in self.parts:
+            out.update(acc.metrics())
+        if any(p.alarm is not None for p in self.report.parts):
+            out["alarms"] = sum(acc.alarmed for acc in self.parts)
+        return out
+
+
+def columns_of(data: np.ndarray) -> list[tuple[str, np.dtype]]:
+    """A structured array's columns as a recording sink's ``open`` takes them."""
+    assert data.dtype.names is not None, "a trajectory is a structured array"
+    return [(n, data.dtype[n]) for n in data.dtype.names]
+
+
 @dataclass(frozen=True)
 class Report:
     """A system's summary, metrics, default record and plot: its parts in order, and its machine plane."""
@@ -283,16 +527,22 @@ class Report:
         axes_first = sorted(self.parts, key=lambda p: not isinstance(p, Axes))
         return list(dict.fromkeys(v for p in axes_first for v in p.variables()))
 
+    def accumulator(self, parameters: Parameters) -> ReportAccumulator:
+        """The summary and metrics of a run with ``parameters``, fed as it goes (a recording sink)."""
+        return ReportAccumulator(self, parameters)
+
+    def _fed(self, result, parameters: Parameters) -> ReportAccumulator:
+        acc = self.accumulator(parameters)
+        acc.open(columns_of(result.data))
+        acc.write(result.data)
+        acc.close(True, float(result.time[-1]) if len(result.data) else None)
+        return acc
+
     def summary(self, result, parameters: Parameters) -> list[str]:
-        return [line for p in self.parts for line in p.summary(result, parameters)]
+        return self._fed(result, parameters).summary()
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
-        out = {"sim_time": float(result.time[-1]), "wall_time": float(result.wall_time)}
-        for p in self.parts:
-            out.update(p.metrics(result, parameters))
-        if any(p.alarm is not None for p in self.parts):
-            out["alarms"] = sum(p.alarmed(result) for p in self.parts)
-        return out
+        return self._fed(result, parameters).metrics(wall_time=result.wall_time)
 
     def draw_plane(self, ax, result, parameters: Parameters) -> None:
         assert self.plane is not None

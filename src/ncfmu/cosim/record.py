@@ -1,0 +1,140 @@
+"""Where a run's recorded rows go: sinks the master streams chunks of rows into.
+
+A run opens every sink once with its columns, writes the rows in chunks as the run goes (a numpy
+structured array per chunk, rows in time order, the first chunk starting with the start row) and closes
+the sinks once at the end, saying whether the run completed. What a sink holds is its own business: a
+:class:`CsvSink` holds one chunk at most, so a run of any length streams to disk at flat memory; a
+:class:`MemorySink` keeps everything (an in-memory :class:`~ncfmu.cosim.result.Result`).
+
+Interrupted runs: a :class:`CsvSink` writes ``PATH.partial`` and renames it to ``PATH`` only when the run
+completed. An interrupted run (Ctrl-C, SIGTERM, a deadline, an FMU error) leaves ``PATH.partial``: a valid CSV
+in the same layout holding every row written so far (whole rows only); ``PATH`` itself is never written
+half-way. :attr:`CsvSink.final_path` says which of the two holds the rows after :meth:`CsvSink.close`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import BinaryIO, Protocol, runtime_checkable
+
+import numpy as np
+
+from ..errors import SystemDefinitionError
+from .result import Result, csv_header, csv_rows
+
+#: The most a run may keep in memory: more is a mistake (stream it to a file instead).
+MAX_RECORD_BYTES = 8 * 2 ** 30
+
+
+@runtime_checkable
+class RecordSink(Protocol):
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        """Once, before the first row: ``("time", float64)`` first, then ``INSTANCE.VARIABLE`` columns with
+        float64 (Real), int32 (Integer) or bool (Boolean)."""
+        ...
+
+    def write(self, rows: np.ndarray) -> None:
+        """A chunk of rows as a numpy structured array with exactly those columns (rows in time order,
+        the first chunk starts with the start time)."""
+        ...
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        """Once, at the end: ``complete`` False when the run was interrupted (Ctrl-C, SIGTERM, a deadline,
+        an FMU error); ``stopped_at`` the time of the last row written."""
+        ...
+
+
+def too_big(rows: int, row_bytes: int, what: str) -> SystemDefinitionError | None:
+    """The refusal for keeping ``rows`` rows of ``row_bytes`` bytes in memory, or None when it fits."""
+    need = rows * row_bytes
+    if need <= MAX_RECORD_BYTES:
+        return None
+    return SystemDefinitionError(
+        f"{what}: keeping {rows} rows of {row_bytes} bytes in memory needs {need / 2 ** 30:.1f} GiB; an in-memory "
+        f"result must stay under {MAX_RECORD_BYTES / 2 ** 30:g} GiB (rows x bytes per row): shorten the run, "
+        "record fewer variables or a longer output interval, or stream the rows to a file instead of keeping them")
+
+
+class MemorySink:
+    """Keeps every chunk; :meth:`result` joins them into a :class:`Result` (refused past ``MAX_RECORD_BYTES``)."""
+
+    def __init__(self, system: str = "") -> None:
+        self.system = system
+        self._chunks: list[np.ndarray] = []
+        self._dtype: np.dtype | None = None
+        self._bytes = 0
+        self.complete: bool | None = None
+        self.stopped_at: float | None = None
+        self.reason = ""
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self._dtype = np.dtype([(name, dtype) for name, dtype in columns])
+        self._chunks.clear()
+        self._bytes = 0
+
+    def write(self, rows: np.ndarray) -> None:
+        self._bytes += rows.nbytes
+        if self._bytes > MAX_RECORD_BYTES:
+            assert self._dtype is not None
+            err = too_big(self._bytes // self._dtype.itemsize, self._dtype.itemsize, "a memory sink")
+            assert err is not None
+            raise err
+        self._chunks.append(rows.copy())
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.complete, self.stopped_at, self.reason = complete, stopped_at, reason
+
+    @property
+    def data(self) -> np.ndarray:
+        assert self._dtype is not None, "the sink was never opened"
+        if len(self._chunks) != 1:
+            self._chunks = [np.concatenate(self._chunks) if self._chunks else np.empty(0, self._dtype)]
+        return self._chunks[0]
+
+    def result(self) -> Result:
+        return Result(self.data, self.system)
+
+
+class CsvSink:
+    """fmpy's CSV layout, byte for byte what :meth:`Result.to_csv` writes, streamed chunk by chunk.
+
+    The rows go to ``PATH.partial`` (flushed after every chunk); :meth:`close` renames it to ``PATH`` when the
+    run completed, and leaves it as ``PATH.partial`` (a valid CSV of every row written) when it did not.
+    """
+
+    def __init__(self, path: Path | str) -> None:
+        self.path = Path(path)
+        self.partial = self.path.with_name(self.path.name + ".partial")
+        self.final_path: Path | None = None
+        self.rows = 0
+        self.stopped_at: float | None = None
+        self._file: BinaryIO | None = None
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.partial, "wb")
+        self._file.write(csv_header([name for name, _ in columns]))
+        self.rows = 0
+
+    def write(self, rows: np.ndarray) -> None:
+        assert self._file is not None, "write before open"
+        if len(rows):
+            # one write of whole rows, then flushed: what is on disk always ends at a row boundary
+            self._file.write(csv_rows(rows))
+            self._file.flush()
+            self.rows += len(rows)
+            self.stopped_at = float(rows["time"][-1])
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        if self._file is None:
+            return
+        f, self._file = self._file, None
+        f.flush()
+        os.fsync(f.fileno())
+        f.close()
+        if complete:
+            self.partial.replace(self.path)
+            self.final_path = self.path
+        else:
+            self.final_path = self.partial
