@@ -41,11 +41,8 @@ from urllib.parse import urlparse
 
 import numpy as np
 
-from .cosim.master import Master
-
 if TYPE_CHECKING:
     from asyncua.common.node import Node
-from .cosim.slave import DTYPES, KINDS
 from .errors import ConfigError, NcfmuError, SimulationError
 
 log = logging.getLogger("ncfmu.serve")
@@ -110,20 +107,10 @@ class Point:
 
 
 def points_of(slaves: Sequence) -> list[Point]:
-    """Every variable of every FMU, in system order, from the FMUs' modelDescriptions."""
-    points = []
-    for s in slaves:
-        md_vars = {v.name: v for v in s.unpacked.model_description.modelVariables}
-        for v in s.variables.values():
-            mv = md_vars.get(v.name)
-
-            def number(text):
-                return None if text in (None, "") else float(text)
-            typ = "Integer" if v.type == "Enumeration" else v.type
-            points.append(Point(f"{s.name}.{v.name}", s.name, v.name, typ, v.causality,
-                                getattr(mv, "variability", None) or "continuous", v.unit, v.description or "",
-                                number(getattr(mv, "min", None)), number(getattr(mv, "max", None))))
-    return points
+    """Every variable of every FMU, in system order, as its modelDescription declares it."""
+    return [Point(f"{s.name}.{v.name}", s.name, v.name, "Integer" if v.type == "Enumeration" else v.type,
+                  v.causality, v.variability or "continuous", v.unit, v.description or "", v.min, v.max)
+            for s in slaves for v in s.variables.values()]
 
 
 class WriteRefused(NcfmuError):
@@ -164,194 +151,44 @@ def check_value(point: Point, value: object) -> object:
     return value
 
 
-# -- the session: the streaming helper's Master.open_session when there, else a minimal one here ----------
-class LocalSession:
-    """A live run of a :class:`Master`'s system, stepped on demand, with inputs forced and parameters set.
+# -- recording ------------------------------------------------------------------------------------------
+class Recorder:
+    """Where a served run's recording goes (``--out DIR``): ``DIR/<system>.csv`` (every output, or ``--record``)
+    and ``DIR/session_inputs.csv`` (the writes that took effect, an input CSV ``ncfmu run --input`` replays).
 
-    The minimum a served run needs, in the shape of ``Master.open_session`` (advance, value, outputs, force,
-    release, forced, set_parameter, reset, close, ``writes``), used when the master has no ``open_session``.
-    Gauss-Seidel in Python; forcing redirects the input's gather index to a slot of its own.
+    A Reset ends a recording segment (the session starts again from its start values): the segment before the
+    k-th Reset is kept as ``<system>.segment<k>.csv`` and ``session_inputs.segment<k>.csv``; the two files
+    without a number always hold the run since the last Reset.
     """
 
-    def __init__(self, master: Master, stop_time: float | None = None, step_size: float | None = None,
-                 start_values: Mapping[str, object] | None = None, start_time: float = 0.0,
-                 record: Sequence[str] | None = None) -> None:
-        self.master = master
-        self.slaves = list(master.slaves)
-        self.step_size = master.system.step_size if step_size is None else float(step_size)
-        self.stop_time = math.inf if stop_time is None else float(stop_time)
-        self.start_time = float(start_time)
-        self.start_values = dict(start_values or {})
-        self.writes: list[tuple[float, str, object]] = []
-        self._record_names = list(record) if record is not None else None
-        self._setup(first=True)
+    def __init__(self, system: str, out: Path) -> None:
+        self.system, self.out = system, Path(out)
+        self.segments = 0
+        self.files: list[Path] = []
+        self.out.mkdir(parents=True, exist_ok=True)
 
-    # -- set-up (also what reset repeats) ---------------------------------------------------------
-    def _setup(self, first: bool) -> None:
-        m, system = self.master, self.master.system
-        for comp in system.components:
-            for name, value in comp.parameters.items():
-                m.by_name[comp.name].set_start(name, value)
-        for qualified, value in self.start_values.items():
-            slave, v = m.variable(qualified)
-            slave.set_start(v.name, value)
-        stop = self.stop_time if math.isfinite(self.stop_time) else self.start_time + 1e9
-        for s in self.slaves:
-            s.initialize(self.start_time, stop)
-        sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
-                   for c in system.connections}
-        # slots: every output, then one 'own' slot per input (forced value, or start value when unconnected)
-        slots: dict[str, dict[str, int]] = {k: {} for k in KINDS}
-        for kind in KINDS:
-            for s in self.slaves:
-                for v in s.variables.values():
-                    if v.causality == "output" and v.type == kind:
-                        slots[kind][f"{s.name}.{v.name}"] = len(slots[kind])
-        self._n_out = {k: len(slots[k]) for k in KINDS}
-        own: dict[str, int] = {}
-        for kind in KINDS:
-            for s in self.slaves:
-                for v in s.variables.values():
-                    if v.causality == "input" and v.type == kind:
-                        own[f"{s.name}.{v.name}"] = len(slots[kind])
-                        slots[kind][f"{s.name}.{v.name}#own"] = len(slots[kind])
-        self.values = {k: np.zeros(len(slots[k]), dtype=DTYPES[k]) for k in KINDS}
-        self._out_slot = {q: (k, i) for k in KINDS for q, i in slots[k].items() if not q.endswith("#own")}
-        self._inputs: dict[str, tuple] = {}     # name -> (kind, buffer, position, idx array, source slot)
-        self._plan = []
-        for s in self.slaves:
-            gathers = []
-            for kind in KINDS:
-                outs = [v for v in s.variables.values() if v.causality == "output" and v.type == kind]
-                first_slot = slots[kind][f"{s.name}.{outs[0].name}"] if outs else 0
-                out_view = self.values[kind][first_slot:first_slot + len(outs)]
-                ins = [v for v in s.variables.values() if v.causality == "input" and v.type == kind]
-                idx = np.array([slots[kind][sources[(s.name, v.name)]] if (s.name, v.name) in sources
-                                else own[f"{s.name}.{v.name}"] for v in ins], dtype=np.intp)
-                buf = np.zeros(len(ins), dtype=DTYPES[kind])
-                for j, v in enumerate(ins):
-                    q = f"{s.name}.{v.name}"
-                    if (s.name, v.name) not in sources and v.start is not None:
-                        self.values[kind][own[q]] = v.start
-                    self._inputs[q] = (kind, buf, j, idx, int(idx[j]), own[q], v.start)
-                s.bind(kind, buf, [v.vr for v in ins], out_view, [v.vr for v in outs])
-                if len(ins):
-                    gathers.append((buf, self.values[kind].take, idx))
-            self._plan.append((s, tuple(gathers)))
-        for s in self.slaves:
-            s.read_outputs()
-        self.time = self.start_time
-        self._steps = 0
-        self._forced: dict[str, object] = {}
-        names = self._record_names
-        if names is None:
-            names = [q for q in self._out_slot]
-        for q in names:
-            if q not in self._out_slot:
-                raise ConfigError(q, "--record", "must be an output INSTANCE.VARIABLE of the system")
-        self._rec_names = names
-        self._rec_index = [self._out_slot[q] for q in names]
-        if first:
-            self._rows: list[tuple] = []
-        self._record_row()
+    @property
+    def trajectory(self) -> Path:
+        return self.out / f"{self.system}.csv"
 
-    def _record_row(self) -> None:
-        v = self.values
-        self._rows.append((self.time, *(v[k][i].item() for k, i in self._rec_index)))
+    def sinks(self) -> list:
+        from .cosim.record import CsvSink
+        return [CsvSink(self.trajectory)]
 
-    # -- the session's interface ------------------------------------------------------------------
-    def advance(self, n: int) -> None:
-        h, plan = self.step_size, self._plan
-        try:
-            for _ in range(n):
-                t = self.time
-                for s, gathers in plan:
-                    for buf, take, idx in gathers:
-                        take(idx, out=buf)
-                    s.write_inputs()
-                    s.do_step(t, h)
-                    s.read_outputs()
-                self._steps += 1
-                self.time = self.start_time + self._steps * h
-                self._record_row()
-        except SimulationError:
-            raise
-
-    def _input(self, name: str):
-        entry = self._inputs.get(name)
-        if entry is None:
-            raise ConfigError(name, "", "must be an input INSTANCE.VARIABLE of the system")
-        return entry
-
-    def value(self, name: str) -> object:
-        if name in self._out_slot:
-            k, i = self._out_slot[name]
-            return self.values[k][i].item()
-        if name in self._inputs:
-            kind, buf, j, *_ = self._inputs[name]
-            return buf[j].item()
-        slave, v = self.master.variable(name)
-        return slave.get(v.name)
-
-    def outputs(self) -> dict[str, object]:
-        return {q: self.values[k][i].item() for q, (k, i) in self._out_slot.items()}
-
-    def force(self, name: str, value: object) -> None:
-        kind, _buf, j, idx, _source, own, _start = self._input(name)
-        slave, v = self.master.variable(name)
-        from .cosim.fmu import typed_value
-        typed = typed_value(name, v.type, value)
-        self.values[kind][own] = typed
-        idx[j] = own
-        self._forced[name] = typed
-        self.writes.append((self.time, name, typed))
-
-    def release(self, name: str) -> None:
-        kind, _buf, j, idx, source, own, start = self._input(name)
-        if name not in self._forced:
+    def end_segment(self, writes: Sequence[tuple[float, str, object]], final: bool) -> None:
+        """After the session closed its sinks: name the segment's files and write its writes."""
+        from .cosim.master import write_input_csv
+        if final:
+            self.files.append(write_input_csv(self.out / "session_inputs.csv", writes))
+            for path in (self.trajectory, self.trajectory.with_name(self.trajectory.name + ".partial")):
+                if path.exists():
+                    self.files.append(path)
             return
-        if source == own and start is not None:
-            self.values[kind][own] = start
-        idx[j] = source
-        del self._forced[name]
-        self.writes.append((self.time, name, None))
-
-    def forced(self) -> dict[str, object]:
-        return dict(self._forced)
-
-    def set_parameter(self, name: str, value: object) -> None:
-        slave, v = self.master.variable(name)
-        md = {mv.name: mv for mv in slave.unpacked.model_description.modelVariables}
-        if v.causality != "parameter" or getattr(md.get(v.name), "variability", "") != "tunable":
-            raise ConfigError(name, value, "not writable (only tunable parameters change during a run)")
-        try:
-            slave.set_start(v.name, value)
-        except SimulationError as err:
-            raise ConfigError(name, value, str(err)) from None
-        self.writes.append((self.time, name, value))
-
-    def reset(self) -> None:
-        for s in self.slaves:
-            s.reset()       # type: ignore[attr-defined]  # FmuSlave.reset: fmi2Reset
-        self._setup(first=False)
-
-    def records(self) -> np.ndarray:
-        dtype: list[tuple[str, type]] = [("time", np.float64)]
-        for q, (k, _i) in zip(self._rec_names, self._rec_index):
-            dtype.append((q, np.float64 if k == "Real" else (np.bool_ if k == "Boolean" else np.int32)))
-        return np.array(self._rows, dtype=dtype)
-
-    def close(self, complete: bool = True, stopped_at: float | None = None, reason: str = ""):
-        return None
-
-
-def open_session(master: Master, **kwargs):
-    """The master's own session when it has one (``Master.open_session``), else :class:`LocalSession`."""
-    opener = getattr(master, "open_session", None)
-    if opener is not None:
-        return opener(**kwargs)
-    return LocalSession(master, **{k: kwargs[k] for k in ("stop_time", "step_size", "start_values", "record")
-                                   if k in kwargs})
+        self.segments += 1
+        k = self.segments
+        if self.trajectory.exists():
+            self.files.append(self.trajectory.replace(self.out / f"{self.system}.segment{k}.csv"))
+        self.files.append(write_input_csv(self.out / f"session_inputs.segment{k}.csv", writes))
 
 
 # -- the simulation thread ------------------------------------------------------------------------------
@@ -391,14 +228,12 @@ class PaceStats:
 class Runner:
     """Paces a session in a worker thread (see the module's docstring)."""
 
-    def __init__(self, session, points: Sequence[Point], speed: float = 1.0,
+    def __init__(self, session, points: Sequence[Point], speed: float = 1.0, recorder: Recorder | None = None,
                  on_state: Callable[[], None] | None = None) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ConfigError("--speed", speed, "must be a number >= 0 (0: as fast as possible)")
-        self.session, self.speed = session, float(speed)
+        self.session, self.speed, self.recorder = session, float(speed), recorder
         self.points = list(points)
-        self.readable = [p.name for p in self.points if p.causality in ("output", "input")
-                         or p.writes == "parameter"]
         self.state, self.reason = "running", ""
         self.stats = PaceStats()
         self.lag = 0.0
@@ -468,11 +303,15 @@ class Runner:
                 elif self.state != "running":
                     refusal = f"the simulation is {self.state}"
             elif c.what == "reset":
-                s.reset()
                 if self.state in ("stopped", "failed"):
                     refusal = f"the simulation is {self.state}"
-                rebase = True
-                self._want_snapshot = True
+                else:
+                    writes = list(s.writes)
+                    rec = self.recorder
+                    s.reset(rec.sinks() if rec is not None else ())
+                    if rec is not None:
+                        rec.end_segment(writes, final=False)
+                    rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
                 self._stop.set()
@@ -908,49 +747,23 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     archive = system_archive(system, root)
     files: list[Path] = []
     with OpenSystem(archive) as opened:
-        session = open_session(opened.master, stop_time=stop_time, step_size=step_size,
-                               start_values=dict(start_values or {}), record=list(record) if record else None)
-        runner = Runner(session, points_of(opened.slaves), speed)
+        recorder = Recorder(opened.system.name, Path(out)) if out is not None else None
+        session = opened.master.open_session(
+            stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
+            start_values=dict(start_values or {}), record=list(record) if record else None,
+            sinks=recorder.sinks() if recorder else ())
+        runner = Runner(session, points_of(opened.slaves), speed, recorder)
         server = LiveServer(opened.system.name, runner, endpoint, security)
         try:
             asyncio.run(server.serve(ready))
         finally:
-            if out is not None:
-                files = _write_outputs(opened.system.name, session, Path(out), runner)
-            session.close(complete=runner.state != "failed", stopped_at=float(session.time), reason=runner.reason)
+            writes = list(session.writes)
+            end = float(session.time)
+            # a served run ends by being stopped: its recording is complete unless the simulation failed
+            session.close(complete=runner.state != "failed", reason=runner.reason)
+            if recorder is not None:
+                recorder.end_segment(writes, final=True)
+                files = recorder.files
         p50, p99, pmax = runner.stats.percentiles()
-        return ServeSummary(opened.system.name, float(session.time), runner.state, runner.reason,
-                            runner.stats.overruns, p50, p99, pmax, files, list(session.writes))
-
-
-def _write_outputs(system: str, session, out: Path, runner: Runner) -> list[Path]:
-    from .cosim import master as master_module
-    out.mkdir(parents=True, exist_ok=True)
-    files = []
-    writer = getattr(master_module, "write_input_csv", None)
-    inputs_path = out / "session_inputs.csv"
-    if writer is not None:
-        writer(inputs_path, session.writes)
-    else:
-        _write_writes(inputs_path, session.writes)
-    files.append(inputs_path)
-    if isinstance(session, LocalSession):
-        from .cosim.result import csv_bytes
-        path = out / f"{system}.csv"
-        tmp = path.with_suffix(".csv.partial")
-        tmp.write_bytes(csv_bytes(session.records()))
-        tmp.replace(path)
-        files.append(path)
-    return files
-
-
-def _write_writes(path: Path, writes: Sequence[tuple[float, str, object]]) -> None:
-    """The write log as an input CSV (one row per write, empty cells: no change, ``release``)."""
-    names = list(dict.fromkeys(name for _t, name, _v in writes))
-    lines = [",".join(["\"time\"", *(f'"{n}"' for n in names)])]
-    for t, name, value in writes:
-        cells = [repr(float(t))] + [""] * len(names)
-        cells[1 + names.index(name)] = ("release" if value is None else
-                                        str(int(value)) if isinstance(value, bool) else repr(value))
-        lines.append(",".join(cells))
-    path.write_text("\n".join(lines) + "\n")
+        return ServeSummary(opened.system.name, end, runner.state, runner.reason,
+                            runner.stats.overruns, p50, p99, pmax, files, writes)
