@@ -1,4 +1,6 @@
-"""``ncfmu serve`` started as a process, a real asyncua client as the PLC: address space, writes, control."""
+"""``ncfmu serve`` started as a process, a real asyncua client as the PLC: address space, writes, control.
+
+Each test starts a server process (a few seconds): all are ``slow`` but the command-line refusal."""
 
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from ncfmu.cli import main
 
 
 # -- the address space --------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_units_descriptions_and_types_are_browsable(ncfmu_serve):
     served = ncfmu_serve("lathe_roughing", "--speed", "0")
 
@@ -49,6 +52,7 @@ def test_units_descriptions_and_types_are_browsable(ncfmu_serve):
     run(plc())
 
 
+@pytest.mark.slow
 def test_subscription_delivers_x_axis_pos_changes(ncfmu_serve):
     """grinder_feed at real time: the wheel roughs from X 4.0 to 4.2 at 0.02 mm/s for 10 s; a 10 ms subscription
     sees it move every publication."""
@@ -96,6 +100,7 @@ BAD_WRITES = [
 ]
 
 
+@pytest.mark.slow
 def test_bad_writes_get_the_status_that_says_why_and_change_nothing(ncfmu_serve):
     served = ncfmu_serve("lathe_roughing", "--speed", "2")
 
@@ -121,6 +126,7 @@ def test_bad_writes_get_the_status_that_says_why_and_change_nothing(ncfmu_serve)
     run(plc())
 
 
+@pytest.mark.slow
 def test_forcing_a_connected_input_and_releasing_it(ncfmu_serve):
     """seq.feed_override is driven by the panel's dial (1.0): forced to 0.25 it holds, released it follows again."""
     served = ncfmu_serve("lathe_roughing", "--speed", "2")
@@ -151,6 +157,7 @@ def test_forcing_a_connected_input_and_releasing_it(ncfmu_serve):
 
 
 # -- the Simulation object --------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
     served = ncfmu_serve("lathe_roughing", "--speed", "1")
 
@@ -184,6 +191,7 @@ def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
     assert "stopped at t = " in served.output and "(Stop called)" in served.output
 
 
+@pytest.mark.slow
 def test_stop_time_and_sigterm_exit_zero(ncfmu_serve):
     served = ncfmu_serve("lathe_taper", "--speed", "0", "--stop-time", "2")
     assert served.wait(60) == 0, served.output
@@ -215,6 +223,7 @@ ROGUE = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_a_flooding_client_killed_mid_session_does_not_stall_the_simulation(ncfmu_serve):
     served = ncfmu_serve("lathe_roughing", "--speed", "1")
     rogue = subprocess.Popen([sys.executable, "-c", ROGUE, served.endpoint, served.namespace],
@@ -240,6 +249,7 @@ def test_a_flooding_client_killed_mid_session_does_not_stall_the_simulation(ncfm
     assert served.stop() == 0, served.output
 
 
+@pytest.mark.slow
 def test_three_clients_at_once(ncfmu_serve):
     served = ncfmu_serve("grinder_feed", "--speed", "2")
 
@@ -271,6 +281,7 @@ def test_another_address_than_the_loopback_needs_a_user(project, capsys):
     assert "--user 'plc': expected NAME:PASSWORD" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_with_users_only_users_connect_and_write(ncfmu_serve):
     served = ncfmu_serve("grinder_feed", "--speed", "1", "--user", "plc:secret")
 
