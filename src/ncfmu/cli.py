@@ -179,6 +179,7 @@ def cmd_serve(args) -> int:
                     security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
+          + f" after {summary.wall:.2f} s of wall time"
           + f"; lag p50 {summary.lag_p50 * 1e3:.2f} ms, p99 {summary.lag_p99 * 1e3:.2f} ms, "
             f"max {summary.lag_max * 1e3:.2f} ms; overruns {summary.overruns}; {len(summary.writes)} writes",
           flush=True)

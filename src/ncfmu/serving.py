@@ -51,6 +51,8 @@ log = logging.getLogger("ncfmu.serve")
 OVERRUN_LAG = 0.010
 #: The most wall time one chunk may take when catching up (the server gets the GIL in between anyway).
 MAX_CHUNK_WALL = 0.020
+#: The shortest wall time between chunks when paced: faster than real time, one wake-up runs several steps.
+MIN_CHUNK_WALL = 0.001
 #: Steps per chunk at ``speed`` 0 (as fast as possible, still handing back between chunks).
 FAST_CHUNK = 50
 #: How long a client's write waits for the simulation thread to take it (the thread takes writes between
@@ -237,6 +239,7 @@ class Runner:
         self.state, self.reason = "running", ""
         self.stats = PaceStats()
         self.lag = 0.0
+        self.started, self.wall = 0.0, 0.0      # perf_counter at the thread's start; its wall time to the end
         self.commands: queue.SimpleQueue[_Command] = queue.SimpleQueue()
         self._snapshot: Snapshot | None = None
         self._snapshot_lock = threading.Lock()
@@ -326,6 +329,9 @@ class Runner:
         s, h = self.session, self.session.step_size
         stop_time = s.stop_time
         wall0, sim0 = _time.perf_counter(), s.time
+        self.started = wall0
+        # the fewest steps worth waking up for: a chunk every MIN_CHUNK_WALL at least (1 step at real time)
+        min_steps = max(1, int(MIN_CHUNK_WALL * self.speed / h + 1e-9)) if self.speed > 0 else 1
         try:
             while not self._stop.is_set():
                 rebase = False
@@ -356,9 +362,9 @@ class Runner:
                 if self.speed > 0:
                     now = _time.perf_counter()
                     due = int(math.floor(((now - wall0) * self.speed - (s.time - sim0)) / h + 1e-9))
-                    if due <= 0:
-                        # sleep until the next step is due (at most 5 ms: commands are taken in between)
-                        wait = (s.time + h - sim0) / self.speed - (now - wall0)
+                    if due < min_steps:
+                        # sleep until a chunk is due (at most 5 ms: commands are taken in between)
+                        wait = (s.time + min_steps * h - sim0) / self.speed - (now - wall0)
                         try:
                             c = self.commands.get(timeout=min(max(wait, 0.0), 0.005))
                         except queue.Empty:
@@ -393,6 +399,7 @@ class Runner:
             self.state, self.reason = "failed", f"{type(err).__name__}: {err}"
             log.exception("ncfmu serve: the simulation failed at t = %.3f s", s.time)
         finally:
+            self.wall = _time.perf_counter() - self.started
             if self.state == "running":
                 self.state = "stopped"
             try:
@@ -454,6 +461,7 @@ class ServeSummary:
     lag_max: float
     files: list[Path]
     writes: list[tuple[float, str, object]]
+    wall: float = 0.0            # wall time of the simulation thread, s
 
 
 class LiveServer:
@@ -766,4 +774,4 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
                 files = recorder.files
         p50, p99, pmax = runner.stats.percentiles()
         return ServeSummary(opened.system.name, end, runner.state, runner.reason,
-                            runner.stats.overruns, p50, p99, pmax, files, writes)
+                            runner.stats.overruns, p50, p99, pmax, files, writes, runner.wall)
