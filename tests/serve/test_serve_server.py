@@ -159,7 +159,8 @@ def test_forcing_a_connected_input_and_releasing_it(ncfmu_serve):
 # -- the Simulation object --------------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
-    served = ncfmu_serve("lathe_roughing", "--speed", "1")
+    out = tmp_path / "served"
+    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--out", out)
 
     async def plc():
         async with connect(served) as p:
@@ -189,6 +190,15 @@ def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
     run(plc())
     assert served.wait(30) == 0, served.output
     assert "stopped at t = " in served.output and "(Stop called)" in served.output
+    # the Reset ended a recording segment: its trajectory and its writes are kept under their own names
+    before = (out / "lathe_roughing.segment1.csv").read_text().splitlines()
+    assert before[1].startswith("0.0,") and float(before[-1].split(",")[0]) > 1.0
+    writes = (out / "session_inputs.segment1.csv").read_text().splitlines()
+    assert writes[0] == '"time","seq.feed_override"' and writes[1].endswith(",0.5") and len(writes) == 2
+    after = (out / "lathe_roughing.csv").read_text().splitlines()
+    assert after[1].startswith("0.0,") and 0.3 <= float(after[-1].split(",")[0]) < 5.0
+    assert (out / "session_inputs.csv").read_text() == '"time"\n'
+
 
 
 @pytest.mark.slow
@@ -224,8 +234,11 @@ ROGUE = textwrap.dedent("""
 
 
 @pytest.mark.slow
-def test_a_flooding_client_killed_mid_session_does_not_stall_the_simulation(ncfmu_serve):
+def test_a_hung_client_and_a_flooding_client_killed_mid_session_do_not_stall_the_simulation(ncfmu_serve):
     served = ncfmu_serve("lathe_roughing", "--speed", "1")
+    import socket
+    hung = socket.create_connection(("127.0.0.1", int(served.endpoint.rsplit(":", 1)[1].split("/")[0])))
+    hung.sendall(b"HELF\x40\x00\x00")      # the start of a Hello, then nothing: a client that hangs
     rogue = subprocess.Popen([sys.executable, "-c", ROGUE, served.endpoint, served.namespace],
                              stdout=subprocess.PIPE, text=True)
     try:
@@ -243,6 +256,7 @@ def test_a_flooding_client_killed_mid_session_does_not_stall_the_simulation(ncfm
         pace, _ = run(watch(1.0))
         assert pace == pytest.approx(1.0, abs=0.15)
     finally:
+        hung.close()
         if rogue.poll() is None:
             rogue.kill()
             rogue.wait()
@@ -299,6 +313,10 @@ def test_with_users_only_users_connect_and_write(ncfmu_serve):
         async with connect(served, "plc", "secret") as p:
             await p.write("panel.override", 0.5)
             return await p.wait_until("panel.feed_override", lambda v: v == 0.5, timeout=5)
+    async def endpoints():
+        return await Client(served.endpoint, timeout=5).connect_and_get_server_endpoints()
+    offered = run(endpoints())
+    assert {t.TokenType for e in offered for t in e.UserIdentityTokens} == {ua.UserTokenType.UserName}
     run(anonymous())
     with pytest.raises(ua.UaStatusCodeError):
         run(wrong_password())
