@@ -30,11 +30,13 @@ def _parse_set(items: list[str]) -> dict[str, object]:
     return values
 
 
-def _summary(result) -> str:
+def _summary(result, report_lines: list[str] | None = None) -> str:
+    """The run's summary: the report's lines from its trajectory, or ``report_lines`` computed as it ran."""
     from .systems import report_of, run_parameters
-    lines = [f"system {result.system}: simulated {result.time[-1]:.3f} s in {result.wall_time:.2f} s wall "
+    lines = [f"system {result.system}: simulated {result.end_time:.3f} s in {result.wall_time:.2f} s wall "
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
-    lines += report_of(result).summary(result, run_parameters(result))
+    lines += (report_of(result).summary(result, run_parameters(result)) if report_lines is None
+              else report_lines)
     for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):
@@ -66,8 +68,66 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
     return [{name: values[i] for name, values in columns.items()} for i in range(n)]
 
 
+def _run_streamed(args, start_values: dict[str, object]):
+    """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
+    completed) and the summary computed as the run goes; only ``--plot`` keeps the trajectory in memory.
+    Prints the summary; returns the result and where its CSV is."""
+    import signal
+
+    from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
+    from .cosim.ssp import read_ssp
+    from .project import simulate, system_archive
+    from .systems import report_for
+    archive = system_archive(args.system, args.root)
+    system = read_ssp(archive)
+    report = report_for(system.name, {c.name: c.model for c in system.components})
+    parameters: dict[str, dict[str, object]] = {c.name: dict(c.parameters) for c in system.components}
+    for qualified, value in start_values.items():
+        inst, _, var = qualified.partition(".")
+        parameters.setdefault(inst, {})[var] = value
+    record = None if args.record is None else list(dict.fromkeys(args.record))
+    csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv")
+    accumulator = None
+    sinks: list[RecordSink]
+    interval = args.output_interval
+    if args.plot:                       # the plot needs the whole trajectory: kept in memory
+        sinks, run_record = [csv_sink], record
+    else:
+        # the summary reads every step; the CSV gets the --record columns at the --output-interval
+        accumulator = report.accumulator(parameters)
+        run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
+        csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
+        every = steps_per_row(interval, system.step_size if args.step is None else args.step)
+        sinks = [csv_view if every == 1 else EveryKth(csv_view, every), accumulator]
+        interval = None
+    try:
+        with deferred_interrupts():
+            result = simulate(str(archive), stop_time=args.stop_time, step_size=args.step,
+                              start_values=start_values, input_csv=args.input, mode=args.mode, root=args.root,
+                              record=run_record, output_interval=interval, sinks=sinks, keep=args.plot)
+    except KeyboardInterrupt as err:
+        terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
+        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {_where_stopped(csv_sink)}",
+              file=sys.stderr)
+        raise SystemExit(143 if terminated else 130) from None
+    except NcfmuError as err:
+        if csv_sink.final_path is None:
+            raise
+        raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
+    result.system = system.name
+    print(_summary(result, None if accumulator is None else accumulator.summary()))
+    return result, csv_sink.final_path
+
+
+def _where_stopped(sink) -> str:
+    if not sink.rows:
+        return f"no rows recorded ({sink.final_path} has the header only)"
+    return f"{sink.rows} rows up to t = {sink.stopped_at:.3f} s in {sink.final_path} (the run did not finish)"
+
+
 def cmd_run(args) -> int:
-    from .project import simulate, simulate_branches
+    from .project import simulate_branches
     if args.branch_at is not None:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
@@ -84,11 +144,10 @@ def cmd_run(args) -> int:
             print(f"  results: {csv}")
         return 0
     start_values = _parse_set(args.set)
-    result = simulate(args.system, stop_time=args.stop_time, step_size=args.step,
-                      start_values=start_values, input_csv=args.input, mode=args.mode, root=args.root)
+    if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
+        raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
+    result, csv = _run_streamed(args, start_values)
     out = Path(args.out)
-    csv = result.to_csv(out / f"{result.system}.csv")
-    print(_summary(result))
     print(f"  results: {csv}")
     if args.plot:
         try:
@@ -215,8 +274,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
     p.add_argument("--input", type=Path, default=None, help="CSV of input changes (columns time, INSTANCE.VARIABLE)")
     p.add_argument("--mode", choices=("gauss-seidel", "jacobi"), default="gauss-seidel", help="master algorithm")
-    p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out)")
-    p.add_argument("--plot", action="store_true", help="also write SYSTEM.png")
+    p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out); the rows are streamed to "
+                   "SYSTEM.csv.partial and renamed when the run completed (an interrupted run leaves the .partial: "
+                   "a valid CSV of every row up to where it stopped)")
+    p.add_argument("--record", nargs="+", default=None, metavar="NAME",
+                   help="outputs written to SYSTEM.csv, INSTANCE.VARIABLE (default: every output)")
+    p.add_argument("--output-interval", type=float, default=None, metavar="S",
+                   help="write a row every S seconds of simulated time (a whole multiple of the step; default: "
+                        "every step)")
+    p.add_argument("--plot", action="store_true", help="also write SYSTEM.png (keeps the trajectory in memory)")
     p.add_argument("--branch-at", type=float, default=None, metavar="T",
                    help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",

@@ -19,6 +19,7 @@ from . import __version__
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.native_loop import build_library
+from .cosim.record import RecordSink
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, System, pack, read_ssd, write_system
 from .errors import SystemDefinitionError
@@ -130,13 +131,19 @@ class OpenSystem:
 
 def simulate(system: str = "lathe_roughing", stop_time: float | None = None, step_size: float | None = None,
              start_values: Mapping[str, object] | None = None, input_csv: Path | None = None,
-             mode: str = "gauss-seidel", root: Path | None = None, progress=None) -> Result:
-    """Build what is missing, run ``system`` (a name or an .ssp path) closed loop, return the result."""
+             mode: str = "gauss-seidel", root: Path | None = None, progress=None,
+             record: Sequence[str] | None = None, output_interval: float | None = None,
+             sinks: Sequence[RecordSink] = (), keep: bool = True) -> Result:
+    """Build what is missing, run ``system`` (a name or an .ssp path) closed loop, return the result.
+
+    ``record``, ``output_interval``, ``sinks`` and ``keep`` as :meth:`~ncfmu.cosim.master.Master.run`: e.g.
+    ``sinks=[CsvSink("out/run.csv")], keep=False`` streams a run of any length to disk at flat memory."""
     archive = system_archive(system, root)
     inputs = InputTable.from_csv(input_csv) if input_csv else None
     with OpenSystem(archive, mode) as opened:
         return opened.run(stop_time=stop_time, step_size=step_size, start_values=start_values,
-                          inputs=inputs, progress=progress)
+                          inputs=inputs, progress=progress, record=record, output_interval=output_interval,
+                          sinks=sinks, keep=keep)
 
 
 def validate(root: Path | None = None) -> list[str]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from ..errors import ConfigError
 from ..ports import boolean, integer, real
 from .base import Controller, real_param
 
@@ -41,6 +42,8 @@ class OperatorPanel(Controller):
         real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word",
              min=0.0, variability="tunable"),
         real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5, variability="tunable"),
+        real("repeat_every", "parameter", -1.0, "s", "the button times repeat with this period (a shift of "
+             "cycles: START, wear start, ... again every period); negative: once", variability="tunable"),
         integer("m_active", "input", 0, "active M function number (0 none), from the controller"),
         boolean("start", "output", None, "cycle start push button (START1)"),
         boolean("wear_start", "output", None, "wear-compensation start push button (START2)"),
@@ -60,6 +63,10 @@ class OperatorPanel(Controller):
         self.pulse = real_param(values, "pulse")
         self.mfin_delay = real_param(values, "mfin_delay")
         self.override = real_param(values, "override")
+        self.repeat_every = real_param(values, "repeat_every")
+        if 0.0 <= self.repeat_every <= self.pulse:
+            raise ConfigError("repeat_every", self.repeat_every, f"must be negative (once) or longer than the "
+                              f"pulse ({self.pulse:g} s)")
 
     def reset(self) -> None:
         self.clock = 0.0            # panel time, advanced only by dt
@@ -68,9 +75,9 @@ class OperatorPanel(Controller):
         self._outputs: dict[str, object] = {}
         self._publish(0)
 
-    def _pressed(self, at: float) -> bool:
+    def _pressed(self, at: float, now: float) -> bool:
         # Half a step of slack so a press at k*dt is seen at that step whatever the rounding.
-        return at >= 0.0 and at - 1e-9 <= self.clock < at + self.pulse - 1e-9
+        return at >= 0.0 and at - 1e-9 <= now < at + self.pulse - 1e-9
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
         self.clock += dt
@@ -82,11 +89,13 @@ class OperatorPanel(Controller):
 
     def _publish(self, m: int) -> dict[str, object]:
         out = self._outputs
-        out["start"] = self._pressed(self.start_at) or self._pressed(self.restart_at)
-        out["wear_start"] = self._pressed(self.wear_start_at)
-        out["emergency"] = self._pressed(self.emergency_at)
-        held = self.hold_at >= 0.0 and self.clock >= self.hold_at - 1e-9
-        released = self.release_at >= 0.0 and self.release_at > self.hold_at and self.clock >= self.release_at - 1e-9
+        # the time in the button schedule: the panel's clock, or its time into the present period
+        now = self.clock % self.repeat_every if self.repeat_every > 0.0 else self.clock
+        out["start"] = self._pressed(self.start_at, now) or self._pressed(self.restart_at, now)
+        out["wear_start"] = self._pressed(self.wear_start_at, now)
+        out["emergency"] = self._pressed(self.emergency_at, now)
+        held = self.hold_at >= 0.0 and now >= self.hold_at - 1e-9
+        released = self.release_at >= 0.0 and self.release_at > self.hold_at and now >= self.release_at - 1e-9
         out["feed_hold"] = held and not released
         out["mfin"] = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
         out["feed_override"] = self.override

@@ -28,8 +28,11 @@ from __future__ import annotations
 
 import csv
 import math
+import signal
+import threading
 import time as _time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,7 +46,8 @@ from .result import Result
 from .slave import DTYPES, KINDS, Slave, StatefulSlave, Variable
 from .ssp import System
 
-__all__ = ["MAX_RECORD_BYTES", "InputTable", "Master", "Session", "write_input_csv"]
+__all__ = ["MAX_RECORD_BYTES", "InputTable", "Interrupted", "Master", "Session", "deferred_interrupts", "steps_per_row",
+           "write_input_csv"]
 
 MODES = ("gauss-seidel", "jacobi")
 
@@ -220,6 +224,47 @@ class _Run:
         return data
 
 
+def steps_per_row(output_interval: float | None, h: float) -> int:
+    """Steps between recorded rows for an output interval (None: every step); it must be a whole multiple of ``h``."""
+    if output_interval is None:
+        return 1
+    ratio = float(output_interval) / h
+    if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) <= 1e-9 * ratio):
+        raise SystemDefinitionError(f"output interval {output_interval!r} s: must be a whole multiple of the "
+                                    f"step {h:g} s")
+    return int(round(ratio))
+
+
+#: Signals noted inside :func:`deferred_interrupts`, raised by the loop between chunks of steps.
+_PENDING: list[int] = []
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM during a run, raised between chunks of steps (``signum`` says which)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+@contextmanager
+def deferred_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Inside: Ctrl-C and SIGTERM are noted and raised as :class:`Interrupted` by the master between chunks of
+    steps, never inside an FMU's own Python code (a pythonfmu FMU runs in this interpreter and turns an
+    exception raised in its step into fmi2Fatal). Only in the main thread; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.signal(signum, lambda received, frame: _PENDING.append(received))
+                for signum in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        _PENDING.clear()
+
+
 def _output_slots(slaves, kind, ext_names):
     """Slot in the global vector of ``kind`` for every output of that kind, then for the CSV inputs."""
     slots: dict[str, int] = {}
@@ -364,14 +409,7 @@ class Master:
                                                       record, every))
 
     def _every(self, output_interval: float | None, step_size: float | None) -> int:
-        if output_interval is None:
-            return 1
-        h = self.system.step_size if step_size is None else float(step_size)
-        ratio = float(output_interval) / h
-        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) <= 1e-9 * ratio):
-            raise SystemDefinitionError(f"output interval {output_interval!r} s: must be a whole multiple of the "
-                                        f"step {h:g} s")
-        return int(round(ratio))
+        return steps_per_row(output_interval, self.system.step_size if step_size is None else float(step_size))
 
     def run_branches(self, branch_time: float, variants: Sequence[Mapping[str, object]],
                      stop_time: float | None = None, step_size: float | None = None,
@@ -676,6 +714,8 @@ class Master:
                     end = min(end, (i + 64) // 64 * 64)
                 advance(i, end, run.row_base)
                 i = run.step = end
+                if _PENDING:
+                    raise Interrupted(_PENDING[0])
                 if progress is not None and end % report_every == 0 and run.n_steps:
                     progress(end / run.n_steps)
                 if deadline is not None and end % 64 == 0 and _time.perf_counter() > deadline:

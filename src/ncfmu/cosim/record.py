@@ -138,3 +138,51 @@ class CsvSink:
             self.final_path = self.path
         else:
             self.final_path = self.partial
+
+
+class SelectColumns:
+    """A sink seen through a subset of the run's columns (``time`` and ``names``, in that order): when one run
+    feeds sinks that need different columns (a CSV of what the user asked for, a summary of what it reads)."""
+
+    def __init__(self, sink: RecordSink, names: list[str]) -> None:
+        self.sink = sink
+        self.names = ["time", *[n for n in dict.fromkeys(names) if n != "time"]]
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        have = dict(columns)
+        missing = [n for n in self.names if n not in have]
+        if missing:
+            raise SystemDefinitionError(f"record: the run does not record {', '.join(missing)}")
+        self.sink.open([(n, have[n]) for n in self.names])
+
+    def write(self, rows: np.ndarray) -> None:
+        # a copy with exactly these fields (a multi-field view would keep the others' bytes as padding)
+        part = np.empty(len(rows), dtype=[(n, rows.dtype[n]) for n in self.names])
+        for n in self.names:
+            part[n] = rows[n]
+        self.sink.write(part)
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.sink.close(complete, stopped_at, reason)
+
+
+class EveryKth:
+    """A sink that takes the start row and every ``k``-th row after it (an output interval of its own), while the
+    run's other sinks see every step (a summary computed from every step, a CSV at 0.1 s)."""
+
+    def __init__(self, sink: RecordSink, k: int) -> None:
+        self.sink, self.k = sink, int(k)
+        self._seen = 0                       # rows of the run before the present chunk
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self._seen = 0
+        self.sink.open(columns)
+
+    def write(self, rows: np.ndarray) -> None:
+        first = (-self._seen) % self.k       # the chunk's first row whose run index is a multiple of k
+        self._seen += len(rows)
+        if first < len(rows):
+            self.sink.write(rows[first::self.k])
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.sink.close(complete, stopped_at, reason)

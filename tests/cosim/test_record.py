@@ -1,0 +1,128 @@
+"""Streaming a run's rows into sinks: the streamed CSV is byte for byte the in-memory run's CSV, chunk size and
+output interval change no value, an interrupted run leaves a valid prefix under ``.partial`` and says where it
+stopped, and only what is kept in memory is refused for its size."""
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.util import read_csv
+
+from ncfmu.cli import main
+from ncfmu.cosim import master as master_module
+from ncfmu.cosim.record import CsvSink, MemorySink
+from ncfmu.cosim.result import csv_bytes
+from ncfmu.errors import SimulationTimeout, SystemDefinitionError
+from ncfmu.project import OpenSystem, simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def in_memory_csv(system, stop_time, record=None, every=1, **kwargs):
+    """Today's way: the whole run in memory, then the columns and rows picked (as the sweeps do)."""
+    r = simulate(system, stop_time=stop_time, **kwargs)
+    data = r.data if record is None else r.data[["time", *record]]
+    return csv_bytes(data[::every]), r
+
+
+@pytest.mark.parametrize("system, stop, extra, record, every", [
+    ("lathe_roughing", 12.0, [], None, 1),
+    ("grinder_feed", 35.0, ["--set", "panel.emergency_at=20"], None, 1),
+    ("mill_contour", 9.0, ["--output-interval", "0.007"], ["x_axis.pos", "y_axis.pos", "contour.segment",
+                                                           "contour.alarm"], 7),
+])
+def test_the_streamed_csv_is_the_in_memory_csv_byte_for_byte(project, tmp_path, monkeypatch, capsys,
+                                                             system, stop, extra, record, every):
+    monkeypatch.setattr(master_module, "WINDOW_BYTES", 40_000)      # many chunks: the joints are tested
+    args = ["run", system, "--stop-time", str(stop), "--out", str(tmp_path), *extra]
+    if record:
+        args += ["--record", *record]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    start_values = {"panel.emergency_at": 20} if "--set" in extra else None
+    expected, result = in_memory_csv(system, stop, record, every, start_values=start_values)
+    streamed = (tmp_path / f"{system}.csv").read_bytes()
+    assert streamed == expected
+    assert not (tmp_path / f"{system}.csv.partial").exists()
+    # the summary computed as the run went is the one from the whole trajectory
+    from ncfmu.cli import _summary
+    assert printed.splitlines()[1:-1] == _summary(result).splitlines()[1:]
+    if every > 1:
+        assert len(read_csv(str(tmp_path / f"{system}.csv"))) == int(stop / 0.001) // every + 1
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_chunks_and_the_output_interval_change_no_value(project, monkeypatch, native):
+    """A run streamed through a window of a few rows into a MemorySink equals the run kept in memory."""
+    archive = ROOT / "ssp" / "lathe_taper.ssp"
+    record = ["x_axis.pos", "seq.subcycle", "limiter.alarm", "z_axis.pos"]
+    with OpenSystem(archive) as opened:
+        opened.master.native = native
+        kept = opened.run(stop_time=2.0, record=record, output_interval=0.003)
+    assert kept.names == record and len(kept.data) == 2000 // 3 + 1
+    assert kept.data.dtype["seq.subcycle"] == np.int32 and kept.data.dtype["limiter.alarm"] == np.bool_
+    monkeypatch.setattr(master_module, "WINDOW_BYTES", 3000)       # ~5 rows of every output per chunk
+    sink = MemorySink()
+    with OpenSystem(archive) as opened:
+        opened.master.native = native
+        streamed = opened.run(stop_time=2.0, record=record, output_interval=0.003, sinks=[sink], keep=False)
+    assert len(streamed.data) == 0 and streamed.end_time == pytest.approx(2.0)
+    assert sink.complete is True and sink.stopped_at == pytest.approx(1.998)
+    assert sink.data.dtype == kept.data.dtype and np.array_equal(sink.data, kept.data)
+    # the values are the full run's every third row
+    with OpenSystem(archive) as opened:
+        full = opened.run(stop_time=2.0)
+    for name in record:
+        assert np.array_equal(kept[name], full[name][::3]), name
+    assert np.array_equal(kept.time, full.time[::3])
+
+
+def test_a_deadline_leaves_a_valid_prefix_under_partial(project, tmp_path, monkeypatch):
+    monkeypatch.setattr(master_module, "WINDOW_BYTES", 50_000)
+    path = tmp_path / "taper.csv"
+    sink = CsvSink(path)
+    with OpenSystem(ROOT / "ssp" / "lathe_taper.ssp") as opened, pytest.raises(SimulationTimeout):
+        opened.run(stop_time=50.0, sinks=[sink], keep=False, deadline=time.perf_counter() + 0.5)
+    assert not path.exists() and sink.final_path == path.with_name("taper.csv.partial")
+    text = sink.final_path.read_bytes()
+    assert text.endswith(b"\n") and sink.rows > 100
+    expected, _ = in_memory_csv("lathe_taper", 50.0)
+    assert expected.startswith(text)                       # every row written is the full run's, whole
+    assert len(text.splitlines()) == sink.rows + 1
+    assert float(text.splitlines()[-1].split(b",")[0]) == sink.stopped_at
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum, status, says", [(signal.SIGTERM, 143, "terminated (SIGTERM)"),
+                                                  (signal.SIGINT, 130, "interrupted")])
+def test_ctrl_c_and_sigterm_leave_a_valid_prefix_and_say_where(project, tmp_path, signum, status, says):
+    ncfmu = Path(sys.executable).with_name("ncfmu")
+    proc = subprocess.Popen([str(ncfmu), "run", "lathe_taper", "--stop-time", "100000", "--out", str(tmp_path)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    partial = tmp_path / "lathe_taper.csv.partial"
+    deadline = time.time() + 120
+    while time.time() < deadline and (not partial.exists() or partial.stat().st_size < 2_000_000):
+        time.sleep(0.2)
+    proc.send_signal(signum)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == status, err
+    assert not (tmp_path / "lathe_taper.csv").exists()
+    assert says in err and str(partial) in err and "rows up to t = " in err
+    data = read_csv(str(partial))
+    stopped = float(err.split("rows up to t = ")[1].split(" s")[0])
+    assert data["time"][-1] == pytest.approx(stopped, abs=5e-4) and len(data) > 1000
+    head = simulate("lathe_taper", stop_time=float(data["time"][-1]))
+    assert csv_bytes(head.data) == partial.read_bytes()
+
+
+def test_only_what_is_kept_in_memory_is_refused(project):
+    with pytest.raises(SystemDefinitionError, match=r"must stay under 8 GiB \(rows x bytes per row\)"):
+        simulate("lathe_taper", stop_time=100000)
+    with OpenSystem(ROOT / "ssp" / "lathe_taper.ssp") as opened:
+        session = opened.master.open_session(stop_time=100000)          # keeps nothing: no refusal
+        session.advance(10)
+        assert session.close().end_time == pytest.approx(0.01)
