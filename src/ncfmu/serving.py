@@ -648,6 +648,9 @@ class LiveServer:
 
     def _method(self, what: str):
         async def call(parent, *args):
+            if what == "stop" and self.runner.state == "failed":
+                self.stopped.set()
+                return []
             refusal = await self._submit(_Command(what))
             if refusal is not None:
                 return self._method_refusal("BadInvalidState", refusal)
@@ -712,7 +715,10 @@ class LiveServer:
             except (NotImplementedError, RuntimeError, ValueError):   # not the main thread, or Windows
                 pass
         def wake() -> None:
-            loop.call_soon_threadsafe(self.stopped.set)
+            # stopped (Stop, the stop time): the server ends too; failed: it stays up so that clients see the
+            # state and the reason, until Stop, Ctrl-C or SIGTERM
+            if self.runner.state != "failed":
+                loop.call_soon_threadsafe(self.stopped.set)
         self.runner._on_state = wake
         async with self.server:
             self.runner.start()
@@ -730,10 +736,22 @@ class LiveServer:
             await self._publish_once()
 
 
+class _NoServiceFaultLines(logging.Filter):
+    """asyncua logs every refused request as an error ("sending service fault response"); a refused write is
+    ours to report (at info, naming the variable and the rule), and a client flooding bad writes must not
+    flood the log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("sending service fault response")
+
+
 def _quiet_asyncua() -> None:
     # asyncua logs every request at INFO: a write flood would cost the server more in logging than in writing
     for name in ("asyncua", "asyncua.server", "asyncua.server.uaprocessor"):
         logging.getLogger(name).setLevel(logging.WARNING)
+    processor = logging.getLogger("asyncua.server.uaprocessor")
+    if not any(isinstance(f, _NoServiceFaultLines) for f in processor.filters):
+        processor.addFilter(_NoServiceFaultLines())
 
 
 def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, speed: float = 1.0,
