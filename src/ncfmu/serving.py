@@ -215,16 +215,33 @@ class Snapshot:
     overruns: int = 0
 
 
-@dataclass
 class PaceStats:
-    lags: list[float] = field(default_factory=list)
-    overruns: int = 0
+    """The lag after every chunk, as a histogram (10 µs bins up to 1 s; bounded memory however long the run),
+    its exact maximum, and the overruns."""
+
+    BIN = 1e-5
+    BINS = 100_000
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
+        self.count = 0
+        self.max = 0.0
+        self.overruns = 0
+
+    def add(self, lag: float) -> None:
+        self.counts[min(max(int(lag / self.BIN), 0), self.BINS)] += 1
+        self.count += 1
+        self.max = max(self.max, lag)
+
+    def percentile(self, q: float) -> float:
+        """The lag that ``q`` percent of the chunks did not exceed (to the bin's upper edge, at most the max)."""
+        if not self.count:
+            return 0.0
+        k = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * self.count, side="left"))
+        return self.max if k >= self.BINS else min((k + 1) * self.BIN, self.max)     # the last bin: beyond 1 s
 
     def percentiles(self) -> tuple[float, float, float]:
-        if not self.lags:
-            return (0.0, 0.0, 0.0)
-        a = np.asarray(self.lags)
-        return float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max())
+        return self.percentile(50), self.percentile(99), self.max
 
 
 class Runner:
@@ -379,8 +396,7 @@ class Runner:
                 if self.speed > 0:
                     lag = _time.perf_counter() - (wall0 + (s.time - sim0) / self.speed)
                     self.lag = lag
-                    if len(self.stats.lags) < 10_000_000:
-                        self.stats.lags.append(lag)
+                    self.stats.add(lag)
                     if lag > OVERRUN_LAG:
                         self.stats.overruns += 1
                         if not self._said_overrun:

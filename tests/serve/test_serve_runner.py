@@ -10,7 +10,7 @@ import time
 import pytest
 
 from ncfmu.errors import ConfigError, SimulationError
-from ncfmu.serving import Point, Runner, _Command
+from ncfmu.serving import PaceStats, Point, Runner, _Command
 
 POINTS = [Point("a.y", "a", "y", "Real", "output", "continuous", None, "", None, None),
           Point("a.u", "a", "u", "Real", "input", "continuous", None, "", None, None)]
@@ -80,8 +80,7 @@ def test_real_time_pacing_follows_the_wall_clock():
     assert session.time <= wall + session.step_size                # never ahead of the clock ...
     assert session.time >= wall - 0.1                             # ... and keeping up (the steps cost nothing)
     p50, p99, pmax = runner.stats.percentiles()
-    assert 0 <= p50 <= p99 <= pmax                                 # each chunk ends after its due time
-    assert runner.stats.overruns == sum(lag > 0.010 for lag in runner.stats.lags)
+    assert 0 < p50 <= p99 <= pmax and runner.stats.count > 100    # each chunk ends after its due time
 
 
 def test_twice_real_time():
@@ -98,9 +97,7 @@ def test_a_loop_that_cannot_keep_the_pace_counts_overruns_and_says_so_once(caplo
     runner = Runner(session, POINTS, speed=1.0)
     with caplog.at_level(logging.WARNING, logger="ncfmu.serve"):
         run_for(runner, 0.6)
-    lags = runner.stats.lags
-    assert runner.stats.overruns >= 3 and runner.stats.overruns == sum(lag > 0.010 for lag in lags)
-    assert lags == sorted(lags)                                   # it never catches up: the lag only grows
+    assert runner.stats.overruns >= 3 and runner.stats.max > 0.1   # never caught up: 0.6 s of steps cost 1.2 s
     said = [r for r in caplog.records if "cannot keep the pace" in r.getMessage()]
     assert len(said) == 1 and "--speed 1" in said[0].getMessage()
     assert session.time < 0.45                                    # it did fall behind: nothing was skipped
@@ -143,3 +140,13 @@ def test_speed_must_be_a_number_not_below_zero():
     for bad in (-1.0, math.nan, math.inf):
         with pytest.raises(ConfigError, match="--speed"):
             Runner(Session(), POINTS, speed=bad)
+
+
+def test_lag_percentiles_from_the_histogram():
+    stats = PaceStats()
+    for k in range(1, 1001):            # 0.1 ms .. 100 ms
+        stats.add(k * 1e-4)
+    p50, p99, pmax = stats.percentiles()
+    assert p50 == pytest.approx(0.050, abs=2e-5) and p99 == pytest.approx(0.099, abs=2e-5) and pmax == 0.1
+    stats.add(5.0)                      # beyond the last bin: counted there, the max exact
+    assert stats.max == 5.0 and stats.percentile(100) == 5.0
