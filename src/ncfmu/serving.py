@@ -28,6 +28,7 @@ import asyncio
 import ipaddress
 import logging
 import math
+import os
 import queue
 import signal
 import sys
@@ -736,7 +737,12 @@ class LiveServer:
             if self.runner.state != "failed":
                 loop.call_soon_threadsafe(self.stopped.set)
         self.runner._on_state = wake
-        async with self.server:
+        try:
+            await self.server.start()
+        except OSError as err:          # the port is taken, or the address is not this machine's
+            said = os.strerror(err.errno).lower() if err.errno else str(err)
+            raise ConfigError("--endpoint", self.endpoint, f"cannot listen there: {said}") from None
+        try:
             self.runner.start()
             if ready is not None:
                 ready(self.endpoint)
@@ -750,24 +756,33 @@ class LiveServer:
                 self.runner.stop("stopped by a signal")
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
+        finally:
+            if self.runner.thread.is_alive():      # the server failed: the FMUs must not step on while closed
+                self.runner.stop("the server stopped")
+                await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
+            await self.server.stop()
 
 
-class _NoServiceFaultLines(logging.Filter):
-    """asyncua logs every refused request as an error ("sending service fault response"); a refused write is
-    ours to report (at info, naming the variable and the rule), and a client flooding bad writes must not
-    flood the log."""
+class _SaidByUs(logging.Filter):
+    """asyncua logs, as errors, what ncfmu says itself: every refused request ("sending service fault
+    response": a refused write is ours to report, at info, naming the variable and the rule, and a client
+    flooding bad writes must not flood the log) and a port it cannot bind, with a traceback (ours is one
+    line naming the endpoint)."""
+
+    SAID = ("sending service fault response", "%s error starting server")
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.msg).startswith("sending service fault response")
+        return not str(record.msg).startswith(self.SAID)
 
 
 def _quiet_asyncua() -> None:
     # asyncua logs every request at INFO: a write flood would cost the server more in logging than in writing
     for name in ("asyncua", "asyncua.server", "asyncua.server.uaprocessor"):
         logging.getLogger(name).setLevel(logging.WARNING)
-    processor = logging.getLogger("asyncua.server.uaprocessor")
-    if not any(isinstance(f, _NoServiceFaultLines) for f in processor.filters):
-        processor.addFilter(_NoServiceFaultLines())
+    for name in ("asyncua.server.uaprocessor", "asyncua.server.server"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, _SaidByUs) for f in logger.filters):
+            logger.addFilter(_SaidByUs())
 
 
 def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, speed: float = 1.0,

@@ -153,3 +153,18 @@ def test_the_python_api_serves_and_returns_a_summary(project, tmp_path):
     lines = (tmp_path / "lathe_taper.csv").read_text().splitlines()
     assert lines[0].startswith('"time",') and len(lines) == 1 + 1501          # 0 .. 1.5 s at 1 ms
     assert (tmp_path / "session_inputs.csv").read_text() == '"time"\n'
+
+
+@pytest.mark.slow
+def test_a_port_in_use_is_one_line_and_status_2(project, capsys):
+    import socket
+
+    from ncfmu.cli import main
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["serve", "lathe_taper", "--endpoint", f"opc.tcp://127.0.0.1:{port}/ncfmu"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (f"ncfmu serve: --endpoint = 'opc.tcp://127.0.0.1:{port}/ncfmu': cannot listen there: "
+                       "address already in use"), err
