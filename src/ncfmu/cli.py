@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from .errors import NcfmuError
 
@@ -95,7 +96,7 @@ def _run_streamed(args, start_values: dict[str, object]):
         sinks, run_record = [csv_sink], record
     else:
         # the summary reads every step; the CSV gets the --record columns at the --output-interval
-        accumulator = report.accumulator(parameters)
+        accumulator = _Summary(report, parameters)
         run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
         csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
         every = steps_per_row(interval, system.step_size if args.step is None else args.step)
@@ -118,6 +119,30 @@ def _run_streamed(args, start_values: dict[str, object]):
     result.system = system.name
     print(_summary(result, None if accumulator is None else accumulator.summary()))
     return result, csv_sink.final_path
+
+
+class _Summary:
+    """The report's accumulator, made when the run opens its sinks: after the master checked every --set."""
+
+    def __init__(self, report, parameters: dict[str, dict[str, object]]) -> None:
+        self.report, self.parameters = report, parameters
+        self.accumulator: Any = None
+
+    def open(self, columns) -> None:
+        self.accumulator = self.report.accumulator(self.parameters)
+        self.accumulator.open(columns)
+
+    def write(self, rows) -> None:
+        assert self.accumulator is not None
+        self.accumulator.write(rows)
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        if self.accumulator is not None:
+            self.accumulator.close(complete, stopped_at, reason)
+
+    def summary(self) -> list[str]:
+        assert self.accumulator is not None
+        return self.accumulator.summary()
 
 
 def _where_stopped(sink) -> str:
