@@ -48,7 +48,8 @@ from .errors import ConfigError, NcfmuError, SimulationError
 
 log = logging.getLogger("ncfmu.serve")
 
-#: A chunk whose last step finished more than this after its wall-clock due time is an overrun.
+#: An overrun: the loop falls behind, a chunk's last step finishing more than this after its wall-clock due time
+#: (counted once until a chunk is on time again).
 OVERRUN_LAG = 0.010
 #: The most wall time one chunk may take when catching up (the server gets the GIL in between anyway).
 MAX_CHUNK_WALL = 0.020
@@ -350,6 +351,7 @@ class Runner:
         self.started = wall0
         # the fewest steps worth waking up for: a chunk every MIN_CHUNK_WALL at least (1 step at real time)
         min_steps = max(1, int(MIN_CHUNK_WALL * self.speed / h + 1e-9)) if self.speed > 0 else 1
+        behind = False
         try:
             while not self._stop.is_set():
                 rebase = False
@@ -398,7 +400,10 @@ class Runner:
                     lag = _time.perf_counter() - (wall0 + (s.time - sim0) / self.speed)
                     self.lag = lag
                     self.stats.add(lag)
-                    if lag > OVERRUN_LAG:
+                    if lag <= OVERRUN_LAG:
+                        behind = False
+                    elif not behind:            # one overrun per time it falls behind, however long it takes
+                        behind = True           # to catch up again
                         self.stats.overruns += 1
                         if not self._said_overrun:
                             self._said_overrun = True
@@ -566,7 +571,7 @@ class LiveServer:
                 ("speed", self.runner.speed, ua.VariantType.Double,
                  "simulated seconds per wall-clock second (0: as fast as possible)"),
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
-                ("overruns", 0, ua.VariantType.Int32, "chunks that finished more than 10 ms after they were due"),
+                ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
                 ("state", "running", ua.VariantType.String, "running, paused, stopped or failed"),
                 ("reason", "", ua.VariantType.String, "why the simulation stopped or failed")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
