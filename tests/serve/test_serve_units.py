@@ -144,14 +144,15 @@ def test_the_python_api_serves_and_returns_a_summary(project, tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     script = (f"import ncfmu; s = ncfmu.serve('lathe_taper', endpoint='opc.tcp://127.0.0.1:{port}/ncfmu', "
-              f"speed=0, stop_time=1.5, out={str(tmp_path)!r}); print(s.state, s.time, s.overruns, "
+              f"speed=0, stop_time=1.5, out={str(tmp_path)!r}, record=['x_axis.pos', 'seq.subcycle']); "
+              "print(s.state, s.time, s.overruns, "
               "[p.name for p in s.files])")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split()[:3] == ["stopped", "1.5", "0"]
     assert "'session_inputs.csv'" in done.stdout and "'lathe_taper.csv'" in done.stdout
     lines = (tmp_path / "lathe_taper.csv").read_text().splitlines()
-    assert lines[0].startswith('"time",') and len(lines) == 1 + 1501          # 0 .. 1.5 s at 1 ms
+    assert lines[0] == '"time","x_axis.pos","seq.subcycle"' and len(lines) == 1 + 1501    # 0 .. 1.5 s at 1 ms
     assert (tmp_path / "session_inputs.csv").read_text() == '"time"\n'
 
 
