@@ -117,15 +117,10 @@ def main() -> None:
     # build first: a run that (re)builds FMUs or docs imports python-control and matplotlib (~250 MB) before it
     # steps, which is start-up, not what the run holds
     subprocess.run([str(Path(sys.executable).with_name("ncfmu")), "build"], check=True, capture_output=True)
+    # The soaks first, while this process is small: Linux counts the RSS a child had between fork and exec (a
+    # copy of this process) in its ru_maxrss, so after the in-process side-by-side (~300 MB) every child would
+    # report at least that.
     with tempfile.TemporaryDirectory(prefix="ncfmu_soak_") as tmp:
-        side = short_side_by_side(args.short, args.repeats, Path(tmp)) if args.short > 0 else None
-        results["side_by_side"] = side
-    with tempfile.TemporaryDirectory(prefix="ncfmu_soak_") as tmp:
-        if side is not None:
-            print(f"short run ({args.short:g} s, {args.repeats} interleaved pairs, medians): in memory "
-                  f"{side['in_memory_us_per_step']:.1f} us/step, streamed {side['streamed_us_per_step']:.1f} us/step: "
-                  f"streaming {side['streamed_slower_pct']:+.1f} % (goal < +5 %); CSV identical: "
-                  f"{side['identical_csv']}", flush=True)
         for hours in args.hours:
             row = soak(hours, Path(tmp))
             results["soak"].append(row)
@@ -134,6 +129,14 @@ def main() -> None:
                   f"({row['csv_mb_per_hour']:.1f} MB per simulated hour)", flush=True)
             for line in row["summary"][:3]:
                 print(f"    {line}")
+    with tempfile.TemporaryDirectory(prefix="ncfmu_soak_") as tmp:
+        side = short_side_by_side(args.short, args.repeats, Path(tmp)) if args.short > 0 else None
+        results["side_by_side"] = side
+        if side is not None:
+            print(f"short run ({args.short:g} s, {args.repeats} interleaved pairs, medians): in memory "
+                  f"{side['in_memory_us_per_step']:.1f} us/step, streamed {side['streamed_us_per_step']:.1f} us/step: "
+                  f"streaming {side['streamed_slower_pct']:+.1f} % (goal < +5 %); CSV identical: "
+                  f"{side['identical_csv']}", flush=True)
     rows = results["soak"]
     if len(rows) > 1:
         growth = rows[-1]["peak_rss_mb"] - rows[0]["peak_rss_mb"]

@@ -455,8 +455,6 @@ class Master:
                     applied[slave.name][v.name] = value
                 for s in self.slaves:
                     s.read_outputs()
-                if run.native is not None:
-                    run.native.forget_sent()     # a restored state and the variant may have changed the FMUs' inputs
                 run_wall = wall + self._loop(run, k, run.n_steps)
                 results.append(self._assemble(run, run_wall, applied))
         finally:
@@ -693,7 +691,11 @@ class Master:
         report_every = max(1, (run.n_steps or 1) // 100)
         self.loop_used = "python" if run.native is None else "c"
         advance: Callable[[int, int, int], None]
-        advance = run.native.run if run.native is not None else self._python_steps(run)
+        if run.native is not None:
+            run.native.forget_sent()     # start values, a restored state or a direct set may have changed inputs
+            advance = run.native.run
+        else:
+            advance = self._python_steps(run)
         wall0 = _time.perf_counter()
         i = first
         try:
