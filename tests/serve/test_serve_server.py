@@ -249,12 +249,14 @@ def test_a_hung_client_and_a_flooding_client_killed_mid_session_do_not_stall_the
                 t0, w0 = await p.time(), time.monotonic()
                 await asyncio.sleep(seconds)
                 return (await p.time() - t0) / (time.monotonic() - w0), await p.read("Simulation.overruns")
-        pace, _ = run(watch(1.0))
-        assert pace == pytest.approx(1.0, abs=0.15)           # the flood does not stall the pacing
+        # paced as the clock goes: a stalled or starved loop would fall far behind (a loaded machine may stall a
+        # process for a few 100 ms now and then; the loop catches up after)
+        pace, _ = run(watch(2.0))
+        assert 0.8 <= pace <= 1.05                              # the flood does not stall the pacing
         os.kill(rogue.pid, signal.SIGKILL)                      # no goodbye: the connection just dies
         rogue.wait(10)
-        pace, _ = run(watch(1.0))
-        assert pace == pytest.approx(1.0, abs=0.15)
+        pace, _ = run(watch(2.0))
+        assert 0.8 <= pace <= 1.05
     finally:
         hung.close()
         if rogue.poll() is None:
