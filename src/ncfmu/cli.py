@@ -386,6 +386,36 @@ def cmd_vars(args) -> int:
     return 0
 
 
+def cmd_serve(args) -> int:
+    from .serving import Security, serve
+    users = {}
+    for item in args.user or []:
+        name, colon, password = item.partition(":")
+        if not colon or not name or not password:
+            raise NcfmuError(f"--user {item!r}: expected NAME:PASSWORD")
+        users[name] = password
+    if args.speed is not None and not (args.speed >= 0 and args.speed < float("inf")):
+        raise NcfmuError(f"--speed {args.speed!r}: must be a number >= 0 (0: as fast as possible)")
+    if args.record and not args.out:
+        raise NcfmuError("--record needs --out DIR (where the recorded trajectory is written)")
+
+    def ready(endpoint: str) -> None:
+        print(f"ncfmu serve: {args.system} at {endpoint} (speed {args.speed:g}); Ctrl-C stops", flush=True)
+
+    summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
+                    stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
+                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
+    print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
+          + (f" ({summary.reason})" if summary.reason else "")
+          + f" after {summary.wall:.2f} s of wall time"
+          + f"; lag p50 {summary.lag_p50 * 1e3:.2f} ms, p99 {summary.lag_p99 * 1e3:.2f} ms, "
+            f"max {summary.lag_max * 1e3:.2f} ms; overruns {summary.overruns}; {len(summary.writes)} writes",
+          flush=True)
+    for path in summary.files:
+        print(f"  written: {path}")
+    return 1 if summary.state == "failed" else 0
+
+
 def cmd_validate(args) -> int:
     from .project import validation
     checked = validation(args.root)
@@ -486,6 +516,32 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
     p.set_defaults(func=cmd_vars)
+
+    p = sub.add_parser("serve", help="run a system in real time behind an OPC UA server (virtual commissioning)",
+                       description="Run the system with simulated time paced to the wall clock behind an OPC UA "
+                                   "server: clients read every variable (ns urn:ncfmu:SYSTEM, NodeId "
+                                   "INSTANCE.VARIABLE), force inputs, set tunable parameters, and Pause/Resume/"
+                                   "Stop/Reset the Simulation object. Stops on Ctrl-C, SIGTERM, Stop or the stop "
+                                   "time, writes what it recorded and exits 0.", epilog=help_epilog)
+    p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
+    p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE", help="start value or parameter")
+    p.add_argument("--endpoint", default="opc.tcp://127.0.0.1:4840/ncfmu",
+                   help="where the server listens (default opc.tcp://127.0.0.1:4840/ncfmu; another address than "
+                        "the loopback needs --user)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="simulated seconds per wall-clock second (default 1; 0: as fast as possible)")
+    p.add_argument("--stop-time", type=float, default=None, help="stop at this simulated time (default: never)")
+    p.add_argument("--step", type=float, default=None, help="communication step in s (default: the system's)")
+    p.add_argument("--record", nargs="+", default=None, metavar="NAME",
+                   help="outputs recorded, INSTANCE.VARIABLE (default: every output); needs --out")
+    p.add_argument("--out", default=None, help="folder for SYSTEM.csv and session_inputs.csv (the writes, "
+                                               "replayable with 'ncfmu run --input')")
+    p.add_argument("--user", action="append", metavar="NAME:PASSWORD",
+                   help="a user who may connect (then only users connect; required off the loopback)")
+    p.add_argument("--certificate", type=Path, default=None,
+                   help="server certificate: adds the Basic256Sha256 SignAndEncrypt policy (with --private-key)")
+    p.add_argument("--private-key", type=Path, default=None, help="the certificate's private key")
+    p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)

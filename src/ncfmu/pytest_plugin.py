@@ -10,6 +10,10 @@ ncfmu_run
 ncfmu_checks
     The :mod:`ncfmu.checks` module (``assert_reaches``, ``assert_no_motion``, ``assert_inside_envelope``,
     ``assert_alarm``).
+ncfmu_serve
+    ``ncfmu_serve(system, *options)`` starts ``ncfmu serve SYSTEM *options`` as a process on a free port of
+    127.0.0.1 and returns a :class:`ServedSystem` (``endpoint``, ``namespace``, ``stop()``): the test plays
+    the PLC with an OPC UA client (asyncua). Every server still running is stopped after the test.
 
 Example::
 
@@ -21,6 +25,13 @@ Example::
 from __future__ import annotations
 
 import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
 
 import pytest
 
@@ -51,3 +62,71 @@ def ncfmu_run(ncfmu_project):
 def ncfmu_checks():
     from ncfmu import checks
     return checks
+
+
+class ServedSystem:
+    """An ``ncfmu serve`` process: its endpoint, OPC UA namespace, output so far, and how to stop it."""
+
+    def __init__(self, system: str, options: tuple[str, ...], cwd: Path | None = None, timeout: float = 120.0):
+        with socket.socket() as probe:          # a free port (the server binds it a moment later)
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        self.system = system
+        self.endpoint = f"opc.tcp://127.0.0.1:{port}/ncfmu"
+        self.namespace = f"urn:ncfmu:{Path(system).stem}"
+        self.lines: list[str] = []
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "ncfmu.cli", "serve", system, "--endpoint", self.endpoint, *options],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self._ready = threading.Event()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        if not self._ready.wait(timeout) or self.process.poll() is not None:
+            output = self.output
+            self.kill()
+            raise RuntimeError(f"ncfmu serve {system} did not come up:\n{output}")
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self.lines.append(line.rstrip("\n"))
+            if " at opc.tcp://" in line:
+                self._ready.set()
+        self._ready.set()
+
+    @property
+    def output(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self, timeout: float = 60.0) -> int:
+        """SIGTERM (what Ctrl-C does) and wait: the exit status."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        return self.wait(timeout)
+
+    def wait(self, timeout: float = 60.0) -> int:
+        rc = self.process.wait(timeout)
+        self._reader.join(5)
+        return rc
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(10)
+
+
+@pytest.fixture
+def ncfmu_serve(ncfmu_project):
+    served: list[ServedSystem] = []
+
+    def start(system: str = "lathe_roughing", *options: str) -> ServedSystem:
+        s = ServedSystem(system, tuple(str(o) for o in options))
+        served.append(s)
+        return s
+    yield start
+    for s in served:
+        try:
+            s.stop(30)
+        except subprocess.TimeoutExpired:
+            s.kill()

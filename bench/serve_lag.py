@@ -1,0 +1,176 @@
+"""Pacing of ``ncfmu serve``: lag and overruns at real time, and the fastest speed held without an overrun.
+
+    python bench/serve_lag.py [--seconds 60] [--system lathe_roughing] [--json FILE]
+
+0. A baseline: a bare loop sleeping 1 ms (no ncfmu) for up to 30 s: how late the machine wakes a thread up.
+1. ``ncfmu serve SYSTEM --speed 1 --stop-time SECONDS`` as a process, with an asyncua client subscribed to both
+   axes' positions at a 10 ms publishing interval (what an HMI does): prints the lag (wall clock minus the
+   paced simulated time, after each chunk of steps) p50 / p99 / max and the overruns (times it fell more than
+   10 ms behind). Goal on 2 cores: p99 < 5 ms, 0 overruns.
+2. ``--speed 0`` (as fast as it can, still serving, the same client): simulated / wall time.
+3. The headroom: the same for 10 s of wall time at doubling speeds (2, 4, 8, ...) until a speed overruns, then
+   halfway between the last good and the first bad speed, twice: the fastest speed held with 0 overruns.
+
+The numbers depend on what else the machine runs: say so with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+
+WALL = re.compile(r"after (?P<wall>[\d.]+) s of wall time")
+SUMMARY = re.compile(r"lag p50 (?P<p50>[\d.]+) ms, p99 (?P<p99>[\d.]+) ms, max (?P<max>[\d.]+) ms; "
+                     r"overruns (?P<overruns>\d+)")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+async def watch(endpoint: str, namespace: str, axes: list[str], stop: asyncio.Event) -> int:
+    """Subscribe to the axes' positions until ``stop``; the number of data changes received."""
+    from asyncua import Client, ua
+
+    class Count:
+        n = 0
+
+        def datachange_notification(self, node, val, data):
+            Count.n += 1
+    for _ in range(200):
+        try:
+            client = Client(endpoint, timeout=10)
+            await client.connect()
+            break
+        except OSError:
+            await asyncio.sleep(0.1)
+    else:
+        raise RuntimeError(f"no server at {endpoint}")
+    try:
+        idx = await client.get_namespace_index(namespace)
+        sub = await client.create_subscription(10, Count())
+        await sub.subscribe_data_change([client.get_node(ua.NodeId(f"{a}.pos", idx)) for a in axes])
+        await stop.wait()
+    except Exception:
+        pass
+    finally:
+        try:
+            await client.disconnect()
+        except Exception:
+            pass
+    return Count.n
+
+
+def wake_up_baseline(seconds: float) -> dict:
+    """The machine's own lateness: a bare loop sleeping 1 ms, how late each wake-up is (no ncfmu, no GIL
+    sharing). Lateness over 10 ms here is the machine's, and shows as overruns of any paced loop."""
+    late = []
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        t = time.perf_counter()
+        time.sleep(0.001)
+        late.append(time.perf_counter() - t - 0.001)
+    late.sort()
+    return {"seconds": seconds, "wake_ups": len(late), "late_p50_ms": late[len(late) // 2] * 1e3,
+            "late_p99_ms": late[int(len(late) * 0.99)] * 1e3, "late_max_ms": late[-1] * 1e3,
+            "over_10ms": sum(x > 0.010 for x in late)}
+
+
+def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str]) -> dict:
+    port = free_port()
+    endpoint = f"opc.tcp://127.0.0.1:{port}/ncfmu"
+    proc = subprocess.Popen([sys.executable, "-m", "ncfmu.cli", "serve", system, "--endpoint", endpoint,
+                             "--speed", repr(speed), "--stop-time", repr(sim_seconds)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    async def client() -> int:
+        stop = asyncio.Event()
+        task = asyncio.create_task(watch(endpoint, f"urn:ncfmu:{system}", axes, stop))
+        while proc.poll() is None:
+            await asyncio.sleep(0.2)
+        stop.set()
+        return await task
+    wall = time.perf_counter()
+    changes = asyncio.run(client())
+    wall = time.perf_counter() - wall
+    out = proc.stdout.read() if proc.stdout else ""
+    m = SUMMARY.search(out)
+    if proc.returncode != 0 or m is None:
+        raise RuntimeError(f"ncfmu serve failed (rc {proc.returncode}):\n{out}")
+    w = WALL.search(out)
+    return {"speed": speed, "simulated_s": sim_seconds, "wall_s": float(w["wall"]) if w else round(wall, 2),
+            "data_changes": changes,
+            "lag_p50_ms": float(m["p50"]), "lag_p99_ms": float(m["p99"]), "lag_max_ms": float(m["max"]),
+            "overruns": int(m["overruns"])}
+
+
+def main() -> dict:
+    import logging
+    logging.getLogger("asyncua").setLevel(logging.CRITICAL)     # the server going away at its stop time is expected
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--system", default="lathe_roughing")
+    parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds at --speed 1 (default 60)")
+    parser.add_argument("--headroom-wall", type=float, default=10.0, help="wall seconds per headroom trial")
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    axes = ["x_axis", "z_axis"] if args.system.startswith("lathe") else ["x_axis"]
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} (1 min) at the start")
+    base = wake_up_baseline(min(args.seconds, 30.0))
+    print(f"baseline: a bare 1 ms sleep loop for {base['seconds']:g} s wakes up late by p50 "
+          f"{base['late_p50_ms']:.2f} ms, p99 {base['late_p99_ms']:.2f} ms, max {base['late_max_ms']:.1f} ms; "
+          f"{base['over_10ms']} wake-ups more than 10 ms late (the machine's share of any overruns)")
+    real = serve_once(args.system, 1.0, args.seconds, axes)
+    print(f"{args.system} at --speed 1 for {args.seconds:g} s (client subscribed, 10 ms): lag p50 "
+          f"{real['lag_p50_ms']:.2f} ms, p99 {real['lag_p99_ms']:.2f} ms, max {real['lag_max_ms']:.2f} ms; "
+          f"overruns {real['overruns']}; {real['data_changes']} data changes delivered  "
+          f"[goal p99 < 5 ms: {'met' if real['lag_p99_ms'] < 5 else 'NOT met'}; 0 overruns: "
+          f"{'met' if real['overruns'] == 0 else 'NOT met'}]")
+    fast = serve_once(args.system, 0.0, args.seconds, axes)
+    print(f"{args.system} at --speed 0 (as fast as it can, still serving): {args.seconds:g} s in "
+          f"{fast['wall_s']:.2f} s of wall time: {args.seconds / fast['wall_s']:.1f}x real time")
+    trials = []
+
+    def trial(speed: float) -> bool:
+        r = serve_once(args.system, speed, speed * args.headroom_wall, axes)
+        trials.append(r)
+        print(f"  --speed {speed:g}: overruns {r['overruns']}, lag p99 {r['lag_p99_ms']:.2f} ms, "
+              f"max {r['lag_max_ms']:.2f} ms")
+        return r["overruns"] == 0
+    good, bad, speed = 1.0, None, 2.0
+    while bad is None and speed <= 1024:
+        if trial(speed):
+            good, speed = speed, speed * 2
+        else:
+            bad = speed
+    for _ in range(2):
+        if bad is None:
+            break
+        mid = round((good + bad) / 2, 1)
+        if trial(mid):
+            good = mid
+        else:
+            bad = mid
+    print(f"headroom: the fastest --speed held with 0 overruns: {good:g}"
+          + (f" (--speed {bad:g} overran)" if bad is not None else ""))
+    print(f"machine: load average {os.getloadavg()[0]:.2f} (1 min) at the end")
+    result = {"system": args.system, "baseline": base, "realtime": real, "as_fast_as_possible": fast,
+              "headroom_speed": good, "first_overrun_speed": bad,
+              "trials": trials, "cores": os.cpu_count(), "load_average_end": os.getloadavg()[0]}
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(result, f, indent=2)
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,69 @@
+"""What the served-system tests share: an asyncua client playing the PLC against ``ncfmu serve``."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+
+from asyncua import Client, ua
+
+VARIANT = {bool: ua.VariantType.Boolean, int: ua.VariantType.Int32, float: ua.VariantType.Double,
+           str: ua.VariantType.String}
+
+
+class Plc:
+    """A connected client: read, write (forcing), call the Simulation's methods, wait for conditions."""
+
+    def __init__(self, client: Client, idx: int) -> None:
+        self.client, self.idx = client, idx
+
+    def node(self, name: str):
+        return self.client.get_node(ua.NodeId(name, self.idx))
+
+    async def read(self, name: str):
+        return await self.node(name).read_value()
+
+    async def write(self, name: str, value, vtype: ua.VariantType | None = None) -> None:
+        await self.node(name).write_value(ua.DataValue(ua.Variant(value, vtype or VARIANT[type(value)])))
+
+    async def call(self, method: str, *args: str) -> None:
+        await self.node("Simulation").call_method(ua.NodeId(f"Simulation.{method}", self.idx),
+                                                  *(ua.Variant(a, ua.VariantType.String) for a in args))
+
+    async def time(self) -> float:
+        return await self.read("Simulation.time")
+
+    async def wait_until(self, name: str, test: Callable[[object], bool], timeout: float = 60.0,
+                         poll: float = 0.005):
+        """Poll ``name`` until ``test(value)``; the value. Fails after ``timeout`` s of wall time."""
+        end = time.monotonic() + timeout
+        while True:
+            value = await self.read(name)
+            if test(value):
+                return value
+            if time.monotonic() > end:
+                raise AssertionError(f"{name} = {value!r}: the condition did not hold within {timeout} s")
+            await asyncio.sleep(poll)
+
+
+class connect:
+    """``async with connect(served) as plc``: a client of a served system (optionally as a user)."""
+
+    def __init__(self, served, user: str | None = None, password: str | None = None, endpoint: str | None = None):
+        self.client = Client(endpoint or served.endpoint, timeout=10)
+        if user is not None:
+            self.client.set_user(user)
+            self.client.set_password(password or "")
+        self.namespace = served.namespace
+
+    async def __aenter__(self) -> Plc:
+        await self.client.connect()
+        return Plc(self.client, await self.client.get_namespace_index(self.namespace))
+
+    async def __aexit__(self, *exc) -> None:
+        await self.client.disconnect()
+
+
+def run(coro):
+    return asyncio.run(coro)
