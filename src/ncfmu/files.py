@@ -1,4 +1,4 @@
-"""Writing files: atomically, and generated files only when their content changes.
+"""Where the project's files are, and writing them: atomically, and generated files only when their content changes.
 
 A run builds what is missing and nothing else, so it must not touch a file whose content is already right
 (``ncfmu run`` changes no file of the checkout, not even a timestamp).
@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+
+from . import __version__
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -31,3 +33,28 @@ def write_if_changed(path: Path, data: bytes) -> bool:
         pass
     write_atomic(path, data)
     return True
+
+
+def is_checkout(folder: Path) -> bool:
+    return (folder / "models" / "CutSequencer.py").is_file() and (folder / "pyproject.toml").is_file()
+
+
+def project_root() -> Path:
+    """Where models are read and FMUs, systems (and, in a checkout, docs) are written.
+
+    ``$NCFMU_ROOT`` when set; else the ncfmu checkout holding the working directory; else the checkout an
+    editable install points at; else (an installed wheel, anywhere) a per-version user cache,
+    ``$NCFMU_CACHE`` or ``$XDG_CACHE_HOME/ncfmu/<version>`` (``~/.cache/ncfmu/<version>``).
+    """
+    env = os.environ.get("NCFMU_ROOT")
+    if env:
+        return Path(env)
+    cwd = Path.cwd().resolve()
+    for folder in (cwd, *cwd.parents, Path(__file__).resolve().parents[2]):
+        if is_checkout(folder):
+            return folder
+    cache = os.environ.get("NCFMU_CACHE")
+    if cache:
+        return Path(cache)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "ncfmu" / __version__

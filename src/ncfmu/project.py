@@ -9,14 +9,12 @@ This is the API behind the command line::
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import __version__
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.native_loop import build_library
@@ -24,33 +22,9 @@ from .cosim.record import RecordSink
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, System, fmu_path, pack, read_ssp, write_system
 from .errors import SystemDefinitionError
-from .fmi.builder import PACKAGE_DIR, build_all
+from .files import is_checkout, project_root
+from .fmi.builder import build_all
 from .systems import SYSTEMS, get_system
-
-
-def _is_checkout(folder: Path) -> bool:
-    return (folder / "models" / "CutSequencer.py").is_file() and (folder / "pyproject.toml").is_file()
-
-
-def project_root() -> Path:
-    """Where models are read and FMUs, systems (and, in a checkout, docs) are written.
-
-    ``$NCFMU_ROOT`` when set; else the ncfmu checkout holding the working directory; else the checkout an
-    editable install points at; else (an installed wheel, anywhere) a per-version user cache,
-    ``$NCFMU_CACHE`` or ``$XDG_CACHE_HOME/ncfmu/<version>`` (``~/.cache/ncfmu/<version>``).
-    """
-    env = os.environ.get("NCFMU_ROOT")
-    if env:
-        return Path(env)
-    cwd = Path.cwd().resolve()
-    for folder in (cwd, *cwd.parents, PACKAGE_DIR.parents[1]):
-        if _is_checkout(folder):
-            return folder
-    cache = os.environ.get("NCFMU_CACHE")
-    if cache:
-        return Path(cache)
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "ncfmu" / __version__
 
 
 def models_dir(root: Path) -> Path:
@@ -68,7 +42,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     root = Path(root or project_root())
     (root / "fmus").mkdir(parents=True, exist_ok=True)
     fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale)
-    if _is_checkout(root):
+    if is_checkout(root):
         from .docs import write_docs
         write_docs(root, fmus)
     build_library(root)                     # the master's C loop, next to the FMUs it drives

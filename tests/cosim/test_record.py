@@ -132,7 +132,7 @@ def test_a_csv_that_cannot_fit_on_the_disk_is_refused_before_the_run(project, tm
     """Streaming lifts the memory limit, not every limit: a billion seconds would not fit on any disk."""
     assert main(["run", "lathe_taper", "--stop-time", "0.1", "--out", str(tmp_path)]) == 0   # fits
     with pytest.raises(SystemDefinitionError, match=r"stop time 1e\+09 s at a step of 0.001 s: 1000000000001 rows "
-                                                    r"of 38 columns: the CSV may need up to .* GiB free"):
+                                                    r"of \d+ columns: the CSV may need up to .* GiB"):
         simulate("lathe_taper", stop_time=1e9, keep=False,
                  sinks=[CsvSink(tmp_path / "huge.csv", expected_rows=10 ** 12 + 1,
                                 run="stop time 1e+09 s at a step of 0.001 s")])

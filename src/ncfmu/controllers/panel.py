@@ -42,8 +42,6 @@ class OperatorPanel(Controller):
         real("mfin_delay", "parameter", 0.5, "s", "delay of the auxiliary device's MFIN after an M word",
              min=0.0, variability="tunable"),
         real("override", "parameter", 1.0, "1", "feed override dial", min=0.0, max=1.5, variability="tunable"),
-        real("repeat_every", "parameter", -1.0, "s", "the button times repeat with this period (a shift of "
-             "cycles: START, wear start, ... again every period); negative: once", variability="tunable"),
         integer("m_active", "input", 0, "active M function number (0 none), from the controller"),
         boolean("start", "output", None, "cycle start push button (START1)"),
         boolean("wear_start", "output", None, "wear-compensation start push button (START2)"),
@@ -51,6 +49,9 @@ class OperatorPanel(Controller):
         boolean("feed_hold", "output", None, "feed hold switch"),
         boolean("mfin", "output", None, "M-function finish from the auxiliary device"),
         real("feed_override", "output", None, "1", "feed override dial"),
+        # appended: the ports before keep their value references
+        real("repeat_every", "parameter", -1.0, "s", "the button times repeat with this period (a shift of "
+             "cycles: START, wear start, ... again every period); negative: once", variability="tunable"),
     )
 
     # Each time, dial and delay drives one output (pulse: the push buttons): a system that does not connect
@@ -58,7 +59,8 @@ class OperatorPanel(Controller):
     ACTS_ON = {"start_at": ("start",), "restart_at": ("start",), "wear_start_at": ("wear_start",),
                "emergency_at": ("emergency",), "hold_at": ("feed_hold",), "release_at": ("feed_hold",),
                "pulse": ("start", "wear_start", "emergency"), "mfin_delay": ("mfin",),
-               "override": ("feed_override",), "m_active": ("mfin",)}
+               "override": ("feed_override",), "m_active": ("mfin",),
+               "repeat_every": ("start", "wear_start", "emergency", "feed_hold")}
 
     def configure(self, values: Mapping[str, object]) -> None:
         self.start_at = real_param(values, "start_at")

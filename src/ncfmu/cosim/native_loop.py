@@ -24,6 +24,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ..errors import SimulationError
+from ..files import project_root
 from .slave import KINDS, Slave
 
 SOURCE = Path(__file__).with_name("loop.c")
@@ -117,7 +118,6 @@ def build_library(root: Path) -> Path | None:
 @functools.lru_cache(maxsize=1)
 def library() -> ctypes.CDLL | None:
     """The compiled loop of the project root (built by ``ncfmu build``, or here on first use), or None."""
-    from ..project import project_root  # not at import: project imports the master
     path = build_library(project_root())
     if path is None:
         return None

@@ -1,0 +1,91 @@
+"""Layers point one way: a module imports only from the layers below its own (docs/architecture.md).
+
+Read from the source (``ast``), not by importing, so an import hidden inside a function counts too.
+"""
+
+from __future__ import annotations
+
+import ast
+
+import pytest
+from conftest import ROOT
+
+SRC = ROOT / "src" / "ncfmu"
+
+#: layer -> the ncfmu layers it may import (besides itself). Top-level modules are their own layer.
+ALLOWED: dict[str, set[str]] = {
+    "errors": set(),
+    "files": set(),
+    "ports": {"errors"},
+    "controllers": {"errors", "ports"},
+    "servo": {"errors", "ports", "controllers"},
+    "catalogue": {"errors", "ports", "controllers", "servo"},
+    "fmi": {"errors", "ports", "files", "controllers", "servo", "catalogue"},
+    "cosim": {"errors", "ports", "files"},
+    "checks": {"errors", "ports", "controllers", "cosim"},
+    "systems": {"errors", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue"},
+}
+#: what nothing below the front end may import: the front end itself
+FRONT = {"project", "cli", "batch", "serve", "plots", "docs", "pytest_plugin"}
+#: third-party packages a layer must not import (the controllers run inside FMUs on the standard library)
+FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control"},
+                      "cosim": {"pythonfmu"}}
+
+
+def _layer(path) -> str:
+    rel = path.relative_to(SRC)
+    return rel.parts[0] if len(rel.parts) > 1 else rel.stem
+
+
+def _imports(path) -> list[tuple[int, str]]:
+    """(line, imported ncfmu layer or third-party top-level package) of every import in ``path``."""
+    return _imports_in(path.read_text(), path.relative_to(SRC.parent).with_suffix("").parts[:-1])
+
+
+def _imports_in(source: str, package: tuple[str, ...]) -> list[tuple[int, str]]:
+    """The imports of ``source``, a module of ``package`` (e.g. ``("ncfmu", "cosim")``)."""
+    tree = ast.parse(source)
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                found.append((node.lineno, parts[1] if parts[0] == "ncfmu" and len(parts) > 1 else parts[0]))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = list(package[:len(package) - node.level + 1])
+                parts = base + (node.module.split(".") if node.module else [])
+                if len(parts) == 1:            # "from .. import x": x names the layer
+                    found += [(node.lineno, alias.name) for alias in node.names]
+                else:
+                    found.append((node.lineno, parts[1]))
+            elif node.module:
+                parts = node.module.split(".")
+                found.append((node.lineno, parts[1] if parts[0] == "ncfmu" and len(parts) > 1 else parts[0]))
+    return found
+
+
+def _modules():
+    return sorted(p for p in SRC.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
+def test_imports_point_down(path):
+    layer = _layer(path)
+    layers = set(ALLOWED) | FRONT | {_layer(p) for p in _modules()}
+    bad = []
+    for line, target in _imports(path):
+        if target in layers and target != layer:
+            if layer in ALLOWED and target not in ALLOWED[layer]:
+                bad.append(f"line {line}: {layer} imports {target}")
+        elif target in FORBIDDEN_PACKAGES.get(layer, ()):
+            bad.append(f"line {line}: {layer} imports {target}")
+    assert not bad, f"{path.relative_to(SRC)}: " + "; ".join(bad)
+
+
+def test_the_rule_catches_an_upward_import():
+    """The check itself: upward imports, also inside a function and relative ones, are found."""
+    source = "import numpy\nfrom ..errors import ConfigError\ndef f():\n    from ..project import simulate\n"
+    assert [t for _, t in _imports_in(source, ("ncfmu", "cosim"))] == ["numpy", "errors", "project"]
+    assert [t for _, t in _imports_in("from . import master\nimport ncfmu.cli\n", ("ncfmu", "cosim"))] == [
+        "cosim", "cli"]
