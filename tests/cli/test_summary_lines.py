@@ -59,7 +59,9 @@ def test_an_input_csv_column_that_is_an_output_is_said_in_good_grammar(project, 
     csv_file = tmp_path / "inputs.csv"
     csv_file.write_text('"time","x_axis.pos"\n0.0,1\n')
     assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
-    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'x_axis.pos' is an output, not an input\n")
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'x_axis.pos' is an output: only inputs and tunable "
+                                         "parameters change during a run\n")
     csv_file.write_text('"time","seq.accel"\n0.0,100\n')
     assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
-    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'seq.accel' is a parameter, not an input\n")
+    assert capsys.readouterr().err == ("ncfmu run: input CSV column 'seq.accel' is a fixed parameter: only inputs and "
+                                       "tunable parameters change during a run\n")
