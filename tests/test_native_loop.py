@@ -123,7 +123,7 @@ def test_an_fmi2error_mid_run_is_the_same_simulation_error_through_the_c_loop(pr
 
 
 def test_fake_slaves_keep_the_python_loop():
-    from test_master import chain
+    from fakes import chain
     m, log = chain("gauss-seidel")
     r = m.run()
     assert list(r["b.y"]) == [0, 11, 22, 33] and log == ["a", "b"] * 3
@@ -162,7 +162,7 @@ def _fake_native_chain(fail_call=None, fail_step=None):
     ``fail_call`` ("SetReal", "GetReal" or "DoStep") of slave b returns fmi2Error at step ``fail_step``."""
     import ctypes
 
-    from test_master import FakeSlave
+    from fakes import FakeSlave
 
     from ncfmu.cosim.native_loop import Fmi2Functions
     from ncfmu.cosim.slave import KINDS

@@ -43,7 +43,7 @@ from .fmu import typed_value
 from .native_loop import NativePlan, NativeSlave, library
 from .record import MAX_RECORD_BYTES, RecordSink, too_big
 from .result import Result
-from .slave import DTYPES, KINDS, Slave, StatefulSlave, Variable
+from .slave import DTYPES, KINDS, ReadableSlave, ResettableSlave, Slave, StatefulSlave, Variable
 from .ssp import System
 
 __all__ = ["MAX_RECORD_BYTES", "InputTable", "Interrupted", "Master", "Session", "deferred_interrupts", "steps_per_row",
@@ -443,8 +443,8 @@ class Master:
         prefix = {kind: run.rec[kind][:k + 1].copy() for kind in KINDS}
         vector = {kind: run.values[kind].copy() for kind in KINDS}
         # the log lines each slave had at the branch point: a branch's result carries these and its own only
-        logs = [getattr(s, "messages", None) for s in self.slaves]
-        marks = [len(log) if log is not None else 0 for log in logs]
+        logs = [s.messages for s in self.slaves]
+        marks = [len(log) for log in logs]
         next_change = run.next_change
         results = []
         try:
@@ -452,8 +452,7 @@ class Master:
                 for holder, state in zip(stateful, states):
                     holder.set_state(state)
                 for log, mark in zip(logs, marks):
-                    if log is not None:
-                        del log[mark:]
+                    del log[mark:]
                 for kind in KINDS:
                     run.values[kind][:] = vector[kind]
                     run.rec[kind][:k + 1] = prefix[kind]
@@ -782,7 +781,7 @@ class Master:
 
     def _assemble(self, run: _Run, wall: float, applied: dict[str, dict[str, object]]) -> Result:
         data = run.rows(run.rows_done)
-        messages = {s.name: list(getattr(s, "messages", [])) for s in self.slaves}
+        messages = {s.name: list(s.messages) for s in self.slaves}
         return Result(data, self.system.name, wall, messages, parameters=applied,
                       models={c.name: c.model for c in self.system.components},
                       span=(run.start_time, run.time_of(run.step)))
@@ -906,10 +905,9 @@ class Session:
             return None if start is None else _as_python(v.type, start)
         if v.causality == "parameter":
             return run.start_values[slave.name].get(v.name, v.start)
-        get = getattr(slave, "get", None)
-        if get is None:
+        if not isinstance(slave, ReadableSlave):
             raise SystemDefinitionError(f"{name} is a {v.causality}: this slave cannot be read outside its outputs")
-        return get(v.name)
+        return slave.get(v.name)
 
     def outputs(self) -> dict[str, object]:
         """Every output's present value."""
@@ -981,10 +979,9 @@ class Session:
             raise SimulationError("the session is closed")
         self._close_sinks(True, f"reset at t = {self.time:g} s")
         for s in self.master.slaves:
-            reset = getattr(s, "reset", None)
-            if reset is None:
+            if not isinstance(s, ResettableSlave):
                 raise SimulationError(f"{s.name} cannot be reset")
-            reset()
+            s.reset()
         self.sinks = list(sinks)
         self.failed = None
         self.writes = []
@@ -1003,7 +1000,7 @@ class Session:
         self.closed = True
         self._close_sinks(complete, reason)
         run = self.run
-        messages = {s.name: list(getattr(s, "messages", [])) for s in self.master.slaves}
+        messages = {s.name: list(s.messages) for s in self.master.slaves}
         models = {c.name: c.model for c in self.master.system.components}
         span = (run.start_time, self.time)
         if self.keep:
