@@ -198,6 +198,7 @@ class Refusing:
         self.variables = {"u": Variable("u", "Real", "input", 0), "y": Variable("y", "Real", "output", 1),
                           "gain": Variable("gain", "Real", "parameter", 2, variability="tunable", start=1.0)}
         self.gain, self.u, self.initialised = 1.0, 0.0, False
+        self.messages: list[tuple[str, str]] = []
 
     def set_start(self, name, value):
         if name == "gain" and value < 0:

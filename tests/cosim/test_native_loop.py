@@ -17,7 +17,7 @@ from ncfmu.cosim.master import InputTable, Master
 from ncfmu.cosim.native_loop import library
 from ncfmu.project import OpenSystem
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # M words at times off the step grid, one exactly on it, two in one step
 M_WORDS = InputTable(np.array([0.0, 0.2345, 0.9, 1.4999999, 1.5000001, 2.6]),

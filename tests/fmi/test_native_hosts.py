@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from fmpy import extract, read_model_description
 
-HOST_C = Path(__file__).with_name("native") / "fmi_host.c"
+HOST_C = Path(__file__).resolve().parents[1] / "native" / "fmi_host.c"
 
 
 @pytest.fixture(scope="session")

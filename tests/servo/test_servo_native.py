@@ -4,7 +4,7 @@
   sequences with the torque and speed limits, Coulomb friction and encoder quantisation active;
 - its margin check agrees with python-control (``control.margin``) on random parameter sets;
 - friction never moves the axis, whatever ``tau_coulomb``.
-(Without Python, in a C host: tests/test_native_hosts.py.)
+(Without Python, in a C host: tests/fmi/test_native_hosts.py.)
 """
 
 from __future__ import annotations
