@@ -114,7 +114,7 @@ def test_block_change_reloads_xf():
 
 def test_feed_rate_override_and_hold():
     def cut_time(**overrides):
-        seq = CutSequencer.with_blocks([Block(N=1, feed=4.0)])
+        seq = CutSequencer.with_blocks([Block(Xf=1.0, Xd=0.5, N=1, Zp=42.0, feed=4.0)], x_start=30.0, z_start=2.0)
         axes = PerfectAxes(seq)
         axes.press_start()
         axes.run_until(lambda o: o["subcycle"] == 2)
@@ -127,7 +127,7 @@ def test_feed_rate_override_and_hold():
     assert nominal == pytest.approx(42.0 / 4.0, abs=0.02)
     assert cut_time(feed_override=0.5) == pytest.approx(42.0 / 2.0, abs=0.02)
     # hold: decelerate to rest, no motion while held, resume on the path
-    seq = CutSequencer.with_blocks([Block(N=1)])
+    seq = CutSequencer.with_blocks([Block(Xf=1.0, Xd=0.5, N=1, Zp=42.0)], x_start=30.0, z_start=2.0)
     axes = PerfectAxes(seq)
     axes.press_start()
     axes.run_until(lambda o: o["subcycle"] == 2 and o["z_cmd"] < -10)

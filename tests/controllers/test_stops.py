@@ -125,7 +125,7 @@ def test_blocks_with_their_own_start_points_rough_a_stepped_shaft():
     seq = CutSequencer.with_blocks([
         Block(Xf=1.0, Xd=0.5, Zp=40.0, N=2, feed=4.0),                                   # radius 28.0 over 40 mm
         Block(Xf=1.0, Xd=0.5, Zp=15.0, N=2, feed=4.0, own_stp=True, x_stp=29.0, z_stp=2.0),  # 27.0 over 15 mm
-    ])
+    ], x_start=30.0, z_start=2.0)
     lathe = Lathe(seq)
     lathe.step(start=True)
     while not lathe.trace[-1]["done"]:

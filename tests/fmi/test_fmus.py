@@ -5,6 +5,7 @@ import sys
 
 import pytest
 
+from ncfmu.controllers import CutSequencer
 from ncfmu.errors import SimulationError
 from ncfmu.systems import parameters
 
@@ -64,7 +65,7 @@ def test_bad_registers_refused_at_initialisation(fmus, fmu_runner, name, value, 
     r.slave.reset()
     r.slave.initialize(0.0, 1.0)
     r.slave.do_step(0.0, 1e-3)
-    assert r.get("alarm") == 0 and r.get("x_cmd") == 30.0
+    assert r.get("alarm") == 0 and r.get("x_cmd") == CutSequencer.default_parameters()["x_start"]   # the defaults
 
 
 def test_nan_position_raises_alarm_and_stops_under_control(fmus, fmu_runner):

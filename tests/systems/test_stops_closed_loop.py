@@ -228,7 +228,7 @@ def test_lathe_restart_after_an_alarm_retracts_x_before_z_moves(project, tmp_pat
 @pytest.mark.parametrize("model, start, axis_inputs", [
     ("ProgrammableFeed", "start", {"x_pos": 0.0, "y_pos": 0.0}),
     ("ContourInterpolator", "start", {"x_pos": 0.0, "y_pos": -10.0}),
-    ("CutSequencer", "start", {"x_pos": 30.0, "z_pos": 2.0}),
+    ("CutSequencer", "start", {"x_pos": 10.0, "z_pos": 0.0}),                # its start point as the FMU starts
 ])
 @pytest.mark.parametrize("bad", [1e300, -1e300, "jump"])
 def test_absurd_position_input_alarms_and_stops_under_control(fmus, fmu_runner, model, start, axis_inputs, bad):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ncfmu.controllers import AreaLimiter, ContourInterpolator, ProgrammableFeed
+from ncfmu.controllers import AreaLimiter, ContourInterpolator, CutSequencer, ProgrammableFeed
 from ncfmu.cosim.result import Result
 from ncfmu.systems import MODELS, SYSTEMS, get_system, parameters, report_for
 from ncfmu.systems.report import Axes
@@ -60,7 +60,8 @@ def test_metrics_and_summary_read_the_parameters_of_the_run():
 
 def test_controller_defaults_carry_no_system_scenario():
     """An FMU's start values run no system's scenario: the limiter limits nothing, the feed's cycle is empty
-    (its EMB returns X to the origin), the contour is one 10 mm move; the scenarios live in the systems."""
+    (its EMB returns X to the origin), the contour is one 10 mm move, the sequencer one 1 mm pass over 10 mm;
+    the scenarios live in the systems."""
     limiter = AreaLimiter()
     inputs = dict(limiter.default_inputs())
     for k in range(1, 5001):                       # to Z -500, X -900 at 100 and 180 mm/s: passed through
@@ -78,6 +79,21 @@ def test_controller_defaults_carry_no_system_scenario():
 
     contour = ContourInterpolator()
     assert [(m.element.start, m.element.end) for m in contour.tool_path][-1] == ((0.0, 0.0), (10.0, 0.0))
+
+    seq = CutSequencer()                           # one pass 1 mm deep over 10 mm from X 10, Z 0, and back
+    inputs = dict(seq.default_inputs(), start=True)
+    xs, zs = [], []
+    for k in range(6000):                          # the cut: 10 mm at 4 mm/s
+        o = seq.step(k * DT, DT, inputs)
+        inputs.update(start=False, x_pos=o["x_cmd"], z_pos=o["z_cmd"])
+        xs.append(o["x_cmd"])
+        zs.append(o["z_cmd"])
+        if o["done"]:
+            break
+    assert o["done"] and not o["alarm"] and (min(xs), min(zs)) == (9.0, -10.0) and (xs[-1], zs[-1]) == (10.0, 0.0)
+    lathe = parameters("lathe_roughing", "seq")
+    assert all(lathe[name] != port.start for name, port in ((p.name, p) for p in CutSequencer.ports("parameter"))
+               if name in ("x_start", "z_start", "block[1].Zp", "block[1].N"))
 
 
 def _outside(port):

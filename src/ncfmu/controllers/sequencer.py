@@ -62,20 +62,25 @@ APPROACH = -1
 PROGRAM_MOVE = -2
 
 
+#: The start point as the FMU starts: a 10 mm radius at Z 0 (a system gives its own, e.g. lathe_roughing's).
+X_START, Z_START = 10.0, 0.0
+
+
 @dataclass
 class Block:
-    """One tape block: the seed's registers Xf, Xd, Xp, Zp, N plus the block's rates."""
+    """One tape block: the seed's registers Xf, Xd, Xp, Zp, N plus the block's rates. The defaults are no
+    system's scenario: one pass 1 mm deep (Xf + Xd) over 10 mm."""
 
-    Xf: float = 1.0
+    Xf: float = 0.5
     Xd: float = 0.5
     Xp: float = 0.0
-    Zp: float = 42.0
-    N: int = 6
+    Zp: float = 10.0
+    N: int = 1
     feed: float = 4.0
     rapid: float = 50.0
     own_stp: bool = False
-    x_stp: float = 30.0
-    z_stp: float = 2.0
+    x_stp: float = X_START
+    z_stp: float = Z_START
 
 
 def _block_ports():
@@ -115,8 +120,8 @@ class CutSequencer(CycleController):
     AXES = ("x", "z")
 
     PORTS = (
-        real("x_start", "parameter", 30.0, "mm", "X (radius) of the start point STP"),
-        real("z_start", "parameter", 2.0, "mm", "Z of the start point STP"),
+        real("x_start", "parameter", X_START, "mm", "X (radius) of the start point STP"),
+        real("z_start", "parameter", Z_START, "mm", "Z of the start point STP"),
         integer("n_blocks", "parameter", 1, "number of blocks read in series", min=1, max=MAX_BLOCKS),
         real("accel", "parameter", 500.0, "mm/s2", "path acceleration/deceleration limit", min=0.0,
              min_exclusive=True),
@@ -126,7 +131,7 @@ class CutSequencer(CycleController):
         boolean("feed_hold", "input", False, "feed hold: decelerate and stop on the path while true"),
         real("feed_override", "input", 1.0, "1", "feed override of the cutting feed (SC2)", min=0.0, max=1.5),
         boolean("alarm_in", "input", False, "external alarm (area limiter): latch alarm, decelerate to rest"),
-        *servo_ports(("x", 30.0), ("z", 2.0)),
+        *servo_ports(("x", X_START), ("z", Z_START)),
         integer("subcycle", "output", None,
                 "sub-cycle: 0 idle (or approach to STP), 1 infeed, 2 cut, 3 retract, 4 return"),
         integer("pass_no", "output", None, "pass of the current block, counting up from 1 (0 idle)"),
