@@ -1,4 +1,6 @@
-"""Fakes shared by the tests: slaves the master drives without any FMU."""
+"""What tests share besides fixtures: fake slaves the master drives without any FMU, and system variants."""
+
+from dataclasses import replace
 
 from ncfmu.cosim.master import Master
 from ncfmu.cosim.slave import Variable
@@ -53,3 +55,15 @@ def chain(mode):
                     [Connection("a", "y", "b", "u"), Connection("b", "y", "a", "u")], stop_time=0.003)
     m = Master(system, [a, b], mode)
     return m, log
+
+
+def unwired(name, folder):
+    """``name`` with the limiter's alarm not wired to the controller (seq.alarm_in is free for an input CSV)."""
+    from ncfmu.cosim.ssp import pack, write_system
+    from ncfmu.project import project_root
+    from ncfmu.systems import get_system
+    system = get_system(name)
+    system = replace(system, name=f"{name}_unwired",
+                     connections=[c for c in system.connections
+                                  if (c.start_element, c.start_connector) != ("limiter", "alarm")])
+    return pack(write_system(system, folder), project_root() / "fmus", folder / f"{name}_unwired.ssp")

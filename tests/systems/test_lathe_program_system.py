@@ -134,7 +134,7 @@ def test_limiter_stops_a_program_that_runs_into_the_chuck(ncfmu_run):
 def test_hold_and_restart_through_the_panel(project, tmp_path):
     """The panel holds the first cut of the example and releases it; an alarm stops the cut; START again re-bases
     on the axes, retracts X clear before Z moves, and runs the program from its start."""
-    from test_edges_fmus import unwired  # lathe_roughing with seq.alarm_in free for an input CSV
+    from fakes import unwired  # lathe_roughing with seq.alarm_in free for an input CSV
 
     from ncfmu.project import simulate
 

@@ -2,10 +2,10 @@
 (fmpy master) or stepped by hand. Each failed before its fix."""
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
+from fakes import unwired
 
 from ncfmu.controllers.limiter import AreaLimiter
 from ncfmu.project import simulate
@@ -106,18 +106,6 @@ def test_non_predictive_limiter_overshoot_within_its_documented_bound(chuck_runs
 
 
 # -- 3. a move held downstream never counts as done ------------------------------------------------
-def unwired(name, folder):
-    """``name`` with the limiter's alarm not wired to the controller (seq.alarm_in is free for an input CSV)."""
-    from ncfmu.cosim.ssp import pack, write_system
-    from ncfmu.project import project_root
-    from ncfmu.systems import get_system
-    system = get_system(name)
-    system = replace(system, name=f"{name}_unwired",
-                     connections=[c for c in system.connections
-                                  if (c.start_element, c.start_connector) != ("limiter", "alarm")])
-    return pack(write_system(system, folder), project_root() / "fmus", folder / f"{name}_unwired.ssp")
-
-
 @pytest.mark.slow
 def test_taper_pass_held_in_x_never_ends_short_with_the_alarm_unwired(project, tmp_path):
     """With limiter.alarm -> seq.alarm_in removed and X limited to >= 27.2 (a shoulder), the first
