@@ -163,6 +163,13 @@ class Controller:
                     return f"{name}: clamps {value.name!r} to 0..{value.hi!r}, not to its input's range"
         return None
 
+    def outputs_fault(self) -> str | None:
+        """A restored state's published outputs are what the state itself publishes (else a message)."""
+        published = dict(self._outputs)  # type: ignore[attr-defined]
+        if self._publish() != published:  # type: ignore[attr-defined]
+            return f"_outputs = {published!r}: not what the state publishes"
+        return None
+
     @staticmethod
     def move_fault(move: object, accel: float, rates: set[float], name: str = "move") -> str | None:
         """A restored straight move (:class:`~ncfmu.controllers.motion.LinearMove`) is one its ``begin()`` and

@@ -475,7 +475,4 @@ class ContourInterpolator(CycleController):
             at = [self.x_start, self.y_start]
         if self.cmd != at:
             return f"cmd = {self.cmd!r}: not the point of the path the state stands at ({at!r})"
-        published = dict(self._outputs)
-        if self._publish() != published:
-            return f"_outputs = {published!r}: not what the state publishes"
-        return None
+        return self.outputs_fault()

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from ..ports import Port, real
-from .base import Controller, OverrideDial, PositionGuard, finite_inputs, real_param
+from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, finite_inputs, real_param
 
 #: What :meth:`InPosition.judge` says of a motion this step.
 MOVING, WAITING, ARRIVED, LATE = 0, 1, 2, 3
@@ -153,6 +153,19 @@ class CycleController(Controller):
         if not self.alarm:
             self.say("error", f"t = {t:.4f} s: {why}; {consequence}")
         self.alarm = True
+
+    def reach_fault(self, inputs: Mapping[str, object], commands: Mapping[str, float]) -> str | None:
+        """A restored running cycle: each axis's command within ``max_following_error`` and one step (at
+        SPEED_LIMIT) of the actual axis, so no restored state hands a servo a jump (else a message naming it)."""
+        if self.positions.last is None:            # nothing judged yet: no actual position to compare with
+            return None
+        bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
+        for axis, command in commands.items():
+            off = abs(command - float(inputs[f"{axis}_pos"]))  # type: ignore[arg-type]
+            if off > bound:
+                return (f"{axis}_cmd = {command!r}: {off:.4g} mm from the actual {axis}_pos, beyond "
+                        f"max_following_error = {self.max_following_error:g} mm and one step")
+        return None
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
         """A restored state: the in-position check judges with this controller's band and timeout and has

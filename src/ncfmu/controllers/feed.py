@@ -489,7 +489,7 @@ class ProgrammableFeed(CycleController):
         """A restored state: the word executing is the program's at the program counter (or the return to the
         origin before a start), the command where the interpolator stands and, while a cycle runs, within
         max_following_error (and one step) of the actual axes."""
-        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        from .base import POSITION_LIMIT  # here: this check is one self-contained piece
         why = super().check_state(inputs)
         if why:
             return why
@@ -519,13 +519,8 @@ class ProgrammableFeed(CycleController):
             return f"cmd = {self.cmd!r}: not where the interpolator stands ({self.move.position()!r})"
         if (self.vff["x"], self.vff["y"]) not in (self.move.velocity(), (0.0, 0.0)):
             return f"vff = {self.vff!r}: not the interpolator's velocity"
-        if self.mode != IDLE and not self.alarm and not self._pending_emergency and self.positions.last is not None:
-            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
-            for a in ("x", "y"):
-                if abs(self.cmd[a] - inputs[f"{a}_pos"]) > bound:  # type: ignore[operator]
-                    return (f"cmd[{a!r}] = {self.cmd[a]!r}: {abs(self.cmd[a] - inputs[f'{a}_pos']):.4g} mm from "  # type: ignore[operator]
-                            f"the actual {a}_pos, beyond max_following_error = {self.max_following_error:g} mm")
-        published = dict(self._outputs)
-        if self._publish() != published:
-            return f"_outputs = {published!r}: not what the state publishes"
-        return None
+        if self.mode != IDLE and not self.alarm and not self._pending_emergency:
+            why = self.reach_fault(inputs, self.cmd)
+            if why:
+                return why
+        return self.outputs_fault()

@@ -49,7 +49,7 @@ from dataclasses import dataclass, replace
 from ..errors import ProgramError
 from .geometry import Arc, Element, Line, Point, arc_through
 from .motion import LinearMove
-from .rs274 import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, MAX_PROGRAM_CHARS, _strip_comments, _words
+from .rs274 import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, check_once, program_lines, strip_comments, words
 
 #: More planned moves than this are refused: one part, a few hundred passes at most.
 MAX_SEGMENTS = 20_000
@@ -140,33 +140,26 @@ class _Block:
 
 # -- reading the blocks -------------------------------------------------------------------------------
 def _blocks(text: str) -> list[_Block]:
-    if len(text) > MAX_PROGRAM_CHARS:
-        raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
-    lines = [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
+    lines = program_lines(text)
     out: list[_Block] = []
     ended_at = 0
     for n, raw in enumerate(lines, start=1):
         if raw.strip() == "%":
             continue
-        clean = _strip_comments(raw, n)
+        clean = strip_comments(raw, n)
         if ended_at:
             if clean.strip():
                 raise ProgramError(n, len(clean) - len(clean.lstrip()) + 1, raw.strip(),
                                    f"text after the program end (line {ended_at})")
             continue
-        words = _words(clean, n)
-        if not words:
+        block = words(clean, n)
+        if not block:
             continue
         number = None
         seen: dict[str, int] = {}
-        for i, (letter, value, spelled, col) in enumerate(words):
-            if letter in seen and letter != "G":
-                raise ProgramError(n, col, raw.strip(), f"{letter} given twice in one block (first at column "
-                                                        f"{seen[letter]})")
-            seen.setdefault(letter, col)
+        for i, (letter, value, spelled, col) in enumerate(block):
+            check_once(seen, i, letter, col, n, raw)
             if letter == "N":
-                if i != 0:
-                    raise ProgramError(n, col, raw.strip(), "the block number N must be the first word")
                 if value != int(value) or value < 0:
                     raise ProgramError(n, col, raw.strip(), f"N{spelled}: a block number is a whole number >= 0")
                 number = int(value)
@@ -174,7 +167,7 @@ def _blocks(text: str) -> list[_Block]:
                 if value not in (2, 30):
                     raise ProgramError(n, col, raw.strip(), f"M{spelled} is not in the subset (M02, M30)")
                 ended_at = n
-        out.append(_Block(n, raw, words, number))
+        out.append(_Block(n, raw, block, number))
     if not ended_at:
         last = max((n for n, line in enumerate(lines, start=1) if line.strip()), default=1)
         raise ProgramError(last, 1, lines[last - 1].strip(), "the program does not end with M02 or M30")

@@ -473,10 +473,7 @@ class AreaLimiter(Controller):
             return f"clock = {self.clock!r}: not within the monitor period {self.monitor_period:g} s"
         if self.fault is not None and type(self.fault) is not str:
             return f"fault = {self.fault!r}: not a message"
-        published = dict(self._outputs)
-        if self._publish() != published:
-            return f"_outputs = {published!r}: not what the state publishes"
-        return None
+        return self.outputs_fault()
 
 
 #: (command, feed-forward) input names of the reference and the limited axis.

@@ -61,7 +61,7 @@ class Move:
     comp_after: int         # ... and after it (a change is a lead-in or a lead-out)
 
 
-def _strip_comments(text: str, line_no: int) -> str:
+def strip_comments(text: str, line_no: int) -> str:
     """The line with comments blanked out (columns kept)."""
     out, depth_at = [], None
     for col, ch in enumerate(text, start=1):
@@ -85,9 +85,9 @@ def _strip_comments(text: str, line_no: int) -> str:
     return "".join(out)
 
 
-def _words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
+def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
     """(letter, value, spelled number, column) of every word of a comment-free line."""
-    words, col = [], 0
+    found, col = [], 0
     while col < len(text):
         if text[col].isspace():
             col += 1
@@ -107,9 +107,27 @@ def _words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
         value = float(m.group(2))
         if not math.isfinite(value) or abs(value) > 1e15:
             raise ProgramError(line_no, col + 1, text.strip(), f"{letter}{m.group(2)[:20]}...: number too large")
-        words.append((letter, value, m.group(2), col + 1))
+        found.append((letter, value, m.group(2), col + 1))
         col = m.end()
-    return words
+    return found
+
+
+def program_lines(text: str) -> list[str]:
+    """A program's lines, after its length check: only newlines end a line (str.splitlines would also split at
+    form feeds, U+2028 ...), a trailing CR is dropped. The mill's and the lathe's parsers read programs so."""
+    if len(text) > MAX_PROGRAM_CHARS:
+        raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
+    return [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
+
+
+def check_once(seen: dict[str, int], i: int, letter: str, col: int, n: int, raw: str) -> None:
+    """Word ``i`` of a block, at column ``col``: each letter but G at most once a block (``seen``: letter ->
+    first column), and N only as the first word."""
+    if letter in seen and letter != "G":
+        raise ProgramError(n, col, raw.strip(), f"{letter} given twice in one block (first at column {seen[letter]})")
+    seen.setdefault(letter, col)
+    if letter == "N" and i != 0:
+        raise ProgramError(n, col, raw.strip(), "the block number N must be the first word")
 
 
 def parse(text: str, start: Point) -> list[Move]:
@@ -120,10 +138,7 @@ def parse(text: str, start: Point) -> list[Move]:
     ProgramError
         naming the line, the column and the reason, for the first thing outside the subset or wrong.
     """
-    if len(text) > MAX_PROGRAM_CHARS:
-        raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
-    # only newlines end a line (str.splitlines would also split at form feeds, U+2028 ...)
-    lines = [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
+    lines = program_lines(text)
     moves: list[Move] = []
     motion: int | None = None
     incremental = False
@@ -134,15 +149,15 @@ def parse(text: str, start: Point) -> list[Move]:
     ended_at = 0
     for n, raw in enumerate(lines, start=1):
         if ended_at:
-            rest = _strip_comments(raw, n) if raw.strip() != "%" else ""
+            rest = strip_comments(raw, n) if raw.strip() != "%" else ""
             if rest.strip():
                 raise ProgramError(n, len(rest) - len(rest.lstrip()) + 1, raw.strip(),
                                    f"text after the program end (line {ended_at})")
             continue
         if raw.strip() == "%":
             continue
-        words = _words(_strip_comments(raw, n), n)
-        if not words:
+        block = words(strip_comments(raw, n), n)
+        if not block:
             continue
         seen: dict[str, int] = {}
         groups: dict[str, int] = {}
@@ -150,15 +165,10 @@ def parse(text: str, start: Point) -> list[Move]:
         new_motion = None
         motion_col = None
         end_program = False
-        for i, (letter, value, spelled, col) in enumerate(words):
+        for i, (letter, value, spelled, col) in enumerate(block):
             here = f"{letter}{spelled}"
-            if letter in seen and letter not in "G":
-                raise ProgramError(n, col, raw.strip(), f"{letter} given twice in one block (first at column "
-                                                        f"{seen[letter]})")
-            seen.setdefault(letter, col)
+            check_once(seen, i, letter, col, n, raw)
             if letter == "N":
-                if i != 0:
-                    raise ProgramError(n, col, raw.strip(), "the block number N must be the first word")
                 continue
             if letter == "G":
                 if value != int(value) or value > 99:

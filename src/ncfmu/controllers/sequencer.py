@@ -397,7 +397,7 @@ class CutSequencer(CycleController):
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
         """A restored state: the registers within the present block, the command where the interpolator
         stands and (while running) within max_following_error (and one step) of the actual axes."""
-        from .base import POSITION_LIMIT, SPEED_LIMIT  # here: this check is one self-contained piece
+        from .base import POSITION_LIMIT  # here: this check is one self-contained piece
         why = super().check_state(inputs)
         if why:
             return why
@@ -430,16 +430,11 @@ class CutSequencer(CycleController):
             return f"x_cmd, z_cmd = {here!r}: not where the interpolator stands ({self.move.position()!r})"
         if (self.x_vff, self.z_vff) not in (self.move.velocity(), (0.0, 0.0)):
             return f"x_vff, z_vff = {(self.x_vff, self.z_vff)!r}: not the interpolator's velocity"
-        if self.busy and not self.alarm and self.positions.last is not None:
-            bound = self.max_following_error + SPEED_LIMIT * self.PERIOD
-            for axis, cmd in (("x", self.x_cmd), ("z", self.z_cmd)):
-                if abs(cmd - inputs[f"{axis}_pos"]) > bound:  # type: ignore[operator]
-                    return (f"{axis}_cmd = {cmd!r}: {abs(cmd - inputs[f'{axis}_pos']):.4g} mm from the actual "  # type: ignore[operator]
-                            f"{axis}_pos, beyond max_following_error = {self.max_following_error:g} mm and one step")
-        published = dict(self._outputs)
-        if self._publish() != published:
-            return f"_outputs = {published!r}: not what the state publishes"
-        return None
+        if self.busy and not self.alarm:
+            why = self.reach_fault(inputs, {"x": self.x_cmd, "z": self.z_cmd})
+            if why:
+                return why
+        return self.outputs_fault()
 
     def _program_fault(self) -> str | None:
         """A restored state of a running program: the move is the plan's present segment (an arc with the arc's

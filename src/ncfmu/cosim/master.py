@@ -282,6 +282,11 @@ def _a(causality: str) -> str:
     return f"{'an' if causality[:1] in 'aeiou' else 'a'} {causality}"
 
 
+def _described(v: Variable) -> str:
+    """``a fixed parameter``, ``an output``: what a variable is, with its article, for messages."""
+    return f"a {v.variability} parameter" if v.causality == "parameter" and v.variability else _a(v.causality)
+
+
 def _as_python(kind: str, value) -> object:
     if kind == "Real":
         return float(value)
@@ -556,9 +561,7 @@ class Master:
                         raise SystemDefinitionError(f"input CSV column {qualified!r}: a parameter cannot be "
                                                     "released ('release' is for inputs)")
                 else:
-                    what = (f"a {v.variability} parameter" if v.causality == "parameter"
-                            else f"an {v.causality}" if v.causality in ("input", "output", "independent")
-                            else f"a {v.causality}")
+                    what = _described(v)
                     raise SystemDefinitionError(f"input CSV column {qualified!r} is {what}: only inputs and tunable "
                                                 "parameters change during a run")
 
@@ -946,7 +949,7 @@ class Session:
         self._usable()
         slave, v = self.master.variable(name)
         if v.causality != "parameter" or v.variability != "tunable":
-            kind = f"a {v.variability} parameter" if v.causality == "parameter" else f"an {v.causality}"
+            kind = _described(v)
             raise ConfigError(name, value, f"not writable during a run ({kind}; only tunable parameters are)")
         typed = typed_value(name, v.type, value)
         if v.type in ("Real", "Integer"):
