@@ -53,7 +53,7 @@ class SpindleDrive(Controller):
     DERIVED = ("plant",)
     NATIVE_SOURCE = "native/spindle_model.c"
     NATIVE_HEADERS = ("native/drive_math.h",)
-    NATIVE_DEFINED_BY = ("spindle_model.py", "parameters.py")
+    NATIVE_DEFINED_BY = ("spindle_model.py", "parameters.py", "bode.py")
 
     PORTS = (
         real("J", "parameter", 0.2, "kg.m2", "inertia of motor + spindle + chuck + workpiece", min=1e-5, max=100.0),
