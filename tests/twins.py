@@ -57,7 +57,7 @@ LOOP_PARAMETERS: dict[str, dict[str, object]] = {
 def loop_inputs(model: str, k: int, inputs: dict, outputs: dict) -> dict:
     """The inputs of step ``k`` of ``model`` in a small closed loop, from the outputs of the step before
     (updated in place and returned): every ``<a>_pos`` follows its ``<a>_cmd`` (an ideal servo, always in
-    position), START is pushed for the first steps, an M word is answered, the limiter and the servo follow a ramp."""
+    position), START is pushed for the first steps, an M word is answered, the limiter and the drives follow a ramp."""
     for name in list(inputs):
         if name.endswith("_pos") and name[:-4] + "_cmd" in outputs:
             inputs[name] = outputs[name[:-4] + "_cmd"]
@@ -75,6 +75,8 @@ def loop_inputs(model: str, k: int, inputs: dict, outputs: dict) -> dict:
     elif model == "ServoAxis":
         inputs["pos_cmd"] = 0.01 * k
         inputs["vel_ff"] = 10.0
+    elif model == "SpindleDrive":
+        inputs["speed_cmd"] = 20.0 * k
     return inputs
 
 
