@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from twins import loop_inputs, offered_values, same_bits
 
-from ncfmu.catalogue import models
+from ncfmu.catalogue import is_native, models
 from ncfmu.controllers.panel import OperatorPanel
 from ncfmu.errors import ConfigError
 from ncfmu.fmi import state
@@ -52,9 +52,9 @@ def _step(logic, k: int, inputs: dict) -> object:
         return repr(err)
 
 
-# the servo steps its loops in sub-steps and rebuilds its discretisation at each change taken: slow
-@pytest.mark.parametrize("model", [pytest.param(m, marks=pytest.mark.slow) if m == "ServoAxis" else m
-                                   for m in sorted(models())])
+# the drives step their loops in sub-steps and rebuild their discretisation at each change taken: slow
+@pytest.mark.parametrize("model", [pytest.param(m, marks=pytest.mark.slow) if is_native(cls) else m
+                                   for m, cls in models().items()])
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_a_refused_retune_leaves_the_controller_as_its_twin(model, data):
