@@ -262,3 +262,35 @@ def test_a_broken_command_is_held_not_acted_on(fmus, fmu_runner):
     assert "input speed_cmd = nan: must be finite; holding the last command" in said[0]
     assert "input direction = 2: must be -1, 0 or 1; holding the last command" in said[1]
     assert "input load_torque = -5: must be finite and >= 0; holding the last command" in said[2]
+
+
+# -- in a system, under the master ---------------------------------------------------------------------
+def test_two_spindles_in_a_system_run_the_same_in_the_c_and_the_python_loop(fmus, tmp_path):
+    """A system of two SpindleDrives, the follower commanded with the leader's actual speed (a Real connection),
+    the leader by an input table (its Integer direction too): both loops record the same values, and the
+    follower tracks the leader through a reversal."""
+    from ncfmu.cosim.master import InputTable
+    from ncfmu.cosim.ssp import Connection, System, pack, write_system
+    from ncfmu.project import OpenSystem
+    from ncfmu.systems.compose import component
+
+    system = System("spindles", [component("leader", "SpindleDrive"), component("follower", "SpindleDrive")],
+                    [Connection("leader", "speed", "follower", "speed_cmd")], stop_time=2.0)
+    archive = pack(write_system(system, tmp_path), fmus["SpindleDrive"].parent, tmp_path / "spindles.ssp")
+    table = InputTable(np.array([0.0, 1.0]), {"leader.speed_cmd": np.array([1200.0, 1200.0]),
+                                              "leader.direction": np.array([1.0, -1.0])})
+    runs = []
+    for native in (False, True):
+        with OpenSystem(archive) as opened:
+            opened.master.native = native
+            runs.append(opened.run(inputs=table))
+            assert opened.master.loop_used == ("c" if native else "python")
+    python, c = runs
+    for name in python.data.dtype.names:
+        assert np.array_equal(python.data[name], c.data[name]), name
+    t, lead, follow = python["time"], python["leader.speed"], python["follower.speed"]
+    assert lead[np.searchsorted(t, 0.9)] == pytest.approx(1200.0, abs=RESOLUTION)
+    assert lead[-1] == pytest.approx(-1200.0, abs=RESOLUTION)
+    # the follower lags a step behind (it reads the leader's speed of the step before), and its own loop
+    assert follow[np.searchsorted(t, 0.9)] == pytest.approx(1200.0, abs=1.0)
+    assert follow[-1] == pytest.approx(-1200.0, abs=1.0) and python["follower.at_speed"][-1]
