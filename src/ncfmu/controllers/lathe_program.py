@@ -44,6 +44,7 @@ in force before the profile.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
@@ -142,6 +143,7 @@ class _Block:
 def _blocks(text: str) -> list[_Block]:
     lines = program_lines(text)
     out: list[_Block] = []
+    numbered: dict[int, int] = {}           # block number -> line
     ended_at = 0
     for n, raw in enumerate(lines, start=1):
         if raw.strip() == "%":
@@ -163,6 +165,11 @@ def _blocks(text: str) -> list[_Block]:
                 if value != int(value) or value < 0:
                     raise ProgramError(n, col, raw.strip(), f"N{spelled}: a block number is a whole number >= 0")
                 number = int(value)
+                if number in numbered:
+                    raise ProgramError(n, col, raw.strip(), f"N{number} again: line {numbered[number]} is N{number} "
+                                                            "(a block number names one block: G70/G71 P and Q "
+                                                            "find the profile by it)")
+                numbered[number] = n
             elif letter == "M":
                 if value not in (2, 30):
                     raise ProgramError(n, col, raw.strip(), f"M{spelled} is not in the subset (M02, M30)")
@@ -439,12 +446,14 @@ def _check_profile(profile: Profile, start: Point) -> int:
             if after is None or (abs(after.start[0] - after.end[0]) <= TOL and after.end[1] > after.start[1]):
                 raise ProgramError(line, 1, raw, "a groove of no width: this wall falls at the profile's end or "
                                                  "the next block climbs straight back up at the same Z")
-        top = max(s[1], t[1])
+        # an arc's highest and lowest points between its ends count as its ends do
+        top = max(s[1], t[1], x_hi[1] if x_hi else -math.inf)
         if top > start[1] + TOL:
-            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:g} above the start "
+            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:.6g} above the start "
                                                         f"point's X {start[1]:g}")
-        if min(s[1], t[1]) < -TOL:
-            raise ProgramError(line, 1, raw, "the profile crosses the spindle axis (X < 0)")
+        bottom = min(s[1], t[1], x_lo[1] if x_lo else math.inf)
+        if bottom < -TOL:
+            raise ProgramError(line, 1, raw, f"the profile crosses the spindle axis: X {bottom:.6g} < 0")
     if profile.blocks[-1].element.end[0] >= start[0] - TOL:
         last = profile.blocks[-1]
         raise ProgramError(last.line, 1, last.raw, "the profile ends in front of the start point's Z: nothing to cut")
@@ -531,7 +540,13 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
                                     "point's Z: nothing to cut")
         if feed == 0.0:
             raise b.err(1, "G71 with no feed: give F (mm/min) here or before")
-        ops.append(Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed))
+        rough = Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed)
+        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(rough)))
+        if low >= here[1] - TOL:
+            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere below "
+                                    f"the start point's X {here[1]:g} (its lowest X {low:g}): nothing to rough, and "
+                                    "G70 would take the whole depth in one pass")
+        ops.append(rough)
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
     return ops
@@ -586,24 +601,58 @@ def monotone_pieces(chain: list[Element]) -> list[Element]:
     return out
 
 
-def below(pieces: list[Element], level: float) -> list[tuple[float, float]]:
+def below(pieces: list[Element], level: float, crossing: list[int] | None = None) -> list[tuple[float, float]]:
     """The Z ranges (high, low), front to back, where the chain (running toward -Z, each piece monotone) is below
-    X ``level``; ranges of no length (a wall touching the level) are left out."""
+    X ``level``; ranges of no length (a wall touching the level) are left out. ``crossing``: the indices, in
+    order, of the pieces that cross the level (lowest X below it, highest at or above it) when the caller keeps
+    them (:class:`_Levels`), so the cost grows with the crossings, not with the chain."""
+    if crossing is None:
+        crossing = [i for i, e in enumerate(pieces) if min(e.start[1], e.end[1]) < level <= max(e.start[1], e.end[1])]
     ranges: list[tuple[float, float]] = []
-    for e in pieces:
-        (zs, xs), (ze, xe) = e.start, e.end
-        if max(xs, xe) < level:
-            part = (zs, ze)
-        elif min(xs, xe) >= level:
-            continue
-        else:
-            zc = e.point(_solve(e, lambda p: p[1], level))[0]
-            part = (zs, zc) if xs < level else (zc, ze)
+
+    def add(part: tuple[float, float]) -> None:
         if ranges and ranges[-1][1] - part[0] <= EPS:
             ranges[-1] = (ranges[-1][0], part[1])
         else:
             ranges.append(part)
+
+    first = 0                                   # the run of pieces before the next crossing: all below or none
+    for c in (*crossing, len(pieces)):
+        if c > first and max(pieces[first].start[1], pieces[first].end[1]) < level:
+            add((pieces[first].start[0], pieces[c - 1].end[0]))
+        if c == len(pieces):
+            break
+        e = pieces[c]
+        (zs, xs), (_, _) = e.start, e.end
+        zc = e.point(_solve(e, lambda p: p[1], level))[0]
+        add((zs, zc) if xs < level else (zc, e.end[0]))
+        first = c + 1
     return [(hi, lo) for hi, lo in ranges if hi - lo > TOL]
+
+
+class _Levels:
+    """The pieces that cross a falling X level, kept level by level: a piece joins when the level falls to its
+    highest X and leaves when the level falls to its lowest, so each level costs what crosses it."""
+
+    def __init__(self, pieces: list[Element]) -> None:
+        self.pieces = pieces
+        self.low = [min(e.start[1], e.end[1]) for e in pieces]
+        self.high = [max(e.start[1], e.end[1]) for e in pieces]
+        self.waiting = sorted(range(len(pieces)), key=lambda i: -self.high[i])
+        self.next = 0
+        self.crossing: list[int] = []
+
+    def ranges(self, level: float) -> list[tuple[float, float]]:
+        """:func:`below` at ``level``, which is below every level asked before."""
+        joined = False
+        while self.next < len(self.waiting) and level <= self.high[self.waiting[self.next]]:
+            self.crossing.append(self.waiting[self.next])
+            self.next += 1
+            joined = True
+        self.crossing = [i for i in self.crossing if self.low[i] < level]
+        if joined:
+            self.crossing.sort()
+        return below(self.pieces, level, self.crossing)
 
 
 def rough_boundary(op: Rough) -> list[Element]:
@@ -612,27 +661,94 @@ def rough_boundary(op: Rough) -> list[Element]:
 
 
 class _Stock:
-    """What is left of the stock: up to X ``top`` (the start point's) behind Z ``front``, cut down by the passes."""
+    """What is left of the stock: up to X ``top`` (the start point's) behind Z ``front``, cut down by the passes.
 
-    def __init__(self, top: float, front: float) -> None:
+    The Z coordinates where a cut may begin or end are known before the first cut (``coords``, the ranges of
+    every level); the stock is kept on them -- each coordinate a slot, each open interval between two a slot --
+    in a segment tree of the highest X of material, so a cut and a question cost log(coordinates). A cut lowers
+    its slots to its X (levels fall: never raises one); a cut or a question counts a point within ``EPS`` of a
+    coordinate as on it."""
+
+    def __init__(self, top: float, front: float, coords: list[float]) -> None:
         self.top, self.front = top, front
-        self.cuts: list[tuple[float, float, float]] = []      # (z low, z high, X cut to)
+        self.coords = sorted({*coords, front})
+        m = len(self.coords)
+        self.slots = 2 * m + 1          # interval 0, point 0, interval 1, ..., point m-1, interval m
+        size = 1
+        while size < self.slots:
+            size *= 2
+        self.size = size
+        self.high = [-math.inf] * (2 * size)
+        self.lazy: list[float | None] = [None] * (2 * size)
+        k = self.coords.index(front)
+        for slot in range(2 * k + 1):     # behind the front: the stock's top; from the front on: air
+            self.high[size + slot] = top
+        for i in range(size - 1, 0, -1):
+            self.high[i] = max(self.high[2 * i], self.high[2 * i + 1])
+
+    def _assign(self, node: int, x: float) -> None:
+        if x < self.high[node]:
+            self.high[node] = x
+        self.lazy[node] = x if self.lazy[node] is None else min(x, self.lazy[node])  # type: ignore[type-var]
+
+    def _lower(self, node: int, lo: int, hi: int, a: int, b: int, x: float) -> None:
+        if b < lo or hi < a:
+            return
+        if a <= lo and hi <= b:
+            self._assign(node, x)
+            return
+        self._push(node)
+        mid = (lo + hi) // 2
+        self._lower(2 * node, lo, mid, a, b, x)
+        self._lower(2 * node + 1, mid + 1, hi, a, b, x)
+        self.high[node] = max(self.high[2 * node], self.high[2 * node + 1])
+
+    def _push(self, node: int) -> None:
+        if self.lazy[node] is not None:
+            self._assign(2 * node, self.lazy[node])        # type: ignore[arg-type]
+            self._assign(2 * node + 1, self.lazy[node])    # type: ignore[arg-type]
+            self.lazy[node] = None
+
+    def _max(self, node: int, lo: int, hi: int, a: int, b: int) -> float:
+        if b < lo or hi < a:
+            return -math.inf
+        if a <= lo and hi <= b:
+            return self.high[node]
+        self._push(node)
+        mid = (lo + hi) // 2
+        return max(self._max(2 * node, lo, mid, a, b), self._max(2 * node + 1, mid + 1, hi, a, b))
+
+    def _span(self, a: int, b: int) -> float:
+        return self._max(1, 0, self.size - 1, a, b) if a <= b else -math.inf
 
     def cut(self, z_lo: float, z_hi: float, x: float) -> None:
-        self.cuts.append((z_lo, z_hi, x))
+        first = bisect_left(self.coords, z_lo - EPS)
+        last = bisect_right(self.coords, z_hi + EPS) - 1
+        if first <= last:
+            self._lower(1, 0, self.size - 1, 2 * first + 1, 2 * last + 1, x)
 
     def at(self, z: float) -> float:
         """The highest X of material at ``z`` (-inf in front of the stock)."""
         if z >= self.front - EPS:
             return -math.inf
-        return min([self.top] + [x for lo, hi, x in self.cuts if lo - EPS <= z <= hi + EPS])
+        first = bisect_left(self.coords, z - EPS)
+        last = bisect_right(self.coords, z + EPS) - 1
+        k = bisect_left(self.coords, z)
+        on = k < len(self.coords) and self.coords[k] == z
+        near = self._span(2 * first + 1, 2 * last + 1) if first <= last else math.inf
+        inside = math.inf if on else self._span(2 * k, 2 * k)
+        return min(near, inside)
 
     def highest(self, z_a: float, z_b: float) -> float:
         """The highest X of material anywhere in Z between ``z_a`` and ``z_b``."""
         lo, hi = min(z_a, z_b), max(z_a, z_b)
-        zs = sorted({lo, hi, *(z for c in self.cuts for z in c[:2] if lo < z < hi)})
-        probes = zs + [(a + b) / 2 for a, b in zip(zs, zs[1:])]
-        return max(self.at(z) for z in probes)
+        ends = max(self.at(lo), self.at(hi))
+        if lo == hi:
+            return ends
+        # the slots strictly between: from the interval after lo to the interval before hi
+        a = bisect_right(self.coords, lo)
+        b = bisect_left(self.coords, hi)
+        return max(ends, self._span(2 * a, 2 * b))
 
 
 def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
@@ -647,7 +763,22 @@ def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
         raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS // 4} passes of U{op.depth:g} "
                                                           f"down to X {x_min:g}: U is too small")
     x_max = max(max(e.start[1], e.end[1]) for e in pieces)
-    stock = _Stock(x0, z0)
+    # the passes are counted before one is planned: each at least SC1, SC2, SC3, SC4
+    levels: list[tuple[float, list[tuple[float, float]]]] = []
+    crossings = _Levels(pieces)
+    passes, n = 0, 0
+    level = x0 - op.depth
+    while level > x_min + TOL:
+        ranges = crossings.ranges(level)
+        levels.append((level, ranges))
+        passes += len(ranges)
+        if 4 * passes + len(bound) > MAX_SEGMENTS:
+            raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS} moves: {passes} passes "
+                                                              f"of U{op.depth:g} down to X {level:g} already: U is "
+                                                              "too small")
+        n += 1
+        level = x0 - (n + 1) * op.depth
+    stock = _Stock(x0, z0, [z for _, ranges in levels for r in ranges for z in r])
     out: list[Segment] = []
     here = op.start
     k = 0
@@ -668,19 +799,15 @@ def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
             add((z, clear), rapid, False, 1, sigma)
         add((z, x), op.feed if plunge else rapid, plunge, 1, sigma)
 
-    n = 0
-    level = x0 - op.depth
-    while level > x_min + TOL:
+    for level, ranges in levels:
         sigma = x0 - level
-        for z_hi, z_lo in below(pieces, level):
+        for z_hi, z_lo in ranges:
             k += 1
             reach(z_hi, level, z_hi < z0 - TOL, sigma)           # in front of the stock at rapid, else a plunge
             add((z_lo, level), op.feed, True, 2, sigma)
             stock.cut(z_lo, z_hi, level)
             add((z_lo, level + op.retract), rapid, False, 3, sigma)
             add((z_hi, level + op.retract), rapid, False, 4, sigma)
-        n += 1
-        level = x0 - (n + 1) * op.depth
     k += 1
     sigma = x0 - x_min
     reach(bound[0].start[0], bound[0].start[1], True, sigma)
