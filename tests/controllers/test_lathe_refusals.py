@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from ncfmu.controllers.lathe_program import MAX_SEGMENTS, parse, plan
+from ncfmu.controllers.g7x import MAX_SEGMENTS
+from ncfmu.controllers.lathe_program import parse, plan
 from ncfmu.errors import ProgramError
 
 HEAD = "G18 G21 G90\nG00 X30 Z2\nG71 U1 R0.5\nG71 P10 Q20 F300\n"

@@ -50,8 +50,8 @@ from ..ports import boolean, integer, real, string
 from . import lathe_program
 from .base import int_param, real_param, servo_ports
 from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
-from .lathe_program import ElementMove, Segment
-from .motion import LinearMove
+from .g7x import Segment
+from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
 
 MAX_BLOCKS = 8
 
@@ -451,7 +451,7 @@ class CutSequencer(CycleController):
             if m.arc != seg.element:
                 return f"move.arc = {m.arc!r}: not the program's move {self.segment}"
             cap = ElementMove.rate_on(m.arc, seg.rate, self.accel)
-            if (m.accel, m.rate, m.length) != (lathe_program.ARC_TANGENTIAL * self.accel, cap, m.arc.length):
+            if (m.accel, m.rate, m.length) != (ARC_TANGENTIAL * self.accel, cap, m.arc.length):
                 return f"move.accel, rate, length = {(m.accel, m.rate, m.length)!r}: not those of its arc"
             if not (0.0 <= m.s <= m.length and 0.0 <= m.v <= 1.5 * m.rate):
                 return f"move.s = {m.s!r}, v = {m.v!r}: not within the arc (length {m.length!r})"
