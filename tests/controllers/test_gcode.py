@@ -11,14 +11,14 @@ from ncfmu.errors import ProgramError, ProgramErrors
 
 
 def test_every_reading_error_at_once_in_line_order_lathe():
-    text = ("G18 G21 G90\nG00 X30 Z2 Y1\nG01 G00 X10\nG4 P1\nN10 G01 Z-1 F100\nN10 X20\nG01 X#1\nM30\nG00 X5\n")
+    text = ("G18 G21 G90\nG00 X30 Z2 Y1\nG01 G00 X10\nG5 P1\nN10 G01 Z-1 F100\nN10 X20\nG01 X#1\nM30\nG00 X5\n")
     with pytest.raises(ProgramErrors) as err:
         lathe_program.parse(text, (30.0, 2.0))
     found = [(e.line_no, e.column) for e in err.value.errors]
     assert found == [(2, 12), (3, 5), (4, 1), (6, 1), (7, 5), (9, 1)]
     assert (err.value.line_no, err.value.column) == (2, 12)
     reasons = [e.rule for e in err.value.errors]
-    assert "no Y axis" in reasons[0] and "modal group motion" in reasons[1] and "G4 is not in the subset" in reasons[2]
+    assert "no Y axis" in reasons[0] and "modal group motion" in reasons[1] and "G5 is not in the subset" in reasons[2]
     assert "N10 again: line 5" in reasons[3] and "parameters" in reasons[4] and "after the program end" in reasons[5]
     # one message, every error in it, each with its line and column
     assert str(err.value).count("line ") >= 6 and "line 9, column 1: text after the program end" in str(err.value)

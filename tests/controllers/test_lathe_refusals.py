@@ -9,7 +9,7 @@ from ncfmu.controllers.g7x import MAX_SEGMENTS
 from ncfmu.controllers.lathe_program import parse, plan
 from ncfmu.errors import ProgramError
 
-HEAD = "G18 G21 G90\nG00 X30 Z2\nG71 U1 R0.5\nG71 P10 Q20 F300\n"
+HEAD = "G18 G21 G90 G8\nG00 X30 Z2\nG71 U1 R0.5\nG71 P10 Q20 F300\n"
 
 
 def refused(text: str) -> ProgramError:

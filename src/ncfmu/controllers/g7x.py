@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left, bisect_right
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
 from .gcode import Move
@@ -45,6 +45,45 @@ TOL = 1e-6
 
 
 @dataclass(frozen=True)
+class Tool:
+    """A row of the tool table: where the tool's tip stands from the axes' reference (radius, Z), its nose."""
+
+    x_offset: float = 0.0       # mm, radius: the axes stand at the programmed point + the offset
+    z_offset: float = 0.0       # mm
+    nose_radius: float = 0.0    # mm
+    tip: int = 0                # Fanuc's imaginary tool-nose number 0..9
+    max_depth: float = 0.0      # mm, the deepest cut the insert takes (0: not given)
+
+
+@dataclass(frozen=True)
+class Modal:
+    """What a lathe program sets besides positions, as it runs with a planned move: the tool and its offset, the
+    spindle, the feed mode, the coolant."""
+
+    tool: int = 0                        # turret station of T<tool><offset> (0: none)
+    offset: Point = (0.0, 0.0)           # the active tool offset (z, x radius): axes = programmed point + offset
+    spindle: int = 0                     # +1 M03, -1 M04, 0 M05
+    s: float = 0.0                       # S: rev/min (G97) or the surface speed in m/min (G96)
+    css: bool = False                    # G96 constant surface speed
+    s_max: float = 0.0                   # G50 S: the highest rev/min under G96
+    per_rev: bool = False                # G99: a feed's rate is mm/s per rev/min of the actual spindle speed
+    coolant: bool = False                # M08 / M09
+
+    def rpm(self, x: float) -> float:
+        """The spindle speed commanded with the tool at radius ``x`` (programmed): S under G97; under G96
+        1000 v / (pi D), D = 2|x|, at most G50 S. 0 with the spindle stopped."""
+        if not self.spindle:
+            return 0.0
+        if not self.css:
+            return self.s
+        d = 2.0 * abs(x)
+        return self.s_max if d <= 0.0 else min(self.s_max, 1000.0 * self.s / (math.pi * d))
+
+
+NO_MODAL = Modal()
+
+
+@dataclass(frozen=True)
 class Segment:
     """One planned move of the program and what the sequencer reports while it runs."""
 
@@ -56,6 +95,9 @@ class Segment:
     sigma_x: float          # depth of the pass below the cycle's start point, mm
     line: int               # program line being executed (1-based)
     cycle: int              # 71, 70 or 0
+    dwell: float = 0.0      # s to wait at the move's end (G04)
+    stop: int = 0           # at the move's end wait for START: 1 always (M00), 2 with the optional stop on (M01)
+    modal: Modal = NO_MODAL
 
 
 @dataclass(frozen=True)
@@ -67,10 +109,16 @@ class Profile:
     lead: Move              # the N<P> block: S -> A, in X only
     blocks: tuple[Move, ...]
     pocket: int = 0                 # the line where X first falls along -Z (type II), 0: monotone (type I)
+    front: Element | None = None    # a first block moving in Z too: the profile's X from the start point's Z on
 
     @property
     def elements(self) -> list[Element]:
         return [b.element for b in self.blocks]
+
+    @property
+    def outline(self) -> list[Element]:
+        """What G71 roughs to: the elements, after the front piece of a first block that moved in Z too."""
+        return ([self.front] if self.front is not None else []) + self.elements
 
 
 @dataclass(frozen=True)
@@ -99,7 +147,37 @@ class Finish:
 
 
 
-Op = Move | Rough | Finish
+@dataclass(frozen=True)
+class State:
+    """From here on the program runs with ``modal`` (T, S, M03/M04/M05, M08/M09, G96/G97, G98/G99, G50 S)."""
+
+    line: int
+    modal: Modal
+
+
+@dataclass(frozen=True)
+class Dwell:
+    line: int
+    seconds: float          # G04
+
+
+@dataclass(frozen=True)
+class Stop:
+    line: int
+    optional: bool          # M01 (else M00)
+
+
+@dataclass(frozen=True)
+class Home:
+    """G28: at the rapid rate to the intermediate point ``via`` (programmed), then to the machine reference
+    ``home`` (axes), each as (z, x) with None where the block names no such axis (it stays)."""
+
+    line: int
+    via: Point
+    home: tuple[float | None, float | None]
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -257,7 +335,7 @@ class _Levels:
 
 def rough_boundary(op: Rough) -> list[Element]:
     """The profile shifted by the allowances (W in Z, U in X), from the start point's Z on."""
-    return clip_front([shifted(e, op.w, op.u) for e in op.profile.elements], op.start[0])
+    return clip_front([shifted(e, op.w, op.u) for e in op.profile.outline], op.start[0])
 
 
 class _Stock:
@@ -424,7 +502,7 @@ def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
 
 def _lines_of(op: Rough, bound: list[Element]) -> list[int]:
     """The program line of each element of the rough boundary (the clipped chain keeps the tail's order)."""
-    lines = [pb.line for pb in op.profile.blocks]
+    lines = ([op.profile.lead.line] if op.profile.front is not None else []) + [pb.line for pb in op.profile.blocks]
     return lines[len(lines) - len(bound):]
 
 
@@ -453,13 +531,66 @@ def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
     return out
 
 
-def plan_ops(ops: list[Op], rapid: float) -> list[Segment]:
+def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Segment]:
+    """The planned moves of a program's operations, the tool at ``start`` ((z, x), programmed = axes: no tool
+    offset yet; the first operation's start when None). Each move in the axes' coordinates (the programmed
+    point + the active tool offset) and with the state it runs in; a new tool offset is taken up by a rapid move
+    where the T word stands, dwells and stops are moves of no length."""
     out: list[Segment] = []
+    modal = NO_MODAL
+    here = start if start is not None else _start_of(ops)          # programmed point
+    dz = dx = 0.0
+
+    def axes(p: Point) -> Point:
+        return (p[0] + dz, p[1] + dx)
+
+    def still(line: int, **kw: object) -> Segment:
+        p = axes(here)
+        return Segment(Line(p, p), rapid, False, 0, 0, 0.0, line, 0, modal=modal, **kw)  # type: ignore[arg-type]
+
     for op in ops:
         if isinstance(op, Move):
-            out.append(Segment(op.element, rapid if op.rapid else op.feed, not op.rapid, 0, 0, 0.0, op.line, 0))
-        elif isinstance(op, Rough):
-            out += _plan_rough(op, rapid)
+            e = op.element if (dz, dx) == (0.0, 0.0) else shifted(op.element, dz, dx)
+            out.append(Segment(e, rapid if op.rapid else op.feed, not op.rapid, 0, 0, 0.0, op.line, 0, modal=modal))
+            here = op.element.end
+        elif isinstance(op, (Rough, Finish)):
+            segs = _plan_rough(op, rapid) if isinstance(op, Rough) else _plan_finish(op, rapid)
+            if (dz, dx) != (0.0, 0.0) or modal != NO_MODAL:
+                segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
+            out += segs
+            here = op.start
+        elif isinstance(op, State):
+            before = axes(here)
+            modal = op.modal
+            dz, dx = modal.offset
+            if math.dist(before, axes(here)) > EPS:             # the new offset taken up at the rapid rate
+                out.append(Segment(Line(before, axes(here)), rapid, False, 0, 0, 0.0, op.line, 0, modal=modal))
+        elif isinstance(op, Dwell):
+            out.append(still(op.line, dwell=op.seconds))
+        elif isinstance(op, Stop):
+            out.append(still(op.line, stop=2 if op.optional else 1))
         else:
-            out += _plan_finish(op, rapid)
+            p = axes(here)
+            via = axes(op.via)
+            home = (op.home[0] if op.home[0] is not None else via[0], op.home[1] if op.home[1] is not None else via[1])
+            for a, b in ((p, via), (via, home)):
+                if math.dist(a, b) > EPS:
+                    out.append(Segment(Line(a, b), rapid, False, 0, 0, 0.0, op.line, 0, modal=modal))
+            here = (home[0] - dz, home[1] - dx)
+    if out and out[-1].modal != modal:                 # the state the program ends in (M05, M09 at its end)
+        out.append(still(out[-1].line))
+    for g in out:
+        m = g.modal
+        if g.feed and m.per_rev and not (m.spindle and (m.css or m.s > 0)):
+            raise ProgramError(g.line, 1, f"line {g.line}", "a feed per revolution (G99) with the spindle stopped: "
+                                                            "give S and M03/M04 first")
     return out
+
+
+def _start_of(ops: list[Op]) -> Point:
+    for op in ops:
+        if isinstance(op, Move):
+            return op.element.start
+        if isinstance(op, (Rough, Finish)):
+            return op.start
+    return (0.0, 0.0)

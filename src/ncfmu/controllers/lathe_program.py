@@ -27,18 +27,25 @@ positions, arcs by I/K or R) and reads the profile of each cycle; the cycles' ge
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
 from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
     EPS,
     MAX_SEGMENTS,
+    NO_MODAL,
     TOL,
+    Dwell,
     Finish,
+    Home,
+    Modal,
     Op,
     Profile,
     Rough,
     Segment,
+    State,
+    Stop,
+    Tool,
     check_profile,
     monotone_pieces,
     plan_ops,
@@ -48,25 +55,40 @@ from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move,
 from .geometry import Arc, Element, Line, Point
 
 _MOTION = {0, 1, 2, 3}
-_NO_NOSE_RADIUS = "tool nose radius compensation is not in the subset (the tool point is programmed)"
+_NOSE_RADIUS = ("G41/G42 tool-nose radius compensation is not built yet: program the tool tip (the nose radius "
+                "of seq.tool[k] is not applied)")
+#: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 LATHE = Dialect(
     name="lathe",
     groups={**{g: "motion (G00-G03)" for g in _MOTION}, 18: "plane (G18)", 21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
-            70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)"},
+            70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)",
+            4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
+            40: "tool-nose radius compensation (G40)", 96: "spindle speed mode (G96/G97)",
+            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
-               40: _NO_NOSE_RADIUS, 41: _NO_NOSE_RADIUS, 42: _NO_NOSE_RADIUS,
+               41: _NOSE_RADIUS, 42: _NOSE_RADIUS,
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
                73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G7, G8, G18, G21, G70, G71, G90, G91",
-    m_codes=frozenset({2, 30}), m_list="M02, M30",
-    coordinates="XZIKRUWPQ",
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G40, G50, G70, G71, G90, G91, G96-G99",
+    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
+    coordinates="XZIKRUWPQSTO",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
                      "D": "tool nose radius compensation is not in the subset"},
-    letter_list="G, M, N, X, Z, I, K, R, F, U, W, P, Q",
+    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
     unique_numbers=True,
 )
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a lathe program is read with besides its text: the sequencer's parameters."""
+
+    diameter: bool = True                 # X is a diameter until G7/G8 (seq.x_diameter; Fanuc's lathes)
+    feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
+    tools: tuple[Tool, ...] = ()          # the tool table, offset k = tools[k - 1]
+    home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
 
 
 @dataclass
@@ -74,7 +96,8 @@ class _Modes:
     motion: int | None = None
     incremental: bool = False
     diameter: bool = False
-    feed: float = 0.0       # mm/s
+    feed: float = 0.0       # mm/s (under G99: mm/s per rev/min)
+    machine: Modal = field(default_factory=Modal)
 
 
 def _r_centre(b: Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
@@ -97,6 +120,12 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
           new_motion: int | None, motion_col: int | None, profile: bool) -> tuple[Element | None, Point]:
     """The element of a move block from ``here`` ((z, x)), and its end point."""
     motion = new_motion if new_motion is not None else modes.motion
+    for absolute, incremental in (("X", "U"), ("Z", "W")):
+        if absolute in values and incremental in values:
+            raise b.err(b.col(incremental), f"{absolute} and {incremental} in one block: give the end point as "
+                                            f"{absolute} (absolute) or {incremental} (incremental)")
+    values = {**values, **{a: values[inc] for a, inc in (("X", "U"), ("Z", "W")) if inc in values}}
+    relative = {k for k, inc in (("X", "U"), ("Z", "W")) if inc in b.values}
     has_end = "X" in values or "Z" in values
     has_centre = "I" in values or "K" in values
     if has_centre and motion not in (2, 3):
@@ -105,7 +134,7 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(b.col("R"), "R outside G71 is an arc radius: it belongs to G02/G03")
     if not (has_end or has_centre or "R" in values):
         return None, here
-    xz_col = min((b.col(k) for k in "XZ" if k in values), default=1)
+    xz_col = min((b.col(k if k in b.values else {"X": "U", "Z": "W"}[k]) for k in "XZ" if k in values), default=1)
     if motion is None:
         raise b.err(xz_col, "a move with no motion mode: give G00, G01, G02 or G03 first")
     move_col = motion_col or xz_col
@@ -113,8 +142,9 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(move_col, f"G{motion:02d} with no feed: give F (mm/min) first")
     scale = 0.5 if modes.diameter else 1.0
     z, x = here
-    tz = z + values.get("Z", 0.0) if modes.incremental else values.get("Z", z)
-    tx = x + scale * values.get("X", 0.0) if modes.incremental else (scale * values["X"] if "X" in values else x)
+    tz = z + values.get("Z", 0.0) if modes.incremental or "Z" in relative else values.get("Z", z)
+    tx = (x + scale * values.get("X", 0.0) if modes.incremental or "X" in relative else
+          (scale * values["X"] if "X" in values else x))
     if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
         raise b.err(xz_col, f"the move ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
     end = (tz, tx)
@@ -166,15 +196,101 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             if k in values:
                 raise b.err(b.col(k), f"{k}: G{cycle} takes P, Q, U, W, R and F (the profile is in N<P>..N<Q>)")
         return None, here, False, _Cycle(cycle, b, values)
-    for k in "UWPQ":
+    for k in "PQ":
         if k in values:
-            reason = ("U and W as incremental X/Z are not in the subset: use G91" if k in "UW" else
-                      "P and Q belong to G70/G71")
-            raise b.err(b.col(k), f"{k}{values[k]:g}: {reason}")
+            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71 (and P to G04)")
     element, end = _move(b, modes, here, values, new_motion, motion_col, profile)
     if new_motion is not None:
         modes.motion = new_motion
     return element, end, modes.motion == 0, None
+
+
+# -- the machine: tools, spindle, coolant, dwell, stops, reference return ------------------------------
+_BEFORE_MOVE = {3: 1, 4: -1}          # M03/M04 start the spindle before the block's move (M05 stops it after)
+
+
+def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
+    """The block's words that set the machine's state before its move: G50 S, S, G96/G97, G98/G99, T, M03/M04,
+    M08 (Fanuc runs them with the move's start)."""
+    m, v = modes.machine, b.values
+    codes = {g for g, _ in b.g}
+    if 50 in codes:
+        for k in "XZUW":
+            if k in v:
+                raise b.err(b.col(k), f"G50 {k}: setting the coordinate system is not in the subset (the program "
+                                      "starts where the sequencer's x_start/z_start are)")
+        if "S" not in v:
+            raise b.err(b.col("G"), "G50 takes S<the highest spindle speed, rev/min> here")
+        modes.machine = replace(m, s_max=v["S"])
+        return
+    if "S" in v:
+        if v["S"] < 0:
+            raise b.err(b.col("S"), f"S{v['S']:g}: the spindle speed must be >= 0")
+        m = replace(m, s=v["S"])
+    if 96 in codes:
+        if m.s_max <= 0:
+            raise b.err(b.col("G"), "G96 needs the highest spindle speed first (G50 S<rev/min>): at the axis the "
+                                    "constant surface speed asks for an endless speed")
+        m = replace(m, css=True)
+    elif 97 in codes:
+        m = replace(m, css=False)
+    if 98 in codes or 99 in codes:
+        m = replace(m, per_rev=99 in codes)
+    if "T" in v:
+        t = v["T"]
+        tool, row = divmod(int(t), 100)
+        if t != int(t) or t < 0 or not 0 <= tool <= len(setup.tools) or not 0 <= row <= len(setup.tools):
+            raise b.err(b.col("T"), f"T{t:g}: T<tool><offset> with tool and offset 0..{len(setup.tools)} (T0101: "
+                                    "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
+        row_tool = setup.tools[row - 1] if row else Tool()
+        m = replace(m, tool=tool, offset=(row_tool.z_offset, row_tool.x_offset))
+    for code, _ in b.m:
+        if code in _BEFORE_MOVE:
+            m = replace(m, spindle=_BEFORE_MOVE[code])
+        elif code == 8:
+            m = replace(m, coolant=True)
+    modes.machine = m
+
+
+def _after_move(b: Block, modes: _Modes) -> Op | None:
+    """The block's words that act after its move: M05, M09, M00/M01 (a stop), M02/M30 (spindle and coolant off)."""
+    for code, _ in b.m:
+        if code in (0, 1):
+            return Stop(b.line, code == 1)
+        if code in (5, 9, 2, 30):
+            m = modes.machine
+            m = replace(m, spindle=0 if code != 9 else m.spindle, coolant=False if code != 5 else m.coolant)
+            if m != modes.machine:
+                modes.machine = m
+                return State(b.line, m)
+    return None
+
+
+def _dwell(b: Block) -> Dwell:
+    v = b.values
+    given = [k for k in "PXU" if k in v]
+    if len(given) != 1:
+        raise b.err(b.col("G"), "G04 takes the dwell once: P<ms> or X/U<s>")
+    seconds = v["P"] / 1000.0 if given[0] == "P" else v[given[0]]
+    if not seconds >= 0:
+        raise b.err(b.col(given[0]), f"{given[0]}{v[given[0]]:g}: a dwell is >= 0")
+    return Dwell(b.line, seconds)
+
+
+def _home(b: Block, modes: _Modes, here: Point, setup: Setup) -> Home:
+    v = b.values
+    if setup.home is None:
+        raise b.err(b.col("G"), "G28 needs the machine reference (seq.x_home, seq.z_home)")
+    axes = [k for k in "XZUW" if k in v]
+    if not axes:
+        raise b.err(b.col("G"), "G28 names the axes to return: X/U and/or Z/W (the intermediate point)")
+    scale = 0.5 if modes.diameter else 1.0
+    z, x = here
+    vz = z + v["W"] if "W" in v else (z + v["Z"] if modes.incremental else v["Z"]) if "Z" in v else z
+    vx = (x + scale * v["U"] if "U" in v else (x + scale * v["X"] if modes.incremental else scale * v["X"])
+          if "X" in v else x)
+    return Home(b.line, (vz, vx), (setup.home[0] if "Z" in v or "W" in v else None,
+                                   setup.home[1] if "X" in v or "U" in v else None))
 
 
 # -- the program ------------------------------------------------------------------------------------
@@ -200,20 +316,29 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         raise b.err(b.col("Q"), f"Q{q}: the profile's last block N{q} is not in the program after N{p}")
     saved = replace(modes)
     here = start
+    front: Element | None = None
     pieces: list[Move] = []
     j = i
     while True:
         blk = blocks[j]
-        if blk.m:
+        if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
+        machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 50, 96, 97, 98, 99)]
+        if machine:
+            raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
+                                                  "part's outline (moves, F), give it before G71/G70")
         element, end, rapid, cycle = _interpret(blk, modes, here, profile=True)
         if cycle is not None:
             raise blk.err(blk.col("G"), f"G{cycle.code} inside the profile N{p}..N{q}")
         if j == i:
-            if element is None or isinstance(element, Arc) or abs(end[0] - start[0]) > EPS:
-                raise blk.err(1, f"the profile's first block N{p} must move in X only from the start point "
-                                 f"(X {start[1]:g}, Z {start[0]:g}) to the profile's start (Fanuc's form)")
+            if element is None or isinstance(element, Arc) or end[0] > start[0] + EPS:
+                raise blk.err(1, f"the profile's first block N{p} moves in a straight line from the start point "
+                                 f"(X {start[1]:g}, Z {start[0]:g}) to the profile's start, in X (type I) or in X "
+                                 "and Z (type II), not in front of the start point's Z (Fanuc's form)")
             lead = Move(element, rapid, modes.feed, blk.line, raw=blk.raw.strip())
+            if end[0] < start[0] - EPS:          # the profile in front of its start: at its X from S's Z on
+                front = Line((start[0], end[1]), end)
         elif element is not None:
             pieces.append(Move(element, rapid, modes.feed, blk.line, raw=blk.raw.strip()))
         here = end
@@ -224,12 +349,13 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
                                                                    saved.diameter, saved.feed)
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
-    profile = Profile(p, q, lead, tuple(pieces))
+    profile = Profile(p, q, lead, tuple(pieces), front=front)
     return replace(profile, pocket=check_profile(profile, start)), j
 
 
-def parse(text: str, start: tuple[float, float]) -> list[Op]:
-    """The operations of a lathe program; the tool starts at ``start`` = (x, z).
+def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> list[Op]:
+    """The operations of a lathe program read with ``setup`` (default :class:`Setup`: X a diameter, feed per
+    minute, eight tools without offsets, no G28); the tool starts at ``start`` = (x, z).
 
     Raises
     ------
@@ -237,20 +363,43 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
         naming the line, the column and the reason: every reading error at once (:func:`.gcode.read`), else
         the first error of conversion.
     """
+    setup = setup or Setup()
     blocks = read(text, LATHE)
-    modes = _Modes()
+    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
     here: Point = (start[1], start[0])
-    ops: list[Op] = []
+    ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
     profiles: dict[tuple[int, int], Profile] = {}
     g71_first: tuple[float, float] | None = None
     i = 0
     while i < len(blocks):
         b = blocks[i]
         i += 1
-        element, end, rapid, cycle = _interpret(b, modes, here)
-        if element is not None:
-            ops.append(Move(element, rapid, modes.feed, b.line))
-        here = end
+        before = modes.machine
+        _machine(b, modes, setup)
+        if modes.machine != before:
+            ops.append(State(b.line, modes.machine))
+        codes = {g for g, _ in b.g}
+        cycle = None
+        if codes & {4, 28, 50}:
+            for g, col in b.g:
+                if g not in (4, 28, 50, 40):
+                    raise b.err(col, f"G{g:02d} in a G04/G28/G50 block: give it a block of its own")
+            if 4 in codes:
+                ops.append(_dwell(b))
+            elif 28 in codes:
+                home = _home(b, modes, here, setup)
+                ops.append(home)
+                dz, dx = modes.machine.offset           # the reference is the axes': the programmed point is off
+                here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
+                        home.home[1] - dx if home.home[1] is not None else home.via[1])
+        else:
+            element, end, rapid, cycle = _interpret(b, modes, here)
+            if element is not None:
+                ops.append(Move(element, rapid, modes.feed, b.line))
+            here = end
+        after = _after_move(b, modes)
+        if after is not None:
+            ops.append(after)
         if cycle is None:
             continue
         v = cycle.values
@@ -321,6 +470,7 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
     return ops
 
 
-def plan(text: str, start: tuple[float, float], rapid: float) -> list[Segment]:
-    """Every move of a program (the tool at ``start`` = (x, z)), G00 and the cycles' rapids at ``rapid`` mm/s."""
-    return plan_ops(parse(text, start), rapid)
+def plan(text: str, start: tuple[float, float], rapid: float, setup: Setup | None = None) -> list[Segment]:
+    """Every move of a program read with ``setup`` (the tool at ``start`` = (x, z)), G00 and the cycles' rapids at
+    ``rapid`` mm/s."""
+    return plan_ops(parse(text, start, setup), rapid, (start[1], start[0]))
