@@ -420,11 +420,13 @@ class CutSequencer(CycleController):
             override = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
+            held = False
             if self.plan and self.phase != APPROACH:
-                scale = self._machine(t, dt, inputs, scale, pressed)
-            self.move.advance(dt, scale)
-            judged = self.inpos.judge(dt, self.move.done, self.in_position(inputs), self.actual(inputs),
-                                      (self.x_cmd, self.z_cmd))
+                scale, held = self._machine(t, dt, inputs, scale, pressed)
+            if not held:
+                self.move.advance(dt, scale)
+            judged = None if held else self.inpos.judge(dt, self.move.done, self.in_position(inputs),
+                                                        self.actual(inputs), (self.x_cmd, self.z_cmd))
             if judged == ARRIVED:
                 self._next_phase()
             elif judged == LATE:
@@ -442,16 +444,18 @@ class CutSequencer(CycleController):
             self.x_vff = self.z_vff = 0.0
         return self._publish()
 
-    def _machine(self, t: float, dt: float, inputs: Mapping[str, object], scale: float, pressed: bool) -> float:
+    def _machine(self, t: float, dt: float, inputs: Mapping[str, object], scale: float,
+                 pressed: bool) -> tuple[float, bool]:
         """A program's move waits for its dwell, for START at a stop and, at a cut's start, for the spindle to
-        arrive at speed; a feed per revolution follows the actual spindle speed. Returns the feed scale."""
+        arrive at speed (held: the move neither starts nor ends); a feed per revolution follows the actual
+        spindle speed. Returns the feed scale and whether the move is held."""
         seg = self.plan[self.segment]
         if self.dwell_left > DWELL_EPS:
             self.dwell_left = max(self.dwell_left - dt, 0.0)
-            return 0.0
+            return 0.0, True
         if self.stop_wait:
             self.stop_wait = not pressed
-            return 0.0
+            return 0.0, True
         actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
         if self.spindle_wait is not None:
             wanted = seg.modal.rpm(self.x_cmd - seg.modal.offset[1])
@@ -463,10 +467,10 @@ class CutSequencer(CycleController):
                     self._raise_alarm(t, f"spindle: {actual:.1f} rev/min, not within {self.spindle_band:g} of the "
                                          f"commanded {wanted:.1f} rev/min {self.spindle_timeout:g} s after the cut on "
                                          f"line {seg.line} was to begin (speed arrival)")
-                return 0.0
+                return 0.0, True
         if seg.feed and seg.modal.per_rev:
             self.move.rate = ElementMove.rate_on(seg.element, seg.rate * actual, self.accel)
-        return scale
+        return scale, False
 
     def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
         """Re-base the command on the actual position where a stop left them apart (a held axis)."""
