@@ -124,3 +124,17 @@ def packed(system, fmus: dict[str, Path], dest: Path) -> Path:
         source = fmus.get(comp.model, own / f"{comp.model}.fmu")
         shutil.copy(source, models / f"{comp.model}.fmu")
     return pack(folder, models, dest / f"{system.name}.ssp")
+
+
+def with_plant(system_name: str, model: str, scale: float = 1.0, axes=("x_axis", "z_axis"), drop=()):
+    """A shipped system with its servo axes ``axes`` replaced by the foreign ``model`` (start position in the
+    model's length unit: ``scale`` mm), the connections named in ``drop`` left out."""
+    from ncfmu.systems import get_system
+    system = get_system(system_name)
+    for comp in system.components:
+        if comp.name in axes:
+            comp.model = model
+            comp.parameters = {"pos_start": comp.parameters["pos_start"] * scale}
+            comp.connectors = []          # the user's SSD declares what their FMU has; here: nothing
+    system.connections = [c for c in system.connections if str(c) not in drop]
+    return system

@@ -100,6 +100,7 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
     lines += (report_of(result).summary(result, run_parameters(result)) if report_lines is None
               else report_lines)
+    lines += [f"  [warning] {w}" for w in getattr(result, "warnings", [])]
     for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):

@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from .cosim.connect import free_inputs
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.native_loop import build_library
@@ -25,6 +26,16 @@ from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
 from .systems import SYSTEMS, get_system
+
+
+def shipped(system: System) -> bool:
+    """Whether ``system`` is one ncfmu ships, as it ships it (its name, instances and models): its free inputs are
+    meant to be free (a servo's enable, a single-axis grinder's second axis)."""
+    if system.name not in SYSTEMS:
+        return False
+    own = get_system(system.name)
+    return ({c.name: c.model for c in own.components} == {c.name: c.model for c in system.components}
+            and {str(c) for c in own.connections} == {str(c) for c in system.connections})
 
 
 def models_dir(root: Path) -> Path:
@@ -89,8 +100,19 @@ class OpenSystem:
             shutil.rmtree(self._tmp, ignore_errors=True)
             raise
 
+    def warnings(self, start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None) -> list[str]:
+        """The system's warning lines: the master's (units), and for a system ncfmu does not ship as it is, every
+        input nothing drives and no value is given for."""
+        lines = list(self.master.warnings)
+        if not shipped(self.system):
+            given = set(start_values or {}) | set(inputs.columns if inputs is not None else {})
+            lines += free_inputs(self.system, self.master.by_name, given)
+        return lines
+
     def run(self, **kwargs) -> Result:
-        return self.master.run(**kwargs)
+        result = self.master.run(**kwargs)
+        result.warnings = self.warnings(kwargs.get("start_values"), kwargs.get("inputs"))
+        return result
 
     def close(self) -> None:
         try:

@@ -34,6 +34,7 @@ from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
+from .units import unit_from_fmpy, variable_unit
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -175,9 +176,11 @@ class UnpackedFmu:
                 except ValueError:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has a range bound "
                                                 f"{bound!r} that is not a number") from None
+            unit = variable_unit(v)
             self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
-                                              getattr(v, "unit", None), start, v.description or "",
-                                              v.variability or "", bounds[0], bounds[1])
+                                              unit, start, v.description or "",
+                                              v.variability or "", bounds[0], bounds[1],
+                                              None if unit is None else unit_from_fmpy(unit, md.unitDefinitions))
 
     def cleanup(self) -> None:
         if self._tmp:

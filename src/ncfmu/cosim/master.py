@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError
+from .connect import check_units
 from .fmu import typed_value
 from .native_loop import NativePlan, NativeSlave, library
 from .record import MAX_RECORD_BYTES, RecordSink, too_big
@@ -334,6 +335,9 @@ class Master:
         self.loop_used = ""
         self.by_name = {s.name: s for s in slaves}
         self.check_connections()
+        checked = check_units(system, self.by_name)
+        #: input (instance, variable) -> the unit conversion its connection applies; the warnings of the checks
+        self.conversions, self.warnings = checked.conversions, checked.warnings
         self.sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
                         for c in system.connections}
 
@@ -606,7 +610,7 @@ class Master:
                     q = f"{s.name}.{v.name}"
                     bound[q] = _BoundInput(kind, idx, pos, in_buf, int(idx[pos]), force_slot[q])
                 if len(ins):
-                    gathers.append((in_buf, values[kind].take, idx))
+                    gathers.append((in_buf, self._gather(s, kind, ins, values[kind]), idx))
             plan.append((s, tuple(gathers)))
             bindings.append(kinds_bound)
 
@@ -624,11 +628,26 @@ class Master:
             for buf, take, idx in prepared:
                 take(idx, out=buf)             # what each input is given at the first step (Session.value)
         natives = [s for s in self.slaves if isinstance(s, NativeSlave)]
-        if self.native and len(natives) == len(self.slaves) and library() is not None:
+        if self.native and len(natives) == len(self.slaves) and library() is not None and not self.conversions:
             records = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
             run.native = NativePlan(natives, bindings, values, records, run.start_time, h,
                                     self.mode == "jacobi", every)
         return run
+
+    def _gather(self, s: Slave, kind: str, ins: list[Variable], vector: np.ndarray) -> Callable:
+        """``take(idx, out)`` for a slave's inputs of ``kind``: the vector's values, converted to the inputs' units
+        where a connection converts (then the Python loop runs: the C loop gathers without converting)."""
+        convs = [self.conversions.get((s.name, v.name)) for v in ins]
+        if not any(convs):
+            return vector.take
+        gain = np.array([1.0 if c is None else c.gain for c in convs])
+        offset = np.array([0.0 if c is None else c.offset for c in convs])
+
+        def take(idx: np.ndarray, out: np.ndarray) -> None:
+            vector.take(idx, out=out)
+            out *= gain
+            out += offset
+        return take
 
     def _schedule(self, run: _Run, inputs: InputTable, forced: set[str]) -> list:
         """The CSV's changes as (first step they apply to, actions) in time order: a change at time tc applies
@@ -675,7 +694,9 @@ class Master:
                 slave.set_start(v.name, value)          # an input outside the plan keeps what it is set to
                 run.unbound[name] = value
             else:
-                run.values[b.kind][b.force_slot] = value
+                conv = self.conversions.get((slave.name, v.name))
+                # the slot is gathered like the connection's source: in the source's unit
+                run.values[b.kind][b.force_slot] = value if conv is None else (value - conv.offset) / conv.gain
                 b.idx[b.pos] = b.force_slot
             run.forced[name] = value
         elif action == "ext_release":

@@ -60,6 +60,8 @@ class Result:
         self.messages = messages or {}
         self.parameters = parameters or {}
         self.models = models or {}
+        #: the master's warning lines about the system (units, connections, free inputs), one per problem
+        self.warnings: list[str] = []
 
     @property
     def time(self) -> np.ndarray:

@@ -41,6 +41,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .units import Unit
+
 KINDS = ("Real", "Integer", "Boolean")
 DTYPES = {"Real": np.float64, "Integer": np.int32, "Boolean": np.int32}
 
@@ -59,6 +61,7 @@ class Variable:
     variability: str = ""     # fixed, tunable, discrete, continuous ("" when the slave does not say)
     min: float | None = None  # the modelDescription's range (Real and Integer)
     max: float | None = None
+    unit_definition: Unit | None = None   # the unit with its SI exponents, factor and offset, where defined
 
 
 class Slave(Protocol):

@@ -25,6 +25,7 @@ from pathlib import Path
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
 from ..ports import UNITS, parse_text
+from .units import Unit
 
 #: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
 MAX_UNPACKED = 2 ** 30
@@ -88,6 +89,7 @@ class System:
     stop_time: float
     step_size: float = 1e-3
     description: str = ""
+    units: dict[str, Unit] = field(default_factory=dict)     # the SSD's unit definitions, by name
 
     def component(self, name: str) -> Component:
         for c in self.components:
@@ -338,6 +340,12 @@ def read_ssd(path: Path, read_file=None) -> System:
     connections = [Connection(_attribute(c, "startElement", path), _attribute(c, "startConnector", path),
                               _attribute(c, "endElement", path), _attribute(c, "endConnector", path))
                    for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
+    units: dict[str, Unit] = {}
+    for u in root.iterfind(f"{_q('ssd:Units')}/{_q('ssc:Unit')}"):
+        name = _attribute(u, "name", path)
+        base_unit = u.find(_q("ssc:BaseUnit"))
+        attrs = dict(base_unit.attrib) if base_unit is not None else {}
+        units[name] = Unit.of(name, attrs, attrs.get("factor", 1.0), attrs.get("offset", 0.0))
     exp = root.find(_q("ssd:DefaultExperiment"))
     stop = _time_attribute(path, exp, "stopTime") if exp is not None and exp.get("stopTime") else math.nan
     step = 1e-3
@@ -347,7 +355,7 @@ def read_ssd(path: Path, read_file=None) -> System:
         if not step > 0:
             raise SystemDefinitionError(f"{path}: baseStepSize = {step!r}: must be > 0")
     return System(_attribute(root, "name", path), components, connections, stop, step,
-                  sys_el.get("description", ""))
+                  sys_el.get("description", ""), units)
 
 
 def read_ssp(archive: Path) -> System:
