@@ -163,12 +163,12 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
     from .cosim.ssp import read_ssp
-    from .project import simulate, system_archive
+    from .project import archive_models, simulate, system_archive
     from .systems import report_for
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
-    report = report_for(system.name, {c.name: c.model for c in system.components})
+    report = report_for(system.name, archive_models(archive, system))
     parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))
     step = system.step_size if args.step is None else args.step
@@ -341,23 +341,24 @@ def cmd_plot(args) -> int:
 
 def cmd_vars(args) -> int:
     """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
-    import zipfile
+    from dataclasses import replace
 
     from .cosim.ssp import read_ssp
+    from .project import OpenSystem, model_descriptions
     from .systems import get_system
     from .systems.settable import settable
+    warnings: list[str] = []
     if args.system.endswith(".ssp"):
         archive = Path(args.system)
         system = read_ssp(archive)
-
-        def model_description(model: str) -> bytes:
-            source = next(c.source for c in system.components if c.model == model)
-            try:
-                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
-                    return fmu.read("modelDescription.xml")
-            except (KeyError, zipfile.BadZipFile) as err:
-                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
-        rows = settable(system, model_description)
+        described = model_descriptions(archive, system)
+        rows = settable(system, described.__getitem__)
+        # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
+        with OpenSystem(archive) as opened:
+            conversions = opened.master.conversions
+            warnings = opened.warnings()
+        rows = [replace(r, driven_by=f"{r.driven_by} ({conversions[key]})")
+                if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
         system = get_system(args.system)
         rows = settable(system)
@@ -379,6 +380,7 @@ def cmd_vars(args) -> int:
         lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
         if r is not None and len(r.start) > long:
             lines.append(f"    start: {r.start}")
+    lines += [f"  [warning] {w}" for w in warnings]
     try:
         sys.stdout.write("\n".join(lines) + "\n")
         sys.stdout.flush()

@@ -26,15 +26,16 @@ from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
 from .systems import SYSTEMS, get_system
+from .systems.roles import identify
 
 
-def shipped(system: System) -> bool:
+def shipped(system: System, models: Mapping[str, str] | None = None) -> bool:
     """Whether ``system`` is one ncfmu ships, as it ships it (its name, instances and models): its free inputs are
     meant to be free (a servo's enable, a single-axis grinder's second axis)."""
     if system.name not in SYSTEMS:
         return False
     own = get_system(system.name)
-    return ({c.name: c.model for c in own.components} == {c.name: c.model for c in system.components}
+    return ({c.name: c.model for c in own.components} == dict(models or {c.name: c.model for c in system.components})
             and {str(c) for c in own.connections} == {str(c) for c in system.connections})
 
 
@@ -80,6 +81,28 @@ def system_archive(system: str, root: Path | None = None, ensure_built: bool = T
     return root / "ssp" / f"{system}.ssp"
 
 
+def model_descriptions(archive: Path, system: System) -> dict[str, bytes]:
+    """instance -> its FMU's modelDescription.xml, read from the .ssp archive (nothing extracted or loaded)."""
+    import zipfile
+    out = {}
+    with zipfile.ZipFile(archive) as z:
+        for comp in system.components:
+            try:
+                with zipfile.ZipFile(z.open(comp.source)) as fmu:
+                    out[comp.name] = fmu.read("modelDescription.xml")
+            except (KeyError, zipfile.BadZipFile) as err:
+                raise SystemDefinitionError(f"{archive}: {comp.source} has no readable modelDescription.xml "
+                                            f"({err})") from None
+    return out
+
+
+def archive_models(archive: Path, system: System) -> dict[str, str]:
+    """instance -> the catalogue model its FMU is, or ``foreign:<modelName>`` (by its modelDescription)."""
+    return {inst: i.model or f"foreign:{i.model_name}"
+            for inst, i in ((inst, identify(md, f"{archive}: {inst}"))
+                            for inst, md in model_descriptions(archive, system).items())}
+
+
 class OpenSystem:
     """An .ssp archive unpacked once, its FMUs instantiated through fmpy, ready to run."""
 
@@ -96,6 +119,10 @@ class OpenSystem:
                     self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
             self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
+            #: instance -> what its FMU is, from its modelDescription (never the file name)
+            self.identities = {c.name: identify((self.unpacked[c.model].directory / "modelDescription.xml")
+                                                .read_bytes(), f"{self.archive}: {c.source}")
+                               for c in self.system.components}
         except Exception:
             shutil.rmtree(self._tmp, ignore_errors=True)
             raise
@@ -104,14 +131,20 @@ class OpenSystem:
         """The system's warning lines: the master's (units), and for a system ncfmu does not ship as it is, every
         input nothing drives and no value is given for."""
         lines = list(self.master.warnings)
-        if not shipped(self.system):
+        if not shipped(self.system, self.models):
             given = set(start_values or {}) | set(inputs.columns if inputs is not None else {})
             lines += free_inputs(self.system, self.master.by_name, given)
         return lines
 
+    @property
+    def models(self) -> dict[str, str]:
+        """instance -> the catalogue model its FMU is, or ``foreign:<modelName>``."""
+        return {inst: i.model or f"foreign:{i.model_name}" for inst, i in self.identities.items()}
+
     def run(self, **kwargs) -> Result:
         result = self.master.run(**kwargs)
         result.warnings = self.warnings(kwargs.get("start_values"), kwargs.get("inputs"))
+        result.models = self.models
         return result
 
     def close(self) -> None:

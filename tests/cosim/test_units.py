@@ -86,3 +86,16 @@ def test_every_ssd_connector_is_checked_against_its_fmu(foreign, project, tmp_pa
     system.component("x_axis").connectors = [connector]
     with pytest.raises(SystemDefinitionError, match=refusal):
         OpenSystem(packed(system, foreign, tmp_path))
+
+
+def test_a_foreign_fmus_min_and_max_hold_for_start_values_and_parameter_sets(foreign, project, tmp_path):
+    from ncfmu.errors import ConfigError
+    system = System("gain", [Component("feed", "Feedthrough", {"gain": 2.0})], [], 1.0)
+    archive = packed(system, foreign, tmp_path / "ok")
+    with OpenSystem(archive) as opened:
+        with pytest.raises(ConfigError, match=r"feed\.gain = 0\.3: must be in \[0\.5, 4\]"):
+            opened.run(start_values={"feed.gain": 0.3})
+    system.components[0].parameters["gain"] = 5.0          # the .ssv's value
+    with OpenSystem(packed(system, foreign, tmp_path / "ssv")) as opened:
+        with pytest.raises(ConfigError, match=r"feed\.gain = 5\.0: must be in \[0\.5, 4\]"):
+            opened.run()

@@ -88,6 +88,19 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
     return value
 
 
+def check_range(qualified: str, v: Variable, value: object) -> None:
+    """The modelDescription's rule for a value given to ``v`` (type checked already): finite, within min/max."""
+    if v.type == "Real" and not math.isfinite(float(value)):     # type: ignore[arg-type]
+        raise ConfigError(qualified, value, "must be finite")
+    if v.type in ("Real", "Integer"):
+        x = float(value)                                          # type: ignore[arg-type]
+        low, high = v.min, v.max
+        if (low is not None and x < low) or (high is not None and x > high):
+            rule = (f"must be in [{low:g}, {high:g}]" if low is not None and high is not None
+                    else f"must be >= {low:g}" if low is not None else f"must be <= {high:g}")
+            raise ConfigError(qualified, value, rule)
+
+
 def safe_extract(archive: Path, target: Path) -> Path:
     """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths) and symbolic
     links (zipfile would write a link as a file holding its target; no tool should find one there)."""

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError
 from .connect import check_units
-from .fmu import typed_value
+from .fmu import check_range, typed_value
 from .native_loop import NativePlan, NativeSlave, library
 from .record import MAX_RECORD_BYTES, RecordSink, too_big
 from .result import Result
@@ -296,17 +296,8 @@ def _as_python(kind: str, value) -> object:
     return int(value)
 
 
-def _check_range(qualified: str, v: Variable, value: object) -> None:
-    """The modelDescription's rule for a value written during a run (type checked already)."""
-    if v.type == "Real" and not math.isfinite(float(value)):     # type: ignore[arg-type]
-        raise ConfigError(qualified, value, "must be finite")
-    if v.type in ("Real", "Integer"):
-        x = float(value)                                          # type: ignore[arg-type]
-        low, high = v.min, v.max
-        if (low is not None and x < low) or (high is not None and x > high):
-            rule = (f"must be in [{low:g}, {high:g}]" if low is not None and high is not None
-                    else f"must be >= {low:g}" if low is not None else f"must be <= {high:g}")
-            raise ConfigError(qualified, value, rule)
+#: The modelDescription's rule for a value written during a run (one home: the slave's module)
+_check_range = check_range
 
 
 #: Steps a run counts at most (whole numbers in a double): a stop time beyond is a mistake, not a run.
@@ -536,10 +527,12 @@ class Master:
         applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
         for comp in self.system.components:
             for name, value in comp.parameters.items():
+                self._in_range(f"{comp.name}.{name}", value)
                 self.by_name[comp.name].set_start(name, value)
                 applied[comp.name][name] = value
         for qualified, value in (start_values or {}).items():
             slave, v = self.variable(qualified)
+            self._in_range(qualified, value)
             if (slave.name, v.name) in self.sources:
                 c = self.sources[(slave.name, v.name)]
                 raise SystemDefinitionError(f"{qualified} is driven by the connection {c} -> {qualified}: a start "
@@ -633,6 +626,12 @@ class Master:
             run.native = NativePlan(natives, bindings, values, records, run.start_time, h,
                                     self.mode == "jacobi", every)
         return run
+
+    def _in_range(self, qualified: str, value: object) -> None:
+        """A start value within its modelDescription's min/max, whichever FMU it is for (an FMU need not check)."""
+        slave, v = self.variable(qualified)
+        if v.type in ("Real", "Integer") and not isinstance(value, (bool, str)):
+            _check_range(qualified, v, typed_value(qualified, v.type, value))
 
     def _gather(self, s: Slave, kind: str, ins: list[Variable], vector: np.ndarray) -> Callable:
         """``take(idx, out)`` for a slave's inputs of ``kind``: the vector's values, converted to the inputs' units
