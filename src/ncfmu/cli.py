@@ -100,6 +100,8 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
     lines += (report_of(result).summary(result, run_parameters(result)) if report_lines is None
               else report_lines)
+    if getattr(result, "ended_by", ""):
+        lines.append(f"  ended: {result.ended_by}")
     lines += [f"  [warning] {w}" for w in getattr(result, "warnings", [])]
     for _inst, msgs in result.messages.items():
         for level, text in msgs:

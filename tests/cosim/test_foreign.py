@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
-from foreign_fmus import FOREIGN, packed
+from foreign_fmus import FOREIGN, packed, with_plant
 
 from ncfmu.project import simulate
-from ncfmu.systems import get_system
 
 
 @pytest.mark.parametrize("name", sorted(FOREIGN))
@@ -30,15 +29,9 @@ def test_the_foreign_axis_follows_a_ramp_by_its_own_physics(foreign):
 
 
 def test_the_foreign_axis_in_mm_runs_the_lathe_taper_cycle(foreign, project, tmp_path):
-    system = get_system("lathe_taper")
-    for comp in system.components:
-        if comp.name in ("x_axis", "z_axis"):
-            comp.model = "PlantAxis"
-            comp.parameters = {"pos_start": comp.parameters["pos_start"]}
-    run = simulate(str(packed(system, foreign, tmp_path)))
+    run = simulate(str(packed(with_plant("lathe_taper", "PlantAxis"), foreign, tmp_path)))
     assert run["seq.done"][-1] and not run["seq.alarm"].any()
     assert run["seq.pass_no"].max() == 4
-    # the taper: X falls 1.5 mm over the cut; the last pass ends at the final radius of the seed's block
     assert np.abs(run["x_axis.following_error"]).max() < 0.1
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import read_model_description
-from fmpy.fmi1 import calloc, free
+from fmpy.fmi1 import FMICallException, calloc, free
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -29,7 +29,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from ..errors import ConfigError, SimulationError, SystemDefinitionError
+from ..errors import ConfigError, SimulationError, SystemDefinitionError, TerminationRequested
 from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
@@ -235,7 +235,11 @@ class FmuSlave:
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
-    def _fail(self, what: str, status: int) -> SimulationError:
+    def _fail(self, what: str, status: int, time: float | None = None) -> SimulationError:
+        """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
+        if status == 2 and time is not None and self._asks_to_terminate():
+            detail = [msg for _lvl, msg in self.messages[-3:]]
+            return TerminationRequested(self.name, time, "; ".join(detail))
         if status >= 4:
             self._alive = False   # after fmi2Fatal the FMI standard allows no further call, not even freeing
         recent = self.messages[-5:]
@@ -246,9 +250,27 @@ class FmuSlave:
         return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {said}" if said else ""))
 
+    def _asks_to_terminate(self) -> bool:
+        """After fmi2Discard from fmi2DoStep: fmi2GetBooleanStatus(fmi2Terminated) says whether the FMU asks to end
+        the simulation (an FMU that cannot say does not)."""
+        try:
+            return bool(self.fmu.getBooleanStatus(3))      # 3: fmi2Terminated
+        except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say, so it does not ask
+            return False
+
+    def _call(self, what: str, call: Callable[[], object]) -> object:
+        """A call through fmpy's wrappers: fmpy's FMICallException becomes our SimulationError (the contract)."""
+        try:
+            return call()
+        except FMICallException as err:
+            raise self._fail(what, int(getattr(err, "status", 3))) from None
+
     def fmi2_failure(self, what: str, status: int) -> SimulationError:
         """The error for ``what`` returning ``status`` (for the C loop, which calls the functions directly)."""
-        return self._fail(what, status)
+        time = None
+        if what.startswith("fmi2DoStep at t = "):
+            time = float(what.removeprefix("fmi2DoStep at t = ").split()[0])
+        return self._fail(what, status, time)
 
     def fmi2_functions(self) -> Fmi2Functions:
         """The component and the addresses of the loop's FMI functions, for the C loop
@@ -356,7 +378,7 @@ class FmuSlave:
         else:
             status = self._step(self._component, t, h, NO_SET_FMU_STATE_PRIOR)
         if status > 1:
-            raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
+            raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status, t)
 
     def read_outputs(self) -> None:
         self._transfer(self._reads, "Get")
@@ -365,31 +387,31 @@ class FmuSlave:
         """Read one variable (for checks outside the loop)."""
         v = self.variables[name]
         if v.type == "Real":
-            return self.fmu.getReal([v.vr])[0]
-        if v.type == "Integer":
-            return self.fmu.getInteger([v.vr])[0]
+            return self._call(f"fmi2GetReal({name})", lambda: self.fmu.getReal([v.vr])[0])
+        if v.type in ("Integer", "Enumeration"):
+            return self._call(f"fmi2GetInteger({name})", lambda: self.fmu.getInteger([v.vr])[0])
         if v.type == "Boolean":
-            return self.fmu.getBoolean([v.vr])[0]
-        value = self.fmu.getString([v.vr])[0]
+            return self._call(f"fmi2GetBoolean({name})", lambda: self.fmu.getBoolean([v.vr])[0])
+        value = self._call(f"fmi2GetString({name})", lambda: self.fmu.getString([v.vr])[0])
         return value.decode() if isinstance(value, bytes) else value
 
     # -- FMU state ------------------------------------------------------------------------------
     def get_state(self):
         """fmi2GetFMUstate: an opaque handle (free it with :meth:`free_state`)."""
-        return self.fmu.getFMUstate()
+        return self._call("fmi2GetFMUstate", self.fmu.getFMUstate)
 
     def set_state(self, state) -> None:
-        self.fmu.setFMUstate(state)
+        self._call("fmi2SetFMUstate", lambda: self.fmu.setFMUstate(state))
         self._sent = [None] * len(self._writes)
 
     def free_state(self, state) -> None:
-        self.fmu.freeFMUstate(state)
+        self._call("fmi2FreeFMUstate", lambda: self.fmu.freeFMUstate(state))
 
     def serialize_state(self, state) -> bytes:
-        return bytes(self.fmu.serializeFMUstate(state))
+        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))  # type: ignore[call-overload]
 
     def deserialize_state(self, data: bytes):
-        return self.fmu.deSerializeFMUstate(bytes(data))
+        return self._call("fmi2DeSerializeFMUstate", lambda: self.fmu.deSerializeFMUstate(bytes(data)))
 
     def reset(self) -> None:
         """fmi2Reset: back to the instantiated state (for batch runs); bindings and the log of the run before

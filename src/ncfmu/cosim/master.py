@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError
+from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError, TerminationRequested
 from .connect import check_units
 from .fmu import check_range, typed_value
 from .native_loop import NativePlan, NativeSlave, library
@@ -397,6 +397,12 @@ class Master:
         try:
             assert session.run.n_steps is not None
             session._advance(session.run.n_steps, progress, deadline)
+        except TerminationRequested as ended:
+            # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
+            session.failed = None
+            result = session.close(reason=str(ended))
+            result.ended_by = str(ended)
+            return result
         except BaseException as err:
             session.close(complete=False, reason=str(err) or type(err).__name__)
             raise
