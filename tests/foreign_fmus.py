@@ -9,7 +9,9 @@ into an FMU (binaries/linux64 plus its sources) with the system C compiler. They
 - ``PlantAxisBare``: the same axis in mm without any unit declared;
 - ``Countdown``: counts seconds, ends the experiment at ``end_at`` (fmi2Discard + fmi2Terminated), an output in min;
 - ``Feedthrough``: inputs to outputs per type (Real with a declaredType in s and one in mm, Integer, Boolean),
-  a gain with min/max, a String parameter.
+  a gain with min/max, a String parameter;
+- ``PlantAxis3``, ``Countdown3``, ``Feedthrough3``: the same models as FMI 3.0 co-simulation FMUs (``frame3.c``;
+  Float64, Int32, Boolean, String).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ class Foreign:
     xml: str
     defines: dict[str, str]
     substitutions: dict[str, str]
+    fmi: int = 2               # the FMI version of its frame: 2 (frame2.c) or 3 (frame3.c + stubs3.c)
 
 
 def _plant(name: str, scale: float, length: str | None) -> Foreign:
@@ -57,6 +60,9 @@ FOREIGN = {f.name: f for f in (
     _plant("PlantAxisBare", 1.0, None),
     Foreign("Countdown", "countdown.c", "countdown.xml", {}, {}),
     Foreign("Feedthrough", "feedthrough.c", "feedthrough.xml", {}, {}),
+    Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {}, 3),
+    Foreign("Countdown3", "countdown.c", "countdown3.xml", {}, {}, 3),
+    Foreign("Feedthrough3", "feedthrough.c", "feedthrough3.xml", {}, {}, 3),
 )}
 
 
@@ -78,21 +84,23 @@ def build_one(f: Foreign, dest: Path) -> Path:
     """Compile ``f`` and pack it as ``dest/<name>.fmu``."""
     import re
     md = model_description(f)
-    guid = re.search(r'guid="([^"]+)"', md)
+    guid = re.search(r'(?:guid|instantiationToken)="([^"]+)"', md)
     assert guid is not None
     stage = dest / f"{f.name}.stage"
     shutil.rmtree(stage, ignore_errors=True)
-    (stage / "binaries" / "linux64").mkdir(parents=True)
+    platform = "linux64" if f.fmi == 2 else "x86_64-linux"      # FMI 3.0 names platforms by tuple
+    (stage / "binaries" / platform).mkdir(parents=True)
     (stage / "sources").mkdir()
     (stage / "modelDescription.xml").write_text(md)
-    for src in ("frame2.c", "model.h", f.model_c):
+    frame = ("frame2.c",) if f.fmi == 2 else ("frame3.c", "stubs3.c")
+    for src in (*frame, "model.h", f.model_c):
         shutil.copy(SOURCES / src, stage / "sources" / src)
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or "cc"
     defines = {"MODEL_GUID": f'"{guid.group(1)}"', **f.defines}
     command = [cc, "-shared", "-fPIC", "-O2", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Werror", f"-I{fmi_headers()}",
                f"-I{stage / 'sources'}", *(f"-D{k}={v}" for k, v in defines.items()),
-               str(stage / "sources" / "frame2.c"), str(stage / "sources" / f.model_c),
-               "-o", str(stage / "binaries" / "linux64" / f"{f.name}.so"), "-lm"]
+               *(str(stage / "sources" / src) for src in frame), str(stage / "sources" / f.model_c),
+               "-o", str(stage / "binaries" / platform / f"{f.name}.so"), "-lm"]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode:
         raise RuntimeError(f"compiling {f.name} failed:\n{done.stderr}")

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .cosim.connect import free_inputs
-from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
+from .cosim.fmu import UnpackedFmu, make_slave, safe_extract, unpacked_fmu
 from .cosim.master import InputTable, Master
 from .cosim.native_loop import build_library
 from .cosim.record import RecordSink
@@ -117,7 +117,7 @@ class OpenSystem:
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
                     self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
-            self.slaves = [FmuSlave(self.unpacked[c.model], c.name) for c in self.system.components]
+            self.slaves = [make_slave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
             #: instance -> what its FMU is, from its modelDescription (never the file name)
             self.identities = {c.name: identify((self.unpacked[c.model].directory / "modelDescription.xml")

@@ -150,6 +150,31 @@ def unpacked_fmu(path: Path) -> UnpackedFmu:
     return unpacked
 
 
+#: The FMI 3.0 types the master runs, as the FMI 2.0 kinds its buffers hold (the rest are refused, naming them)
+FMI3_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
+def _supported_fmi3(fmu: str, v) -> None:
+    """An FMI 3.0 variable the master can run, or SystemDefinitionError naming it and what is not supported."""
+    if v.causality == "independent":
+        return
+    if v.type not in FMI3_TYPES:
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is an FMI 3.0 {v.type}: not supported (ncfmu's master "
+                                    f"runs {', '.join(FMI3_TYPES)} variables)")
+    if getattr(v, "dimensions", None):
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is an array: FMI 3.0 arrays are not supported")
+    if getattr(v, "clocks", None) or getattr(v, "intervalVariability", None):
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is clocked: FMI 3.0 clocks are not supported")
+
+
+def make_slave(unpacked: UnpackedFmu, instance_name: str):
+    """The slave of one instance of ``unpacked``: :class:`FmuSlave` for FMI 2.0, :class:`Fmu3Slave` for 3.0."""
+    if unpacked.fmi3:
+        from .fmu3 import Fmu3Slave
+        return Fmu3Slave(unpacked, instance_name)
+    return FmuSlave(unpacked, instance_name)
+
+
 class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 
@@ -167,18 +192,24 @@ class UnpackedFmu:
         except Exception as err:                         # fmpy's own errors name the schema problem
             raise SystemDefinitionError(f"{self.path.name}: cannot read its modelDescription.xml: {err}") from None
         md = self.model_description
-        if md.fmiVersion != "2.0":
+        if md.fmiVersion not in ("2.0", "3.0"):
             raise SystemDefinitionError(f"{self.path.name}: an FMI {md.fmiVersion} FMU; ncfmu's master runs FMI 2.0 "
-                                        "co-simulation FMUs only")
+                                        "and 3.0 co-simulation FMUs only")
         if md.coSimulation is None:
             raise SystemDefinitionError(f"{self.path.name}: a model-exchange-only FMU; ncfmu's master runs FMI 2.0 "
-                                        "co-simulation FMUs only (no solver for model exchange)")
+                                        "and 3.0 co-simulation FMUs only (no solver for model exchange)")
+        self.fmi3 = md.fmiVersion == "3.0"
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
+            if self.fmi3:
+                _supported_fmi3(self.path.name, v)
+                if v.causality == "independent":
+                    continue
+            typ = FMI3_TYPES.get(v.type, v.type) if self.fmi3 else v.type
             start = v.start
             if start is not None:
                 try:
-                    start = parse_text(v.type, str(start))
+                    start = parse_text(typ, str(start))
                 except ValueError:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has start {start!r}, not a "
                                                 f"valid {v.type}") from None
@@ -190,7 +221,7 @@ class UnpackedFmu:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has a range bound "
                                                 f"{bound!r} that is not a number") from None
             unit = variable_unit(v)
-            self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
+            self.variables[v.name] = Variable(v.name, typ, v.causality, v.valueReference,
                                               unit, start, v.description or "",
                                               v.variability or "", bounds[0], bounds[1],
                                               None if unit is None else unit_from_fmpy(unit, md.unitDefinitions))

@@ -61,18 +61,27 @@ def _from_model_description(inst: str, md_xml: bytes, values: dict[str, object])
     out = []
     root = ET.fromstring(md_xml)
     declared = {t.get("name"): t[0].get("unit", "") for t in root.iterfind("TypeDefinitions/SimpleType") if len(t)}
-    for sv in root.iter("ScalarVariable"):
+    if root.get("fmiVersion", "").startswith("3"):
+        # FMI 3.0: the variable is its type's element (Float64, Int32, ...), with the attributes on it
+        declared.update({t.get("name"): t.get("unit", "") for t in root.iterfind("TypeDefinitions/*")})
+        variables = [(v, v) for v in root.iterfind("ModelVariables/*")]
+    else:
+        variables = [(sv, sv[0]) for sv in root.iter("ScalarVariable") if len(sv)]
+    for sv, typed in variables:
         causality = sv.get("causality", "local")
-        if causality not in ("parameter", "input") or not len(sv):
+        if causality not in ("parameter", "input"):
             continue
-        typed, name = sv[0], sv.get("name", "")
+        name = sv.get("name", "")
         lo, hi = typed.get("min"), typed.get("max")
         rule = (f"must be in [{lo}, {hi}]" if lo and hi else f"must be >= {lo}" if lo else f"must be <= {hi}" if hi
                 else "")
         kind = "input" if causality == "input" else f"parameter, {sv.get('variability', 'fixed')}"
+        start = typed.get("start", "")
+        if not start and typed.find("Start") is not None:            # FMI 3.0's String start
+            start = typed.find("Start").get("value", "")             # type: ignore[union-attr]
         unit = typed.get("unit") or declared.get(typed.get("declaredType"), "")
         out.append(Settable(f"{inst}.{name}", kind, typed.tag, unit,
-                            text(values[name]) if name in values else typed.get("start", ""), rule,
+                            text(values[name]) if name in values else start, rule,
                             sv.get("description", "")))
     return out
 
