@@ -25,7 +25,7 @@ from pathlib import Path
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
 from ..ports import UNITS, parse_text
-from .units import Unit
+from .units import BASE, Unit
 
 #: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
 MAX_UNPACKED = 2 ** 30
@@ -122,6 +122,21 @@ def ssv_document(parameters: dict[str, object], name: str = PARAMETER_SET) -> by
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def _unit_spec(name: str, defined: dict[str, Unit]) -> dict | None:
+    """A unit's ``BaseUnit`` attributes: ncfmu's own units (ports.UNITS), else the system's definition."""
+    if name in UNITS:
+        return dict(UNITS[name])
+    u = defined.get(name)
+    if u is None or u.exponents is None:
+        return None
+    spec: dict[str, object] = {b: e for b, e in zip(BASE, u.exponents) if e}
+    if u.factor != 1.0:
+        spec["factor"] = u.factor
+    if u.offset != 0.0:
+        spec["offset"] = u.offset
+    return spec
+
+
 def ssd_document(system: System) -> bytes:
     root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=system.name)
     sys_el = ET.SubElement(root, _q("ssd:System"), name=system.name, description=system.description)
@@ -152,11 +167,14 @@ def ssd_document(system: System) -> bytes:
     if units:
         units_el = ET.SubElement(root, _q("ssd:Units"))
         for name in sorted(units):
+            spec = _unit_spec(name, system.units)
+            if spec is None:              # a unit known by its name only: referenced, not defined
+                continue
             u = ET.SubElement(units_el, _q("ssc:Unit"), name=name)
-            spec = dict(UNITS[name])
-            base = {k: str(v) for k, v in spec.items() if k != "factor"}
-            if "factor" in spec:
-                base["factor"] = repr(spec["factor"])
+            base = {k: str(v) for k, v in spec.items() if k not in ("factor", "offset")}
+            for key in ("factor", "offset"):
+                if key in spec:
+                    base[key] = repr(spec[key])
             ET.SubElement(u, _q("ssc:BaseUnit"), base)
     exp = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(float(system.stop_time)))
     ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"),
