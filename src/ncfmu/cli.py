@@ -208,7 +208,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     import signal
 
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
+    from .cosim.record import CsvSink, EveryKth, RecordSink, RecordWriteError, SelectColumns
     from .cosim.ssp import read_ssp
     from .project import ScaledSink, archive_models, report_scales, simulate, system_archive
     from .systems import report_for
@@ -249,6 +249,10 @@ def _run_streamed(args, start_values: dict[str, object]):
         print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {_where_stopped(csv_sink)}",
               file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
+    except RecordWriteError as err:       # the disk full: whole rows kept, said as for Ctrl-C
+        if csv_sink.final_path is None:
+            raise
+        raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
     except NcfmuError as err:
         if csv_sink.final_path is None:
             raise
