@@ -185,8 +185,21 @@ class OpenSystem:
         lines = list(self.master.warnings)
         if not shipped(self.system, self.models):
             given = set(start_values or {}) | set(inputs.columns if inputs is not None else {})
+            given |= self._free_by_design()
             lines += free_inputs(self.system, self.master.by_name, given)
         return lines
+
+    def _free_by_design(self) -> set[str]:
+        """The inputs the shipped system of this name leaves free on purpose, of instances that kept their model
+        (a servo's enable, the panel's m_active): not worth a warning in a variant of it."""
+        if self.system.name not in SYSTEMS:
+            return set()
+        own = get_system(self.system.name)
+        driven = {(c.end_element, c.end_connector) for c in own.connections}
+        models = self.models
+        from .systems.compose import MODELS
+        return {f"{c.name}.{p.name}" for c in own.components if models.get(c.name) == c.model
+                for p in MODELS[c.model].PORTS if p.causality == "input" and (c.name, p.name) not in driven}
 
     @property
     def models(self) -> dict[str, str]:
