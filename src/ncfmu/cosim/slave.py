@@ -19,7 +19,8 @@ parameter during the run) raises :class:`~ncfmu.errors.ConfigError` naming the v
 and the slave is unchanged; a call the slave fails (an FMU's fmi2Error or fmi2Fatal) raises
 :class:`~ncfmu.errors.SimulationError` naming the instance, the call and the time, and the run ends there; nothing
 else escapes. An FMU that asks to end the simulation raises the SimulationError
-:class:`~ncfmu.errors.TerminationRequested` from ``do_step``: the run ends cleanly at the step before. What the slave said (its FMU's log) is in ``messages``, ``(level, text)`` pairs in order, kept until
+:class:`~ncfmu.errors.TerminationRequested` from ``do_step``: the run ends cleanly at the step before. What the
+slave said (its FMU's log) is in ``messages``, ``(level, text)`` pairs in order, kept until
 :meth:`ResettableSlave.reset`.
 
 Optional capabilities, each a protocol the master checks with ``isinstance`` before it relies on it:
