@@ -409,6 +409,7 @@ def cmd_vars(args) -> int:
     from .systems import get_system
     from .systems.settable import settable
     warnings: list[str] = _prepare_source(args)
+    foreign: list[str] = []
     if args.system.endswith(".ssp"):
         archive = Path(args.system)
         system = read_ssp(archive)
@@ -417,7 +418,8 @@ def cmd_vars(args) -> int:
         # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
         with OpenSystem(archive) as opened:
             conversions = opened.master.conversions
-            warnings = opened.warnings()
+            warnings = [*warnings, *opened.warnings()]
+            foreign = [f"{inst}: {identity}" for inst, identity in opened.identities.items() if not identity.model]
         rows = [replace(r, driven_by=f"{r.driven_by} ({conversions[key]})")
                 if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
@@ -441,6 +443,7 @@ def cmd_vars(args) -> int:
         lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
         if r is not None and len(r.start) > long:
             lines.append(f"    start: {r.start}")
+    lines += [f"  foreign FMU {line}" for line in foreign]
     lines += [f"  [warning] {w}" for w in warnings]
     try:
         sys.stdout.write("\n".join(lines) + "\n")
