@@ -9,10 +9,11 @@ Two threads share the work, and neither waits on the other:
 - the **server** (asyncua, on an asyncio loop in the main thread) publishes the newest snapshot every
   ``publish_interval`` (subscriptions then deliver data changes) and answers clients.
 
-A write is checked on the server side first (type, NaN/inf, the port's min/max from the modelDescription:
-OPC UA status Bad_TypeMismatch, Bad_OutOfRange, Bad_NotWritable, nothing changes), then handed to the
-simulation thread, which applies it before the next step and answers with the session's verdict (a
-controller's own rule, e.g. the panel's allowed values, is the session's ConfigError -> Bad_OutOfRange).
+Each node of a Write is checked on the server side first (type, NaN/inf, the port's min/max from the
+modelDescription: OPC UA status Bad_TypeMismatch, Bad_OutOfRange, Bad_NotWritable, Bad_NodeIdUnknown; that node
+changes nothing), then handed to the simulation thread, which applies it before the next step and answers with
+the session's verdict (a tunable parameter is first checked by its model's own rules on a copy; a refusal is
+Bad_OutOfRange and never reaches the FMU). Each node gets its own status, as OPC UA Part 4 asks.
 
 Address space (stable: PLC projects point at these names): namespace ``urn:ncfmu:<system>``; one Object per
 component instance; one Variable per FMU variable, string NodeId ``<instance>.<variable>``, BrowseName the
@@ -179,11 +180,20 @@ class Recorder:
         from .cosim.record import CsvSink
         return [CsvSink(self.trajectory)]
 
-    def end_segment(self, writes: Sequence[tuple[float, str, object]], final: bool) -> None:
-        """After the session closed its sinks: name the segment's files and write its writes."""
+    def end_segment(self, writes: Sequence[tuple[float, str, object]], final: bool, start: float = 0.0) -> None:
+        """After the session closed its sinks: name the segment's files and write its writes (a segment without
+        writes: one row at its ``start`` time that changes nothing -- an input CSV with a header and no rows is
+        refused by ``ncfmu run --input`` as a mistake)."""
         from .cosim.master import write_input_csv
+        from .files import write_atomic
+
+        def inputs(path: Path) -> Path:
+            if writes:
+                return write_input_csv(path, writes)
+            write_atomic(path, f'"time"\n{float(start)!r}\n'.encode())
+            return path
         if final:
-            self.files.append(write_input_csv(self.out / "session_inputs.csv", writes))
+            self.files.append(inputs(self.out / "session_inputs.csv"))
             for path in (self.trajectory, self.trajectory.with_name(self.trajectory.name + ".partial")):
                 if path.exists():
                     self.files.append(path)
@@ -192,7 +202,7 @@ class Recorder:
         k = self.segments
         if self.trajectory.exists():
             self.files.append(self.trajectory.replace(self.out / f"{self.system}.segment{k}.csv"))
-        self.files.append(write_input_csv(self.out / f"session_inputs.segment{k}.csv", writes))
+        self.files.append(inputs(self.out / f"session_inputs.segment{k}.csv"))
 
 
 # -- the simulation thread ------------------------------------------------------------------------------
@@ -250,11 +260,18 @@ class Runner:
     """Paces a session in a worker thread (see the module's docstring)."""
 
     def __init__(self, session, points: Sequence[Point], speed: float = 1.0, recorder: Recorder | None = None,
-                 on_state: Callable[[], None] | None = None) -> None:
+                 on_state: Callable[[], None] | None = None,
+                 check_parameter: Callable[[str, object], None] | None = None) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ConfigError("--speed", speed, "must be a number >= 0 (0: as fast as possible)")
         self.session, self.speed, self.recorder = session, float(speed), recorder
         self.points = list(points)
+        #: a tunable parameter's value checked by the model's own rules on a copy before the FMU sees it
+        #: (ConfigError: refused, nothing applied, nothing recorded)
+        self.check_parameter = check_parameter
+        self.start_time = float(session.time)
+        #: the writes of the segments before the last Reset (the session's own log restarts at a Reset)
+        self.earlier_writes: list[tuple[float, str, object]] = []
         self.state, self.reason = "running", ""
         self.stats = PaceStats()
         self.lag = 0.0
@@ -299,8 +316,10 @@ class Runner:
         for p in self.points:
             if p.causality == "input" or p.writes == "parameter":
                 values[p.name] = s.value(p.name)
+        forced = dict(s.forced())
+        values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
-            self._snapshot = Snapshot(float(s.time), values, dict(s.forced()), self.state, self.reason, self.lag,
+            self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
                                       self.stats.overruns)
         self._want_snapshot = False
 
@@ -315,6 +334,8 @@ class Runner:
             elif c.what == "release":
                 s.release(c.name)
             elif c.what == "set":
+                if self.check_parameter is not None:
+                    self.check_parameter(c.name, c.value)
                 s.set_parameter(c.name, c.value)
             elif c.what == "pause":
                 if self.state == "running":
@@ -331,8 +352,9 @@ class Runner:
                     writes = list(s.writes)
                     rec = self.recorder
                     s.reset(rec.sinks() if rec is not None else ())
+                    self.earlier_writes += writes
                     if rec is not None:
-                        rec.end_segment(writes, final=False)
+                        rec.end_segment(writes, final=False, start=self.start_time)
                     rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
@@ -340,8 +362,12 @@ class Runner:
         except (ConfigError, NcfmuError) as err:
             refusal = str(err)
         if c.done is not None:
+            # the snapshot first: once a client has its answer, what it reads next shows the command's effect
+            # (Simulation.state "paused" as soon as Pause returned)
+            self._take_snapshot()
             c.done(refusal)
-        self._want_snapshot = True
+        else:
+            self._want_snapshot = True
         return rebase
 
     def _main(self) -> None:
@@ -462,13 +488,45 @@ def _is_loopback(endpoint: str) -> bool:
 
 def check_endpoint(endpoint: str, security: Security) -> None:
     parsed = urlparse(endpoint)
-    if parsed.scheme != "opc.tcp" or not parsed.hostname or parsed.port is None:
+    try:
+        port = parsed.port
+    except ValueError:
+        raise ConfigError("--endpoint", endpoint, "the port must be a number 0..65535") from None
+    if parsed.scheme != "opc.tcp" or not parsed.hostname or port is None:
         raise ConfigError("--endpoint", endpoint, "must be opc.tcp://HOST:PORT/PATH")
     if not _is_loopback(endpoint) and not security.users:
         raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --user NAME:PASSWORD "
                           "(no anonymous writes from the network); bind 127.0.0.1 otherwise")
     if (security.certificate is None) != (security.private_key is None):
         raise ConfigError("--certificate", str(security.certificate), "needs --private-key too (and vice versa)")
+
+
+async def _load(load, option: str, path: Path | None, what: str) -> None:
+    """asyncua's certificate or key loader, its failure (no such file, not a certificate) one ConfigError."""
+    try:
+        await load(str(path))
+    except OSError as err:
+        raise ConfigError(option, str(path), f"cannot read it: {err.strerror or err}") from None
+    except Exception as err:        # cryptography's parsers: ValueError, TypeError, UnsupportedAlgorithm ...
+        raise ConfigError(option, str(path), f"not {what}: {type(err).__name__}") from None
+
+
+def parameter_check(components: Mapping[str, str], session) -> Callable[[str, object], None]:
+    """``check(INSTANCE.PARAMETER, value)``: the instance's model built anew, on a copy, from its present
+    parameters and the new value (ConfigError: a rule of the model refuses it). A refused tunable then never
+    reaches the FMU, which would apply it before refusing it."""
+    from .catalogue import models
+    logic_of = {inst: models().get(model) for inst, model in components.items()}
+
+    def check(name: str, value: object) -> None:
+        instance, _, variable = name.partition(".")
+        logic = logic_of.get(instance)
+        if logic is None:
+            return
+        values = {p.name: session.value(f"{instance}.{p.name}") for p in logic.ports("parameter")}
+        values[variable] = value
+        logic.from_parameters(values)
+    return check
 
 
 @dataclass
@@ -496,6 +554,7 @@ class LiveServer:
         self.publish_interval = publish_interval
         self.points = {p.name: p for p in runner.points}
         self.stopped = asyncio.Event()
+        self._publishing = asyncio.Lock()
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -518,11 +577,15 @@ class LiveServer:
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"ncfmu {self.system_name}")
         if sec.certificate is not None:
-            await server.load_certificate(str(sec.certificate))
-            await server.load_private_key(str(sec.private_key))
+            await _load(server.load_certificate, "--certificate", sec.certificate, "a certificate (DER or PEM)")
+            await _load(server.load_private_key, "--private-key", sec.private_key, "a private key (DER or PEM)")
             server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
-        if sec.users:
-            server.set_security_IDs(["Username"])
+        else:
+            # only what is served: asyncua offers the signing policies too, and warns that it cannot
+            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        # users, or anonymous clients: never both (asyncua otherwise offers user names, and warns that their
+        # passwords would travel in plain text, where no user was asked for)
+        server.set_identity_tokens([ua.UserNameIdentityToken] if sec.users else [ua.AnonymousIdentityToken])
         idx = self.idx = await server.register_namespace(f"urn:ncfmu:{self.system_name}")
         vtype = {"Real": ua.VariantType.Double, "Integer": ua.VariantType.Int32,
                  "Boolean": ua.VariantType.Boolean, "String": ua.VariantType.String}
@@ -585,8 +648,9 @@ class LiveServer:
                           Description=ua.LocalizedText("the input, INSTANCE.VARIABLE (e.g. feed.mfin)"))
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
                                 self._release_method, [arg], [])
-        from asyncua.common.callback import CallbackType
-        server.iserver.subscribe_server_callback(CallbackType.PreWrite, self._pre_write)  # type: ignore[arg-type]
+        service = server.iserver.attribute_service
+        self._asyncua_write = service.write
+        service.write = self._write      # type: ignore[method-assign]  # why: see _write
 
     def _nid(self, name: str):
         return self.ua.NodeId(self.ua.String(name), self.ua.Int16(self.idx))
@@ -624,78 +688,134 @@ class LiveServer:
         except TimeoutError:
             return "the simulation did not take the write in time"
 
-    def _refuse(self, status: str, message: str):
+    def _status(self, status: str, message: str):
         log.info("ncfmu serve: write refused (%s): %s", status, message)
-        return self.ua.UaStatusCodeError(getattr(self.ua.StatusCodes, status))
+        return self.ua.StatusCode(getattr(self.ua.StatusCodes, status))
 
-    async def _pre_write(self, event, dispatcher) -> None:
-        """Every client write, before asyncua applies it: checked as a whole (a refused value refuses the
-        request: nothing changes), then applied by the simulation thread, which answers."""
+    def _plan(self, wv, user) -> _Command | tuple[str, str]:
+        """One WriteValue of our namespace: the command that applies it, or (status, why) refused."""
         ua = self.ua
-        planned: list[tuple[str, str, object]] = []
-        for wv in event.request_params.NodesToWrite:
-            nid = wv.NodeId
-            if nid.NamespaceIndex != self.idx:
+        nid = wv.NodeId
+        key = nid.Identifier
+        forced = isinstance(key, str) and key.endswith(".forced") and key[:-7] in self.points
+        p = self.points.get(key) if isinstance(key, str) else None
+        if p is None and not forced:
+            return "BadNotWritable", f"{key}: not writable"
+        if wv.AttributeId != ua.AttributeIds.Value:
+            return "BadNotWritable", f"{key}: only the Value attribute is writable"
+        if getattr(user, "role", None) is not None and user.role.name == "Anonymous":
+            return "BadUserAccessDenied", f"{key}: anonymous clients may not write"
+        variant = wv.Value.Value if wv.Value is not None else None
+        value = None if variant is None else variant.Value
+        vt = None if variant is None else variant.VariantType
+        if forced:
+            if vt != ua.VariantType.Boolean:
+                return "BadTypeMismatch", f"{key} = {value!r}: must be a Boolean"
+            name = key[:-7]
+            # true: held at its present value; false: released
+            return _Command("force", name, self._last.get(name)) if value else _Command("release", name)
+        assert p is not None
+        if p.writes and vt != self.vtype[p.type]:
+            return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
+                                       f"must be a {self.vtype[p.type].name}")
+        try:
+            checked = check_value(p, value)
+        except WriteRefused as err:
+            return err.status, str(err)
+        return _Command("force" if p.writes == "input" else "set", key, checked)
+
+    async def _write(self, params, user=None) -> list:
+        """The Write service (OPC UA Part 4 5.11.4): a StatusCode per WriteValue, the good ones applied in their
+        order by the simulation thread (before the same step), the bad ones changing nothing. Installed in
+        place of asyncua's attribute service's ``write``: its PreWrite callback can only refuse a request as a
+        whole (a ServiceFault), and it would apply our values to the address space itself."""
+        ua = self.ua
+        results: list = [None] * len(params.NodesToWrite)
+        planned: list[tuple[int, _Command]] = []
+        theirs: list[int] = []
+        for i, wv in enumerate(params.NodesToWrite):
+            if wv.NodeId not in self.server.iserver.aspace:   # asyncua: BadUserAccessDenied unless an admin
+                results[i] = self._status("BadNodeIdUnknown", f"{wv.NodeId.to_string()}: no such node")
                 continue
-            key = nid.Identifier
-            if wv.AttributeId != ua.AttributeIds.Value:
-                raise self._refuse("BadNotWritable", f"{key}: only the Value attribute is writable")
-            if getattr(event.user, "role", None) is not None and event.user.role.name == "Anonymous":
-                raise self._refuse("BadUserAccessDenied", f"{key}: anonymous clients may not write")
-            variant = wv.Value.Value
-            value = None if variant is None else variant.Value
-            vt = None if variant is None else variant.VariantType
-            if isinstance(key, str) and key.endswith(".forced") and key[:-7] in self.points:
-                if vt != ua.VariantType.Boolean:
-                    raise self._refuse("BadTypeMismatch", f"{key} = {value!r}: must be a Boolean")
-                planned.append(("force_here" if value else "release", key[:-7], None))
+            if wv.NodeId.NamespaceIndex != self.idx:
+                theirs.append(i)
                 continue
-            p = self.points.get(key) if isinstance(key, str) else None
-            if p is None:
-                raise self._refuse("BadNotWritable", f"{key}: not writable")
-            if p.writes and vt != self.vtype[p.type]:
-                raise self._refuse("BadTypeMismatch", f"{key} = {value!r} ({vt.name if vt else 'null'}): "
-                                   f"must be a {self.vtype[p.type].name}")
-            try:
-                checked = check_value(p, value)
-            except WriteRefused as err:
-                raise self._refuse(err.status, str(err)) from None
-            planned.append(("force" if p.writes == "input" else "set", key, checked))
-        for what, name, value in planned:
-            if what == "force_here":
-                what, value = "force", self._last.get(name)      # held at its present value
-            refusal = await self._submit(_Command(what, name, value))
-            if refusal is not None:
-                raise self._refuse("BadOutOfRange" if "simulation" not in refusal else "BadInvalidState", refusal)
+            plan = self._plan(wv, user)
+            if isinstance(plan, tuple):
+                results[i] = self._status(*plan)
+            else:
+                planned.append((i, plan))
+        if planned:
+            refusals = await asyncio.gather(*(self._submit(c) for _, c in planned))
+            for (i, c), refusal in zip(planned, refusals):
+                if refusal is None:
+                    results[i] = ua.StatusCode()
+                else:
+                    status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
+                    results[i] = self._status(status, f"{c.name}: {refusal}")
+            await self._publish_once()
+        if theirs:
+            inner = ua.WriteParameters(NodesToWrite=[params.NodesToWrite[i] for i in theirs])
+            for i, result in zip(theirs, await self._asyncua_write(inner, user=user)):
+                results[i] = result
+        return results
+
+    def _call_result(self, status: str, message: str, arguments: Sequence[str] = ()):
+        # asyncua answers a method's exception with Bad_UnexpectedError; a returned result is the call's own
+        log.info("ncfmu serve: call refused (%s): %s", status, message)
+        codes = self.ua.StatusCodes
+        return self.ua.CallMethodResult(StatusCode=self.ua.StatusCode(getattr(codes, status)),
+                                        InputArgumentResults=[self.ua.StatusCode(getattr(codes, a))
+                                                              for a in arguments])
 
     def _method(self, what: str):
         async def call(parent, *args):
+            if args:
+                return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
+                                         ["BadTooManyArguments"] * len(args))
             if what == "stop" and self.runner.state == "failed":
                 self.stopped.set()
                 return []
             refusal = await self._submit(_Command(what))
             if refusal is not None:
-                return self._method_refusal("BadInvalidState", refusal)
+                return self._call_result("BadInvalidState", refusal)
+            await self._publish_once()
             return []
         return call
 
-    def _method_refusal(self, status: str, message: str):
-        # asyncua answers a method's exception with Bad_UnexpectedError; a returned StatusCode is the call's own
-        log.info("ncfmu serve: call refused (%s): %s", status, message)
-        return self.ua.StatusCode(getattr(self.ua.StatusCodes, status))
-
-    async def _release_method(self, parent, name):
+    async def _release_method(self, parent, *args):
         ua = self.ua
-        text = name.Value if isinstance(name, ua.Variant) else name
-        if not isinstance(text, str) or text not in self.points or self.points[text].causality != "input":
-            return self._method_refusal("BadInvalidArgument", f"Release({text!r}): not an input INSTANCE.VARIABLE")
+        if not args:
+            return self._call_result("BadArgumentsMissing", "Release(name): the input's name is missing")
+        first = args[0]
+        text = first.Value if isinstance(first, ua.Variant) else first
+        if isinstance(first, ua.Variant) and first.VariantType != ua.VariantType.String or not isinstance(text, str):
+            verdict = "BadTypeMismatch"
+        elif text not in self.points or self.points[text].causality != "input":
+            verdict = "BadInvalidArgument"
+        else:
+            verdict = "Good"
+        if len(args) > 1:
+            return self._call_result("BadTooManyArguments", "Release takes one argument, the input's name",
+                                     [verdict] + ["BadTooManyArguments"] * (len(args) - 1))
+        if verdict == "BadTypeMismatch":
+            return self._call_result(verdict, f"Release({text!r}): the name must be a String", [verdict])
+        if verdict == "BadInvalidArgument":
+            return self._call_result(verdict, f"Release({text!r}): not an input INSTANCE.VARIABLE", [verdict])
         refusal = await self._submit(_Command("release", text))
         if refusal is not None:
-            return self._method_refusal("BadInvalidState", refusal)
+            return self._call_result("BadInvalidState", refusal, ["Good"])
+        await self._publish_once()
         return []
 
     # -- publishing ---------------------------------------------------------------------------------------
     async def _publish_once(self) -> None:
+        # one publication at a time: an answer's own publication must not be overwritten by an older snapshot
+        # the periodic one is still writing
+        async with self._publishing:
+            await self._publish_snapshot()
+
+    async def _publish_snapshot(self) -> None:
         ua = self.ua
         snap = self.runner.snapshot()
         if snap is not None:
@@ -814,7 +934,9 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
             start_values=dict(start_values or {}), record=list(record) if record else None,
             sinks=recorder.sinks() if recorder else ())
-        runner = Runner(session, points_of(opened.slaves), speed, recorder)
+        components = {c.name: c.model for c in opened.system.components}
+        runner = Runner(session, points_of(opened.slaves), speed, recorder,
+                        check_parameter=parameter_check(components, session))
         server = LiveServer(opened.system.name, runner, endpoint, security)
         try:
             asyncio.run(server.serve(ready))
@@ -824,8 +946,9 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             # a served run ends by being stopped: its recording is complete unless the simulation failed
             session.close(complete=runner.state != "failed", reason=runner.reason)
             if recorder is not None:
-                recorder.end_segment(writes, final=True)
+                recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files
+            writes = runner.earlier_writes + writes          # the summary counts every segment's
         p50, p99, pmax = runner.stats.percentiles()
         return ServeSummary(opened.system.name, end, runner.state, runner.reason,
                             runner.stats.overruns, p50, p99, pmax, files, writes, runner.wall)

@@ -1,0 +1,220 @@
+"""What a PLC or HMI asks of ``ncfmu serve`` beyond one good write: a result per node of a Write, per-argument
+results of a Call, states and files that say what happened -- with asyncua's client and with open62541 (o6).
+
+Each test starts a server process (a few seconds): ``slow`` but the command-line refusals."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+from asyncua import ua
+from serve_plc import connect, run
+from test_serve_plc import assert_same_trajectory, replay
+
+from ncfmu.cli import main
+from ncfmu.cosim.result import Result
+
+
+def _dv(value, vtype):
+    return ua.DataValue(ua.Variant(value, vtype))
+
+
+D = ua.VariantType.Double
+
+
+# -- Write: one StatusCode per node ------------------------------------------------------------------------
+@pytest.mark.slow
+def test_a_batch_write_applies_its_good_values_and_answers_each_node(ncfmu_serve):
+    """OPC UA Part 4 5.11.4: each WriteValue gets its own StatusCode and the good ones are applied -- a bad value
+    in a batch is not a ServiceFault for all of it."""
+    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+
+    async def plc():
+        async with connect(served) as p:
+            ids = [p.node(n).nodeid for n in ("panel.override", "panel.override")]
+            results = await p.client.uaclient.write_attributes(ids, [_dv(0.8, D), _dv(9.0, D)])
+            assert [r.value for r in results] == [ua.StatusCodes.Good, ua.StatusCodes.BadOutOfRange]
+            assert await p.wait_until("panel.feed_override", lambda v: v == 0.8, timeout=5) == 0.8
+            names = ["seq.feed_override", "seq.no_such_input", "x_axis.pos", "seq.feed_hold", "panel.mfin_delay"]
+            values = [_dv(0.5, D), _dv(1.0, D), _dv(1.0, D), _dv(1.0, D), _dv(0.25, D)]
+            results = await p.client.uaclient.write_attributes([p.node(n).nodeid for n in names], values)
+            assert [r.value for r in results] == [ua.StatusCodes.Good, ua.StatusCodes.BadNodeIdUnknown,
+                                                  ua.StatusCodes.BadNotWritable, ua.StatusCodes.BadTypeMismatch,
+                                                  ua.StatusCodes.Good]
+            await p.wait_until("seq.feed_override", lambda v: v == 0.5, timeout=5)
+            assert await p.read("seq.feed_override.forced") is True and await p.read("panel.mfin_delay") == 0.25
+            assert await p.read("seq.feed_hold.forced") is False
+            # a node of another namespace that does not exist either
+            results = await p.client.uaclient.write_attributes([ua.NodeId("nothing", p.idx + 7)], [_dv(1.0, D)])
+            assert [r.value for r in results] == [ua.StatusCodes.BadNodeIdUnknown]
+            # one write to an unknown node alone: its own status, not a refusal of the request
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                await p.write("seq.no_such_input", 1.0)
+            assert err.value.code == ua.StatusCodes.BadNodeIdUnknown
+    run(plc())
+    assert served.stop() == 0, served.output
+    assert "Traceback" not in served.output
+
+
+#: The open62541 client (PyPI o6) in a process of its own: o6 without a licence runs in its "script mode", which
+#: ends the process after 10 minutes -- never the test run's.
+O6_CLIENT = textwrap.dedent("""
+    import asyncio, json, sys
+    import o6
+    endpoint, idx = sys.argv[1], int(sys.argv[2])
+    async def main():
+        client = o6.Client(endpoint)
+        await client.connect(createDefaultSubscription=False)
+        try:
+            node = lambda name: f"ns={idx};s={name}"
+            codes = await client.write([node("panel.override"), node("panel.override"), node("seq.nothing")],
+                                       [0.8, 9.0, 1.0])
+            release = node("Simulation.Release")
+            calls = [await client.call(node("Simulation"), release, args)
+                     for args in ([], ["seq.feed_hold", "seq.start"], ["seq.feed_hold"])]
+            override = await client.read(node("panel.override"))
+            return {"codes": [c.name for c in codes], "calls": [c[0].name for c in calls], "override": override}
+        finally:
+            await client.disconnect()
+    print("RESULT " + json.dumps(asyncio.run(main())))
+""")
+
+
+@pytest.mark.slow
+def test_open62541_gets_a_result_per_node_and_per_argument(ncfmu_serve):
+    """The same with a second stack: open62541's client (PyPI o6)."""
+    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+
+    async def namespace():
+        async with connect(served) as p:
+            return p.idx
+    done = subprocess.run([sys.executable, "-c", O6_CLIENT, served.endpoint, str(run(namespace()))],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    got = json.loads(done.stdout.rsplit("RESULT ", 1)[1])
+    plain = lambda name: name.replace("_", "").upper()            # noqa: E731  o6 says BAD_OUT_OF_RANGE
+    assert [plain(c) for c in got["codes"]] == ["GOOD", "BADOUTOFRANGE", "BADNODEIDUNKNOWN"]
+    assert [plain(c) for c in got["calls"]] == ["BADARGUMENTSMISSING", "BADTOOMANYARGUMENTS", "GOOD"]
+    assert got["override"] == 0.8
+    assert served.stop() == 0, served.output
+    assert "Traceback" not in served.output
+
+
+# -- Call: argument errors -----------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_method_argument_errors_have_their_own_status_and_per_argument_results(ncfmu_serve):
+    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+
+    async def plc():
+        async with connect(served) as p:
+            def request(method, *args):
+                return ua.CallMethodRequest(ObjectId=p.node("Simulation").nodeid,
+                                            MethodId=p.node(f"Simulation.{method}").nodeid, InputArguments=list(args))
+            s = lambda v: ua.Variant(v, ua.VariantType.String)          # noqa: E731
+            results = await p.client.uaclient.call([
+                request("Release"),                                            # no argument
+                request("Release", ua.Variant(1.0, D)),                        # a Double for the String
+                request("Release", s("seq.feed_hold"), s("seq.start")),        # one too many
+                request("Pause", s("now")),                                    # Pause takes none
+                request("Release", s("x_axis.pos")),                           # not an input
+                request("Release", s("seq.feed_hold")),                        # good (nothing forced: no change)
+            ])
+            got = [(r.StatusCode.value, [a.value for a in r.InputArgumentResults]) for r in results]
+            good, mismatch = ua.StatusCodes.Good, ua.StatusCodes.BadTypeMismatch
+            assert got == [(ua.StatusCodes.BadArgumentsMissing, []),
+                           (ua.StatusCodes.BadTypeMismatch, [mismatch]),
+                           (ua.StatusCodes.BadTooManyArguments, [good, ua.StatusCodes.BadTooManyArguments]),
+                           (ua.StatusCodes.BadTooManyArguments, [ua.StatusCodes.BadTooManyArguments]),
+                           (ua.StatusCodes.BadInvalidArgument, [ua.StatusCodes.BadInvalidArgument]),
+                           (good, [good])]
+            assert await p.read("Simulation.state") == "running"         # the refused Pause changed nothing
+    run(plc())
+    assert served.stop() == 0, served.output
+    assert "Traceback" not in served.output and "BadUnexpectedError" not in served.output
+
+
+# -- the Simulation's state, the writes' count across a Reset ----------------------------------------------------
+@pytest.mark.slow
+def test_the_state_reads_paused_once_pause_returned_and_a_reset_keeps_the_write_count(ncfmu_serve, tmp_path):
+    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--out", tmp_path / "served")
+
+    async def plc():
+        async with connect(served) as p:
+            for _ in range(5):
+                await p.call("Pause")
+                assert await p.read("Simulation.state") == "paused"
+                await p.call("Resume")
+                assert await p.read("Simulation.state") == "running"
+            await p.write("panel.override", 0.5)
+            await p.write("seq.feed_hold", True)
+            await p.call("Reset")
+            await p.write("panel.override", 0.75)
+            await p.call("Stop")
+    run(plc())
+    assert served.wait(30) == 0, served.output
+    assert "; 3 writes" in served.output, served.output            # 2 before the Reset, 1 after
+
+
+# -- replay: a session without writes, a refused tunable --------------------------------------------------------
+@pytest.mark.slow
+def test_a_session_without_writes_replays(ncfmu_serve, tmp_path):
+    out = tmp_path / "served"
+    served = ncfmu_serve("lathe_taper", "--speed", "0", "--stop-time", "1.5", "--out", out)
+    assert served.wait(60) == 0, served.output
+    assert_same_trajectory(Result.from_csv(out / "lathe_taper.csv"),
+                           replay("lathe_taper", out / "lathe_taper.csv", out / "session_inputs.csv", tmp_path))
+    # no warning about a setup the user did not make (no --user: no password to transfer in plain text)
+    assert "plaintext" not in served.output and "Endpoints other than open" not in served.output, served.output
+
+
+@pytest.mark.slow
+def test_a_refused_tunable_write_leaves_the_run_and_its_replay_identical(ncfmu_serve, tmp_path):
+    """OperatorPanel's repeat_every must be negative or longer than a pulse: 5e-324 passes the port's range and
+    is refused by the panel's own rule. Refused, it must change nothing -- START pressed once at 0 s, never
+    again (a panel left with the refused period would press it at every step) -- and the replay of the recorded
+    writes gives the recorded run bit for bit."""
+    out = tmp_path / "served"
+    sets = ["panel.start_at=0"]
+    served = ncfmu_serve("lathe_roughing", "--speed", "4", "--out", out, "--set", sets[0])
+
+    async def plc():
+        async with connect(served) as p:
+            await p.wait_until("Simulation.time", lambda t: t > 1.0)
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                await p.write("panel.repeat_every", 5e-324)
+            assert err.value.code == ua.StatusCodes.BadOutOfRange
+            assert await p.read("panel.repeat_every") == -1.0
+            await p.write("panel.override", 0.5)                   # a good write beside it
+            t = await p.time()
+            await p.wait_until("Simulation.time", lambda now: now > t + 1.0)
+            assert await p.read("panel.start") is False
+            await p.call("Stop")
+    run(plc())
+    assert served.wait(60) == 0, served.output
+    r = Result.from_csv(out / "lathe_roughing.csv")
+    assert r["panel.start"][0] and not r["panel.start"][r.time >= 1.0].any()
+    writes = (out / "session_inputs.csv").read_text()
+    assert "repeat_every" not in writes and "panel.override" in writes
+    assert_same_trajectory(r, replay("lathe_roughing", out / "lathe_roughing.csv", out / "session_inputs.csv",
+                                     tmp_path, *sets))
+
+
+# -- the command line: one line and exit 2, never a traceback -----------------------------------------------------
+def test_a_port_out_of_range_and_a_certificate_that_is_none_are_one_line(project, capsys, tmp_path):
+    assert main(["serve", "grinder_feed", "--endpoint", "opc.tcp://127.0.0.1:99999/ncfmu"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ncfmu serve: --endpoint = 'opc.tcp://127.0.0.1:99999/ncfmu': ") and "port" in err, err
+    assert err.count("\n") == 1
+    bad = tmp_path / "passwd"
+    bad.write_text("root:x:0:0:root:/root:/bin/bash\n")
+    assert main(["serve", "grinder_feed", "--certificate", str(bad), "--private-key", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ncfmu serve: --certificate = '{bad}': ") and err.count("\n") == 1, err
+    assert main(["serve", "grinder_feed", "--certificate", str(tmp_path / "none.der"), "--private-key",
+                 str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ncfmu serve: --certificate = ") and err.count("\n") == 1, err
