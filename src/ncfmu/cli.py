@@ -404,7 +404,8 @@ def cmd_serve(args) -> int:
 
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
-                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
+                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready,
+                    watchdog=args.watchdog)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -541,6 +542,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--certificate", type=Path, default=None,
                    help="server certificate: adds the Basic256Sha256 SignAndEncrypt policy (with --private-key)")
     p.add_argument("--private-key", type=Path, default=None, help="the certificate's private key")
+    p.add_argument("--watchdog", type=float, default=None, metavar="S",
+                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
+                        "nothing for S seconds (logged, and recorded as releases)")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")

@@ -19,8 +19,9 @@ Address space (stable: PLC projects point at these names): namespace ``urn:ncfmu
 component instance; one Variable per FMU variable, string NodeId ``<instance>.<variable>``, BrowseName the
 variable's name, DataType Double/Int32/Boolean/String, its description, its unit as EngineeringUnits
 (EUInformation); inputs also get ``<instance>.<variable>.forced`` (Boolean). The ``Simulation`` object holds
-``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason`` and the methods ``Pause``, ``Resume``,
-``Stop``, ``Reset`` and ``Release(name)``.
+``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs) and the
+methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a watchdog, the inputs a client
+session forced are released when it closes or is silent the watchdog's time.
 """
 
 from __future__ import annotations
@@ -467,6 +468,20 @@ class Runner:
 
 
 # -- the OPC UA server -----------------------------------------------------------------------------------
+@dataclass(eq=False)
+class _Client:
+    """A client's session as the watchdog sees it: when it was last heard (any request), whether it closed."""
+
+    session: object
+    heard: float
+
+    @property
+    def name(self) -> str:
+        user = getattr(self.session, "user", None)
+        who = getattr(user, "name", None)
+        return f"{getattr(self.session, 'name', '?')}" + (f" (user {who})" if who else "")
+
+
 @dataclass
 class Security:
     """Who may connect when the endpoint is not on the loopback interface."""
@@ -548,13 +563,20 @@ class LiveServer:
     """An OPC UA server in front of a :class:`Runner`."""
 
     def __init__(self, system_name: str, runner: Runner, endpoint: str = DEFAULT_ENDPOINT,
-                 security: Security | None = None, publish_interval: float = 0.010) -> None:
+                 security: Security | None = None, publish_interval: float = 0.010,
+                 watchdog: float | None = None) -> None:
         self.system_name, self.runner, self.endpoint = system_name, runner, endpoint
         self.security = security or Security()
         self.publish_interval = publish_interval
         self.points = {p.name: p for p in runner.points}
         self.stopped = asyncio.Event()
         self._publishing = asyncio.Lock()
+        if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
+            raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
+        #: with a watchdog: the inputs a client session forced fall back when it closes or is silent this long
+        self.watchdog = watchdog
+        self._clients: dict[int, _Client] = {}       # id(asyncua session) -> what the watchdog knows of it
+        self._owner: dict[str, _Client] = {}         # a forced input -> the session that forced it last
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -636,7 +658,9 @@ class LiveServer:
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
                 ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
                 ("state", "running", ua.VariantType.String, "running, paused, stopped or failed"),
-                ("reason", "", ua.VariantType.String, "why the simulation stopped or failed")):
+                ("reason", "", ua.VariantType.String, "why the simulation stopped or failed"),
+                ("forced", [], ua.VariantType.String,
+                 "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
                                              ua.Variant(value, vt), varianttype=vt)
             await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(desc))))
@@ -651,6 +675,8 @@ class LiveServer:
         service = server.iserver.attribute_service
         self._asyncua_write = service.write
         service.write = self._write      # type: ignore[method-assign]  # why: see _write
+        if self.watchdog is not None:
+            self._watch_sessions(server.iserver)
 
     def _nid(self, name: str):
         return self.ua.NodeId(self.ua.String(name), self.ua.Int16(self.idx))
@@ -750,6 +776,7 @@ class LiveServer:
             for (i, c), refusal in zip(planned, refusals):
                 if refusal is None:
                     results[i] = ua.StatusCode()
+                    self._owned(c, user)
                 else:
                     status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
                     results[i] = self._status(status, f"{c.name}: {refusal}")
@@ -779,6 +806,8 @@ class LiveServer:
             refusal = await self._submit(_Command(what))
             if refusal is not None:
                 return self._call_result("BadInvalidState", refusal)
+            if what == "reset":
+                self._owner.clear()            # nothing is forced after a Reset
             await self._publish_once()
             return []
         return call
@@ -805,8 +834,69 @@ class LiveServer:
         refusal = await self._submit(_Command("release", text))
         if refusal is not None:
             return self._call_result("BadInvalidState", refusal, ["Good"])
+        self._owner.pop(text, None)
         await self._publish_once()
         return []
+
+    # -- the watchdog -------------------------------------------------------------------------------------
+    def _watch_sessions(self, iserver) -> None:
+        """Know every client session and when it was last heard. asyncua tells neither (its own session timeout
+        closes a silent session after minutes, and a session with subscriptions outlives its connection): its
+        ``create_session`` and each session's ``touch`` (called on every request) are wrapped, here only."""
+        create = iserver.create_session
+
+        def create_session(*args, **kwargs):
+            session = create(*args, **kwargs)
+            client = self._clients[id(session)] = _Client(session, _time.monotonic())
+            touch = session.touch
+
+            def touched() -> None:
+                touch()
+                client.heard = _time.monotonic()
+            session.touch = touched
+            return session
+        iserver.create_session = create_session
+
+    def _owned(self, command: _Command, user) -> None:
+        if command.what == "release":
+            self._owner.pop(command.name, None)
+            return
+        if command.what != "force":
+            return
+        for client in self._clients.values():
+            if getattr(client.session, "user", None) is user:
+                self._owner[command.name] = client
+                return
+        self._owner.pop(command.name, None)
+
+    async def _watch(self) -> None:
+        """Every tenth of the watchdog's time: a closed or silent session's forced inputs are released (logged,
+        and recorded as any release)."""
+        from asyncua.server.internal_session import SessionState
+        assert self.watchdog is not None
+        while not self.stopped.is_set():
+            now = _time.monotonic()
+            for key, client in list(self._clients.items()):
+                closed = getattr(client.session, "state", None) == SessionState.Closed
+                silent = now - client.heard > self.watchdog
+                if closed or silent:
+                    names = [name for name, owner in self._owner.items() if owner is client]
+                    for name in names:
+                        refusal = await self._submit(_Command("release", name))
+                        if self._owner.get(name) is client:
+                            del self._owner[name]
+                        if refusal is not None:
+                            log.warning("ncfmu serve: watchdog: could not release %s: %s", name, refusal)
+                    if names:
+                        why = "closed" if closed else f"silent for {self.watchdog:g} s"
+                        log.warning("ncfmu serve: watchdog: session %s %s at t = %.3f s: released %s",
+                                    client.name, why, self._last.get("Simulation.time", 0.0), ", ".join(names))
+                if closed:
+                    del self._clients[key]
+            try:
+                await asyncio.wait_for(self.stopped.wait(), min(0.1, self.watchdog / 10))
+            except TimeoutError:
+                pass
 
     # -- publishing ---------------------------------------------------------------------------------------
     async def _publish_once(self) -> None:
@@ -840,6 +930,7 @@ class LiveServer:
             await self._sim_value("overruns", int(snap.overruns))
             await self._sim_value("state", snap.state)
             await self._sim_value("reason", snap.reason)
+            await self._sim_value("forced", [name for name in self.points if name in snap.forced])
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -867,8 +958,11 @@ class LiveServer:
         except OSError as err:          # the port is taken, or the address is not this machine's
             said = os.strerror(err.errno).lower() if err.errno else str(err)
             raise ConfigError("--endpoint", self.endpoint, f"cannot listen there: {said}") from None
+        watch: asyncio.Task | None = None
         try:
             self.runner.start()
+            if self.watchdog is not None:
+                watch = asyncio.create_task(self._watch())
             if ready is not None:
                 ready(self.endpoint)
             while not self.stopped.is_set():
@@ -882,6 +976,8 @@ class LiveServer:
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
         finally:
+            if watch is not None:
+                watch.cancel()
             if self.runner.thread.is_alive():      # the server failed: the FMUs must not step on while closed
                 self.runner.stop("the server stopped")
                 await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
@@ -914,16 +1010,19 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           start_values: Mapping[str, object] | None = None, stop_time: float | None = None,
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
-          ready: Callable[[str], None] | None = None) -> ServeSummary:
+          ready: Callable[[str], None] | None = None, watchdog: float | None = None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
-    ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect."""
+    ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
+    (s), the inputs a client session forced fall back (are released) when it closes or is silent that long."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
     if stop_time is not None and not (math.isfinite(stop_time) and stop_time > 0):
         raise ConfigError("--stop-time", stop_time, "must be a number > 0")
+    if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
+        raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
     _quiet_asyncua()
     sys.setswitchinterval(0.001)    # the server and the simulation thread share the GIL: hand it over often
     archive = system_archive(system, root)
@@ -937,7 +1036,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         components = {c.name: c.model for c in opened.system.components}
         runner = Runner(session, points_of(opened.slaves), speed, recorder,
                         check_parameter=parameter_check(components, session))
-        server = LiveServer(opened.system.name, runner, endpoint, security)
+        server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog)
         try:
             asyncio.run(server.serve(ready))
         finally:

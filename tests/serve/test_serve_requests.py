@@ -5,6 +5,7 @@ Each test starts a server process (a few seconds): ``slow`` but the command-line
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -218,3 +219,84 @@ def test_a_port_out_of_range_and_a_certificate_that_is_none_are_one_line(project
                  str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ncfmu serve: --certificate = ") and err.count("\n") == 1, err
+
+
+# -- forces a PLC can live with: Simulation.forced and the watchdog -----------------------------------------------
+#: A PLC that forces an input (subscribed, as PLCs are: asyncua keeps a session with subscriptions past its
+#: connection), says so, then reads the time every 0.2 s until killed -- or, with "close", disconnects properly.
+FORCING_PLC = textwrap.dedent("""
+    import asyncio, sys
+    from asyncua import Client, ua
+    async def main():
+        c = Client(sys.argv[1], timeout=10)
+        await c.connect()
+        idx = await c.get_namespace_index(sys.argv[2])
+        class H:
+            def datachange_notification(self, node, val, data): pass
+        sub = await c.create_subscription(100, H())
+        await sub.subscribe_data_change(c.get_node(ua.NodeId("x_axis.pos", idx)))
+        await c.get_node(ua.NodeId(sys.argv[3], idx)).write_value(ua.DataValue(ua.Variant(True,
+                                                                                          ua.VariantType.Boolean)))
+        print("forced", flush=True)
+        if sys.argv[4] == "close":
+            await c.disconnect()
+            return
+        while True:
+            await c.get_node(ua.NodeId("Simulation.time", idx)).read_value()
+            await asyncio.sleep(0.2)
+    asyncio.run(main())
+""")
+
+
+@pytest.mark.slow
+def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve, tmp_path):
+    out = tmp_path / "served"
+    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--out", out)
+
+    def plc(node: str, how: str) -> subprocess.Popen:
+        proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, how],
+                                stdout=subprocess.PIPE, text=True)
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "forced"
+        return proc
+    crashed = plc("seq.feed_hold", "live")
+
+    async def watch():
+        async with connect(served) as p:
+            async def heartbeat():                                  # a PLC's cycle: heard every 0.2 s
+                while True:
+                    await p.time()
+                    await asyncio.sleep(0.2)
+            beat = asyncio.create_task(heartbeat())
+            await p.write("seq.feed_override", 0.5)                 # ours: we stay alive, it stays forced
+            assert await p.wait_until("Simulation.forced", lambda v: v == ["seq.feed_hold", "seq.feed_override"],
+                                      timeout=5)
+            await asyncio.sleep(2.0)                                # alive (heard every 0.2 s): still forced
+            assert await p.read("Simulation.forced") == ["seq.feed_hold", "seq.feed_override"]
+            crashed.kill()                                          # no goodbye, its session lives on
+            crashed.wait(10)
+            t_kill = await p.time()
+            assert await p.read("seq.feed_hold.forced") is True
+            await p.wait_until("seq.feed_hold.forced", lambda v: v is False, timeout=10)
+            t_released = await p.time()
+            assert 0.8 <= t_released - t_kill <= 3.0                # after the watchdog's 1 s of silence
+            assert await p.read("Simulation.forced") == ["seq.feed_override"]
+            assert await p.read("seq.feed_override") == 0.5
+            # a session that closes properly: its forces fall back at once
+            loop = asyncio.get_running_loop()
+            closing = await loop.run_in_executor(None, plc, "seq.start", "close")
+            await loop.run_in_executor(None, closing.wait, 10)
+            await p.wait_until("seq.start.forced", lambda v: v is False, timeout=1.0)
+            assert await p.read("Simulation.forced") == ["seq.feed_override"]
+            beat.cancel()
+            await p.call("Stop")
+    try:
+        run(watch())
+    finally:
+        if crashed.poll() is None:
+            crashed.kill()
+    assert served.wait(30) == 0, served.output
+    assert "watchdog: session" in served.output and "silent for 1 s" in served.output and "closed" in served.output
+    writes = (out / "session_inputs.csv").read_text().splitlines()
+    header = writes[0].split(",")
+    hold = header.index('"seq.feed_hold"')
+    assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "release"]
