@@ -43,6 +43,8 @@ class Controller:
     #: is made from. Empty: a Python FMU.
     NATIVE_SOURCE: ClassVar[str] = ""
     NATIVE_DEFINED_BY: ClassVar[tuple[str, ...]] = ()
+    #: C headers of that package the native model includes (shipped in the FMU's sources beside it).
+    NATIVE_HEADERS: ClassVar[tuple[str, ...]] = ()
     #: The outputs a parameter or input acts on, for one that acts on only some of them (an operator panel's
     #: button time acts on that button alone); one not named here may act on every output.
     ACTS_ON: ClassVar[Mapping[str, tuple[str, ...]]] = {}
