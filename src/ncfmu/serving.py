@@ -27,6 +27,7 @@ session forced are released when it closes or is silent the watchdog's time.
 from __future__ import annotations
 
 import asyncio
+import datetime
 import ipaddress
 import logging
 import math
@@ -64,6 +65,9 @@ FAST_CHUNK = 50
 WRITE_TIMEOUT = 2.0
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/ncfmu"
+#: The server's ApplicationUri (OPC UA Part 4 7.2), also the URI its certificate carries (``--make-certificate``)
+APPLICATION_URI = "urn:ncfmu:serve"
+PRODUCT_URI = "urn:ncfmu"
 
 #: UNECE codes (OPC UA EngineeringUnits, namespace below) of the units our FMUs declare.
 UNECE_NAMESPACE = "http://www.opcfoundation.org/UA/units/un/cefact"
@@ -489,6 +493,8 @@ class Security:
     users: dict[str, str] = field(default_factory=dict)     # name -> password
     certificate: Path | None = None                          # server certificate (DER or PEM)
     private_key: Path | None = None
+    trust: Path | None = None                # folder of the client certificates (or their CAs) accepted
+    allow_insecure: bool = False             # off the loopback: security policy None, any client certificate
 
 
 def _is_loopback(endpoint: str) -> bool:
@@ -509,11 +515,58 @@ def check_endpoint(endpoint: str, security: Security) -> None:
         raise ConfigError("--endpoint", endpoint, "the port must be a number 0..65535") from None
     if parsed.scheme != "opc.tcp" or not parsed.hostname or port is None:
         raise ConfigError("--endpoint", endpoint, "must be opc.tcp://HOST:PORT/PATH")
-    if not _is_loopback(endpoint) and not security.users:
-        raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --user NAME:PASSWORD "
-                          "(no anonymous writes from the network); bind 127.0.0.1 otherwise")
+    if not _is_loopback(endpoint):
+        if not security.users:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --user NAME:PASSWORD "
+                              "(no anonymous writes from the network); bind 127.0.0.1 otherwise")
+        if security.certificate is None and not security.allow_insecure:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --certificate and "
+                              "--private-key (security policy Basic256Sha256, Sign & Encrypt: no password or write "
+                              "in plain text; 'ncfmu serve --make-certificate DIR' makes them), or --allow-insecure")
+        if security.trust is None and not security.allow_insecure:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --trust DIR (the client "
+                              "certificates accepted), or --allow-insecure")
     if (security.certificate is None) != (security.private_key is None):
         raise ConfigError("--certificate", str(security.certificate), "needs --private-key too (and vice versa)")
+    if security.trust is not None:
+        if security.certificate is None:
+            raise ConfigError("--trust", str(security.trust), "needs --certificate: client certificates are only "
+                              "presented on a signed and encrypted channel")
+        if not Path(security.trust).is_dir():
+            raise ConfigError("--trust", str(security.trust), "must be a folder of trusted certificates (DER or PEM)")
+
+
+def make_certificate(folder: Path | str, hostname: str | None = None) -> tuple[Path, Path]:
+    """A private key (``ncfmu-key.pem``) and a self-signed certificate (``ncfmu.der``, 5 years) in ``folder``,
+    for ``ncfmu serve --certificate ncfmu.der --private-key ncfmu-key.pem``: ncfmu's application URI, the host's
+    name, ``localhost`` and 127.0.0.1 as subject alternative names (OPC UA Part 6 6.2.2). Existing files are
+    never overwritten."""
+    import socket
+
+    from asyncua.crypto import cert_gen
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    from .files import write_atomic
+    folder = Path(folder)
+    key_path, cert_path = folder / "ncfmu-key.pem", folder / "ncfmu.der"
+    for path in (key_path, cert_path):
+        if path.exists():
+            raise ConfigError("--make-certificate", str(folder), f"{path.name} exists there already (remove it "
+                              "first: a key is never overwritten)")
+    host = hostname or socket.gethostname()
+    key = cert_gen.generate_private_key()
+    names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(APPLICATION_URI), x509.DNSName(host),
+                                     x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    cert = cert_gen.generate_self_signed_app_certificate(
+        key, f"ncfmu serve@{host}", {"organizationName": "ncfmu"}, names,
+        extended=[ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=5 * 365)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_atomic(key_path, cert_gen.dump_private_key_as_pem(key))
+    os.chmod(key_path, 0o600)
+    write_atomic(cert_path, cert.public_bytes(Encoding.DER))
+    return key_path, cert_path
 
 
 async def _load(load, option: str, path: Path | None, what: str) -> None:
@@ -598,10 +651,26 @@ class LiveServer:
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"ncfmu {self.system_name}")
+        from . import __version__
+        server.product_uri = PRODUCT_URI
+        await server.set_application_uri(APPLICATION_URI)
+        await server.set_build_info(PRODUCT_URI, "ncfmu", "ncfmu", __version__, __version__,
+                                    datetime.datetime.now(datetime.UTC))
         if sec.certificate is not None:
             await _load(server.load_certificate, "--certificate", sec.certificate, "a certificate (DER or PEM)")
             await _load(server.load_private_key, "--private-key", sec.private_key, "a private key (DER or PEM)")
-            server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+            policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+            if sec.allow_insecure:
+                policies.append(ua.SecurityPolicyType.NoSecurity)
+            server.set_security_policy(policies)
+            if sec.trust is not None:
+                from asyncua.crypto.truststore import TrustStore
+                from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+                store = TrustStore([Path(sec.trust)], [])
+                await store.load()
+                options = CertificateValidatorOptions
+                server.set_certificate_validator(CertificateValidator(
+                    options.TIME_RANGE | options.URI | options.TRUSTED | options.PEER_CLIENT, store))
         else:
             # only what is served: asyncua offers the signing policies too, and warns that it cannot
             server.set_security_policy([ua.SecurityPolicyType.NoSecurity])

@@ -300,3 +300,77 @@ def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve,
     header = writes[0].split(",")
     hold = header.index('"seq.feed_hold"')
     assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "release"]
+
+
+# -- security: certificates, a trust list, who the server says it is ---------------------------------------------
+def _client_certificate(folder, name: str):
+    """A client's key and self-signed certificate (application URI urn:ncfmu-test:NAME), as a PLC or UaExpert has."""
+    from asyncua.crypto import cert_gen
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+    key = cert_gen.generate_private_key()
+    uri = f"urn:ncfmu-test:{name}"
+    cert = cert_gen.generate_self_signed_app_certificate(
+        key, name, {}, [x509.UniformResourceIdentifier(uri), x509.DNSName("localhost")],
+        extended=[ExtendedKeyUsageOID.CLIENT_AUTH])
+    (folder / f"{name}-key.pem").write_bytes(cert_gen.dump_private_key_as_pem(key))
+    (folder / f"{name}.der").write_bytes(cert.public_bytes(Encoding.DER))
+    return folder / f"{name}.der", folder / f"{name}-key.pem", uri
+
+
+@pytest.mark.slow
+def test_a_trust_list_rejects_an_unknown_client_certificate_and_accepts_a_trusted_one(ncfmu_serve, tmp_path,
+                                                                                       capsys):
+    from asyncua import Client
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+    from cryptography import x509
+    server_dir, trusted_dir, clients = tmp_path / "server", tmp_path / "trusted", tmp_path / "clients"
+    trusted_dir.mkdir()
+    clients.mkdir()
+    assert main(["serve", "--make-certificate", str(server_dir)]) == 0
+    assert "application URI urn:ncfmu:serve" in capsys.readouterr().out
+    server_cert = server_dir / "ncfmu.der"
+    cert = x509.load_der_x509_certificate(server_cert.read_bytes())
+    san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert san.get_values_for_type(x509.UniformResourceIdentifier) == ["urn:ncfmu:serve"]
+    assert main(["serve", "--make-certificate", str(server_dir)]) == 2          # a key is never overwritten
+    assert "exists there already" in capsys.readouterr().err
+    plc = _client_certificate(clients, "plc")
+    stranger = _client_certificate(clients, "stranger")
+    (trusted_dir / "plc.der").write_bytes(plc[0].read_bytes())
+    served = ncfmu_serve("grinder_feed", "--speed", "1", "--certificate", server_cert,
+                         "--private-key", server_dir / "ncfmu-key.pem", "--trust", trusted_dir)
+
+    async def session(client_cert, key, uri):
+        c = Client(served.endpoint, timeout=5)
+        c.application_uri = uri
+        await c.set_security(SecurityPolicyBasic256Sha256, certificate=str(client_cert), private_key=str(key),
+                             server_certificate=str(server_cert))
+        async with c:
+            idx = await c.get_namespace_index(served.namespace)
+            build = await c.nodes.server.get_child(["0:ServerStatus", "0:BuildInfo"])
+            info = {n: await (await build.get_child([f"0:{n}"])).read_value()
+                    for n in ("ProductName", "ManufacturerName", "SoftwareVersion", "ProductUri")}
+            return await c.get_node(ua.NodeId("Simulation.state", idx)).read_value(), info
+    state, info = run(session(*plc))
+    import ncfmu
+    assert state == "running"
+    assert info == {"ProductName": "ncfmu", "ManufacturerName": "ncfmu", "SoftwareVersion": ncfmu.__version__,
+                    "ProductUri": "urn:ncfmu"}
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        run(session(*stranger))
+    assert refused.value.code == ua.StatusCodes.BadCertificateUntrusted
+    assert served.stop() == 0, served.output
+
+
+def test_off_the_loopback_no_security_policy_none_unless_allowed(project, capsys, tmp_path):
+    anywhere = "opc.tcp://0.0.0.0:48499/ncfmu"
+    assert main(["serve", "grinder_feed", "--endpoint", anywhere, "--user", "plc:secret"]) == 2
+    err = capsys.readouterr().err
+    assert "needs --certificate and --private-key" in err and "--allow-insecure" in err and err.count("\n") == 1
+    assert main(["serve", "grinder_feed", "--endpoint", anywhere, "--user", "plc:secret", "--certificate", "c.der",
+                 "--private-key", "k.pem"]) == 2
+    assert "needs --trust DIR" in capsys.readouterr().err
+    assert main(["serve", "grinder_feed", "--trust", str(tmp_path)]) == 2
+    assert "--trust" in capsys.readouterr().err
