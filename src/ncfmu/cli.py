@@ -411,7 +411,7 @@ def cmd_serve(args) -> int:
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
-                    watchdog=args.watchdog)
+                    watchdog=args.watchdog, cnc=args.cnc)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -556,6 +556,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
                    help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
                         "DIR/ncfmu-key.pem, then exit")
+    p.add_argument("--cnc", action="store_true",
+                   help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
+                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
     p.add_argument("--watchdog", type=float, default=None, metavar="S",
                    help="the inputs a client session forced fall back to what drives them when it closes or sends "
                         "nothing for S seconds (logged, and recorded as releases)")

@@ -471,6 +471,184 @@ class Runner:
                 self._on_state()
 
 
+# -- OPC UA for CNC Systems (OPC 40502) ----------------------------------------------------------------------
+CNC_NAMESPACE = "http://opcfoundation.org/UA/CNC"
+#: The OPC Foundation's published NodeSet of OPC 40502 v1.00 (OPC Foundation MIT License 1.00, in its header),
+#: as node-opcua's npm package node-opcua-nodesets ships it.
+CNC_NODESET = Path(__file__).parent / "data" / "Opc.Ua.CNC.NodeSet2.xml"
+#: The models whose instances the companion model shows: an axis, a spindle, a channel (an NC cycle controller)
+CNC_AXIS_MODELS = ("ServoAxis",)
+CNC_SPINDLE_MODELS = ("SpindleDrive",)
+# the enumerations' values (OPC 40502 6.x: CncAxisStatus, CncChannelProgramStatus, CncChannelStatus, ...)
+AXIS_IN_POSITION, AXIS_MOVING = 0, 1
+PROGRAM_STOPPED, PROGRAM_RUNNING, PROGRAM_WAITING, PROGRAM_INTERRUPTED, PROGRAM_CANCELED = 0, 1, 2, 3, 4
+CHANNEL_RESET, CHANNEL_INTERRUPTED, CHANNEL_ACTIVE = 0, 1, 2
+MODE_AUTOMATIC = 2
+SPINDLE_STOPPED, SPINDLE_IN_TARGET, SPINDLE_ACCELERATING = 0, 1, 2
+TURN_NONE, TURN_CW, TURN_CCW = 0, 1, 2
+
+
+def cnc_types_xml(path: Path = CNC_NODESET) -> str:
+    """The NodeSet's types only: the published file also holds example instances (``test`` under Objects, axes
+    ``X``, ``Y``, ``Channel_1`` ... without a parent) that asyncua refuses and a client must not see. They are
+    left out, with every reference to them."""
+    import xml.etree.ElementTree as ET
+    ua_ns = "http://opcfoundation.org/UA/2011/03/UANodeSet.xsd"
+    ET.register_namespace("", ua_ns)
+    root = ET.parse(path).getroot()
+
+    def q(tag: str) -> str:
+        return f"{{{ua_ns}}}{tag}"
+    instances = {n.get("NodeId"): n for n in root if n.tag in (q("UAObject"), q("UAVariable"), q("UAMethod"))}
+
+    def type_definition(n) -> str:
+        for r in n.iter(q("Reference")):
+            if r.get("ReferenceType") == "HasTypeDefinition":
+                return r.text or ""
+        return ""
+    dropped: set[str | None] = set()
+    changed = True
+    while changed:
+        changed = False
+        for nid, n in instances.items():
+            if nid in dropped:
+                continue
+            example = not n.get("ParentNodeId") and type_definition(n).startswith(("ns=1;", "i=61"))
+            if example or n.get("ParentNodeId") in dropped:
+                dropped.add(nid)
+                changed = True
+    for n in list(root):
+        if n.get("NodeId") in dropped:
+            root.remove(n)
+            continue
+        refs = n.find(q("References"))
+        for r in list(refs) if refs is not None else ():
+            if r.text in dropped:
+                refs.remove(r)         # type: ignore[union-attr]
+    return ET.tostring(root, encoding="unicode")
+
+
+@dataclass
+class _Mirror:
+    """A node of the companion model that shows a function of the served values."""
+
+    node: object
+    vtype: object
+    value: Callable[[Mapping[str, object]], object]
+
+
+async def build_cnc_model(server, idx: int, system: str, components: Mapping[str, str],
+                          points: Mapping[str, Point]) -> list[_Mirror]:
+    """The served system as an OPC 40502 ``CncInterfaceType`` object ``Objects/CncInterface`` (NodeIds
+    ``ns=<idx>;s=Cnc...``): ``CncAxisList`` (an axis per servo axis: ``PosDirect``/``PosIndirect`` ``ActPos`` =
+    the axis's ``pos``, ``CmdPos`` = its ``pos_cmd``, ``RemDist`` = CmdPos - ActPos, mm, with EngineeringUnits and
+    EURange; ``ActStatus`` in position or moving; ``ActTorque``), ``CncChannelList`` (a channel per NC cycle
+    controller: program status, the system's name as the active program, the block -- the part program's line
+    where the controller says it, else its block number --, feed override %, feed hold, mode automatic) and
+    ``CncSpindleList`` (a spindle per spindle drive: speeds, status, turn direction). The mirrors that keep
+    them current."""
+    from asyncua import ua
+
+    from . import __version__
+    from .catalogue import models
+    from .controllers.cycle import CycleController
+    await server.import_xml(xmlstring=cnc_types_xml())
+    cnc = await server.get_namespace_index(CNC_NAMESPACE)
+
+    def nid(name: str):
+        return ua.NodeId(ua.String(name), ua.Int16(idx))
+
+    def t(number: int):
+        return ua.NodeId(ua.Int32(number), ua.Int16(cnc))
+    iface = await server.nodes.objects.add_object(nid("Cnc"), ua.QualifiedName("CncInterface", idx),
+                                                  objecttype=t(1007))
+    for name, value in (("VendorName", "ncfmu"), ("VendorRevision", __version__), ("Version", "1.00"),
+                        ("CncTypeName", f"ncfmu {system}")):
+        try:
+            node = await iface.get_child([f"{cnc}:{name}"])
+        except ua.UaStatusCodeError:             # an optional property: added
+            node = await iface.add_property(nid(f"Cnc.{name}"), ua.QualifiedName(name, cnc), value)
+        await node.write_value(ua.Variant(value, ua.VariantType.String))
+    mirrors: list[_Mirror] = []
+    D, I32, B, S, U32 = (ua.VariantType.Double, ua.VariantType.Int32, ua.VariantType.Boolean,
+                         ua.VariantType.String, ua.VariantType.UInt32)
+
+    async def mirror(parent, path: str, vtype, fn) -> None:
+        node = await parent.get_child([f"{cnc}:{p}" for p in path.split("/")])
+        mirrors.append(_Mirror(node, vtype, fn))
+
+    def real(name: str) -> Callable[[Mapping[str, object]], float]:
+        return lambda v: float(v.get(name) or 0.0)          # type: ignore[arg-type]
+    logic = models()
+    axis_list = await iface.get_child([f"{cnc}:CncAxisList"])
+    spindle_list = await iface.get_child([f"{cnc}:CncSpindleList"])
+    channel_list = await iface.get_child([f"{cnc}:CncChannelList"])
+    channel_id = 0
+    for inst, model in components.items():
+        if model in CNC_AXIS_MODELS:
+            axis = await axis_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx), objecttype=t(1004))
+            pos, cmd = f"{inst}.pos", f"{inst}.pos_cmd"
+            low = points[cmd].minimum if cmd in points else None
+            high = points[cmd].maximum if cmd in points else None
+            eu = ua.EUInformation(NamespaceUri=UNECE_NAMESPACE, UnitId=_unece_id("MMT"),
+                                  DisplayName=ua.LocalizedText("mm"), Description=ua.LocalizedText("millimetre"))
+            span = ua.Range(Low=-math.inf if low is None else low, High=math.inf if high is None else high)
+            for which in ("PosDirect", "PosIndirect"):
+                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EngineeringUnits"])).write_value(eu)
+                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EURange"])).write_value(span)
+                await mirror(axis, f"{which}/ActPos", D, real(pos))
+                await mirror(axis, f"{which}/CmdPos", D, real(cmd))
+                await mirror(axis, f"{which}/RemDist", D,
+                             lambda v, pos=pos, cmd=cmd: real(cmd)(v) - real(pos)(v))
+            await mirror(axis, "ActStatus", I32, lambda v, inst=inst: AXIS_IN_POSITION
+                         if v.get(f"{inst}.in_position") else AXIS_MOVING)
+            await mirror(axis, "ActTorque", D, real(f"{inst}.torque"))
+            await mirror(axis, "IsInactive", B, lambda v, inst=inst: not v.get(f"{inst}.enable", True))
+            await (await axis.get_child([f"{cnc}:IsReferenced"])).write_value(True)
+        elif model in CNC_SPINDLE_MODELS:
+            spindle = await spindle_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
+                                                    objecttype=t(1005))
+            speed, cmd = f"{inst}.speed", f"{inst}.speed_cmd"
+            await mirror(spindle, "ActSpeed", D, real(speed))
+            await mirror(spindle, "CmdSpeed", D, real(cmd))
+            await mirror(spindle, "ActStatus", I32, lambda v, inst=inst, speed=speed: SPINDLE_STOPPED
+                         if abs(real(speed)(v)) < 1e-9 else SPINDLE_IN_TARGET if v.get(f"{inst}.at_speed")
+                         else SPINDLE_ACCELERATING)
+            await mirror(spindle, "ActTurnDirection", I32, lambda v, speed=speed: TURN_NONE
+                         if abs(real(speed)(v)) < 1e-9 else TURN_CW if real(speed)(v) > 0 else TURN_CCW)
+        elif model in logic and issubclass(logic[model], CycleController):
+            channel_id += 1
+            channel = await channel_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
+                                                    objecttype=t(1002))
+            block = next((f"{inst}.{b}" for b in ("line", "block_no", "pc", "segment") if f"{inst}.{b}" in points),
+                         None)
+
+            def program_status(v, inst=inst) -> int:
+                if v.get(f"{inst}.alarm"):
+                    return PROGRAM_CANCELED
+                if not v.get(f"{inst}.busy"):
+                    return PROGRAM_STOPPED
+                if v.get(f"{inst}.feed_hold"):
+                    return PROGRAM_INTERRUPTED
+                return PROGRAM_WAITING if v.get(f"{inst}.m_active") else PROGRAM_RUNNING
+            await mirror(channel, "ActProgramStatus", I32, program_status)
+            await mirror(channel, "ActStatus", I32, lambda v, st=program_status: CHANNEL_ACTIVE
+                         if st(v) in (PROGRAM_RUNNING, PROGRAM_WAITING) else CHANNEL_INTERRUPTED
+                         if st(v) == PROGRAM_INTERRUPTED else CHANNEL_RESET)
+            await mirror(channel, "ActProgramBlock", S, lambda v, block=block: "" if block is None
+                         else str(v.get(block, "")))
+            await mirror(channel, "ActOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+            await mirror(channel, "CmdOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+            await mirror(channel, "FeedHold", B, lambda v, inst=inst: bool(v.get(f"{inst}.feed_hold")))
+            fixed: tuple[tuple[str, object, object], ...]
+            fixed = (("ActProgramName", system, S), ("ActMainProgramName", system, S),
+                     ("ActOperationMode", MODE_AUTOMATIC, I32), ("CmdOperationMode", MODE_AUTOMATIC, I32),
+                     ("Id", channel_id, U32))
+            for prop, fixed_value, vt in fixed:
+                await (await channel.get_child([f"{cnc}:{prop}"])).write_value(ua.Variant(fixed_value, vt))
+    return mirrors
+
+
 # -- the OPC UA server -----------------------------------------------------------------------------------
 @dataclass(eq=False)
 class _Client:
@@ -617,7 +795,7 @@ class LiveServer:
 
     def __init__(self, system_name: str, runner: Runner, endpoint: str = DEFAULT_ENDPOINT,
                  security: Security | None = None, publish_interval: float = 0.010,
-                 watchdog: float | None = None) -> None:
+                 watchdog: float | None = None, cnc_components: Mapping[str, str] | None = None) -> None:
         self.system_name, self.runner, self.endpoint = system_name, runner, endpoint
         self.security = security or Security()
         self.publish_interval = publish_interval
@@ -630,6 +808,10 @@ class LiveServer:
         self.watchdog = watchdog
         self._clients: dict[int, _Client] = {}       # id(asyncua session) -> what the watchdog knows of it
         self._owner: dict[str, _Client] = {}         # a forced input -> the session that forced it last
+        #: with the OPC 40502 companion model: instance -> model of the served system's components
+        self.cnc_components = cnc_components
+        self._mirrors: list[_Mirror] = []
+        self._mirrored: dict[int, object] = {}
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -741,6 +923,8 @@ class LiveServer:
                           Description=ua.LocalizedText("the input, INSTANCE.VARIABLE (e.g. feed.mfin)"))
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
                                 self._release_method, [arg], [])
+        if self.cnc_components is not None:
+            self._mirrors = await build_cnc_model(server, idx, self.system_name, self.cnc_components, self.points)
         service = server.iserver.attribute_service
         self._asyncua_write = service.write
         service.write = self._write      # type: ignore[method-assign]  # why: see _write
@@ -1000,6 +1184,14 @@ class LiveServer:
             await self._sim_value("state", snap.state)
             await self._sim_value("reason", snap.reason)
             await self._sim_value("forced", [name for name in self.points if name in snap.forced])
+            if self._mirrors:
+                values = {**self._last, **snap.values}
+                for k, m in enumerate(self._mirrors):
+                    value = m.value(values)
+                    if self._mirrored.get(k) != value:
+                        self._mirrored[k] = value
+                        await self.server.write_attribute_value(m.node.nodeid,      # type: ignore[attr-defined]
+                                                                ua.DataValue(ua.Variant(value, m.vtype)))
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -1079,12 +1271,14 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           start_values: Mapping[str, object] | None = None, stop_time: float | None = None,
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
-          ready: Callable[[str], None] | None = None, watchdog: float | None = None) -> ServeSummary:
+          ready: Callable[[str], None] | None = None, watchdog: float | None = None,
+          cnc: bool = False) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
     ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
-    (s), the inputs a client session forced fall back (are released) when it closes or is silent that long."""
+    (s), the inputs a client session forced fall back (are released) when it closes or is silent that long. With
+    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
@@ -1105,7 +1299,8 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         components = {c.name: c.model for c in opened.system.components}
         runner = Runner(session, points_of(opened.slaves), speed, recorder,
                         check_parameter=parameter_check(components, session))
-        server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog)
+        server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
+                            cnc_components=components if cnc else None)
         try:
             asyncio.run(server.serve(ready))
         finally:

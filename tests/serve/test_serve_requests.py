@@ -374,3 +374,59 @@ def test_off_the_loopback_no_security_policy_none_unless_allowed(project, capsys
     assert "needs --trust DIR" in capsys.readouterr().err
     assert main(["serve", "grinder_feed", "--trust", str(tmp_path)]) == 2
     assert "--trust" in capsys.readouterr().err
+
+
+# -- OPC UA for CNC Systems (OPC 40502) --------------------------------------------------------------------------
+@pytest.mark.slow
+def test_the_cnc_companion_model_shows_each_axis_position_and_the_channel(ncfmu_serve):
+    """An HMI that speaks OPC 40502 and not ncfmu: Objects/CncInterface (a CncInterfaceType), its CncAxisList
+    with one CncAxisType per servo axis whose ActPos is the axis's position output, its CncChannelList with the
+    sequencer's program status, block and override."""
+    served = ncfmu_serve("lathe_roughing", "--speed", "2", "--cnc")
+
+    async def hmi():
+        async with connect(served) as p:
+            c = p.client
+            cnc = await c.get_namespace_index("http://opcfoundation.org/UA/CNC")
+            await p.wait_until("seq.busy", lambda v: v is True, timeout=30)
+            await p.wait_until("x_axis.pos", lambda x: x < 29.0, timeout=30)     # moving in
+            await p.call("Pause")
+            await asyncio.sleep(0.1)
+            iface = await c.nodes.objects.get_child([f"{p.idx}:CncInterface"])
+            assert (await iface.read_type_definition()) == ua.NodeId(1007, cnc)          # CncInterfaceType
+            assert await (await iface.get_child([f"{cnc}:VendorName"])).read_value() == "ncfmu"
+            axes = await (await iface.get_child([f"{cnc}:CncAxisList"])).get_children()
+            names = {}
+            for axis in axes:
+                name = (await axis.read_browse_name()).Name
+                assert (await axis.read_type_definition()) == ua.NodeId(1004, cnc)       # CncAxisType
+                pos = await axis.get_child([f"{cnc}:PosDirect"])
+                names[name] = await (await pos.get_child([f"{cnc}:ActPos"])).read_value()
+                assert names[name] == await p.read(f"{name}.pos")
+                cmd = await (await pos.get_child([f"{cnc}:CmdPos"])).read_value()
+                assert cmd == await p.read(f"{name}.pos_cmd")
+                rem = await (await pos.get_child([f"{cnc}:RemDist"])).read_value()
+                assert rem == pytest.approx(cmd - names[name], abs=1e-12)
+                eu = await (await pos.get_child([f"{cnc}:EngineeringUnits"])).read_value()
+                assert eu.DisplayName.Text == "mm" and eu.UnitId == int.from_bytes(b"MMT", "big")
+                await (await pos.get_child([f"{cnc}:EURange"])).read_value()
+            assert set(names) == {"x_axis", "z_axis"}
+            assert names["x_axis"] < 29.0
+            channels = await (await iface.get_child([f"{cnc}:CncChannelList"])).get_children()
+            assert [(await ch.read_browse_name()).Name for ch in channels] == ["seq"]
+            ch = channels[0]
+            read = lambda name: ch.get_child([f"{cnc}:{name}"])                   # noqa: E731
+            assert await (await read("ActProgramStatus")).read_value() == 1          # Running
+            assert await (await read("ActProgramName")).read_value() == "lathe_roughing"
+            assert await (await read("ActProgramBlock")).read_value() == str(await p.read("seq.line"))
+            assert await (await read("ActOverride")).read_value() == 100.0
+            assert await (await read("ActOperationMode")).read_value() == 2          # Automatic
+            assert await (await iface.get_child([f"{cnc}:CncSpindleList"])).get_children() == []
+            await p.call("Resume")
+            await p.write("seq.feed_hold", True)
+            await p.wait_until("seq.feed_hold.forced", lambda v: v is True, timeout=5)
+            await asyncio.sleep(0.1)
+            assert await (await read("ActProgramStatus")).read_value() == 3          # Interrupted
+            assert await (await read("FeedHold")).read_value() is True
+    run(hmi())
+    assert served.stop() == 0, served.output
