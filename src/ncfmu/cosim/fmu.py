@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException, calloc, free
+from fmpy.fmi1 import FMICallException, calloc, free, printLogMessage
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -48,6 +48,10 @@ def _dispatch(env, instance, status, category, message) -> None:
     sink = _SINKS.get(env or 0)
     if sink is not None:
         sink.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
+    else:
+        # not one of ours: an FMU the user runs through fmpy's default callbacks in the same process, whose
+        # messages fmpy's proxy now routes here -- print them as fmpy's own default logger would
+        printLogMessage(env, instance, status, category, message)
 
 
 _LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
