@@ -44,12 +44,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
 from .base import int_param, real_param, servo_ports
-from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
+from .cycle import CycleController, cycle_ports
 from .lathe_program import ElementMove, Segment
 from .motion import LinearMove
 
@@ -317,49 +318,35 @@ class CutSequencer(CycleController):
             self.busy, self.done = False, True
             self.pass_no = 0
 
-    def _raise_alarm(self, t: float, why: str) -> None:
-        """Latch the alarm and bring the present move to a controlled stop along its path."""
-        self.latch_alarm(t, why, "decelerating to rest, cycle stopped")
+    # -- the hooks of the NC cycle (controllers/cycle.py owns the order of a step) -----------------
+    def halt(self) -> None:
+        """The present move comes to a controlled stop along its path; the cycle ends."""
         self.move.halt()
         self.phase = IDLE
         self.busy = False
         self._waypoints = []
 
-    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = self.judge_inputs(inputs, dt)
-        if bad:
-            self._raise_alarm(t, bad)
-        elif inputs["alarm_in"]:
-            self._raise_alarm(t, "alarm_in (area limiter) is set")
-        else:
-            excess = self.following_error(inputs, (self.x_cmd, self.z_cmd))
-            if excess:
-                self._raise_alarm(t, excess)
+    def watching_following_error(self) -> bool:
+        return True                                  # always, at rest too: why in CycleController
 
-        if self.start_button.pressed(inputs["start"]) and not self.busy and not inputs["alarm_in"] and not bad:
-            if self.move.at_rest:
-                if self.alarm:
-                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-                    self._follow_up(t, inputs)
-                self.alarm = False
-                self._start_cycle()
-            else:
-                self.say("warning", f"t = {t:.4f} s: start ignored: the axes are still decelerating")
+    def command_point(self) -> list[float]:
+        return [self.x_cmd, self.z_cmd]
 
+    def rebase(self, actual: Mapping[str, float]) -> None:
+        self.x_cmd, self.z_cmd = actual["x"], actual["z"]
+        self.move.begin((self.x_cmd, self.z_cmd), (self.x_cmd, self.z_cmd), 1.0)
+
+    def begin(self, t: float, edges: Any) -> None:
+        self._start_cycle()
+
+    def advance(self, t: float, dt: float, inputs: Mapping[str, object], why: str | None) -> None:
         if self.busy:
-            override = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+            override = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
             self.move.advance(dt, scale)
-            judged = self.inpos.judge(dt, self.move.done, self.in_position(inputs), self.actual(inputs),
-                                      (self.x_cmd, self.z_cmd))
-            if judged == ARRIVED:
+            if self.arrival(t, dt, self.move.done, inputs):
                 self._next_phase()
-            elif judged == LATE:
-                x_pos, z_pos = self.actual(inputs)
-                self._raise_alarm(t, f"in-position check: the axes stand at ({x_pos:.4f}, {z_pos:.4f}), not at the "
-                                     f"command ({self.x_cmd:.4f}, {self.z_cmd:.4f}), {self.inpos_timeout:g} s after "
-                                     "it stopped (held downstream?)")
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         elif not self.move.done:
@@ -368,16 +355,6 @@ class CutSequencer(CycleController):
             self.x_vff, self.z_vff = self.move.velocity()
         else:
             self.x_vff = self.z_vff = 0.0
-        return self._publish()
-
-    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
-        """Re-base the command on the actual position where a stop left them apart (a held axis)."""
-        x_pos, z_pos = self.actual(inputs)
-        if follow_up({"x": x_pos, "z": z_pos}, {"x": self.x_cmd, "z": self.z_cmd}, self.inpos_band):
-            self.say("info", f"t = {t:.4f} s: follow-up: command ({self.x_cmd:.4f}, {self.z_cmd:.4f}) re-based on "
-                             f"the actual position ({x_pos:.4f}, {z_pos:.4f})")
-            self.x_cmd, self.z_cmd = x_pos, z_pos
-            self.move.begin((x_pos, z_pos), (x_pos, z_pos), 1.0)
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs
