@@ -140,7 +140,7 @@ def test_sweep_to_a_real_scheduler_without_a_worker_is_one_line(project, tmp_pat
     import time
     sched = tmp_path / "scheduler.json"
     proc = subprocess.Popen([str(Path(sys.executable).parent / "dask"), "scheduler", "--scheduler-file", str(sched),
-                             "--port", "0", "--dashboard-address", ":0", "--no-show"],
+                             "--port", "0", "--dashboard-address", "127.0.0.1:0"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 60
