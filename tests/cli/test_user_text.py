@@ -128,3 +128,12 @@ def test_a_result_csv_number_not_in_ascii_decimal_is_refused(tmp_path):
         Result.from_csv(table)
     table.write_text("time,x\n0,1\n0.1,-2.5e-3\n", encoding="utf-8")
     assert list(Result.from_csv(table).data["x"]) == [1.0, -2.5e-3]
+
+
+def test_an_ssd_unit_definition_is_read_in_ascii_decimal():
+    """An .ssd's ssd:Unit attributes are text too: the exponents and the factor by the same parser."""
+    from ncfmu.cosim.units import Unit
+    assert Unit.of("mm", {"m": "1"}, "0.001") == Unit("mm", (0, 1, 0, 0, 0, 0, 0, 0), 0.001, 0.0)
+    for exponents, factor in (({"m": "\u0661"}, "0.001"), ({"m": "1"}, "\u0660.001"), ({"m": "1"}, "1_0")):
+        with pytest.raises(SystemDefinitionError, match="unit 'mm': BaseUnit exponents must be whole numbers"):
+            Unit.of("mm", exponents, factor)
