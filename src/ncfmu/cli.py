@@ -417,7 +417,8 @@ def cmd_plot(args) -> int:
 
 
 def cmd_vars(args) -> int:
-    """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
+    """Every parameter, input and output of a system: kind, type, unit, the system's start value, rule, what drives
+    an input or what an output feeds."""
     from dataclasses import replace
 
     from .cosim.ssp import read_ssp
@@ -430,7 +431,7 @@ def cmd_vars(args) -> int:
         archive = Path(args.system)
         system = read_ssp(archive)
         described = model_descriptions(archive, system)
-        rows = settable(system, described.__getitem__)
+        rows = settable(system, described.__getitem__, outputs=True)
         # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
         with OpenSystem(archive) as opened:
             conversions = opened.master.conversions
@@ -440,16 +441,19 @@ def cmd_vars(args) -> int:
                 if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
         system = get_system(args.system)
-        rows = settable(system)
+        rows = settable(system, outputs=True)
     if args.instance:
         known = [c.name for c in system.components]
         if args.instance not in known:
             raise NcfmuError(f"--instance {args.instance!r}: {system.name} has no such instance "
                              f"(instances: {', '.join(known)})")
         rows = [r for r in rows if r.name.split(".", 1)[0] == args.instance]
-    lines = [f"{system.name}: {len(rows)} parameters and inputs. Set one with --set INSTANCE.VARIABLE=VALUE "
-             "(ncfmu run); tunable parameters and free inputs also with --branch-set, free inputs with --input "
-             "FILE.csv. An input a connection drives cannot be set: set its source. START is the system's value."]
+    n_out = sum(r.kind == "output" for r in rows)
+    lines = [f"{system.name}: {len(rows) - n_out} parameters and inputs, {n_out} outputs. Set one with --set "
+             "INSTANCE.VARIABLE=VALUE (ncfmu run); tunable parameters and free inputs also with --branch-set, free "
+             "inputs with --input FILE.csv. An input a connection drives cannot be set: set its source. START is the "
+             "system's value; a parameter marked unused is one the system's values leave unread (setting it changes "
+             "nothing). Outputs are what --record takes and an OPC UA client reads."]
     header = ("NAME", "KIND", "TYPE", "UNIT", "START", "RULE", "DRIVEN BY", "DESCRIPTION")
     long = 30                        # a longer start value (a program) goes on a line of its own, below
     table = [(r.name, r.kind, r.type, r.unit, r.start if len(r.start) <= long else "(below)", r.rule,
@@ -600,11 +604,13 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser("vars", help="list every parameter and input of a system: unit, start value, rule, "
-                       "description, tunable or fixed, the connection that drives an input",
+                       "description, tunable or fixed, the connection that drives an input; and its outputs",
                        description="Every settable variable of a system (what --set, --branch-set, --vary and "
-                                   "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
-                                   "value the system gives it, its rule, the output a connection drives an input "
-                                   "from, and its description.", epilog=help_epilog)
+                                   "--input take): kind (parameter tunable/fixed, unused where the system's values "
+                                   "leave it unread, input), type, unit, the start value the system gives it, its "
+                                   "rule, the output a connection drives an input from, and its description; then "
+                                   "each instance's outputs (what --record takes) with unit, description and what "
+                                   "they feed.", epilog=help_epilog)
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
     _replace_options(p)
