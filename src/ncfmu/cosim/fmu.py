@@ -475,10 +475,12 @@ class FmuSlave:
         self._sent.clear()
 
     def terminate(self) -> None:
-        _SINKS.pop(self._env, None)
-        if self._alive:
-            self._alive = False
-            try:
-                self._dll.fmi2Terminate(self._component)
-            finally:
-                self.fmu.freeInstance()
+        try:
+            if self._alive:
+                self._alive = False
+                try:
+                    self._dll.fmi2Terminate(self._component)
+                finally:
+                    self.fmu.freeInstance()
+        finally:
+            _SINKS.pop(self._env, None)     # after the last call: what fmi2Terminate logs is still this slave's
