@@ -14,8 +14,7 @@ import time
 
 import pytest
 from asyncua import ua
-from serve_plc import connect, run
-from test_serve_plc import assert_same_trajectory, replay
+from serve_plc import assert_same_trajectory, connect, replay, run
 
 from ncfmu.cli import main
 from ncfmu.cosim.result import Result
