@@ -6,6 +6,7 @@ speed-arrival wait."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,34 +19,9 @@ from ncfmu.errors import ProgramError
 OUT = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "line", "canned_cycle", "busy", "done", "alarm", "tool",
        "s_cmd", "spindle_dir", "coolant")
 
-#: A shaft as Fanuc's manuals write it: O number, safety block, tool 1, G50 S, G96, G99, G71/G70 with the
-#: type I profile in diameters, G28 U0 W0, M30.
-SHAFT = """%
-O1001 (SHAFT)
-N1 G21 G40 G99
-N2 T0101
-N3 G50 S2500
-N4 G96 S180 M03
-N5 G00 X60. Z2. M08
-N6 G71 U1.5 R0.5
-N7 G71 P10 Q20 U0.4 W0.1 F0.25
-N10 G00 X28.
-N11 G01 Z0
-N12 X32. Z-2.
-N13 Z-12.
-N14 X40. Z-20.
-N15 Z-26.
-N16 G02 X48. Z-30. R4.
-N17 G01 X54.
-N18 Z-40.
-N20 X60.
-N21 G70 P10 Q20 F0.1
-N22 G28 U0 W0 M09
-N23 M05
-N24 M30
-%
-"""
-
+#: A shaft as Fanuc's manuals write it (the README's example): O number, safety block, tool 1, G50 S, G96, G99,
+#: G71/G70 with the type I profile in diameters, G28 U0 W0, M30.
+SHAFT = (Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_fanuc.nc").read_text()
 
 def spindle_run(seq: CutSequencer, dt: float = 1e-3, limit: int = 600_000, tau: float = 0.05, events=None):
     """START, then step until done: ideal axes, a spindle reaching its command with time constant ``tau``."""
