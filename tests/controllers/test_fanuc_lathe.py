@@ -178,3 +178,36 @@ def test_g96_with_its_clamp_is_taken():
     """The refusal above can pass: with G50 S first, G96 is read (the spindle then at 2000 rev/min near the axis)."""
     segs = plan("G50 S2000\nG96 S100 M03\nG98 G01 X0.1 F100\nM30\n", (30.0, 2.0), 50.0)
     assert segs[-2].modal.rpm(0.05) == 2000.0 and segs[-1].modal.spindle == 0        # M30 stops the spindle
+
+
+def test_a_state_in_a_feed_per_revolution_cut_restores_and_continues_identically():
+    """Mid-G99 cut (the rate follows the spindle), in a dwell and waiting for the spindle: the FMU state's
+    round trip (fmi/state.py, the controller's own check_state) is accepted and continues bit for bit."""
+    from ncfmu.fmi import state
+
+    parameters = {p.name: p.start for p in CutSequencer.ports("parameter")}
+    parameters.update(program=SHAFT, x_start=30.0, z_start=2.0)
+    for stop_at in (1500, 9000, 30_000):
+        seq = CutSequencer.from_parameters(parameters)
+        inputs = {p.name: p.start for p in CutSequencer.ports("input")}
+        speed = 0.0
+        outs = []
+        for k in range(stop_at + 2000):
+            if k == stop_at:
+                blob = state.dumps(CutSequencer.MODEL_NAME, parameters, dict(inputs), seq)
+                twin, _, _ = state.loads(blob, CutSequencer, CutSequencer.from_parameters)
+                twin_inputs, twin_speed, twin_outs = dict(inputs), speed, []
+            inputs["start"] = k == 0
+            out = seq.step(k * 1e-3, 1e-3, inputs)
+            outs.append((out["x_cmd"], out["z_cmd"], out["s_cmd"]))
+            inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+            speed += (out["s_cmd"] * out["spindle_dir"] - speed) * (1.0 - math.exp(-1e-3 / 0.05))
+            inputs["spindle_speed"] = speed
+        for k in range(stop_at, stop_at + 2000):
+            twin_inputs["start"] = False
+            out = twin.step(k * 1e-3, 1e-3, twin_inputs)
+            twin_outs.append((out["x_cmd"], out["z_cmd"], out["s_cmd"]))
+            twin_inputs["x_pos"], twin_inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+            twin_speed += (out["s_cmd"] * out["spindle_dir"] - twin_speed) * (1.0 - math.exp(-1e-3 / 0.05))
+            twin_inputs["spindle_speed"] = twin_speed
+        assert twin_outs == outs[stop_at:], stop_at
