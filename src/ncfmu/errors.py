@@ -50,6 +50,16 @@ class SimulationError(NcfmuError, RuntimeError):
     """An FMU refused a call during a simulation."""
 
 
+class TerminationRequested(SimulationError):
+    """An FMU asked to end the simulation (fmi2Discard with fmi2Terminated, FMI 3.0's terminateSimulation): the
+    run ends cleanly at the start of the step it refused. ``instance`` names the FMU, ``time`` that point."""
+
+    def __init__(self, instance: str, time: float, detail: str = ""):
+        self.instance, self.time = instance, time
+        super().__init__(f"{instance} asked to end the simulation at t = {time:.6g} s (fmi2Discard with "
+                         f"terminateSimulation){': ' + detail if detail else ''}")
+
+
 class SimulationTimeout(SimulationError):
     """A run passed its wall-clock deadline (a sweep's ``--timeout``)."""
 
