@@ -10,40 +10,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lathe_oracle import spindle_run
 
 from ncfmu.controllers import CutSequencer
 from ncfmu.controllers.g7x import Tool
 from ncfmu.controllers.lathe_program import Setup, parse, plan
 from ncfmu.errors import ProgramError
 
-OUT = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "line", "canned_cycle", "busy", "done", "alarm", "tool",
-       "s_cmd", "spindle_dir", "coolant")
-
 #: A shaft as Fanuc's manuals write it (the README's example): O number, safety block, tool 1, G50 S, G96, G99,
 #: G71/G70 with the type I profile in diameters, G28 U0 W0, M30.
 SHAFT = (Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_fanuc.nc").read_text()
-
-def spindle_run(seq: CutSequencer, dt: float = 1e-3, limit: int = 600_000, tau: float = 0.05, events=None):
-    """START, then step until done: ideal axes, a spindle reaching its command with time constant ``tau``."""
-    inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": seq.x_cmd, "z_pos": seq.z_cmd,
-              "x_in_position": True, "z_in_position": True, "alarm_in": False, "spindle_speed": 0.0,
-              "optional_stop": False}
-    rows, speed = [], 0.0
-    for k in range(limit):
-        if events is not None:
-            events(k, inputs)
-        out = seq.step(k * dt, dt, inputs)
-        inputs["start"] = False
-        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
-        target = out["s_cmd"] * out["spindle_dir"]
-        speed += (target - speed) * (1.0 - math.exp(-dt / tau))
-        inputs["spindle_speed"] = speed
-        rows.append((*(out[n] for n in OUT), speed))
-        if out["done"] or out["alarm"]:
-            break
-    cols = {n: np.array([r[i] for r in rows]) for i, n in enumerate((*OUT, "speed"))}
-    cols["t"] = np.arange(1, len(rows) + 1) * dt
-    return cols
 
 
 @pytest.fixture(scope="module")
