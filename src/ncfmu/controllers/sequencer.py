@@ -31,7 +31,8 @@ of it AND the servos report in-position, so a move held downstream (by the area 
 counts as done. After an alarm, START re-bases the command on the actual position (follow-up, as an
 NC does after a stop it did not command) and approaches the start point safely.
 
-A part program (``program``, :mod:`.lathe_program`) replaces the registers: an RS274 lathe subset whose
+A part program (``program``, :mod:`.lathe_program`) replaces the registers: the Fanuc 0i-T dialect (tools and
+their offsets, the spindle with G96/G99 read back from ``spindle_speed``, dwells, stops, G28), whose
 G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii, pockets -- and runs
 each as the seed's SC1 infeed (at most U deeper), SC2 cut in -Z to the profile plus its allowances, SC3
 retract by R, SC4 return in Z, then one pass along the profile shifted by the allowances, so the stock left
@@ -168,8 +169,9 @@ class CutSequencer(CycleController):
         boolean("done", "output", None, "the last block has finished (until the next start)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
         # last, so the value references of the ports before them stay what they were
-        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
-               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
+        string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
+               "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
+               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
                "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
