@@ -92,7 +92,7 @@ class Setup:
 
     diameter: bool = True                 # X is a diameter until G7/G8 (seq.x_diameter; Fanuc's lathes)
     feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
-    tools: tuple[Tool, ...] = ()          # the tool table, offset k = tools[k - 1]
+    tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
 
 
