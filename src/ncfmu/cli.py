@@ -455,7 +455,12 @@ def cmd_vars(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from .serving import Security, serve
+    from .serving import APPLICATION_URI, Security, make_certificate, serve
+    if args.make_certificate is not None:
+        key, cert = make_certificate(args.make_certificate)
+        print(f"ncfmu serve: wrote {cert} (application URI {APPLICATION_URI}) and its private key {key}; serve "
+              f"with --certificate {cert} --private-key {key}; clients trust {cert}")
+        return 0
     users = {}
     for item in args.user or []:
         name, colon, password = item.partition(":")
@@ -472,7 +477,9 @@ def cmd_serve(args) -> int:
 
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
-                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
+                    security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
+                    root=args.root, ready=ready,
+                    watchdog=args.watchdog, cnc=args.cnc)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -612,6 +619,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--certificate", type=Path, default=None,
                    help="server certificate: adds the Basic256Sha256 SignAndEncrypt policy (with --private-key)")
     p.add_argument("--private-key", type=Path, default=None, help="the certificate's private key")
+    p.add_argument("--trust", type=Path, default=None, metavar="DIR",
+                   help="folder of the client certificates (or their CAs' certificates) accepted; any other is "
+                        "refused (needs --certificate; required off the loopback)")
+    p.add_argument("--allow-insecure", action="store_true",
+                   help="off the loopback, also security policy None and any client certificate (a closed network)")
+    p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
+                   help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
+                        "DIR/ncfmu-key.pem, then exit")
+    p.add_argument("--cnc", action="store_true",
+                   help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
+                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+    p.add_argument("--watchdog", type=float, default=None, metavar="S",
+                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
+                        "nothing for S seconds (logged, and recorded as releases)")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "

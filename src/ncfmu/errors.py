@@ -32,6 +32,16 @@ class ProgramError(ConfigError):
         super().__init__("program", text, f"line {line_no}, column {column}: {reason}")
 
 
+class ProgramErrors(ProgramError):
+    """Every error found in a program, in line order; its line and column are the first one's."""
+
+    def __init__(self, errors: list[ProgramError]):
+        self.errors = list(errors)
+        first = self.errors[0]
+        ConfigError.__init__(self, "program", first.value, "; ".join(e.rule for e in self.errors))
+        self.line_no, self.column = first.line_no, first.column
+
+
 class SystemDefinitionError(NcfmuError, ValueError):
     """A system (SSP file, connection, instance or variable name) is malformed or unknown."""
 
