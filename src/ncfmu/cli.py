@@ -226,12 +226,13 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, EveryKth, RecordSink, RecordWriteError, SelectColumns
     from .cosim.ssp import read_ssp
-    from .project import ScaledSink, archive_models, report_scales, simulate, system_archive
+    from .project import ScaledSink, archive_models, plant_axes, report_scales, simulate, system_archive
     from .systems import report_for
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
-    report = report_for(system.name, archive_models(archive, system))
+    models = archive_models(archive, system)
+    report = report_for(system.name, models, plant_axes(archive, system, models))
     scales = report_scales(archive, system, report.record())     # a user's axis in m: the report reads mm
     parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))

@@ -148,6 +148,22 @@ class ScaledSink:
         self.sink.close(complete, stopped_at, reason)
 
 
+def plant_axes(archive: Path, system: System, models: Mapping[str, str]) -> list[str]:
+    """The axes of ``system`` by their role (:func:`~ncfmu.systems.roles.axes`) whose FMU has the outputs a report
+    reads of an axis (``pos``, ``following_error``)."""
+    import xml.etree.ElementTree as ET
+
+    from .systems.roles import axes
+    described = model_descriptions(archive, system)
+    found = []
+    for inst in axes(system, models):
+        root = ET.fromstring(described[inst])
+        outputs = {v.get("name") for v in root.iter() if v.get("causality") == "output"}
+        if {"pos", "following_error"} <= outputs:
+            found.append(inst)
+    return found
+
+
 def archive_models(archive: Path, system: System) -> dict[str, str]:
     """instance -> the catalogue model its FMU is, or ``foreign:<modelName>`` (by its modelDescription)."""
     return {inst: i.model or f"foreign:{i.model_name}"
