@@ -65,9 +65,10 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
 
 C_LAYER = Path(__file__).with_name("c")
 SHIM_SOURCE = C_LAYER / "status_shim.c"
-#: -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts such as
-#: ecos close a library while an instance made through it lives on.
-SHIM_LINK = ("-ldl", "-lm", "-lpthread", "-Wl,-z,nodelete")
+#: No -z nodelete: the binary holds a reference to itself exactly while instances made through it live
+#: (fmi2_machine.h), so hosts such as ecos may close it under a live instance and hosts that extract the FMU
+#: per run unload each copy.
+SHIM_LINK = ("-ldl", "-lm", "-lpthread")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
 
 

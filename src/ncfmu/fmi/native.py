@@ -171,8 +171,8 @@ def model_description(m: NativeModel, guid: str) -> bytes:
 def build_description(m: NativeModel) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 form, which FMI 2.0 tools that compile sources also read)."""
     files = "\n".join(f'      <SourceFile name="{n}"/>' for n in ("fmi2_native.c", m.model_c.name))
-    how = ("C99; link with -lm -lpthread (and -Wl,-z,nodelete where the linker has it: the binary keeps its live "
-           "instances)")
+    how = ("C99 with -O2 (fmi2FreeInstance drops the library's reference to itself in a tail call); link with -lm "
+           "-lpthread -ldl")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiBuildDescription fmiVersion="3.0">
   <BuildConfiguration modelIdentifier="{m.name}" description="{how}">
@@ -181,6 +181,7 @@ def build_description(m: NativeModel) -> str:
     </SourceFileSet>
     <Library name="m"/>
     <Library name="pthread"/>
+    <Library name="dl"/>
   </BuildConfiguration>
 </fmiBuildDescription>
 """
@@ -288,15 +289,13 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
         (stage / "documentation" / "index.html").write_bytes(fmu_html(md, m.logic, "its C sources", extra))
         log = Path(tmp) / "cmake.log"
         try:
-            # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint).
-            # -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts
-            # such as ecos close the library while an instance made through it lives on.
+            # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint), the
+            # layer libdl (it holds itself loaded while its instances live: fmi2_machine.h; no -z nodelete).
             (Path(tmp) / "build").mkdir()
             with _output_to(log):
                 build_platform_binary(stage, build_dir=Path(tmp) / "build",
-                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread",
-                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE",
-                                                     "CMAKE_SHARED_LINKER_FLAGS:STRING": "-Wl,-z,nodelete"})
+                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread -ldl",
+                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
         except Exception as err:  # fmpy raises CalledProcessError; the compiler's messages are in the log
             tail = log.read_text(errors="replace").strip().splitlines()[-30:] if log.exists() else []
             raise BuildError(f"{m.name}: compiling the native FMU failed: {err}\n" + "\n".join(tail)) from err

@@ -10,6 +10,7 @@
 #ifndef NCFMU_FMI2_MACHINE_H
 #define NCFMU_FMI2_MACHINE_H
 
+#include <dlfcn.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdint.h>
@@ -17,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include "fmi2Functions.h"
 
 /* The states of an instance (FMI 2.0 co-simulation, section 4.2.4), as bits so a call lists the
@@ -116,8 +118,15 @@ static inline int fmi2_utf8_ok(const unsigned char *s)
  * on 64-bit machines): a host that dereferences one faults at once instead of corrupting memory. The bits
  * below name the binary (12 bits mixed from where it was loaded: two FMUs in one process differ but for a
  * 1 in 4096 chance) and count up; when the count (2^32) runs out no new handle is made (the call fails)
- * rather than an old one reused. The binary is linked with -z nodelete so that a host that closes and
- * reopens the library keeps the count and the live instances. */
+ * rather than an old one reused.
+ *
+ * The binary keeps itself loaded exactly while instances made through it live: the first live instance
+ * takes a reference to the library (dlopen of its own file, RTLD_NOLOAD), the last fmi2FreeInstance drops
+ * it. So a host that closes the library while an instance lives on (ecos) keeps the instance and the
+ * count, and a host that extracts the FMU anew for every run (fmpy.simulate_fmu) unloads each copy when it
+ * is done with it (-z nodelete kept every copy mapped for the life of the process). A library loaded
+ * again starts a new count under new binary bits (its load time is mixed in), so a handle of an earlier
+ * load is refused as another binary's. */
 #define FMI2_HANDLE_NC       ((uint64_t)0x4E43u << 48)
 #define FMI2_HANDLE_INSTANCE ((uint64_t)0x1u << 44)
 #define FMI2_HANDLE_STATE    ((uint64_t)0x2u << 44)
@@ -136,18 +145,49 @@ static struct {
     Fmi2Entry *live;
     size_t n, cap;
     uint32_t made;
-} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0};
+    uint64_t binary;                    /* the 12 bits naming this load of the binary, + 1 (0: not yet) */
+    void *self;                         /* the reference to this library held while instances live */
+} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0, 0, NULL};
 
 /* A new handle of ``kind``; 0 when the count ran out. Called with fmi2_handles.lock held. */
 static inline uintptr_t fmi2_handle_locked(uint64_t kind)
 {
     if (sizeof(uintptr_t) < 8 || fmi2_handles.made == UINT32_MAX) return 0;
-    uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles;          /* where this binary was loaded, mixed */
-    binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;      /* (splitmix64's finaliser) */
-    binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
-    binary = (binary ^ (binary >> 31)) & 0xFFFu;
-    return (uintptr_t)(FMI2_HANDLE_NC | kind | binary << 32 | ++fmi2_handles.made);
+    if (!fmi2_handles.binary) {         /* where and when this binary was loaded, mixed */
+        struct timespec now = {0, 0};
+        clock_gettime(CLOCK_MONOTONIC, &now);
+        uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles ^ ((uint64_t)now.tv_sec * 1000000000u + (uint64_t)now.tv_nsec);
+        binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;  /* (splitmix64's finaliser) */
+        binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
+        fmi2_handles.binary = ((binary ^ (binary >> 31)) & 0xFFFu) + 1;
+    }
+    return (uintptr_t)(FMI2_HANDLE_NC | kind | (fmi2_handles.binary - 1) << 32 | ++fmi2_handles.made);
 }
+
+#ifdef _GNU_SOURCE
+/* A reference to this library (the file ``fmi2_handles`` lives in), taken while it is loaded: NULL when
+ * none can be taken (then the library's lifetime is the host's alone). Called with the lock held. */
+static inline void fmi2_library_hold_locked(void)
+{
+    Dl_info info;
+    if (!fmi2_handles.self && dladdr((void *)&fmi2_handles, &info) && info.dli_fname)
+        fmi2_handles.self = dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD);
+}
+
+/* After an instance was freed: this library's reference when no instance lives any more (the caller drops
+ * it with dlclose as the very last thing it does, a tail call: the library may be unmapped by it), else NULL. */
+static inline void *fmi2_library_release(void)
+{
+    pthread_mutex_lock(&fmi2_handles.lock);
+    void *self = fmi2_handles.n == 0 ? fmi2_handles.self : NULL;
+    if (self) fmi2_handles.self = NULL;
+    pthread_mutex_unlock(&fmi2_handles.lock);
+    return self;
+}
+#else
+#define fmi2_library_hold_locked() ((void)0)
+#define fmi2_library_release() ((void *)0)
+#endif
 
 /* A new FMU-state handle; 0 when none can be made. */
 static inline uintptr_t fmi2_state_handle(void)
@@ -168,8 +208,10 @@ static inline fmi2Component fmi2_instance_add(void *object)
         Fmi2Entry *grown = realloc(fmi2_handles.live, cap * sizeof *grown);
         if (grown) { fmi2_handles.live = grown; fmi2_handles.cap = cap; }
     }
-    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0)
+    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0) {
         fmi2_handles.live[fmi2_handles.n++] = (Fmi2Entry){h, object};
+        fmi2_library_hold_locked();
+    }
     pthread_mutex_unlock(&fmi2_handles.lock);
     return (fmi2Component)h;
 }

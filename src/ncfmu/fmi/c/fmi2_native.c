@@ -13,6 +13,7 @@
  * Every message this layer and the model log is an error or a warning: each reaches the host's logger
  * whatever the debug-logging setting.
  */
+#define _GNU_SOURCE                     /* dladdr: the binary holds itself loaded while its instances live */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -118,6 +119,8 @@ void fmi2FreeInstance(fmi2Component c)
     mem_free(i, i->before);
     fmi2CallbackFreeMemory free_memory = i->cb.freeMemory;
     if (free_memory) free_memory(i); else free(i);
+    void *self = fmi2_library_release();
+    if (self) dlclose(self);            /* the last thing done (a tail call): it may unmap this library */
 }
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }

@@ -118,6 +118,7 @@ static struct {
     PyGILState_STATE (*GILEnsure)(void);
     void (*GILRelease)(PyGILState_STATE);
     PyObject *(*DictGetItem)(PyObject *, PyObject *);
+    PyObject *(*DictGetItemString)(PyObject *, const char *);
     int (*DictSetItem)(PyObject *, PyObject *, PyObject *);
     double (*FloatAs)(PyObject *);
     PyObject *(*FloatFrom)(double);
@@ -157,6 +158,7 @@ static int py_load(void)
     void *h = RTLD_DEFAULT;
 #define L(field, name) if (!(py.field = (__typeof__(py.field))dlsym(h, name))) { ready = -1; return 0; }
     L(GILEnsure, "PyGILState_Ensure") L(GILRelease, "PyGILState_Release") L(DictGetItem, "PyDict_GetItem")
+    L(DictGetItemString, "PyDict_GetItemString")
     L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
     L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
     L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
@@ -322,14 +324,18 @@ static void slave_drop(Inst *i)
     i->n = 0;
 }
 
-/* The slave class: the model script's module, imported once from the FMU's resources folder. */
+/* The slave class: the model script's module, imported once per process from the FMU's resources folder
+ * (its folder goes on sys.path then, not again: a host that extracts the FMU anew per run adds no entry a run). */
 static PyObject *slave_class(const Fmi2Log *log, const char *resources)
 {
-    PyObject *path = py.SysGet("path");                          /* borrowed */
-    PyObject *dir = py.StrFrom(resources);
-    if (path && dir && py.SeqContains(path, dir) == 0) py.ListInsert(path, 0, dir);
-    py_drop(dir);
-    PyObject *module = py.Import(NCFMU_MODULE);
+    PyObject *modules = py.SysGet("modules");                    /* borrowed */
+    if (!modules || !py.DictGetItemString(modules, NCFMU_MODULE)) {
+        PyObject *path = py.SysGet("path");                      /* borrowed */
+        PyObject *dir = py.StrFrom(resources);
+        if (path && dir && py.SeqContains(path, dir) == 0) py.ListInsert(path, 0, dir);
+        py_drop(dir);
+    }
+    PyObject *module = py.Import(NCFMU_MODULE);   /* the import lock: another thread's import finishes first */
     PyObject *cls = module ? py.GetAttrString(module, NCFMU_CLASS) : NULL;
     py_drop(module);
     if (!cls) {
@@ -464,6 +470,8 @@ void fmi2FreeInstance(fmi2Component c)
     slave_drop(i);
     py.GILRelease(g);
     free(i);
+    void *self = fmi2_library_release();
+    if (self) dlclose(self);              /* the last thing done (a tail call): it may unmap this library */
 }
 
 fmi2Status fmi2Reset(fmi2Component c)
