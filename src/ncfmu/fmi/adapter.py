@@ -61,6 +61,9 @@ class ControllerSlave(Fmi2Slave):
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
         self._refused = False             # a value fmi_set was given was refused (the old value kept)
+        # What is logged and not yet taken: pythonfmu's queue (Fmi2Slave.log appends to it), the same list for the
+        # slave's life; the shim reads its length after every call and calls fmi_take_log only when it is not empty.
+        self.pending_log: list = self.log_queue
         for port in logic.PORTS:
             self._register(port)
 
@@ -159,9 +162,9 @@ class ControllerSlave(Fmi2Slave):
             return None
 
     def fmi_take_log(self) -> list[tuple[int, str, str]]:
-        queue: list = self.log_queue          # pythonfmu's Fmi2Slave.log appends LogMsg(status, category, msg)
+        queue = self.pending_log              # pythonfmu's Fmi2Slave.log appends LogMsg(status, category, msg)
         taken = [(int(m.status), str(m.category), str(m.msg)) for m in queue]
-        queue.clear()
+        queue.clear()                         # in place: the shim holds this list
         return taken
 
     def _refuse(self, call: str, why: str) -> int:

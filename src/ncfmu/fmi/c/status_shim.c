@@ -5,8 +5,9 @@
  * instance handle, the FMI state machine of fmi2_machine.h, value references and their types, step
  * times), and drives the Python slave (fmi/adapter.py) through the calls listed in the contract
  * (fmi/contract.py, generated into ncfmu_contract.h; see docs/architecture.md). Each call returns its
- * status; the log messages it queued are taken after the call and sent to the host's logger: errors
- * and warnings always, the rest only with debug logging on. pythonfmu provides the Python slave API
+ * status; the log messages it queued are taken after the call (when there are any: the shim reads the length
+ * of the slave's pending_log) and sent to the host's logger: errors and warnings always, the rest only with
+ * debug logging on. pythonfmu provides the Python slave API
  * (Fmi2Slave) and the packaging; its export library is not used.
  *
  * Hosts hold opaque handles, not addresses (fmi2_machine.h): a NULL, freed, made-up or foreign instance
@@ -138,6 +139,7 @@ static struct {
     PyObject *(*ListNew)(Py_ssize_t_);
     int (*ListSetItem)(PyObject *, Py_ssize_t_, PyObject *);
     int (*ListInsert)(PyObject *, Py_ssize_t_, PyObject *);
+    Py_ssize_t_ (*ListSize)(PyObject *);
     PyObject *(*SysGet)(const char *);
     PyObject *(*Import)(const char *);
     PyObject *(*BytesFrom)(const char *, Py_ssize_t_);
@@ -165,7 +167,7 @@ static int py_load(void)
     L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString")
     L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
     L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
-    L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(SysGet, "PySys_GetObject")
+    L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(ListSize, "PyList_Size") L(SysGet, "PySys_GetObject")
     L(Import, "PyImport_ImportModule") L(BytesFrom, "PyBytes_FromStringAndSize")
     L(BytesAs, "PyBytes_AsStringAndSize") L(Occurred, "PyErr_Occurred") L(Fetch, "PyErr_Fetch")
     L(Str, "PyObject_Str") L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef")
@@ -225,6 +227,7 @@ typedef struct Inst {
     int debug;                            /* debug logging on: info messages reach the logger too */
     unsigned categories;                  /* with debug on: which categories (bit k: FMI2_CATEGORIES[k]); all if 0 */
     PyObject *slave, *inputs;
+    PyObject *pending;                    /* the slave's pending_log: fmi_take_log only when not empty */
     unsigned n;                           /* value references 0 .. n-1 */
     PyObject **port_name;                 /* by value reference: the variable's name (NULL: none) */
     unsigned char *type, *causality, *fixed;
@@ -256,7 +259,11 @@ static Inst *checked(fmi2Component c, const char *call, int phases)
 /* Send what the slave logged to the host: errors and warnings always, the rest with debug logging on. */
 static void flush_log(Inst *i)
 {
-    PyObject *taken = i->slave ? py.CallMethod(i->slave, names[N_TAKE_LOG], NULL) : NULL;
+    if (!i->slave) return;
+    Py_ssize_t_ pending = py.ListSize(i->pending);          /* a C call: nothing logged, nothing called */
+    if (pending == 0) return;
+    if (pending < 0) py.Clear();                             /* not a list: take the log anyway */
+    PyObject *taken = py.CallMethod(i->slave, names[N_TAKE_LOG], NULL);
     Py_ssize_t_ n = taken ? py.SeqSize(taken) : 0;
     for (Py_ssize_t_ k = 0; k < n; k++) {
         PyObject *m = py.SeqGetItem(taken, k);
@@ -316,10 +323,10 @@ static fmi2Status simple_call(fmi2Component c, const char *fmi_call, int phases,
 /* ---- making and dropping the Python slave -------------------------------------------------------- */
 static void slave_drop(Inst *i)
 {
-    py_drop(i->slave); py_drop(i->inputs); py_drop(i->strings);
+    py_drop(i->slave); py_drop(i->inputs); py_drop(i->pending); py_drop(i->strings);
     for (unsigned k = 0; k < i->n; k++) py_drop(i->port_name[k]);
     free(i->port_name); free(i->type); free(i->causality); free(i->fixed);
-    i->slave = i->inputs = i->strings = NULL;
+    i->slave = i->inputs = i->pending = i->strings = NULL;
     i->port_name = NULL; i->type = i->causality = i->fixed = NULL;
     i->n = 0;
 }
@@ -359,12 +366,13 @@ static int slave_make(Inst *i)
     py_drop(n); py_drop(res); py_drop(vis); py_drop(cls);
     PyObject *ports = slave ? py.CallMethod(slave, names[N_PORTS], NULL) : NULL;
     PyObject *inputs = slave ? py.GetAttr(slave, names[N_INPUTS]) : NULL;
-    if (!slave || !ports || !inputs) {
+    PyObject *pending = slave ? py.GetAttr(slave, names[N_PENDING_LOG]) : NULL;
+    if (!slave || !ports || !inputs || !pending) {
         char text[512];
         py_error_text(text, sizeof text);
         FMI2_SAY(&i->log, fmi2Error, "logStatusError", "fmi2Instantiate: the slave %s could not be made: %s",
                  NCFMU_CLASS, text);
-        py_drop(slave); py_drop(ports); py_drop(inputs);
+        py_drop(slave); py_drop(ports); py_drop(inputs); py_drop(pending);
         return 0;
     }
     Py_ssize_t_ count = py.SeqSize(ports);
@@ -399,6 +407,7 @@ static int slave_make(Inst *i)
     if (py.Occurred()) py.Clear();
     i->slave = slave;
     i->inputs = inputs;
+    i->pending = pending;
     if (!i->port_name || !i->type || !i->causality || !i->fixed) { slave_drop(i); return 0; }
     return 1;
 }
