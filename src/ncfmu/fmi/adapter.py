@@ -11,7 +11,7 @@ controller (declared once, as data), builds and checks the controller at
 ``exitInitializationMode`` and steps it in ``doStep``. Messages the controller queues go to the FMU
 log with their level.
 
-The FMU's binary (``fmi/c/status_shim.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
+The FMU's binary (``fmi/c/python_model.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
 else: the contract is the table in :mod:`ncfmu.fmi.contract`, described in ``docs/architecture.md``.
 """
 
@@ -40,7 +40,7 @@ _CONVERT = {"Real": float, "Integer": int, "Boolean": bool, "String": str}
 class ControllerSlave(Fmi2Slave):
     """pythonfmu slave around a controller class (set ``logic_class`` in a subclass).
 
-    The FMU's binary (the shim, ``fmi/c/status_shim.c``) drives it through the ``fmi_*`` methods below,
+    The FMU's binary (``fmi/c/python_model.c``) drives it through the ``fmi_*`` methods below,
     and only those: the contract is the table in :mod:`ncfmu.fmi.contract`. Each returns its status
     (:data:`~ncfmu.fmi.contract.STATUS`) and never raises; what it has to say goes to the log queue,
     which the shim takes after every call (:meth:`fmi_take_log`).

@@ -1,4 +1,4 @@
-"""The contract between a Python FMU's C binary (``fmi/c/status_shim.c``) and its Python slave (``fmi/adapter.py``).
+"""The contract between a Python FMU's C binary (``fmi/c/python_model.c``) and its Python slave (``fmi/adapter.py``).
 
 Written once, here. The C side reads it from ``fmi/c/ncfmu_contract.h``, generated from this table by
 :func:`c_header` (checked in; ``tests/fmi/test_contract.py`` fails when the header, the table or the

@@ -9,9 +9,10 @@ What is written where (one home per fact):
 
 - the variables, their start values and their rules come from the model's Python ports
   (:class:`~ncfmu.ports.Port`) and are generated into ``model_vars.h``;
-- the FMI layer is ``fmi/c/fmi2_native.c`` with the state machine of ``fmi/c/fmi2_machine.h``
-  (shared with the status shim of the Python FMUs);
-- the equations are the model's own C file (``servo/native/servo_model.c``).
+- the FMI layer is ``fmi/c/fmi2_functions.c`` (the one layer of every ncfmu FMU, the Python FMUs' too) with the
+  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/fmi2_model.h``, which
+  ``fmi/c/native_model.c`` implements for table-driven native models;
+- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``fmi2_model.h``.
 """
 
 from __future__ import annotations
@@ -42,6 +43,9 @@ if TYPE_CHECKING:
 
 C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
+#: What a native FMU carries of the FMI layer (its sources/), beside the model's C file and model_vars.h.
+LAYER_SOURCES = ("fmi2_functions.c", "native_model.c")
+LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h")
 
 
 @dataclass(frozen=True)
@@ -58,9 +62,7 @@ class NativeModel:
         return self.logic.MODEL_NAME
 
     def sources(self) -> dict[str, bytes]:
-        return {"fmi2_machine.h": (C_LAYER / "fmi2_machine.h").read_bytes(),
-                "fmi2_model.h": (C_LAYER / "fmi2_model.h").read_bytes(),
-                "fmi2_native.c": (C_LAYER / "fmi2_native.c").read_bytes(),
+        return {**{name: (C_LAYER / name).read_bytes() for name in (*LAYER_HEADERS, *LAYER_SOURCES)},
                 self.model_c.name: self.model_c.read_bytes()}
 
     def digest(self) -> str:
@@ -150,7 +152,7 @@ def model_description(m: NativeModel, guid: str) -> bytes:
                        canGetAndSetFMUstate="true", canSerializeFMUstate="true",
                        providesDirectionalDerivative="false")
     files = ET.SubElement(cs, "SourceFiles")
-    for name in ("fmi2_native.c", m.model_c.name):
+    for name in (*LAYER_SOURCES, m.model_c.name):
         ET.SubElement(files, "File", name=name)
     categories = ET.SubElement(root, "LogCategories")          # what fmi2SetDebugLogging takes (fmi2_machine.h)
     for name in log_categories():
@@ -170,7 +172,7 @@ def model_description(m: NativeModel, guid: str) -> bytes:
 
 def build_description(m: NativeModel) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 form, which FMI 2.0 tools that compile sources also read)."""
-    files = "\n".join(f'      <SourceFile name="{n}"/>' for n in ("fmi2_native.c", m.model_c.name))
+    files = "\n".join(f'      <SourceFile name="{n}"/>' for n in (*LAYER_SOURCES, m.model_c.name))
     how = ("C99 with -O2 (fmi2FreeInstance drops the library's reference to itself in a tail call); link with -lm "
            "-lpthread -ldl")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
@@ -233,7 +235,8 @@ that is unstable or has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
 {figure}
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> (fmi2_native.c, {m.model_c.name}; C99, link with -lm), so
+the C sources are in <code>sources/</code> (fmi2_functions.c, native_model.c, {m.model_c.name}; C99, link with
+-lm -lpthread -ldl), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 
