@@ -16,10 +16,11 @@ from conftest import ROOT
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
+from ncfmu.catalogue import models
 from ncfmu.fmi.fmi3 import PLATFORM, TIME_VR, TYPES
 from ncfmu.systems import SYSTEMS, get_system
 
-MODELS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis"]
+MODELS = sorted(models())
 
 
 @pytest.fixture(scope="session")

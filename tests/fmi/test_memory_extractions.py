@@ -17,7 +17,8 @@ import pytest
 pytestmark = pytest.mark.slow        # a fresh process and 160 extractions per FMU
 
 RUNS = Path(__file__).with_name("extraction_runs.py")
-FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis"]
+FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis",
+        "SpindleDrive"]
 
 
 @pytest.mark.parametrize("model", FMUS)
