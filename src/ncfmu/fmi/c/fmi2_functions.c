@@ -248,11 +248,11 @@ static fmi2Status set_values(fmi2Component c, const char *call, const fmi2ValueR
     if (!i || !refs_ok(i, call, vr, n, type, 1, values)) return fmi2Error;
     if (n == 0) return fmi2OK;
     if (type != V_BOOLEAN) return fmu_model_set(i->model, vr, n, type, values);
-    int *flags = malloc(n * sizeof *flags);           /* fmi2Boolean is an int: any non-zero value is true */
+    int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's sets) */
     if (!flags) return fmi2Error;
-    for (size_t k = 0; k < n; k++) flags[k] = ((const fmi2Boolean *)values)[k] != fmi2False;
+    for (size_t k = 0; k < n; k++) flags[k] = ((const fmi2Boolean *)values)[k] != fmi2False;   /* 0 or 1 */
     fmi2Status st = fmu_model_set(i->model, vr, n, type, flags);
-    free(flags);
+    if (flags != small) free(flags);
     return st;
 }
 

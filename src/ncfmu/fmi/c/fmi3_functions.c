@@ -306,11 +306,11 @@ static fmi3Status get_values(fmi3Instance c, const char *call, const fmi3ValueRe
     if (!i || !refs_ok(i, call, vr, n, type, 0, values, n_values)) return fmi3Error;
     if (n == 0) return fmi3OK;
     if (type != V_BOOLEAN) return (fmi3Status)fmu_model_get(i->model, vr, n, type, values);
-    int *flags = malloc(n * sizeof *flags);
+    int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's gets) */
     if (!flags) return fmi3Error;
     fmi3Status st = (fmi3Status)fmu_model_get(i->model, vr, n, type, flags);
     for (size_t k = 0; st <= fmi3Warning && k < n; k++) ((fmi3Boolean *)values)[k] = flags[k] != 0;
-    free(flags);
+    if (flags != small) free(flags);
     return st;
 }
 
@@ -321,11 +321,11 @@ static fmi3Status set_values(fmi3Instance c, const char *call, const fmi3ValueRe
     if (!i || !refs_ok(i, call, vr, n, type, 1, values, n_values)) return fmi3Error;
     if (n == 0) return fmi3OK;
     if (type != V_BOOLEAN) return (fmi3Status)fmu_model_set(i->model, vr, n, type, values);
-    int *flags = malloc(n * sizeof *flags);
+    int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);
     if (!flags) return fmi3Error;
     for (size_t k = 0; k < n; k++) flags[k] = ((const fmi3Boolean *)values)[k] ? 1 : 0;
     fmi3Status st = (fmi3Status)fmu_model_set(i->model, vr, n, type, flags);
-    free(flags);
+    if (flags != small) free(flags);
     return st;
 }
 
