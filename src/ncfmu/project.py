@@ -26,6 +26,7 @@ from .cosim.ssp import SSD_NAME, Component, System, fmu_path, pack, read_ssd, re
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
+from .fmi.fmi3 import build_all_fmi3
 from .systems import SYSTEMS, get_system
 from .systems.roles import identify
 
@@ -55,6 +56,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     root = Path(root or project_root())
     (root / "fmus").mkdir(parents=True, exist_ok=True)
     fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale)
+    fmus3 = build_all_fmi3(fmus, root / "fmus" / "fmi3", only_stale=only_stale)    # their FMI 3.0 twins
     if is_checkout(root):
         from .docs import write_docs
         write_docs(root, fmus)
@@ -63,7 +65,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     for name in SYSTEMS:
         folder = write_system(get_system(name), root / "ssp")
         archives.append(pack(folder, root / "fmus", root / "ssp" / f"{name}.ssp"))
-    return {"fmus": fmus, "ssp": archives}
+    return {"fmus": fmus, "fmi3": fmus3, "ssp": archives}
 
 
 def system_archive(system: str, root: Path | None = None, ensure_built: bool = True) -> Path:
