@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
 from .lathe_program import ElementMove, Segment
 from .motion import LinearMove
@@ -64,6 +64,9 @@ PROGRAM_MOVE = -2
 
 #: The start point as the FMU starts: a 10 mm radius at Z 0 (a system gives its own, e.g. lathe_roughing's).
 X_START, Z_START = 10.0, 0.0
+#: The bar stock as the FMU starts: up to the default registers' stock outline (X_START - Xf = 9.5 mm radius),
+#: its face at Z_START, 50 mm long.
+STOCK_DIAMETER, STOCK_LENGTH = 19.0, 50.0
 
 
 @dataclass
@@ -149,6 +152,16 @@ class CutSequencer(CycleController):
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
         integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
+        # appended: the bar stock the part check cuts (read by the host's part check, not by the cycle), and
+        # whether the present move runs at rapid
+        real("stock_diameter", "parameter", STOCK_DIAMETER, "mm", "diameter of the bar stock (the part check's "
+             "material; the cycle does not read it)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_length", "parameter", STOCK_LENGTH, "mm", "length of the bar stock from its face toward the "
+             "chuck (-Z)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_face_z", "parameter", Z_START, "mm", "Z of the bar stock's face", min=-POSITION_LIMIT,
+             max=POSITION_LIMIT),
+        boolean("rapid", "output", None, "the present move runs at rapid (SC1, SC3, SC4 and the approach of the "
+                "registers; G00 and the cycles' rapid moves of a program); false while cutting or idle"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -224,6 +237,7 @@ class CutSequencer(CycleController):
         self._waypoints: list[tuple[float, float]] = []
         self._then_block = 0                 # block to begin once the approach is done
         self._outputs: dict[str, object] = {}
+        self.rapid = False                   # the present move runs at rapid (kept through a controlled stop)
         self._publish()
 
     # -- the cycle ------------------------------------------------------------------------------
@@ -350,6 +364,7 @@ class CutSequencer(CycleController):
             override = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
+            self.rapid = not cutting
             self.move.advance(dt, scale)
             judged = self.inpos.judge(dt, self.move.done, self.in_position(inputs), self.actual(inputs),
                                       (self.x_cmd, self.z_cmd))
@@ -392,6 +407,7 @@ class CutSequencer(CycleController):
         out["line"] = self.plan[self.segment].line if running else 0
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
+        out["rapid"] = self.rapid and not self.move.done
         return out
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
