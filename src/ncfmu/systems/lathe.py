@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..cosim.ssp import System
 from .compose import blocks, component, table, wire
+from .part import LathePart
 from .report import Axes, Envelope, LatheCycle, Plane, Report
 
 #: Lathe envelope: reference Z, limited X. For Z <= -45 (the chuck) X must be >= 40: out of reach.
@@ -16,7 +17,8 @@ STOCK = dict(stock_diameter=58.0, stock_length=80.0, stock_face_z=0.0)
 REPORT = Report(
     (LatheCycle(seq="seq", x="x_axis", z="z_axis"),
      Envelope(limiter="limiter", ref="z_axis", lim="x_axis", region_names=("chuck",)),
-     Axes(("x_axis", "z_axis"))),
+     Axes(("x_axis", "z_axis")),
+     LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
           ylabel="X (radius) [mm]"))
 
