@@ -34,11 +34,11 @@ def feed(m: MaterialRemoval, points, rapid, line=0, chunk=None, dt=1e-3, t0=0.0)
 
 def test_the_lathe_tool_has_its_programmed_point_at_its_lowest_and_leftmost():
     for r in (0.0, 0.4, 0.8):
-        zmin, xmin, _, _ = lathe_tool(r).bounds
+        zmin, xmin = lathe_tool(r).min(axis=0)
         assert zmin == pytest.approx(0.0, abs=RESOLUTION) and xmin == pytest.approx(0.0, abs=RESOLUTION)
-    assert lathe_tool(0.8).area > lathe_tool(0.0).area * 0.9
+        assert lathe_tool(r).max(axis=0)[0] == pytest.approx(2 * r, abs=RESOLUTION)     # the blade: 2r wide
     # inscribed, its chords within RESOLUTION of the circle: short of the disc by less than perimeter x RESOLUTION
-    assert 0 < math.pi * 4 - mill_cutter(2.0).area < 4 * math.pi * RESOLUTION
+    assert 0 < math.pi * 4 - Polygon(mill_cutter(2.0)).area < 4 * math.pi * RESOLUTION
 
 
 @pytest.mark.parametrize("chunk", [None, 37, 1000])
@@ -66,6 +66,14 @@ def test_a_rapid_into_the_stock_is_a_crash_named_by_its_line_time_and_depth():
     # triangle whose sharp top is reached a row or two later)
     assert c.t == pytest.approx(t[0] + (32 - 29 + TOUCH) / 0.01 * 1e-3, abs=2.5e-3)
     assert c.at == pytest.approx((-20.0, 29.0), abs=0.021)
+
+
+@pytest.mark.parametrize("r", [0.0, 0.4])
+def test_a_rapid_plunge_in_x_alone_is_a_crash_also_for_a_point(r):
+    m = MaterialRemoval(box(-80, 0, 0, 29), lathe_tool(r))
+    feed(m, [(-20.0, 30.0), (-20.0, 27.0)], rapid=True, line=4)
+    assert [(c.line, c.what) for c in m.crashes] == [(4, "rapid into the stock")]
+    assert m.crashes[0].depth_mm == pytest.approx(2.0, abs=0.01)
 
 
 def test_a_rapid_through_air_or_along_a_surface_it_cut_is_no_crash():

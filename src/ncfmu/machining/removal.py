@@ -48,10 +48,8 @@ MAX_CRASHES = 100
 #: Spacing of the points at which a region's depth is measured (mm).
 PROBE = 0.05
 
-#: The lathe tool: an insert of :data:`INSERT_ANGLE` degrees whose leading edge is square to the Z axis (it faces
-#: a shoulder square), its edges :data:`EDGE_LENGTH` long, its nose rounded with the tool table's radius.
-INSERT_ANGLE = 35.0
-EDGE_LENGTH = 12.0
+#: The lathe tool's blade above its nose (the insert and its holder in the half-section), mm high.
+BLADE = 100.0
 
 
 def _circle_segments(radius: float) -> int:
@@ -66,34 +64,30 @@ def _disc(centre: tuple[float, float], radius: float) -> BaseGeometry:
     return ShapelyPoint(centre).buffer(radius, quad_segs=_circle_segments(radius))
 
 
-def lathe_tool(nose_radius: float, edge_length: float = EDGE_LENGTH, insert_angle: float = INSERT_ANGLE) -> Polygon:
-    """The turning tool in the half-section ``(z, x)`` around its programmed point at the origin.
+def lathe_tool(nose_radius: float, blade: float = BLADE) -> np.ndarray:
+    """The turning tool in the half-section ``(z, x)`` around its programmed point at the origin: the vertices of
+    its convex outline.
 
     The programmed point is the imaginary tool tip (no nose radius compensation, as the programs are written):
     the nose circle's centre is ``(r, r)``, so the tool's lowest point is at x = 0 and its leftmost at z = 0.
-    The leading edge rises square from the nose (toward +X), the trailing edge at ``90 - insert_angle``
-    degrees above +Z: the insert and its holder fill the wedge between them, up and toward +Z, as an external
-    turning tool cutting toward the chuck (-Z) and the axis (-X). ``nose_radius`` 0 is a sharp point.
+    Above the nose stands the blade (the insert and its holder), as wide as the nose, ``blade`` mm up: what the
+    tool passes under is cut away (the chip), whatever the direction -- along Z, into a groove, up a face.
+    ``nose_radius`` 0 is a sharp point under a blade of no width (a segment: it cuts by moving in Z, and a move
+    in X alone removes nothing, though a rapid one into the stock is still a crash).
     """
     r = float(nose_radius)
-    lead = (0.0, 1.0)
-    trail = (math.cos(math.radians(90.0 - insert_angle)), math.sin(math.radians(90.0 - insert_angle)))
     if r <= 0.0:
-        return Polygon([(0.0, 0.0), (edge_length * trail[0], edge_length * trail[1]),
-                        (edge_length * lead[0], edge_length * lead[1])])
-    c = (r, r)
-    ends = [(c[0] + edge_length * u[0], c[1] + edge_length * u[1]) for u in (lead, trail)]
-    hull = shapely.union_all([_disc(c, r), *(_disc(e, r) for e in ends)]).convex_hull
-    assert isinstance(hull, Polygon)
-    return hull
+        return np.array([[0.0, 0.0], [0.0, blade]])
+    nose = _disc((r, r), r)
+    outline = shapely.union_all([nose, shapely.box(0.0, r, 2 * r, r + blade)]).convex_hull
+    return np.asarray(outline.exterior.coords)[:-1]
 
 
-def mill_cutter(radius: float) -> Polygon:
-    """The milling cutter in ``(x, y)`` around its centre at the origin; a radius below RESOLUTION is taken as
-    RESOLUTION (a point cuts nothing)."""
+def mill_cutter(radius: float) -> np.ndarray:
+    """The milling cutter in ``(x, y)`` around its centre at the origin: the vertices of its outline. A radius
+    below RESOLUTION is taken as RESOLUTION (a point cuts nothing)."""
     disc = _disc((0.0, 0.0), max(abs(float(radius)), RESOLUTION))
-    assert isinstance(disc, Polygon)
-    return disc
+    return np.asarray(disc.exterior.coords)[:-1]
 
 
 @dataclass(frozen=True)
@@ -158,19 +152,19 @@ class MaterialRemoval:
     stock
         the material at the start (a polygon in the machine plane).
     tool
-        the tool's shape around its reference point (the origin): convex.
+        the vertices of the tool's convex outline around its reference point (the origin), (m, 2); two
+        vertices: a segment.
     forbidden
         regions the tool must not enter (chuck jaws, the axis, a part's finished contour).
     max_depth
         deepest chip a cutting move may take (mm); ``inf``: no limit.
     """
 
-    def __init__(self, stock: BaseGeometry, tool: Polygon, forbidden: Sequence[Forbidden] = (),
+    def __init__(self, stock: BaseGeometry, tool: np.ndarray, forbidden: Sequence[Forbidden] = (),
                  max_depth: float = math.inf) -> None:
         self.stock: BaseGeometry = stock
         self.initial = stock
-        self.tool = tool
-        self.tool_xy = np.asarray(tool.exterior.coords)[:-1]          # (m, 2), convex
+        self.tool_xy = np.asarray(tool, dtype=float).reshape(-1, 2)          # (m, 2), convex
         self.forbidden = list(forbidden)
         for f in self.forbidden:
             shapely.prepare(f.region)
@@ -224,15 +218,14 @@ class MaterialRemoval:
             path = shapely.get_coordinates(shapely.LineString(path).simplify(RESOLUTION, preserve_topology=False))
         steps = np.flatnonzero(np.any(np.diff(path, axis=0) != 0.0, axis=1))
         if not len(steps):
-            return shapely.transform(self.tool, lambda c: c + path[0])
+            return shapely.convex_hull(shapely.multipoints(self.tool_xy + path[0]))
         ends = np.stack((path[steps], path[steps + 1]), axis=1)               # (k, 2, 2)
         corners = ends[:, :, None, :] + self.tool_xy[None, None, :, :]        # (k, 2, m, 2)
         hulls = shapely.convex_hull(shapely.multipoints(corners.reshape(len(steps), -1, 2)))
         return shapely.union_all(hulls)
 
     def _tools_at(self, xy: np.ndarray) -> np.ndarray:
-        ring = xy[:, None, :] + self.tool_xy[None, :, :]
-        return shapely.polygons(np.concatenate((ring, ring[:, :1]), axis=1))
+        return shapely.convex_hull(shapely.multipoints(xy[:, None, :] + self.tool_xy[None, :, :]))
 
     def _first_entry(self, t: np.ndarray, xy: np.ndarray, move: Move, piece: BaseGeometry,
                      depth: float) -> tuple[float, tuple[float, float]]:
@@ -266,16 +259,19 @@ class MaterialRemoval:
                     self._crash(t, xy, move, f.what, inside, depth)
         if self.stock.is_empty or not self.stock.intersects(swept):
             return
-        chip = _areal(self.stock.intersection(swept))
-        if chip.is_empty:
-            return
-        depth, _ = depth_in(chip, self._outline_before)
+        # what of the stock the tool passed through: an area (the chip), or a line where a point moved in X only
+        inside = self.stock.intersection(swept)
+        depth, _ = depth_in(inside, self._outline_before)
         if move.rapid and depth > TOUCH:
-            self._crash(t, xy, move, "rapid into the stock", chip, depth)
+            self._crash(t, xy, move, "rapid into the stock", inside, depth)
         elif not move.rapid:
             self.deepest_cut = max(self.deepest_cut, depth)
             if depth > self.max_depth + TOUCH:
-                self._crash(t, xy, move, f"cut deeper than the tool's max_depth {self.max_depth:g} mm", chip, depth)
+                self._crash(t, xy, move, f"cut deeper than the tool's max_depth {self.max_depth:g} mm", inside,
+                            depth)
+        chip = _areal(inside)
+        if chip.is_empty:
+            return
         self.removed_area += chip.area
         self.stock = _areal(self.stock.difference(swept).simplify(RESOLUTION / 5, preserve_topology=True))
 

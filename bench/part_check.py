@@ -1,0 +1,97 @@
+"""The part check's cost and memory. ``python bench/part_check.py [--pairs 3] [--hours 0.25 1] [--json FILE]``.
+
+- **Cost**: ``ncfmu run lathe_roughing`` with the part check (the default) and with ``--no-part-check``, side by
+  side in one invocation, interleaved (on, off, on, off, ...), each a fresh process; printed: the wall time of
+  each process and of its simulation (the summary's "in ... s wall"), the medians and the ratio on / off. Goal:
+  the part check adds < 20 % to the run's wall time.
+- **Soak**: lathe_roughing cutting part after part (the panel's START repeated every 100 s; the first cycle cuts
+  the bar, the later ones cut air along the part they made -- every rapid still checked against the stock) for
+  each of ``--hours`` of simulated time with the part check on, recorded at 0.1 s: the peak RSS of each
+  ``ncfmu run`` process (``os.wait4``'s ru_maxrss) and the growth from the shortest to the longest run. Goal: flat
+  (the stock, the forbidden regions and at most 100 crash records are all the check keeps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SYSTEM = "lathe_roughing"
+SOAK = ["--set", "panel.repeat_every=100", "--output-interval", "0.1"]
+
+
+def run(args: list[str], out: Path) -> dict[str, float]:
+    """One ``ncfmu run`` process: its wall time, the simulation's wall time (from the summary) and peak RSS."""
+    cmd = [sys.executable, "-m", "ncfmu.cli", "run", SYSTEM, "--out", str(out), *args]
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    stdout = proc.stdout.read() if proc.stdout else ""
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    if os.waitstatus_to_exitcode(status) not in (0, 3):
+        raise SystemExit(f"{' '.join(cmd)} failed:\n{stdout}")
+    sim = re.search(r"simulated ([0-9.]+) s in ([0-9.]+) s wall", stdout)
+    part = next((line.strip() for line in stdout.splitlines() if line.strip().startswith("part:")), "")
+    return {"wall_s": wall, "run_wall_s": float(sim.group(2)) if sim else float("nan"),
+            "peak_rss_mb": usage.ru_maxrss / 1024, "part": part}  # type: ignore[dict-item]
+
+
+def cost(pairs: int, out: Path) -> dict[str, object]:
+    run([], out)                                   # builds what is stale, warms the caches
+    on: list[dict[str, float]] = []
+    off: list[dict[str, float]] = []
+    for k in range(pairs):
+        on.append(run([], out))
+        off.append(run(["--no-part-check"], out))
+        print(f"pair {k + 1}: on {on[-1]['wall_s']:.2f} s (run {on[-1]['run_wall_s']:.2f} s), "
+              f"off {off[-1]['wall_s']:.2f} s (run {off[-1]['run_wall_s']:.2f} s)", flush=True)
+    med = {side: {key: statistics.median(r[key] for r in rows) for key in ("wall_s", "run_wall_s")}
+           for side, rows in (("on", on), ("off", off))}
+    ratio = med["on"]["wall_s"] / med["off"]["wall_s"]
+    ratio_run = med["on"]["run_wall_s"] / med["off"]["run_wall_s"]
+    print(f"median wall: on {med['on']['wall_s']:.2f} s, off {med['off']['wall_s']:.2f} s: ratio {ratio:.3f} "
+          f"({(ratio - 1) * 100:+.1f} %); the simulation alone {ratio_run:.3f} ({(ratio_run - 1) * 100:+.1f} %); "
+          f"goal < +20 %: {'met' if ratio < 1.2 else 'NOT met'}")
+    print(f"  {on[-1]['part']}")
+    return {"pairs": pairs, "on": on, "off": off, "median": med, "ratio_wall": ratio, "ratio_run": ratio_run}
+
+
+def soak(hours: list[float], out: Path) -> dict[str, object]:
+    rows = []
+    for h in hours:
+        r = run(["--stop-time", f"{h * 3600:g}", *SOAK], out)
+        r["hours"] = h
+        rows.append(r)
+        print(f"soak {h:g} h simulated: peak RSS {r['peak_rss_mb']:.1f} MB, wall {r['wall_s']:.1f} s; {r['part']}",
+              flush=True)
+    growth = rows[-1]["peak_rss_mb"] - rows[0]["peak_rss_mb"]
+    print(f"peak RSS growth from {hours[0]:g} h to {hours[-1]:g} h: {growth:+.1f} MB")
+    return {"runs": rows, "growth_mb": growth}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--pairs", type=int, default=3, help="interleaved on/off pairs (default 3)")
+    parser.add_argument("--hours", type=float, nargs="*", default=[], help="soak durations, simulated hours")
+    parser.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    args = parser.parse_args()
+    results: dict[str, object] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.pairs:
+            results["cost"] = cost(args.pairs, Path(tmp))
+        if args.hours:
+            results["soak"] = soak(sorted(args.hours), Path(tmp))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
