@@ -137,3 +137,10 @@ def test_recutting_the_same_surface_keeps_the_stock_small():
         jitter = 1e-7 * (k % 3)
         feed(m, [(2.0, 28.0 + jitter), (-40.0, 28.0 + jitter)], rapid=False, t0=10 * (k + 1))
     assert isinstance(m.stock, Polygon) and len(m.stock.exterior.coords) <= size + 4
+
+
+@pytest.mark.parametrize("chunk", [None, 50])
+def test_a_crash_is_one_crash_per_move_whatever_the_chunks(chunk):
+    m = MaterialRemoval(box(-80, 0, 0, 29), lathe_tool(0.0), max_depth=1.0)
+    feed(m, [(2.0, 27.0), (-30.0, 27.0)], rapid=False, line=3, chunk=chunk)
+    assert m.crash_count == 1 and m.crashes[0].depth_mm == pytest.approx(2.0, abs=RESOLUTION)

@@ -407,7 +407,7 @@ class CutSequencer(CycleController):
         out["line"] = self.plan[self.segment].line if running else 0
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
-        out["rapid"] = self.rapid and not self.move.done
+        out["rapid"] = self.rapid and (self.busy or not self.move.done)
         return out
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:

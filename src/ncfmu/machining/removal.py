@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import shapely
@@ -178,6 +178,8 @@ class MaterialRemoval:
         # next chunk measures its chip's depth from that outline, not from the face its first part just cut
         self._open: tuple[bool, int] | None = None
         self._outline_before: BaseGeometry = stock.boundary
+        # the crashes the open move has been reported for (once per move): what -> its index in crashes
+        self._reported: dict[str, int | None] = {}
 
     # -- feeding ---------------------------------------------------------------------------------------
     def write(self, t: np.ndarray, u: np.ndarray, v: np.ndarray, rapid: np.ndarray, line: np.ndarray) -> None:
@@ -209,6 +211,7 @@ class MaterialRemoval:
                 move = Move(a, b, bool(rapid[a]), int(line[a]))
                 if not (a == first == 1 and self._open == (move.rapid, move.line)):
                     self._outline_before = self.stock.boundary
+                    self._reported = {}
                 self._move(t, xy, move)
                 self._open = (move.rapid, move.line)
 
@@ -243,9 +246,16 @@ class MaterialRemoval:
 
     def _crash(self, t: np.ndarray, xy: np.ndarray, move: Move, what: str, piece: BaseGeometry,
                depth: float) -> None:
+        if what in self._reported:           # a move going on from the chunk before: reported there, deeper now?
+            k = self._reported[what]
+            if k is not None and depth > self.crashes[k].depth_mm:
+                self.crashes[k] = replace(self.crashes[k], depth_mm=depth)
+            return
         self.crash_count += 1
+        self._reported[what] = None
         if len(self.crashes) < MAX_CRASHES:
             when, at = self._first_entry(t, xy, move, piece, depth)
+            self._reported[what] = len(self.crashes)
             self.crashes.append(Crash(when, move.line, what, depth, at))
 
     def _move(self, t: np.ndarray, xy: np.ndarray, move: Move) -> None:

@@ -103,7 +103,7 @@ class PartVerdict:
                 + (f" (line {line})" if line else ""))
 
     def summary(self) -> list[str]:
-        lines = [f"  part: CRASH at t = {c.t:.3f} s, line {c.line}: {c.what}, {c.depth_mm:.4g} mm deep"
+        lines = [f"  part: CRASH at t = {c.t:.3f} s, line {c.line}: {c.what}, {c.depth_mm:.3g} mm deep"
                  for c in self.crashes[:CRASH_LINES]]
         if self.crash_count > CRASH_LINES:
             lines.append(f"  part: ... {self.crash_count - CRASH_LINES} more crashes (OUT/<system>.part.json)")
