@@ -1,7 +1,7 @@
 """The part check's cost and memory. ``python bench/part_check.py [--pairs 3] [--hours 0.25 1] [--json FILE]``.
 
 - **Cost**: ``ncfmu run lathe_roughing`` with the part check (the default) and with ``--no-part-check``, side by
-  side in one invocation, interleaved (on, off, on, off, ...), each a fresh process; printed: the wall time of
+  side in one invocation, interleaved (on off, off on, on off, ...), each a fresh process; printed: the wall time of
   each process and of its simulation (the summary's "in ... s wall"), the medians and the ratio on / off. Goal:
   the part check adds < 20 % to the run's wall time.
 - **Soak**: lathe_roughing cutting part after part (the panel's START repeated every 100 s; the first cycle cuts
@@ -48,9 +48,12 @@ def cost(pairs: int, out: Path) -> dict[str, object]:
     run([], out)                                   # builds what is stale, warms the caches
     on: list[dict[str, float]] = []
     off: list[dict[str, float]] = []
-    for k in range(pairs):
-        on.append(run([], out))
-        off.append(run(["--no-part-check"], out))
+    for k in range(pairs):          # A B, B A, A B, ...: neither side always runs second
+        for side in ((0, 1) if k % 2 == 0 else (1, 0)):
+            if side == 0:
+                on.append(run([], out))
+            else:
+                off.append(run(["--no-part-check"], out))
         print(f"pair {k + 1}: on {on[-1]['wall_s']:.2f} s (run {on[-1]['run_wall_s']:.2f} s), "
               f"off {off[-1]['wall_s']:.2f} s (run {off[-1]['run_wall_s']:.2f} s)", flush=True)
     med = {side: {key: statistics.median(r[key] for r in rows) for key in ("wall_s", "run_wall_s")}
@@ -79,7 +82,7 @@ def soak(hours: list[float], out: Path) -> dict[str, object]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--pairs", type=int, default=3, help="interleaved on/off pairs (default 3)")
+    parser.add_argument("--pairs", type=int, default=4, help="interleaved on/off pairs (default 4)")
     parser.add_argument("--hours", type=float, nargs="*", default=[], help="soak durations, simulated hours")
     parser.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     args = parser.parse_args()

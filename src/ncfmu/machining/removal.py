@@ -43,6 +43,8 @@ RESOLUTION = 0.0005
 TOUCH = 0.005
 #: Chips of a smaller area are not subtracted (mm^2): a recut surface stays as it was.
 MIN_AREA = 1e-6
+#: Walls of the stock thinner than twice this are no part of the part made (mm): see MaterialRemoval.part.
+SLIVER = 0.002
 #: How many crash records are kept (the count goes on).
 MAX_CRASHES = 100
 #: Spacing of the points at which a region's depth is measured (mm).
@@ -288,8 +290,13 @@ class MaterialRemoval:
     # -- the part ---------------------------------------------------------------------------------------
     def part(self, anchor: BaseGeometry) -> BaseGeometry:
         """The piece of the stock left that holds most of ``anchor`` (the chuck's end of a bar, the finished
-        contour of a plate): what is cut off elsewhere is not the part."""
-        pieces = list(shapely.get_parts(self.stock))
+        contour of a plate): what is cut off elsewhere is not the part. Walls thinner than ``2 * SLIVER`` are
+        not part of it: where two cuts met a hair apart (a pass ending a micrometre short of the face the next
+        one cuts), a point tool's path leaves a wall no real tool would; the opening that removes them keeps
+        every other edge and corner where it is (square joins)."""
+        stock = self.stock.buffer(-SLIVER, join_style="mitre", mitre_limit=1e3)
+        stock = _areal(stock.buffer(SLIVER, join_style="mitre", mitre_limit=1e3))
+        pieces = list(shapely.get_parts(stock))
         if not pieces:
             return Polygon()
         return max(pieces, key=lambda p: (p.intersection(anchor).area, p.area))
