@@ -113,7 +113,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
             for slave in opened.slaves:
                 slave.reset()
         system = opened.system
-        report = report_for(system.name, {c.name: c.model for c in system.components})
+        report = report_for(system.name, opened.models)
         keep = list(record) if record is not None else report.record()
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")

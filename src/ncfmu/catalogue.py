@@ -2,8 +2,9 @@
 
 A model is a :class:`~ncfmu.controllers.base.Controller` subclass with a ``MODEL_NAME`` in this package: the
 plain-Python controllers of :mod:`ncfmu.controllers`, each built into a Python FMU from its model script
-``models/<MODEL_NAME>.py``, and the servo's Python stepper (:mod:`ncfmu.servo.axis`), the executable
-specification of the native ServoAxis FMU built from its C sources (``NATIVE_SOURCE``). The systems' component
+``models/<MODEL_NAME>.py``, and the drives' Python steppers (:mod:`ncfmu.servo.axis`, :mod:`ncfmu.servo.spindle`),
+the executable specifications of the native ServoAxis and SpindleDrive FMUs built from their C sources
+(``NATIVE_SOURCE``). The systems' component
 checks, the builders, the documentation and the command line ask :func:`models`; nothing else lists them.
 Adding a model is its controller (a module of ``controllers/``), its model script and its tests.
 """
@@ -24,6 +25,7 @@ def models() -> dict[str, type[Controller]]:
     for info in pkgutil.iter_modules(controllers.__path__):
         importlib.import_module(f"{controllers.__name__}.{info.name}")
     importlib.import_module(f"{__package__}.servo.axis")
+    importlib.import_module(f"{__package__}.servo.spindle")
     found: dict[str, type[Controller]] = {}
     stack: list[type[Controller]] = [Controller]
     while stack:

@@ -101,6 +101,9 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
     lines += (report_of(result).summary(result, run_parameters(result)) if report_lines is None
               else report_lines)
+    if getattr(result, "ended_by", ""):
+        lines.append(f"  ended: {result.ended_by}")
+    lines += [f"  [warning] {w}" for w in getattr(result, "warnings", [])]
     for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):
@@ -127,6 +130,51 @@ def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[st
                 where[name].append(values[name])
     return [f"  [warning] {option.get(name, '--set')} {name}={','.join(map(str, where[name]))}: {reason}"
             for name, reason in why.items()]
+
+
+def _replace_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--replace", action="append", default=[], metavar="INSTANCE=PATH.fmu",
+                   help="run another FMU in place of an instance (connections kept by variable name; the old "
+                        "parameters applied where the new FMU has them); repeatable")
+    p.add_argument("--map", action="append", default=[], metavar="INSTANCE.THEIRS=OURS",
+                   help="a replacing FMU's name for an old connector, e.g. --map x_axis.x=pos; repeatable")
+
+
+def _prepare_source(args) -> list[str]:
+    """``args.system`` (a name, .ssp, .ssd, system folder or .fmu, with --replace/--map) made the path of the .ssp
+    the command runs; returns the replacement's warning lines."""
+    from .project import prepared_archive
+    if args.system in _shipped_names() and not args.replace and not args.map:
+        return []
+    archive, warnings = prepared_archive(args.system, args.replace, args.map, args.root)
+    args.system = str(archive)
+    return warnings
+
+
+def _shipped_names() -> set[str]:
+    from .systems import SYSTEMS
+    return set(SYSTEMS)
+
+
+def cmd_pack(args) -> int:
+    """A user's system (an .ssd with its folder, an unpacked folder, an .ssp or a bare .fmu, with --replace/--map)
+    written as one .ssp archive."""
+    from .cosim.ssp import read_ssp
+    from .files import write_atomic
+    warnings = _prepare_source(args)
+    if args.system in _shipped_names():
+        from .project import system_archive
+        args.system = str(system_archive(args.system, args.root))
+    out = Path(args.output)
+    if out.suffix != ".ssp":
+        raise NcfmuError(f"--output {out}: must end in .ssp")
+    system = read_ssp(Path(args.system))
+    write_atomic(out, Path(args.system).read_bytes())
+    print(f"packed {system.name} ({len(system.components)} components: "
+          f"{', '.join(c.name for c in system.components)}) -> {out}")
+    for w in warnings:
+        print(f"  [warning] {w}")
+    return 0
 
 
 def cmd_build(args) -> int:
@@ -161,20 +209,21 @@ def _run_streamed(args, start_values: dict[str, object]):
     import signal
 
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
+    from .cosim.record import CsvSink, EveryKth, RecordSink, RecordWriteError, SelectColumns
     from .cosim.ssp import read_ssp
-    from .project import simulate, system_archive
+    from .project import ScaledSink, archive_models, report_scales, simulate, system_archive
     from .systems import report_for
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import columns_of, start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
-    report = report_for(system.name, {c.name: c.model for c in system.components})
-    if not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
+    report = report_for(system.name, archive_models(archive, system))
+    if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
         raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
     settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
-                            math.inf if args.max_depth is None else args.max_depth)
+                            args.max_depth)
     report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
+    scales = report_scales(archive, system, report.record())     # a user's axis in m: the report reads mm
     parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))
     step = system.step_size if args.step is None else args.step
@@ -195,7 +244,7 @@ def _run_streamed(args, start_values: dict[str, object]):
         run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
         csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
         every = steps_per_row(interval, step)
-        sinks = [csv_view if every == 1 else EveryKth(csv_view, every), accumulator]
+        sinks = [csv_view if every == 1 else EveryKth(csv_view, every), ScaledSink(accumulator, scales)]
         interval = None
     try:
         with deferred_interrupts():
@@ -207,12 +256,20 @@ def _run_streamed(args, start_values: dict[str, object]):
         print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {_where_stopped(csv_sink)}",
               file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
+    except RecordWriteError as err:       # the disk full: whole rows kept, said as for Ctrl-C
+        if csv_sink.final_path is None:
+            raise
+        raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
     except NcfmuError as err:
         if csv_sink.final_path is None:
             raise
         raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    if accumulator is None:             # --plot: the summary (and the part check) over the kept trajectory
+    if accumulator is None:              # --plot: the kept trajectory, its axes in mm for the summary and the plot
+        for name, gain in scales.items():
+            if name in result:
+                result.data[name] *= gain
+        # the summary (and the part check) over the kept trajectory
         accumulator = report.accumulator(result.parameters or parameters)
         accumulator.open(columns_of(result.data))
         if len(result.data):
@@ -230,6 +287,7 @@ def _where_stopped(sink) -> str:
 
 def cmd_run(args) -> int:
     from .project import simulate_branches
+    replace_warnings = _prepare_source(args)
     if args.branch_at is not None:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
@@ -253,6 +311,8 @@ def cmd_run(args) -> int:
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
     result, csv, accumulator = _run_streamed(args, start_values)
+    for line in replace_warnings:
+        print(f"  [warning] {line}")
     out = Path(args.out)
     for line in _unreached_lines(args.system, [start_values], {}):
         print(line)
@@ -310,6 +370,8 @@ def cmd_sweep(args) -> int:
         if value is not None and not (value > 0 and value < float("inf")):
             raise NcfmuError(f"{name} {value!r}: must be a number > 0")
     vary = _parse_vary(args.vary)
+    for line in _prepare_source(args):
+        print(f"  [warning] {line}")
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
                  output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
@@ -370,23 +432,26 @@ def cmd_plot(args) -> int:
 
 def cmd_vars(args) -> int:
     """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
-    import zipfile
+    from dataclasses import replace
 
     from .cosim.ssp import read_ssp
+    from .project import OpenSystem, model_descriptions
     from .systems import get_system
     from .systems.settable import settable
+    warnings: list[str] = _prepare_source(args)
+    foreign: list[str] = []
     if args.system.endswith(".ssp"):
         archive = Path(args.system)
         system = read_ssp(archive)
-
-        def model_description(model: str) -> bytes:
-            source = next(c.source for c in system.components if c.model == model)
-            try:
-                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
-                    return fmu.read("modelDescription.xml")
-            except (KeyError, zipfile.BadZipFile) as err:
-                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
-        rows = settable(system, model_description)
+        described = model_descriptions(archive, system)
+        rows = settable(system, described.__getitem__)
+        # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
+        with OpenSystem(archive) as opened:
+            conversions = opened.master.conversions
+            warnings = [*warnings, *opened.warnings()]
+            foreign = [f"{inst}: {identity}" for inst, identity in opened.identities.items() if not identity.model]
+        rows = [replace(r, driven_by=f"{r.driven_by} ({conversions[key]})")
+                if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
         system = get_system(args.system)
         rows = settable(system)
@@ -408,6 +473,8 @@ def cmd_vars(args) -> int:
         lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
         if r is not None and len(r.start) > long:
             lines.append(f"    start: {r.start}")
+    lines += [f"  foreign FMU {line}" for line in foreign]
+    lines += [f"  [warning] {w}" for w in warnings]
     try:
         sys.stdout.write("\n".join(lines) + "\n")
         sys.stdout.flush()
@@ -417,7 +484,12 @@ def cmd_vars(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from .serving import Security, serve
+    from .serving import APPLICATION_URI, Security, make_certificate, serve
+    if args.make_certificate is not None:
+        key, cert = make_certificate(args.make_certificate)
+        print(f"ncfmu serve: wrote {cert} (application URI {APPLICATION_URI}) and its private key {key}; serve "
+              f"with --certificate {cert} --private-key {key}; clients trust {cert}")
+        return 0
     users = {}
     for item in args.user or []:
         name, colon, password = item.partition(":")
@@ -434,7 +506,9 @@ def cmd_serve(args) -> int:
 
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
-                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
+                    security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
+                    root=args.root, ready=ready,
+                    watchdog=args.watchdog, cnc=args.cnc)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -487,10 +561,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tolerance", type=float, default=None, metavar="MM",
                    help="the part check's tolerance of the part made against the programmed part, mm (default "
                         "0.01); exit status 3 on a crash or a part out of tolerance")
-    p.add_argument("--nose-radius", type=float, default=0.0, metavar="MM",
-                   help="the lathe tool's nose radius for the part check, mm (default 0: a sharp point)")
+    p.add_argument("--nose-radius", type=float, default=None, metavar="MM",
+                   help="the lathe tool's nose radius for the part check, mm (default: the tool table's "
+                        "seq.tool[k].nose_radius of the program's first T word, else 0: a sharp point)")
     p.add_argument("--max-depth", type=float, default=None, metavar="MM",
-                   help="the deepest cut (radial engagement) the lathe tool may take, mm (default: no limit)")
+                   help="the deepest cut (radial engagement) the lathe tool may take, mm (default: the tool "
+                        "table's seq.tool[k].max_depth, else no limit)")
     p.add_argument("--no-part-check", action="store_true",
                    help="no material removal, crash and tolerance check (and no SYSTEM.part.json)")
     p.add_argument("--branch-at", type=float, default=None, metavar="T",
@@ -498,6 +574,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
                    help="tunable parameter or input set at the branch point, one value per branch, "
                         "e.g. --branch-set panel.emergency_at=12,21,31")
+    _replace_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
@@ -533,6 +610,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
     p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
+    _replace_options(p)
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
@@ -554,6 +632,7 @@ def main(argv: list[str] | None = None) -> int:
                                    "from, and its description.", epilog=help_epilog)
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
+    _replace_options(p)
     p.set_defaults(func=cmd_vars)
 
     p = sub.add_parser("serve", help="run a system in real time behind an OPC UA server (virtual commissioning)",
@@ -580,7 +659,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--certificate", type=Path, default=None,
                    help="server certificate: adds the Basic256Sha256 SignAndEncrypt policy (with --private-key)")
     p.add_argument("--private-key", type=Path, default=None, help="the certificate's private key")
+    p.add_argument("--trust", type=Path, default=None, metavar="DIR",
+                   help="folder of the client certificates (or their CAs' certificates) accepted; any other is "
+                        "refused (needs --certificate; required off the loopback)")
+    p.add_argument("--allow-insecure", action="store_true",
+                   help="off the loopback, also security policy None and any client certificate (a closed network)")
+    p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
+                   help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
+                        "DIR/ncfmu-key.pem, then exit")
+    p.add_argument("--cnc", action="store_true",
+                   help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
+                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+    p.add_argument("--watchdog", type=float, default=None, metavar="S",
+                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
+                        "nothing for S seconds (logged, and recorded as releases)")
     p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "
+                       ".fmu; components replaced with --replace) as one .ssp archive")
+    p.add_argument("system", help="system name, .ssp, .ssd, unpacked system folder or .fmu")
+    p.add_argument("--output", "-o", required=True, help="the .ssp file to write")
+    _replace_options(p)
+    p.set_defaults(func=cmd_pack)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)

@@ -29,6 +29,8 @@ UNITS: dict[str, dict] = {
     "kg.m2": {"kg": 1, "m": 2},
     "mm/rev": {"m": 1, "rad": -1, "factor": 1e-3 / (2 * math.pi)},
     "rev/min": {"rad": 1, "s": -1, "factor": 2 * math.pi / 60},
+    "rev": {"rad": 1, "factor": 2 * math.pi},
+    "kW": {"kg": 1, "m": 2, "s": -3, "factor": 1e3},
     "1": {},
 }
 

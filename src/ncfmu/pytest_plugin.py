@@ -6,10 +6,10 @@ ncfmu_project
     Session: builds what is missing or stale (FMUs in fmus/, systems in ssp/) once; the artefact paths.
 ncfmu_run
     Session: ``ncfmu_run(system, stop_time=None, start_values=None, input_csv=None, mode="gauss-seidel",
-    tolerance=0.01, nose_radius=0.0, max_depth=inf)`` runs a system closed loop through the FMUs and returns the
+    tolerance=0.01, nose_radius=None, max_depth=None)`` runs a system closed loop through the FMUs and returns the
     Result; identical calls share one run. ``result.part`` is the part check's verdict of a lathe or mill run
     (``within_tolerance``, ``crashes``, ``max_left_mm``, ``max_gouge_mm``, ...; judged on first use with the
-    call's tolerance and tool), None for a system without one.
+    call's tolerance and tool -- None: the tool table's), None for a system without one.
 ncfmu_checks
     The :mod:`ncfmu.checks` module (``assert_reaches``, ``assert_no_motion``, ``assert_inside_envelope``,
     ``assert_alarm``).
@@ -28,7 +28,6 @@ Example::
 from __future__ import annotations
 
 import json
-import math
 import os
 import signal
 import socket
@@ -52,8 +51,8 @@ def ncfmu_run(ncfmu_project):
     cache: dict[str, object] = {}
 
     def run(system: str = "lathe_roughing", stop_time: float | None = None, start_values: dict | None = None,
-            input_csv=None, mode: str = "gauss-seidel", tolerance: float = 0.01, nose_radius: float = 0.0,
-            max_depth: float = math.inf):
+            input_csv=None, mode: str = "gauss-seidel", tolerance: float = 0.01, nose_radius: float | None = None,
+            max_depth: float | None = None):
         from ncfmu.systems.part import PartSettings
         key = json.dumps([system, stop_time, sorted((start_values or {}).items()), str(input_csv), mode],
                          default=str)

@@ -16,7 +16,7 @@ LATHE_SEQ, LATHE_LIMITER = parameters("lathe_roughing", "seq"), parameters("lath
 def test_every_model_is_built(fmus):
     # fmpy's validation of each FMU (and the SSP schema of each system) is `ncfmu validate`: test_cli
     assert set(fmus) == {"AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed",
-                         "ServoAxis"}
+                         "ServoAxis", "SpindleDrive"}
 
 
 def test_model_description_carries_units_and_initial_unknowns(fmus):

@@ -15,7 +15,8 @@ import pytest
 pytestmark = pytest.mark.slow        # a fresh process and 350 cycles per FMU
 
 CYCLES = Path(__file__).with_name("memory_cycles.py")
-FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis"]
+FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed", "ServoAxis",
+        "SpindleDrive"]
 
 
 @pytest.mark.parametrize("model", FMUS)

@@ -4,7 +4,7 @@
   at fmi2Instantiate with one message, said once;
 - a native host exits cleanly, every time (pythonfmu's double release of its interpreter state at exit);
 - the controller FMUs carry only code that needs the Python standard library;
-- the native ServoAxis needs no Python at all.
+- the native ServoAxis and SpindleDrive need no Python at all.
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 from fmpy import extract, read_model_description
+
+from ncfmu.catalogue import native_models
 
 HOST_C = Path(__file__).resolve().parents[1] / "native" / "fmi_host.c"
 
@@ -109,7 +111,7 @@ def test_controller_fmus_carry_only_standard_library_code(fmus):
     (carried too) or its own vendored package: no numpy, scipy, control, fmpy."""
     allowed = set(sys.stdlib_module_names) | {"pythonfmu", "__future__"}
     for name, fmu in fmus.items():
-        if name == "ServoAxis":
+        if name in native_models():
             continue
         with zipfile.ZipFile(fmu) as z:
             files = [n for n in z.namelist() if n.startswith("resources/") and n.endswith(".py")]
@@ -136,4 +138,13 @@ def test_servo_runs_without_python(fmus, fmi_host, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     # the command ramps at 10 mm/s to 10 mm; with full feed-forward the axis follows within microns
     assert outputs(proc) == [pytest.approx(10.0, abs=0.01)] * 2
+    assert "python" not in subprocess.run(["ldd", binary], capture_output=True, text=True).stdout.lower()
+
+
+def test_spindle_runs_without_python(fmus, fmi_host, tmp_path):
+    binary, guid, vr = unpack(fmus["SpindleDrive"], tmp_path / "fmu")
+    proc = run_host(fmi_host, binary, guid, 2, 1000, vr["speed"], f"{vr['speed_cmd']}=1000.0")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    # 0 -> 1000 rev/min at the torque limit takes 0.21 s; after 1 s it turns at 1000 (to an encoder count a step)
+    assert outputs(proc) == [pytest.approx(1000.0, abs=0.06)] * 2
     assert "python" not in subprocess.run(["ldd", binary], capture_output=True, text=True).stdout.lower()

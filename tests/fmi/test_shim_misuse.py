@@ -19,7 +19,7 @@ from ncfmu.controllers import __name__ as _controllers  # noqa: F401 -- the pack
 
 HOST = Path(__file__).with_name("misuse_host.py")
 PYTHON_FMUS = ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed"]
-ALL_FMUS = [*PYTHON_FMUS, "ServoAxis"]
+ALL_FMUS = [*PYTHON_FMUS, "ServoAxis", "SpindleDrive"]
 # Functions without a component (nothing to misuse) and the two the host calls in its own cases.
 NO_COMPONENT = {"fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2Instantiate", "fmi2FreeInstance"}
 

@@ -18,9 +18,9 @@ from ncfmu.systems import MODELS
 def test_the_catalogue_is_every_model_and_the_rest_derives_from_it():
     found = catalogue.models()
     assert list(found) == ["AreaLimiter", "ContourInterpolator", "CutSequencer", "OperatorPanel", "ProgrammableFeed",
-                           "ServoAxis"]
+                           "ServoAxis", "SpindleDrive"]
     assert MODELS == found                                              # the systems' component checks
-    assert [m.name for m in native_models()] == catalogue.native_models() == ["ServoAxis"]
+    assert [m.name for m in native_models()] == catalogue.native_models() == ["ServoAxis", "SpindleDrive"]
     assert [p.stem for p in model_scripts(ROOT / "models")] == catalogue.python_models()
     assert sorted(p.stem for p in (ROOT / "docs" / "fmus").glob("*.md")) == list(found)
 

@@ -36,7 +36,7 @@ def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
     (built,) = (cache / "ncfmu").iterdir()
     assert {p.name for p in (built / "fmus").glob("*.fmu")} == {
         "AreaLimiter.fmu", "ContourInterpolator.fmu", "CutSequencer.fmu", "OperatorPanel.fmu",
-        "ProgrammableFeed.fmu", "ServoAxis.fmu"}
+        "ProgrammableFeed.fmu", "ServoAxis.fmu", "SpindleDrive.fmu"}
     assert (built / "ssp" / "grinder_feed.ssp").is_file() and not (built / "docs").exists()
     assert len(list((built / "build").glob("ncfmu_loop-*.so"))) == 1       # the master's C loop, built there too
     # the run itself: the seed's cycle ground to 4.3 mm (rapid 4.0, rough 0.2, fine 0.1) and returned

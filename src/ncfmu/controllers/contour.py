@@ -36,12 +36,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
 from .base import POSITION_LIMIT, int_param, real_param, servo_ports
-from .cycle import ARRIVED, LATE, CycleController, cycle_ports, follow_up
+from .cycle import CycleController, cycle_ports
 from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
 from .motion import stop_speed
 
@@ -330,47 +331,58 @@ class ContourInterpolator(CycleController):
         py = sy + (1 if dy >= 0 else -1) * ((half + k * abs(dy)) // n)
         return px * self.dda_unit, py * self.dda_unit
 
-    # -- stepping -------------------------------------------------------------------------------------
-    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        bad = self.judge_inputs(inputs, dt) or (self.following_error(inputs, self.cmd) if self.busy else None)
-        started = self.start_button.pressed(inputs["start"])
-        if bad or self._halting:
-            if bad:
-                self.latch_alarm(t, bad, "decelerating to rest on the path, cycle stopped")
-                self.busy = False
-                self._halting = self._i < len(self._run) and self.v > 0.0
-            if self._halting:
-                self._advance(dt, 0.0, inputs, finishing=False)
-                self._halting = self.v > 0.0
-                if not self._halting:
-                    self.vff = [0.0, 0.0]
-            else:
+    # -- the hooks of the NC cycle (controllers/cycle.py owns the order of a step) -----------------------
+    ALARM_INPUT = ""                      # no external alarm input: nothing holds the mill's axes
+    STOP_SAYS = "decelerating to rest on the path, cycle stopped"
+    MOTION_SAYS = "the path is"
+
+    def halt(self) -> None:
+        """The path decelerates to rest along the contour (:meth:`advance`); the cycle ends."""
+        self.busy = False
+        self._halting = self._i < len(self._run) and self.v > 0.0
+
+    def watching_following_error(self) -> bool:
+        return self.busy                                # why: in CycleController
+
+    def at_rest(self) -> bool:
+        return not self._halting
+
+    def command_point(self) -> list[float]:
+        return self.cmd
+
+    def rebase(self, actual: Mapping[str, float]) -> None:
+        """The next cycle's approach starts where the tool stands."""
+        self.cmd = [actual["x"], actual["y"]]
+
+    def take_commands(self, t: float, inputs: Mapping[str, object], edges: Any, bad: str | None,
+                      why: str | None) -> None:
+        if not why:                                     # a step that raised the alarm takes no START
+            super().take_commands(t, inputs, edges, bad, why)
+
+    def start(self, t: float, inputs: Mapping[str, object], edges: Any) -> None:
+        if self.geometry_error:                         # the alarm stays: the cutter does not fit
+            self.say("error", f"t = {t:.4f} s: start refused: {self.geometry_error}")
+            return
+        super().start(t, inputs, edges)
+
+    def begin(self, t: float, edges: Any) -> None:
+        self.done, self.busy = False, True
+        self._begin_cycle()
+
+    def advance(self, t: float, dt: float, inputs: Mapping[str, object], why: str | None) -> None:
+        if self._halting:
+            self._advance(t, dt, 0.0, inputs, finishing=False)
+            self._halting = self.v > 0.0
+            if not self._halting:
                 self.vff = [0.0, 0.0]
-            return self._publish()
-        if started and not self.busy:
-            if self.geometry_error:
-                self.say("error", f"t = {t:.4f} s: start refused: {self.geometry_error}")
-            else:
-                if self.alarm:
-                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-                    self._follow_up(t, inputs)
-                self.alarm, self.done, self.busy = False, False, True
-                self._begin_cycle()
-        if self.busy:
+        elif why:
+            self.vff = [0.0, 0.0]
+        elif self.busy:
             scale = 0.0 if inputs["feed_hold"] else self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
-            self._advance(dt, scale, inputs)
-        return self._publish()
+            self._advance(t, dt, scale, inputs)
 
-    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
-        """Re-base the command on the actual position where a stop left them apart (an axis held or lagging when
-        the alarm came): the next cycle's approach starts where the tool stands."""
-        actual = dict(zip(self.AXES, self.actual(inputs)))
-        if follow_up(actual, dict(zip(self.AXES, self.cmd)), self.inpos_band):
-            self.say("info", f"t = {t:.4f} s: follow-up: command ({self.cmd[0]:.4f}, {self.cmd[1]:.4f}) re-based on "
-                             f"the actual position ({actual['x']:.4f}, {actual['y']:.4f})")
-            self.cmd = [actual["x"], actual["y"]]
-
-    def _advance(self, dt: float, scale: float, inputs: Mapping[str, object], finishing: bool = True) -> None:
+    def _advance(self, t: float, dt: float, scale: float, inputs: Mapping[str, object],
+                 finishing: bool = True) -> None:
         """Advance the path by one step at ``scale`` times the programmed feed (override; 0: hold or halt)."""
         if self._i < len(self._run):
             i = self._i
@@ -421,14 +433,8 @@ class ContourInterpolator(CycleController):
         self.v = 0.0
         if not finishing:
             return
-        judged = self.inpos.judge(dt, True, self.in_position(inputs), self.actual(inputs), self.cmd)
-        if judged == ARRIVED:
+        if self.arrival(t, dt, True, inputs):
             self.busy, self.done = False, True
-        elif judged == LATE:
-            self.alarm, self.busy = True, False
-            self.say("error", f"in-position check: the axes stand at ({float(inputs['x_pos']):.4f}, "  # type: ignore[arg-type]
-                              f"{float(inputs['y_pos']):.4f}), not at the end point ({self.cmd[0]:.4f}, "  # type: ignore[arg-type]
-                              f"{self.cmd[1]:.4f}), {self.inpos_timeout:g} s after the command stopped")
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs

@@ -1,23 +1,33 @@
-"""The NC cycle every controller of servo axes shares, written once.
+"""The NC cycle every controller of servo axes shares, written once: its parts and the order of a step.
 
 A cycle controller (the lathe's CutSequencer, the grinder's ProgrammableFeed, the mill's
 ContourInterpolator) commands servo axes through motions and must know, as a control does, when a
-motion has really ended and when something has gone wrong. What its seed adds (sub-cycles, a program
-store, a contour) sits on this skeleton:
+motion has really ended and when something has gone wrong. :meth:`CycleController.step` owns the order
+of every step; what a controller's seed adds (sub-cycles, a program store, a contour) fills in its hooks:
 
-- **cycle start** is a push button read for its rising edge (:class:`Button`);
-- **inputs are judged every step**: a position input that is NaN, beyond any machine or jumps faster
-  than any axis moves, and an override that is not finite, raise the alarm (:meth:`CycleController.judge_inputs`),
-  and so does an excess following error, ``|command - actual| > max_following_error``;
-- **the alarm latches** and says why once (:meth:`CycleController.latch_alarm`); the controller brings its
-  motion to a controlled stop along its path;
-- **a motion ends** only when its command has stopped, the servos have had one round trip through the
-  master to answer the final command (trusted from the 2nd step after the stop: one step with
-  Gauss-Seidel, two with Jacobi), every axis reports in-position AND stands within ``inpos_band`` of the
-  controller's *own* command (a move held downstream never counts as done). Waiting longer than
-  ``inpos_timeout`` after the command stopped is the in-position alarm (:class:`InPosition`);
-- **follow-up**: START after an alarm re-bases the command on the actual position where a stop left them
-  more than ``inpos_band`` apart (:func:`follow_up`).
+1. **buttons**: every push button is read for its rising edge, every step (:class:`Button`; the hook
+   :meth:`~CycleController.read_buttons`: START, and the grinder's START2 and EMB);
+2. **judgement**: a position input that is NaN, beyond any machine or jumps faster than any axis moves, and
+   an override that is not finite, raise the alarm (:meth:`~CycleController.judge_inputs`); else the
+   external alarm input (the area limiter's ``alarm_in``; the hook :meth:`~CycleController.external_alarm`);
+   else an excess following error, ``|command - actual| > max_following_error``, judged under the
+   controller's policy (:meth:`~CycleController.watching_following_error`: the one policy that differs, and
+   why, is written there);
+3. **the alarm latches** and says why once (:meth:`~CycleController.latch_alarm`); the controller brings its
+   motion to a controlled stop along its path (:meth:`~CycleController.stop`, the hook
+   :meth:`~CycleController.halt`);
+4. **commands**: START (:meth:`~CycleController.take_commands`) is taken only when the inputs are sane, no
+   external alarm is set and the controller is idle; it waits until the motion is at rest, and after an alarm
+   it first re-bases the command on the actual position (**follow-up**, :meth:`~CycleController.follow_up`:
+   where a stop left them more than ``inpos_band`` apart), then begins the cycle;
+5. **advance** (the hook :meth:`~CycleController.advance`): the motion moves at the dial (or to rest after a
+   stop); **a motion ends** only when its command has stopped, the servos have had one round trip through
+   the master to answer the final command (trusted from the 2nd step after the stop: one step with
+   Gauss-Seidel, two with Jacobi), every axis reports in-position AND stands within ``inpos_band`` of the
+   controller's *own* command (a move held downstream never counts as done). Waiting longer than
+   ``inpos_timeout`` after the command stopped is the in-position alarm (:class:`InPosition`,
+   :meth:`~CycleController.arrival`), raised as every alarm is;
+6. **publish** the outputs.
 
 Nothing here knows a system; time enters only through ``dt``.
 """
@@ -25,6 +35,7 @@ Nothing here knows a system; time enters only through ``dt``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
 
 from ..ports import Port, real
 from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, finite_inputs, real_param
@@ -111,11 +122,158 @@ def follow_up(actual: Mapping[str, float], command: Mapping[str, float], band: f
 
 class CycleController(Controller):
     """Base of the controllers that run cycles on servo axes (:data:`AXES`): the skeleton's parameters,
-    state and judgements. A subclass lists :func:`cycle_ports` among its ports, calls
-    :meth:`configure_cycle` from ``configure`` and :meth:`reset_cycle` from ``reset``."""
+    state, judgements and the order of a step (:meth:`step`). A subclass lists :func:`cycle_ports` among its
+    ports, calls :meth:`configure_cycle` from ``configure`` and :meth:`reset_cycle` from ``reset``, and fills in
+    the hooks :meth:`command_point`, :meth:`rebase`, :meth:`halt`, :meth:`take_commands` (or :meth:`begin`),
+    :meth:`advance` and ``_publish``."""
 
     #: The axes the controller commands, by letter: inputs ``<a>_pos``, ``<a>_in_position``.
     AXES: tuple[str, ...] = ()
+    #: The input by which another device raises the alarm (the area limiter's), or "" for none.
+    ALARM_INPUT: ClassVar[str] = "alarm_in"
+    #: What a stop after an alarm does, as the alarm's log line says it.
+    STOP_SAYS: ClassVar[str] = "decelerating to rest, cycle stopped"
+    #: What decelerates while a START waits for rest, as the log says it.
+    MOTION_SAYS: ClassVar[str] = "the axes are"
+    #: Follow-up re-bases the axes that stand apart only (each axis its own feed), else the whole command point.
+    FOLLOW_UP_PER_AXIS: ClassVar[bool] = False
+    #: Every cycle controller's: the alarm latched, a cycle running.
+    alarm: bool
+    busy: bool
+
+    # -- the order of a step ------------------------------------------------------------------------
+    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
+        """One step of the NC cycle, in the order of the module docstring; the hooks are the controller's."""
+        edges = self.read_buttons(inputs)
+        bad = self.judge_inputs(inputs, dt)
+        why = bad
+        if bad:
+            self.stop(t, bad)
+        elif self.ALARM_INPUT and inputs[self.ALARM_INPUT]:
+            self.external_alarm(t)
+        elif self.watching_following_error():
+            why = self.following_error(inputs, self.command_point())
+            if why:
+                self.stop(t, why)
+        self.take_commands(t, inputs, edges, bad, why)
+        self.advance(t, dt, inputs, why)
+        return self._publish()
+
+    # -- hooks: what the controller's seed adds ------------------------------------------------------
+    def read_buttons(self, inputs: Mapping[str, object]) -> Any:
+        """The rising edges of the step (default: START's, a bool); handed to :meth:`take_commands`."""
+        return self.start_button.pressed(inputs["start"])
+
+    def _publish(self) -> dict[str, object]:
+        """The outputs of the present state (updated in place, returned)."""
+        raise NotImplementedError
+
+    def command_point(self) -> list[float]:
+        """The controller's own command, one value per axis of :data:`AXES`."""
+        raise NotImplementedError
+
+    def rebase(self, actual: Mapping[str, float]) -> None:
+        """Follow-up: make ``actual`` (axis -> position) the command of those axes; the motion starts afresh."""
+        raise NotImplementedError
+
+    def halt(self) -> None:
+        """The controlled stop after an alarm: the motion decelerates along its path; the cycle ends."""
+        raise NotImplementedError
+
+    def idle(self) -> bool:
+        """No cycle runs: a START may begin one."""
+        return not self.busy
+
+    def at_rest(self) -> bool:
+        """The motion stands (a START while it still decelerates after a stop is ignored, and said)."""
+        return bool(self.move.at_rest)  # type: ignore[attr-defined]
+
+    def begin(self, t: float, edges: Any) -> None:
+        """Begin the cycle START asked for (the alarm is cleared, the command followed up)."""
+        raise NotImplementedError
+
+    def advance(self, t: float, dt: float, inputs: Mapping[str, object], why: str | None) -> None:
+        """Move the motion by one step (at the dial while a cycle runs, to rest after a stop) and judge its
+        arrival (:meth:`arrival`); ``why``: the alarm this step's judgement raised, if any."""
+        raise NotImplementedError
+
+    def watching_following_error(self) -> bool:
+        """Whether this step judges the excess following error. The one policy that differs between the cycle
+        controllers, and why:
+
+        - the lathe (CutSequencer) judges always, at rest too: an axis pushed off its command while the
+          sequencer stands (a slide held by the limiter after an alarm) keeps the alarm latched until a START
+          follows up -- the seed's distance counters watch the axes whatever runs;
+        - the grinder (ProgrammableFeed) while a cycle or the emergency return runs, but not while an aborted
+          feed decelerates before EMB's return: the emergency return backs out of what held the wheel, and an
+          error alarm there would abort the very back-out;
+        - the mill (ContourInterpolator) while a contour runs: at rest it commands nothing.
+
+        Default: while a cycle runs."""
+        return not self.idle()
+
+    def external_alarm(self, t: float) -> None:
+        """The external alarm input is set (no bad input this step): latch the alarm and stop."""
+        self.stop(t, f"{self.ALARM_INPUT} (area limiter) is set")
+
+    def take_commands(self, t: float, inputs: Mapping[str, object], edges: Any, bad: str | None,
+                      why: str | None) -> None:
+        """The operator's commands of this step: START (``edges``) is taken when the inputs are sane, no
+        external alarm is set and the controller is :meth:`idle` (see :meth:`start`)."""
+        if edges and self.idle() and not bad and not (self.ALARM_INPUT and inputs[self.ALARM_INPUT]):
+            self.start(t, inputs, edges)
+
+    # -- the skeleton's parts -------------------------------------------------------------------------
+    def stop(self, t: float, why: str) -> None:
+        """The alarm: latch it (said once, with :data:`STOP_SAYS`) and bring the motion to a controlled stop."""
+        self.latch_alarm(t, why, self.STOP_SAYS)
+        self.halt()
+
+    def start(self, t: float, inputs: Mapping[str, object], edges: Any) -> None:
+        """A START taken: ignored (and said) while the motion decelerates; after an alarm, clear it and follow
+        up; then :meth:`begin`."""
+        if not self.at_rest():
+            self.say("warning", f"t = {t:.4f} s: start ignored: {self.MOTION_SAYS} still decelerating")
+            return
+        if self.alarm:
+            self.say("info", f"t = {t:.4f} s: alarm cleared by start")
+            self.follow_up(t, inputs)
+        self.alarm = False
+        self.begin(t, edges)
+
+    def follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
+        """Re-base the command on the actual position where a stop left them more than ``inpos_band`` apart (an
+        axis held or lagging when the alarm came), as an NC does after a stop it did not command: the axes
+        apart only (:data:`FOLLOW_UP_PER_AXIS`) or the whole command point; said once."""
+        actual = dict(zip(self.AXES, self.actual(inputs)))
+        command = dict(zip(self.AXES, self.command_point()))
+        apart = follow_up(actual, command, self.inpos_band)
+        if not apart:
+            return
+        axes = apart if self.FOLLOW_UP_PER_AXIS else self.AXES
+        moved = ", ".join(f"{a.upper()} {command[a]:.4f} -> {actual[a]:.4f}" for a in axes)
+        self.say("info", f"t = {t:.4f} s: follow-up: command re-based on the actual position ({moved})")
+        self.rebase({a: actual[a] for a in axes})
+
+    def arrival(self, t: float, dt: float, stopped: bool, inputs: Mapping[str, object],
+                axes: Sequence[str] | None = None) -> bool:
+        """One in-position judgement of the motion on ``axes`` (default all) against the controller's own
+        command: True when it has ended; :data:`LATE` is the in-position alarm (:meth:`stop`)."""
+        if axes is None:
+            axes, target = self.AXES, self.command_point()
+        else:
+            command = dict(zip(self.AXES, self.command_point()))
+            target = [command[a] for a in axes]
+        actual = self.actual(inputs, axes)
+        judged = self.inpos.judge(dt, stopped, self.in_position(inputs, axes), actual, target)
+        if judged == LATE:
+            if len(axes) == 1:
+                where = f"{axes[0].upper()} stands at {actual[0]:.4f}, not at the command {target[0]:.4f}"
+            else:
+                where = (f"the axes stand at ({', '.join(f'{p:.4f}' for p in actual)}), not at the command "
+                         f"({', '.join(f'{c:.4f}' for c in target)})")
+            self.stop(t, f"in-position check: {where}, {self.inpos_timeout:g} s after it stopped (held downstream?)")
+        return judged == ARRIVED
 
     def configure_cycle(self, values: Mapping[str, object]) -> None:
         self.max_following_error = real_param(values, "max_following_error")

@@ -41,11 +41,12 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from .base import int_param, real_param, servo_ports
-from .cycle import ARRIVED, LATE, Button, CycleController, cycle_ports, follow_up
+from .cycle import Button, CycleController, cycle_ports
 from .motion import LinearMove
 
 #: The program store as the FMU starts: empty cycles, and an emergency return of X at F7 (a system or a
@@ -306,40 +307,15 @@ class ProgrammableFeed(CycleController):
         self._counting = counting
         self.move.begin(start, end, rate)
 
-    def _word_done(self, word: Word, inputs: Mapping[str, object], judged: int | None) -> bool:
+    def _word_done(self, word: Word, inputs: Mapping[str, object], arrived: bool) -> bool:
         if word.kind in ("feed", "return"):
-            return judged == ARRIVED
+            return arrived
         if word.kind == "dwell":
             return self.dwell_left == 0.0
         if word.kind == "aux":
             # its own MFIN: a rising edge after the strobe went up
             return self.m_active != 0 and bool(inputs["mfin"]) and not self._mfin_was
         return True
-
-    def _raise_alarm(self, t: float, why: str) -> None:
-        """Latch the alarm; the running feed decelerates to rest; a dwell or M wait is abandoned."""
-        self.latch_alarm(t, why, "feed decelerating to rest, cycle stopped")
-        self.move.halt()
-        self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
-        self._pending_emergency = False
-
-    def _follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
-        """Re-base the commands on the actual positions where a stop left them apart (an axis held by the
-        area limiter while the command went on). The return counters follow: they count where the wheel
-        really is from the feed origin, so S1 and the return before a restart go to the true origin."""
-        moved = []
-        actual = dict(zip(self.AXES, self.actual(inputs)))
-        for axis in follow_up(actual, self.cmd, self.inpos_band):
-            pos = actual[axis]
-            moved.append(f"{axis.upper()} {self.cmd[axis]:.4f} -> {pos:.4f}")
-            if self._counting:                     # an S4 move is not counted: nor is what it fell short
-                self.rc[axis] += pos - self.cmd[axis]
-            self.cmd[axis] = pos
-        if moved:
-            self.say("info", f"t = {t:.4f} s: follow-up: command re-based on the actual position ({', '.join(moved)})")
-            here = (self.cmd["x"], self.cmd["y"])
-            self.move.begin(here, here, 1.0)
-            self.vff["x"] = self.vff["y"] = 0.0
 
     def away_from_origin(self) -> list[str]:
         """Axes whose return counter is not 0: the wheel is not at the feed origin there (X first)."""
@@ -364,29 +340,60 @@ class ProgrammableFeed(CycleController):
         self.inpos.reset()
         self._start_move(axis, -self.rc[axis], self.return_rate, counting=True)
 
-    def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
-        start = self.start_button.pressed(inputs["start"])
-        wear = self._wear_button.pressed(inputs["wear_start"])
-        emb = self._emergency_button.pressed(inputs["emergency"])
-        bad = self.judge_inputs(inputs, dt)
-        if bad:
-            self._raise_alarm(t, bad)
-        elif inputs["alarm_in"]:
-            if self.mode == EMERGENCY:
-                # the emergency return backs out of the violation: latch the alarm, keep returning
-                if not self.alarm:
-                    self.say("error", f"t = {t:.4f} s: alarm_in (area limiter) is set during the emergency "
-                                      "return; alarm latched, the return goes on")
-                self.alarm = True
-            elif self.mode != IDLE or self.word is not None or self._pending_emergency:
-                self._raise_alarm(t, "alarm_in (area limiter) is set")
-            else:
-                self.alarm = True
-        elif self.mode != IDLE and not self._pending_emergency:
-            excess = self.following_error(inputs, [self.cmd[a] for a in self.AXES])
-            if excess:
-                self._raise_alarm(t, excess)
+    # -- the hooks of the NC cycle (controllers/cycle.py owns the order of a step) -----------------
+    STOP_SAYS = "feed decelerating to rest, cycle stopped"
+    MOTION_SAYS = "the feed is"
+    FOLLOW_UP_PER_AXIS = True            # each axis its own feed and return counter
 
+    def read_buttons(self, inputs: Mapping[str, object]) -> tuple[bool, bool, bool]:
+        """START1, START2 and EMB."""
+        return (self.start_button.pressed(inputs["start"]), self._wear_button.pressed(inputs["wear_start"]),
+                self._emergency_button.pressed(inputs["emergency"]))
+
+    def halt(self) -> None:
+        """The running feed decelerates to rest; a dwell or M wait is abandoned."""
+        self.move.halt()
+        self.mode, self.busy, self.word, self.m_active, self.dwell_left = IDLE, False, None, 0, 0.0
+        self._pending_emergency = False
+
+    def idle(self) -> bool:
+        return self.mode == IDLE
+
+    def watching_following_error(self) -> bool:
+        return self.mode != IDLE and not self._pending_emergency      # why: in CycleController
+
+    def external_alarm(self, t: float) -> None:
+        """``alarm_in`` is honoured in every state; the emergency return goes on (it is the back-out the limiter
+        lets through), and at rest it latches without a stop to make."""
+        if self.mode == EMERGENCY:
+            self.latch_alarm(t, "alarm_in (area limiter) is set during the emergency return",
+                             "alarm latched, the return goes on")
+        elif self.mode != IDLE or self.word is not None or self._pending_emergency:
+            super().external_alarm(t)
+        else:
+            self.alarm = True
+
+    def command_point(self) -> list[float]:
+        return [self.cmd["x"], self.cmd["y"]]
+
+    def follow_up(self, t: float, inputs: Mapping[str, object]) -> None:
+        self._advance_move_outputs()                      # the commands where the feed stands now
+        super().follow_up(t, inputs)
+
+    def rebase(self, actual: Mapping[str, float]) -> None:
+        """The return counters follow: they count where the wheel really is from the feed origin, so S1 and the
+        return before a restart go to the true origin."""
+        for axis, pos in actual.items():
+            if self._counting:                     # an S4 move is not counted: nor is what it fell short
+                self.rc[axis] += pos - self.cmd[axis]
+            self.cmd[axis] = pos
+        here = (self.cmd["x"], self.cmd["y"])
+        self.move.begin(here, here, 1.0)
+        self.vff["x"] = self.vff["y"] = 0.0
+
+    def take_commands(self, t: float, inputs: Mapping[str, object], edges: Any, bad: str | None,
+                      why: str | None) -> None:
+        start, wear, emb = edges
         if emb and not bad:
             # EMB: abort whatever runs; a running feed first decelerates to rest (EMB.SDW).
             self.say("warning", f"t = {t:.4f} s: EMB: emergency return from M{self.emergency_address}")
@@ -395,29 +402,25 @@ class ProgrammableFeed(CycleController):
             self._pending_emergency = True
             self.move.halt()
             self.word = None
-        elif self.mode == IDLE and (start or wear) and not inputs["alarm_in"] and not bad:
-            if not self.move.at_rest:
-                self.say("warning", f"t = {t:.4f} s: start ignored: the feed is still decelerating")
-            else:
-                if self.alarm:
-                    self.say("info", f"t = {t:.4f} s: alarm cleared by start")
-                    self._advance_move_outputs()
-                    self._follow_up(t, inputs)
-                self.alarm = False
-                self._start(t, self.start_address if start else self.wear_address)
+        elif start or wear:
+            super().take_commands(t, inputs, (start, wear), bad, why)
 
+    def begin(self, t: float, edges: Any) -> None:
+        start, _ = edges
+        self._start(t, self.start_address if start else self.wear_address)
+
+    def advance(self, t: float, dt: float, inputs: Mapping[str, object], why: str | None) -> None:
         hold = bool(inputs["feed_hold"]) and self.mode != EMERGENCY
         if self._pending_emergency:
             self.move.advance(dt, 0.0)                     # decelerate the aborted feed
             if self.move.done:
-                self._advance_move_outputs()
                 self._pending_emergency = False
-                self._follow_up(t, inputs)
+                self.follow_up(t, inputs)                  # (from where the feed stands now)
                 self._load(self.emergency_address)
         elif self.word is not None:
             word = self.word
             if word.kind == "feed":
-                rate = self.override.read(self, t, float(inputs["feed_override"])) if not bad else 0.0  # type: ignore[arg-type]
+                rate = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
                 self.move.advance(dt, 0.0 if hold else rate)
             elif word.kind == "return":
                 self.move.advance(dt, 0.0 if hold else 1.0)
@@ -431,25 +434,17 @@ class ProgrammableFeed(CycleController):
                 self.say("warning", f"t = {t:.4f} s: M{word.m} (M{self.pc}) waits for MFIN to drop: it is still "
                                     "high (the auxiliary device has not released the previous answer)")
             # a feed word ends when its axis stands at this controller's own command (the cycle's in-position check)
-            judged = (self.inpos.judge(dt, self.move.done, self.in_position(inputs, (word.axis,)),
-                                       self.actual(inputs, (word.axis,)), [self.cmd[word.axis]])
-                      if word.kind in ("feed", "return") else None)
-            if self._word_done(word, inputs, judged):
+            arrived = (word.kind in ("feed", "return")
+                       and self.arrival(t, dt, self.move.done, inputs, (word.axis,)))
+            if self._word_done(word, inputs, arrived):
                 if word.kind == "aux":
                     self.m_active = 0
                 self._advance_move_outputs()
                 self._next_word()
-            elif judged == LATE:
-                axis = word.axis
-                self._raise_alarm(t, f"in-position check: {axis.upper()} stands at "
-                                     f"{float(inputs[f'{axis}_pos']):.4f}, not at the command "  # type: ignore[arg-type]
-                                     f"{self.cmd[axis]:.4f}, {self.inpos_timeout:g} s after it stopped "
-                                     "(held downstream?)")
         elif not self.move.done:
             self.move.advance(dt, 0.0)                     # the controlled stop after an alarm
         self._mfin_was = bool(inputs["mfin"])
         self._advance_move_outputs()
-        return self._publish()
 
     def _next_word(self) -> None:
         if self.word is not None and self.word.line == 0:  # a return before the start: next axis, then the entry

@@ -38,8 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError
-from .fmu import typed_value
+from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError, TerminationRequested
+from .connect import check_units
+from .fmu import check_range, typed_value
 from .native_loop import NativePlan, NativeSlave, library
 from .record import MAX_RECORD_BYTES, RecordSink, too_big
 from .result import Result
@@ -295,17 +296,8 @@ def _as_python(kind: str, value) -> object:
     return int(value)
 
 
-def _check_range(qualified: str, v: Variable, value: object) -> None:
-    """The modelDescription's rule for a value written during a run (type checked already)."""
-    if v.type == "Real" and not math.isfinite(float(value)):     # type: ignore[arg-type]
-        raise ConfigError(qualified, value, "must be finite")
-    if v.type in ("Real", "Integer"):
-        x = float(value)                                          # type: ignore[arg-type]
-        low, high = v.min, v.max
-        if (low is not None and x < low) or (high is not None and x > high):
-            rule = (f"must be in [{low:g}, {high:g}]" if low is not None and high is not None
-                    else f"must be >= {low:g}" if low is not None else f"must be <= {high:g}")
-            raise ConfigError(qualified, value, rule)
+#: The modelDescription's rule for a value written during a run (one home: the slave's module)
+_check_range = check_range
 
 
 #: Steps a run counts at most (whole numbers in a double): a stop time beyond is a mistake, not a run.
@@ -334,6 +326,9 @@ class Master:
         self.loop_used = ""
         self.by_name = {s.name: s for s in slaves}
         self.check_connections()
+        checked = check_units(system, self.by_name)
+        #: input (instance, variable) -> the unit conversion its connection applies; the warnings of the checks
+        self.conversions, self.warnings = checked.conversions, checked.warnings
         self.sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
                         for c in system.connections}
 
@@ -402,6 +397,12 @@ class Master:
         try:
             assert session.run.n_steps is not None
             session._advance(session.run.n_steps, progress, deadline)
+        except TerminationRequested as ended:
+            # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
+            session.failed = None
+            result = session.close(reason=str(ended))
+            result.ended_by = str(ended)
+            return result
         except BaseException as err:
             session.close(complete=False, reason=str(err) or type(err).__name__)
             raise
@@ -532,10 +533,12 @@ class Master:
         applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
         for comp in self.system.components:
             for name, value in comp.parameters.items():
+                self._in_range(f"{comp.name}.{name}", value)
                 self.by_name[comp.name].set_start(name, value)
                 applied[comp.name][name] = value
         for qualified, value in (start_values or {}).items():
             slave, v = self.variable(qualified)
+            self._in_range(qualified, value)
             if (slave.name, v.name) in self.sources:
                 c = self.sources[(slave.name, v.name)]
                 raise SystemDefinitionError(f"{qualified} is driven by the connection {c} -> {qualified}: a start "
@@ -606,7 +609,7 @@ class Master:
                     q = f"{s.name}.{v.name}"
                     bound[q] = _BoundInput(kind, idx, pos, in_buf, int(idx[pos]), force_slot[q])
                 if len(ins):
-                    gathers.append((in_buf, values[kind].take, idx))
+                    gathers.append((in_buf, self._gather(s, kind, ins, values[kind]), idx))
             plan.append((s, tuple(gathers)))
             bindings.append(kinds_bound)
 
@@ -624,11 +627,32 @@ class Master:
             for buf, take, idx in prepared:
                 take(idx, out=buf)             # what each input is given at the first step (Session.value)
         natives = [s for s in self.slaves if isinstance(s, NativeSlave)]
-        if self.native and len(natives) == len(self.slaves) and library() is not None:
+        if self.native and len(natives) == len(self.slaves) and library() is not None and not self.conversions:
             records = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
             run.native = NativePlan(natives, bindings, values, records, run.start_time, h,
                                     self.mode == "jacobi", every)
         return run
+
+    def _in_range(self, qualified: str, value: object) -> None:
+        """A start value within its modelDescription's min/max, whichever FMU it is for (an FMU need not check)."""
+        slave, v = self.variable(qualified)
+        if v.type in ("Real", "Integer") and not isinstance(value, (bool, str)):
+            _check_range(qualified, v, typed_value(qualified, v.type, value))
+
+    def _gather(self, s: Slave, kind: str, ins: list[Variable], vector: np.ndarray) -> Callable:
+        """``take(idx, out)`` for a slave's inputs of ``kind``: the vector's values, converted to the inputs' units
+        where a connection converts (then the Python loop runs: the C loop gathers without converting)."""
+        convs = [self.conversions.get((s.name, v.name)) for v in ins]
+        if not any(convs):
+            return vector.take
+        gain = np.array([1.0 if c is None else c.gain for c in convs])
+        offset = np.array([0.0 if c is None else c.offset for c in convs])
+
+        def take(idx: np.ndarray, out: np.ndarray) -> None:
+            vector.take(idx, out=out)
+            out *= gain
+            out += offset
+        return take
 
     def _schedule(self, run: _Run, inputs: InputTable, forced: set[str]) -> list:
         """The CSV's changes as (first step they apply to, actions) in time order: a change at time tc applies
@@ -675,7 +699,9 @@ class Master:
                 slave.set_start(v.name, value)          # an input outside the plan keeps what it is set to
                 run.unbound[name] = value
             else:
-                run.values[b.kind][b.force_slot] = value
+                conv = self.conversions.get((slave.name, v.name))
+                # the slot is gathered like the connection's source: in the source's unit
+                run.values[b.kind][b.force_slot] = value if conv is None else (value - conv.offset) / conv.gain
                 b.idx[b.pos] = b.force_slot
             run.forced[name] = value
         elif action == "ext_release":

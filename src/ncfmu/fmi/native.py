@@ -1,4 +1,4 @@
-"""Build native (C) FMUs: the ServoAxis.
+"""Build native (C) FMUs: the ServoAxis and the SpindleDrive.
 
 A native FMU carries its C sources (``sources/``, listed in the modelDescription's ``SourceFiles`` so
 any FMI tool, fmpy included, can compile it for its platform) and a linux64 binary compiled here by
@@ -20,6 +20,7 @@ import contextlib
 import hashlib
 import html
 import io
+import math
 import os
 import re
 import shutil
@@ -52,6 +53,8 @@ class NativeModel:
     model_c: Path
     #: Python files whose content defines the FMU (ports, design): a change rebuilds it.
     defined_by: tuple[Path, ...]
+    #: C headers the model includes beside the FMI layer's (``NATIVE_HEADERS``), shipped in ``sources/``.
+    headers: tuple[Path, ...] = ()
 
     @property
     def name(self) -> str:
@@ -61,6 +64,7 @@ class NativeModel:
         return {"fmi2_machine.h": (C_LAYER / "fmi2_machine.h").read_bytes(),
                 "fmi2_model.h": (C_LAYER / "fmi2_model.h").read_bytes(),
                 "fmi2_native.c": (C_LAYER / "fmi2_native.c").read_bytes(),
+                **{h.name: h.read_bytes() for h in self.headers},
                 self.model_c.name: self.model_c.read_bytes()}
 
     def digest(self) -> str:
@@ -89,7 +93,8 @@ def native_models() -> list[NativeModel]:
         defined_by = tuple(module.parent / f for f in logic.NATIVE_DEFINED_BY)
         out.append(NativeModel(logic, module.parent / logic.NATIVE_SOURCE,
                                (module, *defined_by, PACKAGE_DIR / "ports.py",
-                                PACKAGE_DIR / "fmi" / "documentation.py")))
+                                PACKAGE_DIR / "fmi" / "documentation.py"),
+                               tuple(module.parent / h for h in logic.NATIVE_HEADERS)))
     return out
 
 
@@ -191,8 +196,11 @@ def _design_html(m: NativeModel, stage: Path) -> str:
     from ..servo.axis import ServoAxis
     from ..servo.bode import bode_design
     from ..servo.model import MIN_PHASE_MARGIN
+    from ..servo.spindle import SpindleDrive
     logic = m.logic()
-    assert isinstance(logic, ServoAxis), "the native models are servo axes"
+    if isinstance(logic, SpindleDrive):
+        return _spindle_design_html(m, logic, stage)
+    assert isinstance(logic, ServoAxis), "the native models are servo axes and spindle drives"
     d, p = logic.design, logic.p
     bode = bode_design(p)
     velocity, position = bode.loops
@@ -233,6 +241,52 @@ that is unstable or has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
 the C sources are in <code>sources/</code> (fmi2_native.c, {m.model_c.name}; C99, link with -lm), so
+<code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
+platform.</p>"""
+
+
+def _spindle_design_html(m: NativeModel, logic, stage: Path) -> str:
+    """The SpindleDrive's design figures (default parameters) and what its ramps take."""
+    from ..servo.spindle_model import MIN_PHASE_MARGIN
+    d, p = logic.design, logic.p
+    accel = (logic.torque_max - logic.tau_coulomb) / p.J            # rad/s^2 while the torque limit acts
+    base = logic.power_max / logic.torque_max * 60.0 / (2.0 * math.pi)
+    rows = [("speed loop: phase margin", f"{d.phase_margin:.1f} deg"),
+            ("speed loop: crossover", f"{d.crossover:.1f} rad/s"),
+            ("speed loop: gain margin", "infinite (the phase never reaches -180 deg)" if not math.isfinite(
+                d.gain_margin) else f"{20 * math.log10(d.gain_margin):.1f} dB"),
+            ("speed loop: closed-loop bandwidth (-3 dB)", f"{d.bandwidth:.1f} rad/s"),
+            ("current loop: corner 1/tau_current", f"{1.0 / p.tau_current:.0f} rad/s"),
+            ("acceleration at the torque limit, (torque_max - tau_coulomb) / J",
+             f"{accel * 60.0 / (2.0 * math.pi):.0f} rev/min/s"),
+            ("base speed power_max / torque_max (constant power above it)", f"{base:.0f} rev/min")]
+    table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
+    c_files = ", ".join(sorted(name for name in m.sources() if name.endswith(".c")))
+    figure = ""
+    try:
+        from ..servo.bode import spindle_bode_figure
+        fig, bode = spindle_bode_figure(p)
+        out = io.BytesIO()
+        fig.savefig(out, format="png", dpi=80)
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        (stage / "documentation").mkdir(exist_ok=True)
+        (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
+        figure = (f'<p><img src="bode.png" alt="Bode plot of the open speed loop from {bode.band[0]:.1f} to '
+                  f'{bode.band[1]:.0f} rad/s, with its phase margin"></p>\n'
+                  f"<p>From a decade below the PI zero ({bode.band[0] * 10:.0f} rad/s) to a decade above the current "
+                  "loop's corner. Dotted: the gain crossover, the phase margin the bar up from -180 deg.</p>")
+    except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
+        pass
+    return f"""<h2>Design (python-control, default parameters)</h2>
+<p>At fmi2ExitInitializationMode the FMU computes the speed loop's phase margin from the parameters (the continuous
+models of ncfmu.servo.spindle_model) and refuses, with fmi2Error naming speed_bandwidth, a loop that is unstable or
+has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
+<table>{table}</table>
+{figure}
+<h2>Runtime requirements</h2>
+<p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
+the C sources are in <code>sources/</code> ({c_files}; C99, link with -lm), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 

@@ -54,3 +54,36 @@ class AxisParameters:
         """PI gains (Kp in N·m/(mm/s), Ki in N·m/mm) for the crossover ``vel_bandwidth``."""
         kp = self.J * self.rad_per_mm * self.vel_bandwidth
         return kp, kp * self.vel_bandwidth / 4.0
+
+
+#: rad/s per rev/min
+RAD_S_PER_RPM = 2.0 * math.pi / 60.0
+
+
+@dataclass(frozen=True)
+class SpindleParameters:
+    """Physical and control parameters of a lathe spindle drive's speed loop (the defaults: a mid-size CNC lathe,
+    15 kW, motor and spindle coupled 1:1).
+
+    Attributes
+    ----------
+    J : float
+        Motor + spindle + chuck + workpiece inertia, kg·m².
+    b_visc : float
+        Viscous friction (bearings, belt), N·m·s/rad.
+    tau_current : float
+        Current (torque) loop time constant, s.
+    speed_bandwidth : float
+        Speed-loop crossover, rad/s; the PI zero sits at a quarter of it.
+    """
+
+    J: float = 0.2
+    b_visc: float = 0.01
+    tau_current: float = 1e-3
+    speed_bandwidth: float = 100.0
+
+    @property
+    def speed_gains(self) -> tuple[float, float]:
+        """PI gains (Kp in N·m/(rad/s), Ki in N·m/rad) for the crossover ``speed_bandwidth``."""
+        kp = self.J * self.speed_bandwidth
+        return kp, kp * self.speed_bandwidth / 4.0

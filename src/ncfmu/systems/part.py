@@ -43,11 +43,25 @@ ARC_SPACING = 0.02
 @dataclass(frozen=True)
 class PartSettings:
     """How the part is judged: ``tolerance`` (mm), and the lathe tool's ``nose_radius`` (mm, 0: a point) and
-    ``max_depth`` (mm, the deepest radial engagement it may take; inf: no limit) until the tool table gives them."""
+    ``max_depth`` (mm, the deepest radial engagement it may take; inf: no limit). None: the tool table's
+    (``seq.tool[k].nose_radius``, ``seq.tool[k].max_depth`` of the offset the program's first T word names), else
+    0 and no limit."""
 
     tolerance: float = TOLERANCE
-    nose_radius: float = 0.0
-    max_depth: float = math.inf
+    nose_radius: float | None = None
+    max_depth: float | None = None
+
+
+def first_tool_offset(program: str) -> int:
+    """The offset row (1-based) of a lathe program's first T word (``T0101``: tool 1, offset 1); 0: none."""
+    import re
+    for raw in program.splitlines():
+        text = re.sub(r"\([^)]*\)", " ", raw.split(";")[0])
+        found = re.search(r"[Tt]\s*(\d+)", text)
+        if found:
+            digits = found.group(1)
+            return int(digits[-2:]) if len(digits) >= 3 else int(digits)
+    return 0
 
 
 @dataclass
@@ -276,9 +290,22 @@ class LathePart(MachinedPart):
                 if abs(lim_min) < POSITION_LIMIT and top > lower:
                     forbidden.append(Forbidden("tool into the chuck jaws", box(lower, -1.0, top, lim_min)))
                 lower = top
-        removal = MaterialRemoval(stock, lathe_tool(self.settings.nose_radius), forbidden, self.settings.max_depth)
-        anchor = box(face - length, 0.0, face - length + min(1.0, length), radius)
         program = str(seq.get("program") or "")
+        # the tool: its nose and deepest cut as set, else the tool table's row of the program's first T word; the
+        # axes stand at the programmed point plus that row's offsets, so the tool's tip is there less them
+        k = first_tool_offset(program) if program.strip() else 0
+        row = f"tool[{k}]."
+        has_row = row + "nose_radius" in seq
+        nose = self.settings.nose_radius
+        if nose is None:
+            nose = to_float(seq[row + "nose_radius"]) if has_row else 0.0
+        depth_limit = self.settings.max_depth
+        if depth_limit is None:
+            depth_limit = to_float(seq[row + "max_depth"]) if has_row else 0.0
+            depth_limit = depth_limit if depth_limit > 0 else math.inf
+        shift = np.array([to_float(seq[row + "z_offset"]), to_float(seq[row + "x_offset"])]) if has_row else 0.0
+        removal = MaterialRemoval(stock, lathe_tool(nose) - shift, forbidden, depth_limit)
+        anchor = box(face - length, 0.0, face - length + min(1.0, length), radius)
         removed: list[Any] = []
         lines: list[tuple[Any, int]] = []
         if program.strip():

@@ -1,0 +1,156 @@
+"""Two commits side by side: ``python bench/compare.py REV_A REV_B [--systems ...] [--repeats N]``.
+
+Run this before claiming that a change made a step faster or slower. Each revision gets a git worktree and a
+venv of its own (cached under ``--work``, default ``~/.cache/ncfmu-compare/<commit>``: installed with the
+pins of *this* checkout's ``.ci/constraints.txt``, so both sides run the same dependencies, then
+``ncfmu build``). The runs are interleaved (A, B, A, B, ...), each in a fresh process, and the best of N is
+kept per revision and system -- the least disturbed run, since a loaded machine only ever adds time. What is
+timed is what ``bench/run.py`` times: ``OpenSystem(archive).run(stop_time=...)`` with the C loop (the wall
+time the master reports), not the import, extraction or instantiation.
+
+Printed per system: microseconds per 1 ms of simulated time on each side (= us per step at the systems'
+1 ms step), the ratio B / A (below 1: B is faster), and whether both sides recorded the same trajectory
+(a digest of every recorded column): a speed change should not change the run. The machine's load average is
+printed first: the ratio is fair on a loaded machine (both sides share the load, interleaved), the absolute
+numbers are not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+DEFAULT_SYSTEMS = ("lathe_taper", "lathe_roughing")
+
+# Runs inside a revision's venv, in its worktree: the timed run and a digest of what it recorded.
+RUNNER = r"""
+import hashlib, json, sys
+from pathlib import Path
+from ncfmu.project import OpenSystem
+archive, stop_time = Path(sys.argv[1]), float(sys.argv[2])
+with OpenSystem(archive) as opened:
+    result = opened.run(stop_time=stop_time)
+    loop = getattr(opened.master, "loop_used", "?")
+digest = hashlib.sha256()
+for name in sorted(result.data.dtype.names):
+    digest.update(name.encode()); digest.update(result.data[name].tobytes())
+print(json.dumps({"wall": result.wall_time, "rows": len(result.data), "loop": loop,
+                  "digest": digest.hexdigest()}))
+"""
+
+
+class CompareError(Exception):
+    """A revision that cannot be checked out, installed or built."""
+
+
+def resolve(rev: str) -> str:
+    out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", f"{rev}^{{commit}}"],
+                         capture_output=True, text=True)
+    if out.returncode:
+        raise CompareError(f"not a commit: {rev!r} ({out.stderr.strip()})")
+    return out.stdout.strip()
+
+
+def prepare(sha: str, work: Path, constraints: Path) -> tuple[Path, Path]:
+    """The revision's worktree and venv python, built once and cached (a 'ready' marker after the build)."""
+    home = work / sha[:12]
+    src, venv = home / "src", home / "venv"
+    python = venv / "bin" / "python"
+    if (home / "ready").is_file():
+        return src, python
+    if home.exists():       # an interrupted preparation: start it again
+        subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(src)], capture_output=True)
+        shutil.rmtree(home, ignore_errors=True)
+    home.mkdir(parents=True)
+    steps = [
+        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(src), sha],
+        [sys.executable, "-m", "venv", str(venv)],
+        [str(python), "-m", "pip", "install", "-q", "-c", str(constraints), "-e", str(src)],
+        [str(venv / "bin" / "ncfmu"), "build"],
+    ]
+    for cmd in steps:
+        print(f"[{sha[:10]}] {' '.join(cmd[:4])} ...", file=sys.stderr, flush=True)
+        out = subprocess.run(cmd, cwd=src if src.exists() else REPO, capture_output=True, text=True)
+        if out.returncode:
+            raise CompareError(f"{sha[:10]}: {' '.join(cmd)} failed:\n{out.stdout[-2000:]}{out.stderr[-2000:]}")
+    (home / "ready").write_text(sha + "\n")
+    return src, python
+
+
+def run_once(src: Path, python: Path, system: str, stop_time: float) -> dict:
+    archive = src / "ssp" / f"{system}.ssp"
+    out = subprocess.run([str(python), "-c", RUNNER, str(archive), repr(stop_time)], cwd=src,
+                         capture_output=True, text=True)
+    if out.returncode:
+        raise CompareError(f"{src}: {system} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeats: int, work: Path) -> dict:
+    constraints = REPO / ".ci" / "constraints.txt"
+    sides = {}
+    for rev in (rev_a, rev_b):
+        sha = resolve(rev)
+        sides[rev] = (sha, *prepare(sha, work, constraints))
+    load = os.getloadavg()[0]
+    print(f"load average {load:.2f} on {os.cpu_count()} cores"
+          + (" -- loaded: trust the ratios, not the absolute numbers" if load > 0.5 else ""))
+    results: dict = {"load_average": load, "stop_time": stop_time, "repeats": repeats,
+                     "a": {"rev": rev_a, "sha": sides[rev_a][0]}, "b": {"rev": rev_b, "sha": sides[rev_b][0]},
+                     "systems": {}}
+    print(f"A = {rev_a} ({sides[rev_a][0][:10]}), B = {rev_b} ({sides[rev_b][0][:10]}); "
+          f"{stop_time:g} s simulated, best of {repeats}, interleaved")
+    print(f"{'system':<18}{'A us/ms':>10}{'B us/ms':>10}{'B/A':>8}  same run  loops")
+    for system in systems:
+        walls: dict[str, list[float]] = {rev_a: [], rev_b: []}
+        last: dict[str, dict] = {}
+        for _ in range(repeats):
+            for rev in (rev_a, rev_b):
+                _, src, python = sides[rev]
+                last[rev] = run_once(src, python, system, stop_time)
+                walls[rev].append(last[rev]["wall"])
+        best = {rev: min(w) * 1e6 / (stop_time * 1e3) for rev, w in walls.items()}
+        ratio = best[rev_b] / best[rev_a]
+        same = last[rev_a]["digest"] == last[rev_b]["digest"]
+        print(f"{system:<18}{best[rev_a]:>10.2f}{best[rev_b]:>10.2f}{ratio:>8.3f}  {'yes' if same else 'NO ':<8}  "
+              f"{last[rev_a]['loop']}/{last[rev_b]['loop']}")
+        results["systems"][system] = {"a_us_per_ms": best[rev_a], "b_us_per_ms": best[rev_b], "ratio_b_over_a": ratio,
+                                      "same_trajectory": same, "a_walls": walls[rev_a], "b_walls": walls[rev_b],
+                                      "a_median": statistics.median(walls[rev_a]),
+                                      "b_median": statistics.median(walls[rev_b])}
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("rev_a", help="the baseline commit (e.g. HEAD~1)")
+    parser.add_argument("rev_b", help="the commit measured against it (e.g. HEAD)")
+    parser.add_argument("--systems", nargs="+", default=list(DEFAULT_SYSTEMS))
+    parser.add_argument("--stop-time", type=float, default=10.0, help="simulated seconds a run (default 10)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs a side and system, best kept (default 3)")
+    parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
+                        help="where the revisions' worktrees and venvs are kept")
+    parser.add_argument("--json", type=Path, help="also write the results here")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or not args.stop_time > 0:
+        parser.error("--repeats must be >= 1 and --stop-time > 0")
+    try:
+        results = compare(args.rev_a, args.rev_b, args.systems, args.stop_time, args.repeats, args.work)
+    except CompareError as exc:
+        print(f"bench/compare.py: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
