@@ -4,6 +4,10 @@
   side in one invocation, interleaved (on off, off on, on off, ...), each a fresh process; printed: the wall time of
   each process and of its simulation (the summary's "in ... s wall"), the medians and the ratio on / off. Goal:
   the part check adds < 20 % to the run's wall time.
+- **Cost in process** (the same on a loaded machine): one run of lathe_roughing kept in memory, its rows fed
+  to the report's accumulator in chunks of 10 000 rows (as ``ncfmu run`` streams them) with and without the part
+  check, interleaved, ``--pairs`` times each; the difference of the medians (the end's verdict included) against
+  the run's own wall time.
 - **Soak**: lathe_roughing cutting part after part (the panel's START repeated every 100 s; the first cycle cuts
   the bar, the later ones cut air along the part they made -- every rapid still checked against the stock) for
   each of ``--hours`` of simulated time with the part check on, recorded at 0.1 s: the peak RSS of each
@@ -67,6 +71,38 @@ def cost(pairs: int, out: Path) -> dict[str, object]:
     return {"pairs": pairs, "on": on, "off": off, "median": med, "ratio_wall": ratio, "ratio_run": ratio_run}
 
 
+def in_process(pairs: int) -> dict[str, object]:
+    from ncfmu.project import simulate
+    from ncfmu.systems import report_of, run_parameters
+    from ncfmu.systems.part import without_part_check
+    from ncfmu.systems.report import columns_of
+    r = simulate(SYSTEM)
+    on_report = report_of(r)
+    off_report = without_part_check(on_report)
+    parameters = run_parameters(r)
+
+    def feed(report) -> float:
+        start = time.perf_counter()
+        acc = report.accumulator(parameters)
+        acc.open(columns_of(r.data))
+        for k in range(0, len(r.data), 10_000):
+            acc.write(r.data[k:k + 10_000])
+        acc.close(True, float(r.time[-1]))
+        acc.summary()
+        return time.perf_counter() - start
+
+    on, off = [], []
+    for k in range(pairs):
+        for side in ((0, 1) if k % 2 == 0 else (1, 0)):
+            (on if side == 0 else off).append(feed(on_report if side == 0 else off_report))
+    added = statistics.median(on) - statistics.median(off)
+    print(f"in process: the summary with the part check {statistics.median(on):.3f} s, without "
+          f"{statistics.median(off):.3f} s: the part check adds {added:.3f} s to a run of {r.wall_time:.2f} s wall "
+          f"({added / r.wall_time * 100:+.1f} %)", flush=True)
+    return {"on_s": on, "off_s": off, "added_s": added, "run_wall_s": r.wall_time,
+            "added_fraction": added / r.wall_time}
+
+
 def soak(hours: list[float], out: Path) -> dict[str, object]:
     rows = []
     for h in hours:
@@ -89,6 +125,7 @@ def main() -> None:
     results: dict[str, object] = {}
     with tempfile.TemporaryDirectory() as tmp:
         if args.pairs:
+            results["in_process"] = in_process(max(args.pairs, 5))
             results["cost"] = cost(args.pairs, Path(tmp))
         if args.hours:
             results["soak"] = soak(sorted(args.hours), Path(tmp))
