@@ -144,3 +144,25 @@ def test_a_crash_is_one_crash_per_move_whatever_the_chunks(chunk):
     m = MaterialRemoval(box(-80, 0, 0, 29), lathe_tool(0.0), max_depth=1.0)
     feed(m, [(2.0, 27.0), (-30.0, 27.0)], rapid=False, line=3, chunk=chunk)
     assert m.crash_count == 1 and m.crashes[0].depth_mm == pytest.approx(2.0, abs=RESOLUTION)
+
+
+def test_a_live_server_reads_the_crashes_as_they_happen():
+    """crashes_so_far: the hook ncfmu serve reads after every chunk (no verdict is judged)."""
+    from ncfmu.systems import SYSTEMS, parameters
+    from ncfmu.systems.part import crashes_so_far
+    report = SYSTEMS["lathe_roughing"].report
+    acc = report.accumulator({"seq": {**parameters("lathe_roughing", "seq"), "program": ""},
+                              "limiter": parameters("lathe_roughing", "limiter")})
+    names = report.record()
+    dtype = [("time", float), *((n, bool if n.endswith(("rapid", "done", "alarm")) else
+                                  np.int32 if n.endswith(("line", "subcycle", "blocked")) else float)
+                                 for n in names)]
+    acc.open([(n, np.dtype(t)) for n, t in dtype])
+    rows = np.zeros(3, dtype=dtype)
+    rows["time"] = [0.0, 0.001, 0.002]
+    rows["x_axis.pos"], rows["z_axis.pos"] = [30.0, 27.0, 24.0], [-10.0, -10.0, -10.0]
+    rows["seq.rapid"] = True
+    acc.write(rows[:1])
+    assert crashes_so_far(acc) == []
+    acc.write(rows[1:])
+    assert [c.what for c in crashes_so_far(acc)] == ["rapid into the stock"]

@@ -411,6 +411,16 @@ def verdict_of(accumulator: ReportAccumulator) -> PartVerdict | None:
     return None
 
 
+def crashes_so_far(accumulator: ReportAccumulator) -> list[Crash]:
+    """The crashes a run fed to ``accumulator`` has had up to its last row, without judging the part: what a
+    live server publishes as they happen (``ncfmu serve``'s crash node and event read this after every chunk;
+    the list only grows, up to the engine's MAX_CRASHES records)."""
+    for acc in accumulator.parts:
+        if isinstance(acc, _PartCheckAccumulator):
+            return list(acc.setup.removal.crashes)
+    return []
+
+
 def verdict_of_result(report: Report, result, parameters: Parameters) -> PartVerdict | None:
     """The part check's verdict of a whole in-memory run."""
     if not any(isinstance(p, MachinedPart) for p in report.parts) or not len(result.data):
