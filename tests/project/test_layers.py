@@ -24,12 +24,13 @@ ALLOWED: dict[str, set[str]] = {
     "fmi": {"errors", "ports", "files", "controllers", "servo", "catalogue"},
     "cosim": {"errors", "ports", "files"},
     "checks": {"errors", "ports", "controllers", "cosim"},
-    "systems": {"errors", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue"},
+    "machining": {"errors"},
+    "systems": {"errors", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue", "machining"},
 }
 #: what nothing below the front end may import: the front end itself
 FRONT = {"project", "cli", "batch", "serve", "plots", "docs", "pytest_plugin"}
 #: third-party packages a layer must not import (the controllers run inside FMUs on the standard library)
-FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control"},
+FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control", "shapely"},
                       "cosim": {"pythonfmu"}}
 
 

@@ -50,7 +50,7 @@ from typing import Any
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
@@ -70,6 +70,9 @@ PROGRAM_MOVE = -2
 
 #: The start point as the FMU starts: a 10 mm radius at Z 0 (a system gives its own, e.g. lathe_roughing's).
 X_START, Z_START = 10.0, 0.0
+#: The bar stock as the FMU starts: up to the default registers' stock outline (X_START - Xf = 9.5 mm radius),
+#: its face at Z_START, 50 mm long.
+STOCK_DIAMETER, STOCK_LENGTH = 19.0, 50.0
 
 
 @dataclass
@@ -196,6 +199,16 @@ class CutSequencer(CycleController):
              "tool's diameter, at most G50 S; 0 stopped)"),
         integer("spindle_dir", "output", None, "spindle direction: +1 M03, -1 M04, 0 M05"),
         boolean("coolant", "output", None, "coolant on (M08) / off (M09)"),
+        # appended: the bar stock the part check cuts (read by the host's part check, not by the cycle), and
+        # whether the present move runs at rapid
+        real("stock_diameter", "parameter", STOCK_DIAMETER, "mm", "diameter of the bar stock (the part check's "
+             "material; the cycle does not read it)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_length", "parameter", STOCK_LENGTH, "mm", "length of the bar stock from its face toward the "
+             "chuck (-Z)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_face_z", "parameter", Z_START, "mm", "Z of the bar stock's face", min=-POSITION_LIMIT,
+             max=POSITION_LIMIT),
+        boolean("rapid", "output", None, "the present move runs at rapid (SC1, SC3, SC4 and the approach of the "
+                "registers; G00 and the cycles' rapid moves of a program); false while cutting or idle"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -288,6 +301,7 @@ class CutSequencer(CycleController):
         self.spindle_wait: float | None = None   # s waited for the spindle to arrive at speed (None: not waiting)
         self.program_started = False         # a program's state (tool, spindle ...) is its present move's
         self._outputs: dict[str, object] = {}
+        self.rapid = False                   # the present move runs at rapid (kept through a controlled stop)
         self._optional_stop = False
         self._pressed = False
         self._publish()
@@ -422,6 +436,7 @@ class CutSequencer(CycleController):
             override = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
+            self.rapid = not cutting
             held = False
             if self.plan and self.phase != APPROACH:
                 scale, held = self._machine(t, dt, inputs, scale)
@@ -485,6 +500,7 @@ class CutSequencer(CycleController):
         out["line"] = self.plan[self.segment].line if running else 0
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
+        out["rapid"] = self.rapid and (self.busy or not self.move.done)
         seg = self.plan[self.segment] if self.plan and self.program_started else None
         modal = seg.modal if seg is not None else NO_MODAL
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant

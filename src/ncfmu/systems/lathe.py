@@ -6,17 +6,21 @@ from __future__ import annotations
 
 from ..cosim.ssp import System
 from .compose import blocks, component, table, wire
+from .part import LathePart
 from .report import Axes, Envelope, LatheCycle, Plane, Report
 
 #: Lathe envelope: reference Z, limited X. For Z <= -45 (the chuck) X must be >= 40: out of reach.
 CHUCK_TABLE = [(-45.0, 40.0, 1e6), (1e6, -1e6, 1e6)]
 #: The start point STP: X (radius) 30, Z 2; the stock radius is 29.
 X_START, Z_START = 30.0, 2.0
+#: The bar stock: 58 mm in diameter, its face at Z 0, 80 mm long (from Z -45 on it is held in the chuck).
+STOCK = dict(stock_diameter=58.0, stock_length=80.0, stock_face_z=0.0)
 
 REPORT = Report(
     (LatheCycle(seq="seq", x="x_axis", z="z_axis"),
      Envelope(limiter="limiter", ref="z_axis", lim="x_axis", region_names=("chuck",)),
-     Axes(("x_axis", "z_axis"))),
+     Axes(("x_axis", "z_axis")),
+     LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
           ylabel="X (radius) [mm]"))
 
@@ -27,7 +31,7 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
         description=description,
         components=[
             component("panel", "OperatorPanel", start_at=0.1),
-            component("seq", "CutSequencer", x_start=X_START, z_start=Z_START, **program),
+            component("seq", "CutSequencer", x_start=X_START, z_start=Z_START, **STOCK, **program),
             component("limiter", "AreaLimiter", ref_start=Z_START, lim_start=X_START, predictive=True,
                       use_actual=True, **table(CHUCK_TABLE)),
             component("x_axis", "ServoAxis", pos_start=X_START),
