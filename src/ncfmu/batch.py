@@ -55,7 +55,6 @@ import numpy as np
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems import report_for
-from .systems.report import start_parameters
 
 if TYPE_CHECKING:
     from .project import OpenSystem
@@ -99,8 +98,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
     client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
-    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
-    from .project import OpenSystem
+    from .cosim.record import CsvSink
+    from .project import OpenSystem, recording
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -113,17 +112,18 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
             for slave in opened.slaves:
                 slave.reset()
         system = opened.system
-        report = report_for(system.name, {c.name: c.model for c in system.components})
-        keep = list(record) if record is not None else report.record()
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
-        metrics = report.accumulator(start_parameters(system.components, variant))
-        # the metrics read every step of what the report needs; the file gets the kept columns every k-th row
-        kept: RecordSink = SelectColumns(csv, keep)
+        # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
+        # report reads) every k-th row
+        keep = list(record) if record is not None else report_for(system.name, {c.name: c.model for c in
+                                                                                system.components}).record()
+        how = recording(system, variant, csv, keep, every=every)
+        metrics = how.summary
+        assert metrics is not None
         deadline = None if timeout is None else time.perf_counter() + timeout
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
-                   record=list(dict.fromkeys([*keep, *report.record()])),
-                   sinks=[kept if every == 1 else EveryKth(kept, every), metrics])
+                   **how.run_arguments())
         row.update(status="ok", error="")
         if not metrics.finished():
             row.update(status="unfinished", error=f"cycle not finished by t = {metrics.last_time:g} s")

@@ -8,9 +8,12 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from .errors import NcfmuError
+
+if TYPE_CHECKING:
+    from .cosim.ssp import System
 
 
 def epilog() -> str:
@@ -107,14 +110,16 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str]) -> list[str]:
+def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str],
+                     opened: System | None = None) -> list[str]:
     """Summary lines warning of the settings (of any of ``runs``) that reach no connected port of ``system``
-    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting."""
+    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting; ``opened``: the
+    system an .ssp path held, as the run read it (not read again)."""
     from .cosim.ssp import read_ssp
     from .systems import SYSTEMS, get_system
     from .systems.reach import unreached
-    definition = read_ssp(Path(system)) if system.endswith(".ssp") else get_system(system) if system in SYSTEMS \
-        else None
+    definition = (opened or read_ssp(Path(system))) if system.endswith(".ssp") else get_system(system) \
+        if system in SYSTEMS else None
     if definition is None:
         return []
     why: dict[str, str] = {}
@@ -155,58 +160,45 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
 def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
     completed) and the summary computed as the run goes; only ``--plot`` keeps the trajectory in memory.
-    Prints the summary; returns the result and where its CSV is."""
+    Prints the summary; returns the result, where its CSV is and the system run (its .ssp read once)."""
     import math
     import signal
 
-    from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
-    from .cosim.ssp import read_ssp
-    from .project import simulate, system_archive
-    from .systems import report_for
-    from .systems.report import start_parameters
+    from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.record import CsvSink
+    from .project import OpenSystem, recording, system_archive
     archive = system_archive(args.system, args.root)
-    system = read_ssp(archive)
-    report = report_for(system.name, {c.name: c.model for c in system.components})
-    parameters = start_parameters(system.components, start_values)
-    record = None if args.record is None else list(dict.fromkeys(args.record))
-    step = system.step_size if args.step is None else args.step
-    stop = system.stop_time if args.stop_time is None else args.stop_time
-    rows = None
-    if step > 0 and math.isfinite(stop / step):
-        rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
-    csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
-                       run=f"stop time {stop:g} s at a step of {step:g} s")
-    accumulator = None
-    sinks: list[RecordSink]
-    interval = args.output_interval
-    if args.plot:                       # the plot needs the whole trajectory: kept in memory
-        sinks, run_record = [csv_sink], record
-    else:
-        # the summary reads every step; the CSV gets the --record columns at the --output-interval
-        accumulator = report.accumulator(parameters)     # its parts are made when the run opens it
-        run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
-        csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
-        every = steps_per_row(interval, step)
-        sinks = [csv_view if every == 1 else EveryKth(csv_view, every), accumulator]
-        interval = None
+    csv_sink = None
     try:
         with deferred_interrupts():
-            result = simulate(str(archive), stop_time=args.stop_time, step_size=args.step,
-                              start_values=start_values, input_csv=args.input, mode=args.mode, root=args.root,
-                              record=run_record, output_interval=interval, sinks=sinks, keep=args.plot)
+            inputs = InputTable.from_csv(args.input) if args.input else None
+            with OpenSystem(archive, args.mode) as opened:
+                system = opened.system
+                step = system.step_size if args.step is None else args.step
+                stop = system.stop_time if args.stop_time is None else args.stop_time
+                rows = None
+                if step > 0 and math.isfinite(stop / step):
+                    rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+                csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
+                                   run=f"stop time {stop:g} s at a step of {step:g} s")
+                # the summary reads every step; the CSV gets the --record columns at the --output-interval (with
+                # --plot the run keeps the trajectory, and the summary is made from it)
+                how = recording(system, start_values, csv_sink, args.record, args.output_interval, args.step,
+                                summary=not args.plot)
+                result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
+                                    inputs=inputs, keep=args.plot, **how.run_arguments())
     except KeyboardInterrupt as err:
         terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
-        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {_where_stopped(csv_sink)}",
-              file=sys.stderr)
+        where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
+        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {where}", file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
     except NcfmuError as err:
-        if csv_sink.final_path is None:
+        if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    print(_summary(result, None if accumulator is None else accumulator.summary()))
-    return result, csv_sink.final_path
+    print(_summary(result, None if how.summary is None else how.summary.summary()))
+    return result, csv_sink.final_path, system
 
 
 def _where_stopped(sink) -> str:
@@ -239,9 +231,9 @@ def cmd_run(args) -> int:
     start_values = _parse_set(args.set)
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
-    result, csv = _run_streamed(args, start_values)
+    result, csv, system = _run_streamed(args, start_values)
     out = Path(args.out)
-    for line in _unreached_lines(args.system, [start_values], {}):
+    for line in _unreached_lines(args.system, [start_values], {}, system):
         print(line)
     print(f"  results: {csv}")
     if args.plot:
@@ -427,6 +419,7 @@ def cmd_validate(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .cosim.algorithm import MODES
     help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
                      "run closed loop with servo axes.", epilog=help_epilog)
@@ -444,7 +437,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
     p.add_argument("--input", type=Path, default=None, help="CSV of input changes (columns time, INSTANCE.VARIABLE)")
-    p.add_argument("--mode", choices=("gauss-seidel", "jacobi"), default="gauss-seidel", help="master algorithm")
+    p.add_argument("--mode", choices=MODES, default=MODES[0], help="master algorithm")
     p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out); the rows are streamed to "
                    "SYSTEM.csv.partial and renamed when the run completed (an interrupted run leaves the .partial: "
                    "a valid CSV of every row up to where it stopped)")

@@ -16,15 +16,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .cosim.fmu import FmuSlave, UnpackedFmu, safe_extract, unpacked_fmu
-from .cosim.master import InputTable, Master
+from .cosim.master import InputTable, Master, Session, steps_per_row
 from .cosim.native_loop import build_library
-from .cosim.record import RecordSink
+from .cosim.record import EveryKth, RecordSink, SelectColumns
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, System, fmu_path, pack, read_ssp, write_system
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
-from .systems import SYSTEMS, get_system
+from .systems import SYSTEMS, get_system, report_for
+from .systems.report import ReportAccumulator, start_parameters
 
 
 def models_dir(root: Path) -> Path:
@@ -90,7 +91,12 @@ class OpenSystem:
             raise
 
     def run(self, **kwargs) -> Result:
+        """One run from start to stop (:meth:`Master.run <ncfmu.cosim.master.Master.run>`)."""
         return self.master.run(**kwargs)
+
+    def open_session(self, **kwargs) -> Session:
+        """A run stepped from outside (:meth:`Master.open_session <ncfmu.cosim.master.Master.open_session>`)."""
+        return self.master.open_session(**kwargs)
 
     def close(self) -> None:
         try:
@@ -103,6 +109,44 @@ class OpenSystem:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@dataclass
+class Recording:
+    """How a run records: the outputs it records, the sinks its rows go to, the interval the run itself records
+    at, and the report's metrics computed as it goes. Made one way (:func:`recording`) for every front end."""
+
+    record: list[str] | None
+    sinks: list[RecordSink]
+    output_interval: float | None
+    summary: ReportAccumulator | None
+
+    def run_arguments(self) -> dict[str, object]:
+        """The arguments of ``Master.run`` / ``open_session`` that say what is recorded and where it goes."""
+        return {"record": self.record, "sinks": self.sinks, "output_interval": self.output_interval}
+
+
+def recording(system: System, start_values: Mapping[str, object], rows: RecordSink | None = None,
+              columns: Sequence[str] | None = None, output_interval: float | None = None,
+              step_size: float | None = None, summary: bool = True, every: int | None = None) -> Recording:
+    """What a run of ``system`` records: ``rows`` (a CSV, any sink) gets ``columns`` (default every output) every
+    ``output_interval`` s; with ``summary`` the system's report reads every step of what it needs (its accumulator,
+    made for the run's parameters: the system's sets with ``start_values`` on top) while the run records only those
+    columns and ``columns``. Without ``summary`` the run itself records ``columns`` at ``output_interval``.
+    ``every``: the rows' spacing in steps, instead of ``output_interval``."""
+    record = None if columns is None else list(dict.fromkeys(columns))
+    if not summary:
+        return Recording(record, [] if rows is None else [rows], output_interval, None)
+    report = report_for(system.name, {c.name: c.model for c in system.components})
+    accumulator = report.accumulator(start_parameters(system.components, start_values))
+    run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
+    sinks: list[RecordSink] = []
+    if rows is not None:
+        view = rows if run_record == record else SelectColumns(rows, record or [])
+        if every is None:
+            every = steps_per_row(output_interval, system.step_size if step_size is None else step_size)
+        sinks.append(view if every == 1 else EveryKth(view, every))
+    return Recording(run_record, [*sinks, accumulator], None, accumulator)
 
 
 def simulate(system: str = "lathe_roughing", stop_time: float | None = None, step_size: float | None = None,
