@@ -99,3 +99,10 @@ def grinder_envelope(ncfmu_run):
 @pytest.fixture(scope="session")
 def mill_contour(ncfmu_run):
     return ncfmu_run("mill_contour")
+
+
+@pytest.fixture(scope="session")
+def foreign(tmp_path_factory) -> dict[str, Path]:
+    """The foreign FMUs of ``tests/foreign/`` (models written without ncfmu's code), compiled once per session."""
+    import foreign_fmus
+    return foreign_fmus.build(tmp_path_factory.mktemp("foreign"))

@@ -116,9 +116,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
         # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
         # report reads) every k-th row
-        keep = list(record) if record is not None else report_for(system.name, {c.name: c.model for c in
-                                                                                system.components}).record()
-        how = recording(system, variant, csv, keep, every=every)
+        keep = list(record) if record is not None else report_for(system.name, opened.models).record()
+        how = recording(opened, variant, csv, keep, every=every)
         metrics = how.summary
         assert metrics is not None
         deadline = None if timeout is None else time.perf_counter() + timeout

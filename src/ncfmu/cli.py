@@ -103,6 +103,9 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
              f"(simulated/wall-clock ratio {result.realtime_factor:.1f})"]
     lines += (report_of(result).summary(result, run_parameters(result)) if report_lines is None
               else report_lines)
+    if getattr(result, "ended_by", ""):
+        lines.append(f"  ended: {result.ended_by}")
+    lines += [f"  [warning] {w}" for w in getattr(result, "warnings", [])]
     for _inst, msgs in result.messages.items():
         for level, text in msgs:
             if level in ("warning", "error", "fatal"):
@@ -131,6 +134,51 @@ def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[st
                 where[name].append(values[name])
     return [f"  [warning] {option.get(name, '--set')} {name}={','.join(map(str, where[name]))}: {reason}"
             for name, reason in why.items()]
+
+
+def _replace_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--replace", action="append", default=[], metavar="INSTANCE=PATH.fmu",
+                   help="run another FMU in place of an instance (connections kept by variable name; the old "
+                        "parameters applied where the new FMU has them); repeatable")
+    p.add_argument("--map", action="append", default=[], metavar="INSTANCE.THEIRS=OURS",
+                   help="a replacing FMU's name for an old connector, e.g. --map x_axis.x=pos; repeatable")
+
+
+def _prepare_source(args) -> list[str]:
+    """``args.system`` (a name, .ssp, .ssd, system folder or .fmu, with --replace/--map) made the path of the .ssp
+    the command runs; returns the replacement's warning lines."""
+    from .project import prepared_archive
+    if args.system in _shipped_names() and not args.replace and not args.map:
+        return []
+    archive, warnings = prepared_archive(args.system, args.replace, args.map, args.root)
+    args.system = str(archive)
+    return warnings
+
+
+def _shipped_names() -> set[str]:
+    from .systems import SYSTEMS
+    return set(SYSTEMS)
+
+
+def cmd_pack(args) -> int:
+    """A user's system (an .ssd with its folder, an unpacked folder, an .ssp or a bare .fmu, with --replace/--map)
+    written as one .ssp archive."""
+    from .cosim.ssp import read_ssp
+    from .files import write_atomic
+    warnings = _prepare_source(args)
+    if args.system in _shipped_names():
+        from .project import system_archive
+        args.system = str(system_archive(args.system, args.root))
+    out = Path(args.output)
+    if out.suffix != ".ssp":
+        raise NcfmuError(f"--output {out}: must end in .ssp")
+    system = read_ssp(Path(args.system))
+    write_atomic(out, Path(args.system).read_bytes())
+    print(f"packed {system.name} ({len(system.components)} components: "
+          f"{', '.join(c.name for c in system.components)}) -> {out}")
+    for w in warnings:
+        print(f"  [warning] {w}")
+    return 0
 
 
 def cmd_build(args) -> int:
@@ -165,7 +213,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     import signal
 
     from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink
+    from .cosim.record import CsvSink, RecordWriteError
     from .project import OpenSystem, recording, system_archive
     archive = system_archive(args.system, args.root)
     csv_sink = None
@@ -183,8 +231,8 @@ def _run_streamed(args, start_values: dict[str, object]):
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
                 # the summary reads every step; the CSV gets the --record columns at the --output-interval (with
                 # --plot the run keeps the trajectory, and the summary is made from it)
-                how = recording(system, start_values, csv_sink, args.record, args.output_interval, args.step,
-                                summary=not args.plot)
+                how = recording(opened, start_values, csv_sink, args.record, args.output_interval, args.step,
+                                summary=not args.plot, in_mm=True)    # a user's axis in m: the report reads mm
                 result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
                                     inputs=inputs, keep=args.plot, **how.run_arguments())
     except KeyboardInterrupt as err:
@@ -192,11 +240,19 @@ def _run_streamed(args, start_values: dict[str, object]):
         where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
         print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {where}", file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
+    except RecordWriteError as err:       # the disk full: whole rows kept, said as for Ctrl-C
+        if csv_sink is None or csv_sink.final_path is None:
+            raise
+        raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
     except NcfmuError as err:
         if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
+    if how.summary is None:              # --plot: the kept trajectory, its axes in mm for the summary and the plot
+        for name, gain in how.scales.items():
+            if name in result:
+                result.data[name] *= gain
     print(_summary(result, None if how.summary is None else how.summary.summary()))
     return result, csv_sink.final_path, system
 
@@ -209,6 +265,7 @@ def _where_stopped(sink) -> str:
 
 def cmd_run(args) -> int:
     from .project import simulate_branches
+    replace_warnings = _prepare_source(args)
     if args.branch_at is not None:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
@@ -232,6 +289,8 @@ def cmd_run(args) -> int:
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
     result, csv, system = _run_streamed(args, start_values)
+    for line in replace_warnings:
+        print(f"  [warning] {line}")
     out = Path(args.out)
     for line in _unreached_lines(args.system, [start_values], {}, system):
         print(line)
@@ -272,6 +331,8 @@ def cmd_sweep(args) -> int:
         if value is not None and not (value > 0 and value < float("inf")):
             raise NcfmuError(f"{name} {value!r}: must be a number > 0")
     vary = _parse_vary(args.vary)
+    for line in _prepare_source(args):
+        print(f"  [warning] {line}")
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
                  output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
@@ -332,23 +393,26 @@ def cmd_plot(args) -> int:
 
 def cmd_vars(args) -> int:
     """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
-    import zipfile
+    from dataclasses import replace
 
     from .cosim.ssp import read_ssp
+    from .project import OpenSystem, model_descriptions
     from .systems import get_system
     from .systems.settable import settable
+    warnings: list[str] = _prepare_source(args)
+    foreign: list[str] = []
     if args.system.endswith(".ssp"):
         archive = Path(args.system)
         system = read_ssp(archive)
-
-        def model_description(model: str) -> bytes:
-            source = next(c.source for c in system.components if c.model == model)
-            try:
-                with zipfile.ZipFile(archive) as z, zipfile.ZipFile(z.open(source)) as fmu:
-                    return fmu.read("modelDescription.xml")
-            except (KeyError, zipfile.BadZipFile) as err:
-                raise NcfmuError(f"{archive}: {source} has no readable modelDescription.xml ({err})") from None
-        rows = settable(system, model_description)
+        described = model_descriptions(archive, system)
+        rows = settable(system, described.__getitem__)
+        # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
+        with OpenSystem(archive) as opened:
+            conversions = opened.master.conversions
+            warnings = [*warnings, *opened.warnings()]
+            foreign = [f"{inst}: {identity}" for inst, identity in opened.identities.items() if not identity.model]
+        rows = [replace(r, driven_by=f"{r.driven_by} ({conversions[key]})")
+                if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
         system = get_system(args.system)
         rows = settable(system)
@@ -370,6 +434,8 @@ def cmd_vars(args) -> int:
         lines.append("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
         if r is not None and len(r.start) > long:
             lines.append(f"    start: {r.start}")
+    lines += [f"  foreign FMU {line}" for line in foreign]
+    lines += [f"  [warning] {w}" for w in warnings]
     try:
         sys.stdout.write("\n".join(lines) + "\n")
         sys.stdout.flush()
@@ -379,7 +445,12 @@ def cmd_vars(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from .serving import Security, serve
+    from .serving import APPLICATION_URI, Security, make_certificate, serve
+    if args.make_certificate is not None:
+        key, cert = make_certificate(args.make_certificate)
+        print(f"ncfmu serve: wrote {cert} (application URI {APPLICATION_URI}) and its private key {key}; serve "
+              f"with --certificate {cert} --private-key {key}; clients trust {cert}")
+        return 0
     users = {}
     for item in args.user or []:
         name, colon, password = item.partition(":")
@@ -396,7 +467,9 @@ def cmd_serve(args) -> int:
 
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
-                    security=Security(users, args.certificate, args.private_key), root=args.root, ready=ready)
+                    security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
+                    root=args.root, ready=ready,
+                    watchdog=args.watchdog, cnc=args.cnc)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -452,6 +525,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
                    help="tunable parameter or input set at the branch point, one value per branch, "
                         "e.g. --branch-set panel.emergency_at=12,21,31")
+    _replace_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
@@ -487,6 +561,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
     p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
+    _replace_options(p)
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
@@ -508,6 +583,7 @@ def main(argv: list[str] | None = None) -> int:
                                    "from, and its description.", epilog=help_epilog)
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
+    _replace_options(p)
     p.set_defaults(func=cmd_vars)
 
     p = sub.add_parser("serve", help="run a system in real time behind an OPC UA server (virtual commissioning)",
@@ -534,7 +610,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--certificate", type=Path, default=None,
                    help="server certificate: adds the Basic256Sha256 SignAndEncrypt policy (with --private-key)")
     p.add_argument("--private-key", type=Path, default=None, help="the certificate's private key")
+    p.add_argument("--trust", type=Path, default=None, metavar="DIR",
+                   help="folder of the client certificates (or their CAs' certificates) accepted; any other is "
+                        "refused (needs --certificate; required off the loopback)")
+    p.add_argument("--allow-insecure", action="store_true",
+                   help="off the loopback, also security policy None and any client certificate (a closed network)")
+    p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
+                   help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
+                        "DIR/ncfmu-key.pem, then exit")
+    p.add_argument("--cnc", action="store_true",
+                   help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
+                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+    p.add_argument("--watchdog", type=float, default=None, metavar="S",
+                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
+                        "nothing for S seconds (logged, and recorded as releases)")
     p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "
+                       ".fmu; components replaced with --replace) as one .ssp archive")
+    p.add_argument("system", help="system name, .ssp, .ssd, unpacked system folder or .fmu")
+    p.add_argument("--output", "-o", required=True, help="the .ssp file to write")
+    _replace_options(p)
+    p.set_defaults(func=cmd_pack)
 
     p = sub.add_parser("validate", help="validate every FMU (fmpy) and SSP (SSP 1.0 schema) and list problems")
     p.set_defaults(func=cmd_validate)

@@ -32,12 +32,32 @@ class ProgramError(ConfigError):
         super().__init__("program", text, f"line {line_no}, column {column}: {reason}")
 
 
+class ProgramErrors(ProgramError):
+    """Every error found in a program, in line order; its line and column are the first one's."""
+
+    def __init__(self, errors: list[ProgramError]):
+        self.errors = list(errors)
+        first = self.errors[0]
+        ConfigError.__init__(self, "program", first.value, "; ".join(e.rule for e in self.errors))
+        self.line_no, self.column = first.line_no, first.column
+
+
 class SystemDefinitionError(NcfmuError, ValueError):
     """A system (SSP file, connection, instance or variable name) is malformed or unknown."""
 
 
 class SimulationError(NcfmuError, RuntimeError):
     """An FMU refused a call during a simulation."""
+
+
+class TerminationRequested(SimulationError):
+    """An FMU asked to end the simulation (fmi2Discard with fmi2Terminated, FMI 3.0's terminateSimulation): the
+    run ends cleanly at the start of the step it refused. ``instance`` names the FMU, ``time`` that point."""
+
+    def __init__(self, instance: str, time: float, detail: str = ""):
+        self.instance, self.time = instance, time
+        super().__init__(f"{instance} asked to end the simulation at t = {time:.6g} s (fmi2Discard with "
+                         f"terminateSimulation){': ' + detail if detail else ''}")
 
 
 class SimulationTimeout(SimulationError):

@@ -9,22 +9,25 @@ Two threads share the work, and neither waits on the other:
 - the **server** (asyncua, on an asyncio loop in the main thread) publishes the newest snapshot every
   ``publish_interval`` (subscriptions then deliver data changes) and answers clients.
 
-A write is checked on the server side first (type, NaN/inf, the port's min/max from the modelDescription:
-OPC UA status Bad_TypeMismatch, Bad_OutOfRange, Bad_NotWritable, nothing changes), then handed to the
-simulation thread, which applies it before the next step and answers with the session's verdict (a
-controller's own rule, e.g. the panel's allowed values, is the session's ConfigError -> Bad_OutOfRange).
+Each node of a Write is checked on the server side first (type, NaN/inf, the port's min/max from the
+modelDescription: OPC UA status Bad_TypeMismatch, Bad_OutOfRange, Bad_NotWritable, Bad_NodeIdUnknown; that node
+changes nothing), then handed to the simulation thread, which applies it before the next step and answers with
+the session's verdict (a tunable parameter is first checked by its model's own rules on a copy; a refusal is
+Bad_OutOfRange and never reaches the FMU). Each node gets its own status, as OPC UA Part 4 asks.
 
 Address space (stable: PLC projects point at these names): namespace ``urn:ncfmu:<system>``; one Object per
 component instance; one Variable per FMU variable, string NodeId ``<instance>.<variable>``, BrowseName the
 variable's name, DataType Double/Int32/Boolean/String, its description, its unit as EngineeringUnits
 (EUInformation); inputs also get ``<instance>.<variable>.forced`` (Boolean). The ``Simulation`` object holds
-``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason`` and the methods ``Pause``, ``Resume``,
-``Stop``, ``Reset`` and ``Release(name)``.
+``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs) and the
+methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a watchdog, the inputs a client
+session forced are released when it closes or is silent the watchdog's time.
 """
 
 from __future__ import annotations
 
 import asyncio
+import datetime
 import ipaddress
 import logging
 import math
@@ -62,6 +65,9 @@ FAST_CHUNK = 50
 WRITE_TIMEOUT = 2.0
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/ncfmu"
+#: The server's ApplicationUri (OPC UA Part 4 7.2), also the URI its certificate carries (``--make-certificate``)
+APPLICATION_URI = "urn:ncfmu:serve"
+PRODUCT_URI = "urn:ncfmu"
 
 #: UNECE codes (OPC UA EngineeringUnits, namespace below) of the units our FMUs declare.
 UNECE_NAMESPACE = "http://www.opcfoundation.org/UA/units/un/cefact"
@@ -179,11 +185,20 @@ class Recorder:
         from .cosim.record import CsvSink
         return [CsvSink(self.trajectory)]
 
-    def end_segment(self, writes: Sequence[tuple[float, str, object]], final: bool) -> None:
-        """After the session closed its sinks: name the segment's files and write its writes."""
+    def end_segment(self, writes: Sequence[tuple[float, str, object]], final: bool, start: float = 0.0) -> None:
+        """After the session closed its sinks: name the segment's files and write its writes (a segment without
+        writes: one row at its ``start`` time that changes nothing -- an input CSV with a header and no rows is
+        refused by ``ncfmu run --input`` as a mistake)."""
         from .cosim.master import write_input_csv
+        from .files import write_atomic
+
+        def inputs(path: Path) -> Path:
+            if writes:
+                return write_input_csv(path, writes)
+            write_atomic(path, f'"time"\n{float(start)!r}\n'.encode())
+            return path
         if final:
-            self.files.append(write_input_csv(self.out / "session_inputs.csv", writes))
+            self.files.append(inputs(self.out / "session_inputs.csv"))
             for path in (self.trajectory, self.trajectory.with_name(self.trajectory.name + ".partial")):
                 if path.exists():
                     self.files.append(path)
@@ -192,7 +207,7 @@ class Recorder:
         k = self.segments
         if self.trajectory.exists():
             self.files.append(self.trajectory.replace(self.out / f"{self.system}.segment{k}.csv"))
-        self.files.append(write_input_csv(self.out / f"session_inputs.segment{k}.csv", writes))
+        self.files.append(inputs(self.out / f"session_inputs.segment{k}.csv"))
 
 
 # -- the simulation thread ------------------------------------------------------------------------------
@@ -250,11 +265,18 @@ class Runner:
     """Paces a session in a worker thread (see the module's docstring)."""
 
     def __init__(self, session, points: Sequence[Point], speed: float = 1.0, recorder: Recorder | None = None,
-                 on_state: Callable[[], None] | None = None) -> None:
+                 on_state: Callable[[], None] | None = None,
+                 check_parameter: Callable[[str, object], None] | None = None) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ConfigError("--speed", speed, "must be a number >= 0 (0: as fast as possible)")
         self.session, self.speed, self.recorder = session, float(speed), recorder
         self.points = list(points)
+        #: a tunable parameter's value checked by the model's own rules on a copy before the FMU sees it
+        #: (ConfigError: refused, nothing applied, nothing recorded)
+        self.check_parameter = check_parameter
+        self.start_time = float(session.time)
+        #: the writes of the segments before the last Reset (the session's own log restarts at a Reset)
+        self.earlier_writes: list[tuple[float, str, object]] = []
         self.state, self.reason = "running", ""
         self.stats = PaceStats()
         self.lag = 0.0
@@ -299,8 +321,10 @@ class Runner:
         for p in self.points:
             if p.causality == "input" or p.writes == "parameter":
                 values[p.name] = s.value(p.name)
+        forced = dict(s.forced())
+        values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
-            self._snapshot = Snapshot(float(s.time), values, dict(s.forced()), self.state, self.reason, self.lag,
+            self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
                                       self.stats.overruns)
         self._want_snapshot = False
 
@@ -315,6 +339,8 @@ class Runner:
             elif c.what == "release":
                 s.release(c.name)
             elif c.what == "set":
+                if self.check_parameter is not None:
+                    self.check_parameter(c.name, c.value)
                 s.set_parameter(c.name, c.value)
             elif c.what == "pause":
                 if self.state == "running":
@@ -331,8 +357,9 @@ class Runner:
                     writes = list(s.writes)
                     rec = self.recorder
                     s.reset(rec.sinks() if rec is not None else ())
+                    self.earlier_writes += writes
                     if rec is not None:
-                        rec.end_segment(writes, final=False)
+                        rec.end_segment(writes, final=False, start=self.start_time)
                     rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
@@ -340,8 +367,12 @@ class Runner:
         except (ConfigError, NcfmuError) as err:
             refusal = str(err)
         if c.done is not None:
+            # the snapshot first: once a client has its answer, what it reads next shows the command's effect
+            # (Simulation.state "paused" as soon as Pause returned)
+            self._take_snapshot()
             c.done(refusal)
-        self._want_snapshot = True
+        else:
+            self._want_snapshot = True
         return rebase
 
     def _main(self) -> None:
@@ -440,7 +471,199 @@ class Runner:
                 self._on_state()
 
 
+# -- OPC UA for CNC Systems (OPC 40502) ----------------------------------------------------------------------
+CNC_NAMESPACE = "http://opcfoundation.org/UA/CNC"
+#: The OPC Foundation's published NodeSet of OPC 40502 v1.00 (OPC Foundation MIT License 1.00, in its header),
+#: as node-opcua's npm package node-opcua-nodesets ships it.
+CNC_NODESET = Path(__file__).parent / "data" / "Opc.Ua.CNC.NodeSet2.xml"
+#: The models whose instances the companion model shows: an axis, a spindle, a channel (an NC cycle controller)
+CNC_AXIS_MODELS = ("ServoAxis",)
+CNC_SPINDLE_MODELS = ("SpindleDrive",)
+# the enumerations' values (OPC 40502 6.x: CncAxisStatus, CncChannelProgramStatus, CncChannelStatus, ...)
+AXIS_IN_POSITION, AXIS_MOVING = 0, 1
+PROGRAM_STOPPED, PROGRAM_RUNNING, PROGRAM_WAITING, PROGRAM_INTERRUPTED, PROGRAM_CANCELED = 0, 1, 2, 3, 4
+CHANNEL_RESET, CHANNEL_INTERRUPTED, CHANNEL_ACTIVE = 0, 1, 2
+MODE_AUTOMATIC = 2
+SPINDLE_STOPPED, SPINDLE_IN_TARGET, SPINDLE_ACCELERATING = 0, 1, 2
+TURN_NONE, TURN_CW, TURN_CCW = 0, 1, 2
+
+
+def cnc_types_xml(path: Path = CNC_NODESET) -> str:
+    """The NodeSet's types only: the published file also holds example instances (``test`` under Objects, axes
+    ``X``, ``Y``, ``Channel_1`` ... without a parent) that asyncua refuses and a client must not see. They are
+    left out, with every reference to them."""
+    import xml.etree.ElementTree as ET
+    ua_ns = "http://opcfoundation.org/UA/2011/03/UANodeSet.xsd"
+    ET.register_namespace("", ua_ns)
+    root = ET.parse(path).getroot()
+
+    def q(tag: str) -> str:
+        return f"{{{ua_ns}}}{tag}"
+    instances = {n.get("NodeId"): n for n in root if n.tag in (q("UAObject"), q("UAVariable"), q("UAMethod"))}
+
+    def type_definition(n) -> str:
+        for r in n.iter(q("Reference")):
+            if r.get("ReferenceType") == "HasTypeDefinition":
+                return r.text or ""
+        return ""
+    dropped: set[str | None] = set()
+    changed = True
+    while changed:
+        changed = False
+        for nid, n in instances.items():
+            if nid in dropped:
+                continue
+            example = not n.get("ParentNodeId") and type_definition(n).startswith(("ns=1;", "i=61"))
+            if example or n.get("ParentNodeId") in dropped:
+                dropped.add(nid)
+                changed = True
+    for n in list(root):
+        if n.get("NodeId") in dropped:
+            root.remove(n)
+            continue
+        refs = n.find(q("References"))
+        for r in list(refs) if refs is not None else ():
+            if r.text in dropped:
+                refs.remove(r)         # type: ignore[union-attr]
+    return ET.tostring(root, encoding="unicode")
+
+
+@dataclass
+class _Mirror:
+    """A node of the companion model that shows a function of the served values."""
+
+    node: object
+    vtype: object
+    value: Callable[[Mapping[str, object]], object]
+
+
+async def build_cnc_model(server, idx: int, system: str, components: Mapping[str, str],
+                          points: Mapping[str, Point]) -> list[_Mirror]:
+    """The served system as an OPC 40502 ``CncInterfaceType`` object ``Objects/CncInterface`` (NodeIds
+    ``ns=<idx>;s=Cnc...``): ``CncAxisList`` (an axis per servo axis: ``PosDirect``/``PosIndirect`` ``ActPos`` =
+    the axis's ``pos``, ``CmdPos`` = its ``pos_cmd``, ``RemDist`` = CmdPos - ActPos, mm, with EngineeringUnits and
+    EURange; ``ActStatus`` in position or moving; ``ActTorque``), ``CncChannelList`` (a channel per NC cycle
+    controller: program status, the system's name as the active program, the block -- the part program's line
+    where the controller says it, else its block number --, feed override %, feed hold, mode automatic) and
+    ``CncSpindleList`` (a spindle per spindle drive: speeds, status, turn direction). The mirrors that keep
+    them current."""
+    from asyncua import ua
+
+    from . import __version__
+    from .catalogue import models
+    from .controllers.cycle import CycleController
+    await server.import_xml(xmlstring=cnc_types_xml())
+    cnc = await server.get_namespace_index(CNC_NAMESPACE)
+
+    def nid(name: str):
+        return ua.NodeId(ua.String(name), ua.Int16(idx))
+
+    def t(number: int):
+        return ua.NodeId(ua.Int32(number), ua.Int16(cnc))
+    iface = await server.nodes.objects.add_object(nid("Cnc"), ua.QualifiedName("CncInterface", idx),
+                                                  objecttype=t(1007))
+    for name, value in (("VendorName", "ncfmu"), ("VendorRevision", __version__), ("Version", "1.00"),
+                        ("CncTypeName", f"ncfmu {system}")):
+        try:
+            node = await iface.get_child([f"{cnc}:{name}"])
+        except ua.UaStatusCodeError:             # an optional property: added
+            node = await iface.add_property(nid(f"Cnc.{name}"), ua.QualifiedName(name, cnc), value)
+        await node.write_value(ua.Variant(value, ua.VariantType.String))
+    mirrors: list[_Mirror] = []
+    D, I32, B, S, U32 = (ua.VariantType.Double, ua.VariantType.Int32, ua.VariantType.Boolean,
+                         ua.VariantType.String, ua.VariantType.UInt32)
+
+    async def mirror(parent, path: str, vtype, fn) -> None:
+        node = await parent.get_child([f"{cnc}:{p}" for p in path.split("/")])
+        mirrors.append(_Mirror(node, vtype, fn))
+
+    def real(name: str) -> Callable[[Mapping[str, object]], float]:
+        return lambda v: float(v.get(name) or 0.0)          # type: ignore[arg-type]
+    logic = models()
+    axis_list = await iface.get_child([f"{cnc}:CncAxisList"])
+    spindle_list = await iface.get_child([f"{cnc}:CncSpindleList"])
+    channel_list = await iface.get_child([f"{cnc}:CncChannelList"])
+    channel_id = 0
+    for inst, model in components.items():
+        if model in CNC_AXIS_MODELS:
+            axis = await axis_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx), objecttype=t(1004))
+            pos, cmd = f"{inst}.pos", f"{inst}.pos_cmd"
+            low = points[cmd].minimum if cmd in points else None
+            high = points[cmd].maximum if cmd in points else None
+            eu = ua.EUInformation(NamespaceUri=UNECE_NAMESPACE, UnitId=_unece_id("MMT"),
+                                  DisplayName=ua.LocalizedText("mm"), Description=ua.LocalizedText("millimetre"))
+            span = ua.Range(Low=-math.inf if low is None else low, High=math.inf if high is None else high)
+            for which in ("PosDirect", "PosIndirect"):
+                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EngineeringUnits"])).write_value(eu)
+                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EURange"])).write_value(span)
+                await mirror(axis, f"{which}/ActPos", D, real(pos))
+                await mirror(axis, f"{which}/CmdPos", D, real(cmd))
+                await mirror(axis, f"{which}/RemDist", D,
+                             lambda v, pos=pos, cmd=cmd: real(cmd)(v) - real(pos)(v))
+            await mirror(axis, "ActStatus", I32, lambda v, inst=inst: AXIS_IN_POSITION
+                         if v.get(f"{inst}.in_position") else AXIS_MOVING)
+            await mirror(axis, "ActTorque", D, real(f"{inst}.torque"))
+            await mirror(axis, "IsInactive", B, lambda v, inst=inst: not v.get(f"{inst}.enable", True))
+            await (await axis.get_child([f"{cnc}:IsReferenced"])).write_value(True)
+        elif model in CNC_SPINDLE_MODELS:
+            spindle = await spindle_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
+                                                    objecttype=t(1005))
+            speed, cmd = f"{inst}.speed", f"{inst}.speed_cmd"
+            await mirror(spindle, "ActSpeed", D, real(speed))
+            await mirror(spindle, "CmdSpeed", D, real(cmd))
+            await mirror(spindle, "ActStatus", I32, lambda v, inst=inst, speed=speed: SPINDLE_STOPPED
+                         if abs(real(speed)(v)) < 1e-9 else SPINDLE_IN_TARGET if v.get(f"{inst}.at_speed")
+                         else SPINDLE_ACCELERATING)
+            await mirror(spindle, "ActTurnDirection", I32, lambda v, speed=speed: TURN_NONE
+                         if abs(real(speed)(v)) < 1e-9 else TURN_CW if real(speed)(v) > 0 else TURN_CCW)
+        elif model in logic and issubclass(logic[model], CycleController):
+            channel_id += 1
+            channel = await channel_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
+                                                    objecttype=t(1002))
+            block = next((f"{inst}.{b}" for b in ("line", "block_no", "pc", "segment") if f"{inst}.{b}" in points),
+                         None)
+
+            def program_status(v, inst=inst) -> int:
+                if v.get(f"{inst}.alarm"):
+                    return PROGRAM_CANCELED
+                if not v.get(f"{inst}.busy"):
+                    return PROGRAM_STOPPED
+                if v.get(f"{inst}.feed_hold"):
+                    return PROGRAM_INTERRUPTED
+                return PROGRAM_WAITING if v.get(f"{inst}.m_active") else PROGRAM_RUNNING
+            await mirror(channel, "ActProgramStatus", I32, program_status)
+            await mirror(channel, "ActStatus", I32, lambda v, st=program_status: CHANNEL_ACTIVE
+                         if st(v) in (PROGRAM_RUNNING, PROGRAM_WAITING) else CHANNEL_INTERRUPTED
+                         if st(v) == PROGRAM_INTERRUPTED else CHANNEL_RESET)
+            await mirror(channel, "ActProgramBlock", S, lambda v, block=block: "" if block is None
+                         else str(v.get(block, "")))
+            await mirror(channel, "ActOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+            await mirror(channel, "CmdOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+            await mirror(channel, "FeedHold", B, lambda v, inst=inst: bool(v.get(f"{inst}.feed_hold")))
+            fixed: tuple[tuple[str, object, object], ...]
+            fixed = (("ActProgramName", system, S), ("ActMainProgramName", system, S),
+                     ("ActOperationMode", MODE_AUTOMATIC, I32), ("CmdOperationMode", MODE_AUTOMATIC, I32),
+                     ("Id", channel_id, U32))
+            for prop, fixed_value, vt in fixed:
+                await (await channel.get_child([f"{cnc}:{prop}"])).write_value(ua.Variant(fixed_value, vt))
+    return mirrors
+
+
 # -- the OPC UA server -----------------------------------------------------------------------------------
+@dataclass(eq=False)
+class _Client:
+    """A client's session as the watchdog sees it: when it was last heard (any request), whether it closed."""
+
+    session: object
+    heard: float
+
+    @property
+    def name(self) -> str:
+        user = getattr(self.session, "user", None)
+        who = getattr(user, "name", None)
+        return f"{getattr(self.session, 'name', '?')}" + (f" (user {who})" if who else "")
+
+
 @dataclass
 class Security:
     """Who may connect when the endpoint is not on the loopback interface."""
@@ -448,6 +671,8 @@ class Security:
     users: dict[str, str] = field(default_factory=dict)     # name -> password
     certificate: Path | None = None                          # server certificate (DER or PEM)
     private_key: Path | None = None
+    trust: Path | None = None                # folder of the client certificates (or their CAs) accepted
+    allow_insecure: bool = False             # off the loopback: security policy None, any client certificate
 
 
 def _is_loopback(endpoint: str) -> bool:
@@ -462,13 +687,92 @@ def _is_loopback(endpoint: str) -> bool:
 
 def check_endpoint(endpoint: str, security: Security) -> None:
     parsed = urlparse(endpoint)
-    if parsed.scheme != "opc.tcp" or not parsed.hostname or parsed.port is None:
+    try:
+        port = parsed.port
+    except ValueError:
+        raise ConfigError("--endpoint", endpoint, "the port must be a number 0..65535") from None
+    if parsed.scheme != "opc.tcp" or not parsed.hostname or port is None:
         raise ConfigError("--endpoint", endpoint, "must be opc.tcp://HOST:PORT/PATH")
-    if not _is_loopback(endpoint) and not security.users:
-        raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --user NAME:PASSWORD "
-                          "(no anonymous writes from the network); bind 127.0.0.1 otherwise")
+    if not _is_loopback(endpoint):
+        if not security.users:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --user NAME:PASSWORD "
+                              "(no anonymous writes from the network); bind 127.0.0.1 otherwise")
+        if security.certificate is None and not security.allow_insecure:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --certificate and "
+                              "--private-key (security policy Basic256Sha256, Sign & Encrypt: no password or write "
+                              "in plain text; 'ncfmu serve --make-certificate DIR' makes them), or --allow-insecure")
+        if security.trust is None and not security.allow_insecure:
+            raise ConfigError("--endpoint", endpoint, "serving beyond this machine needs --trust DIR (the client "
+                              "certificates accepted), or --allow-insecure")
     if (security.certificate is None) != (security.private_key is None):
         raise ConfigError("--certificate", str(security.certificate), "needs --private-key too (and vice versa)")
+    if security.trust is not None:
+        if security.certificate is None:
+            raise ConfigError("--trust", str(security.trust), "needs --certificate: client certificates are only "
+                              "presented on a signed and encrypted channel")
+        if not Path(security.trust).is_dir():
+            raise ConfigError("--trust", str(security.trust), "must be a folder of trusted certificates (DER or PEM)")
+
+
+def make_certificate(folder: Path | str, hostname: str | None = None) -> tuple[Path, Path]:
+    """A private key (``ncfmu-key.pem``) and a self-signed certificate (``ncfmu.der``, 5 years) in ``folder``,
+    for ``ncfmu serve --certificate ncfmu.der --private-key ncfmu-key.pem``: ncfmu's application URI, the host's
+    name, ``localhost`` and 127.0.0.1 as subject alternative names (OPC UA Part 6 6.2.2). Existing files are
+    never overwritten."""
+    import socket
+
+    from asyncua.crypto import cert_gen
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    from .files import write_atomic
+    folder = Path(folder)
+    key_path, cert_path = folder / "ncfmu-key.pem", folder / "ncfmu.der"
+    for path in (key_path, cert_path):
+        if path.exists():
+            raise ConfigError("--make-certificate", str(folder), f"{path.name} exists there already (remove it "
+                              "first: a key is never overwritten)")
+    host = hostname or socket.gethostname()
+    key = cert_gen.generate_private_key()
+    names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(APPLICATION_URI), x509.DNSName(host),
+                                     x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    cert = cert_gen.generate_self_signed_app_certificate(
+        key, f"ncfmu serve@{host}", {"organizationName": "ncfmu"}, names,
+        extended=[ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=5 * 365)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_atomic(key_path, cert_gen.dump_private_key_as_pem(key))
+    os.chmod(key_path, 0o600)
+    write_atomic(cert_path, cert.public_bytes(Encoding.DER))
+    return key_path, cert_path
+
+
+async def _load(load, option: str, path: Path | None, what: str) -> None:
+    """asyncua's certificate or key loader, its failure (no such file, not a certificate) one ConfigError."""
+    try:
+        await load(str(path))
+    except OSError as err:
+        raise ConfigError(option, str(path), f"cannot read it: {err.strerror or err}") from None
+    except Exception as err:        # cryptography's parsers: ValueError, TypeError, UnsupportedAlgorithm ...
+        raise ConfigError(option, str(path), f"not {what}: {type(err).__name__}") from None
+
+
+def parameter_check(components: Mapping[str, str], session) -> Callable[[str, object], None]:
+    """``check(INSTANCE.PARAMETER, value)``: the instance's model built anew, on a copy, from its present
+    parameters and the new value (ConfigError: a rule of the model refuses it). A refused tunable then never
+    reaches the FMU, which would apply it before refusing it."""
+    from .catalogue import models
+    logic_of = {inst: models().get(model) for inst, model in components.items()}
+
+    def check(name: str, value: object) -> None:
+        instance, _, variable = name.partition(".")
+        logic = logic_of.get(instance)
+        if logic is None:
+            return
+        values = {p.name: session.value(f"{instance}.{p.name}") for p in logic.ports("parameter")}
+        values[variable] = value
+        logic.from_parameters(values)
+    return check
 
 
 @dataclass
@@ -490,12 +794,24 @@ class LiveServer:
     """An OPC UA server in front of a :class:`Runner`."""
 
     def __init__(self, system_name: str, runner: Runner, endpoint: str = DEFAULT_ENDPOINT,
-                 security: Security | None = None, publish_interval: float = 0.010) -> None:
+                 security: Security | None = None, publish_interval: float = 0.010,
+                 watchdog: float | None = None, cnc_components: Mapping[str, str] | None = None) -> None:
         self.system_name, self.runner, self.endpoint = system_name, runner, endpoint
         self.security = security or Security()
         self.publish_interval = publish_interval
         self.points = {p.name: p for p in runner.points}
         self.stopped = asyncio.Event()
+        self._publishing = asyncio.Lock()
+        if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
+            raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
+        #: with a watchdog: the inputs a client session forced fall back when it closes or is silent this long
+        self.watchdog = watchdog
+        self._clients: dict[int, _Client] = {}       # id(asyncua session) -> what the watchdog knows of it
+        self._owner: dict[str, _Client] = {}         # a forced input -> the session that forced it last
+        #: with the OPC 40502 companion model: instance -> model of the served system's components
+        self.cnc_components = cnc_components
+        self._mirrors: list[_Mirror] = []
+        self._mirrored: dict[int, object] = {}
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -517,12 +833,32 @@ class LiveServer:
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"ncfmu {self.system_name}")
+        from . import __version__
+        server.product_uri = PRODUCT_URI
+        await server.set_application_uri(APPLICATION_URI)
+        await server.set_build_info(PRODUCT_URI, "ncfmu", "ncfmu", __version__, __version__,
+                                    datetime.datetime.now(datetime.UTC))
         if sec.certificate is not None:
-            await server.load_certificate(str(sec.certificate))
-            await server.load_private_key(str(sec.private_key))
-            server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
-        if sec.users:
-            server.set_security_IDs(["Username"])
+            await _load(server.load_certificate, "--certificate", sec.certificate, "a certificate (DER or PEM)")
+            await _load(server.load_private_key, "--private-key", sec.private_key, "a private key (DER or PEM)")
+            policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+            if sec.allow_insecure:
+                policies.append(ua.SecurityPolicyType.NoSecurity)
+            server.set_security_policy(policies)
+            if sec.trust is not None:
+                from asyncua.crypto.truststore import TrustStore
+                from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+                store = TrustStore([Path(sec.trust)], [])
+                await store.load()
+                options = CertificateValidatorOptions
+                server.set_certificate_validator(CertificateValidator(
+                    options.TIME_RANGE | options.URI | options.TRUSTED | options.PEER_CLIENT, store))
+        else:
+            # only what is served: asyncua offers the signing policies too, and warns that it cannot
+            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        # users, or anonymous clients: never both (asyncua otherwise offers user names, and warns that their
+        # passwords would travel in plain text, where no user was asked for)
+        server.set_identity_tokens([ua.UserNameIdentityToken] if sec.users else [ua.AnonymousIdentityToken])
         idx = self.idx = await server.register_namespace(f"urn:ncfmu:{self.system_name}")
         vtype = {"Real": ua.VariantType.Double, "Integer": ua.VariantType.Int32,
                  "Boolean": ua.VariantType.Boolean, "String": ua.VariantType.String}
@@ -573,7 +909,9 @@ class LiveServer:
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
                 ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
                 ("state", "running", ua.VariantType.String, "running, paused, stopped or failed"),
-                ("reason", "", ua.VariantType.String, "why the simulation stopped or failed")):
+                ("reason", "", ua.VariantType.String, "why the simulation stopped or failed"),
+                ("forced", [], ua.VariantType.String,
+                 "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
                                              ua.Variant(value, vt), varianttype=vt)
             await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(desc))))
@@ -585,8 +923,13 @@ class LiveServer:
                           Description=ua.LocalizedText("the input, INSTANCE.VARIABLE (e.g. feed.mfin)"))
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
                                 self._release_method, [arg], [])
-        from asyncua.common.callback import CallbackType
-        server.iserver.subscribe_server_callback(CallbackType.PreWrite, self._pre_write)  # type: ignore[arg-type]
+        if self.cnc_components is not None:
+            self._mirrors = await build_cnc_model(server, idx, self.system_name, self.cnc_components, self.points)
+        service = server.iserver.attribute_service
+        self._asyncua_write = service.write
+        service.write = self._write      # type: ignore[method-assign]  # why: see _write
+        if self.watchdog is not None:
+            self._watch_sessions(server.iserver)
 
     def _nid(self, name: str):
         return self.ua.NodeId(self.ua.String(name), self.ua.Int16(self.idx))
@@ -624,78 +967,198 @@ class LiveServer:
         except TimeoutError:
             return "the simulation did not take the write in time"
 
-    def _refuse(self, status: str, message: str):
+    def _status(self, status: str, message: str):
         log.info("ncfmu serve: write refused (%s): %s", status, message)
-        return self.ua.UaStatusCodeError(getattr(self.ua.StatusCodes, status))
+        return self.ua.StatusCode(getattr(self.ua.StatusCodes, status))
 
-    async def _pre_write(self, event, dispatcher) -> None:
-        """Every client write, before asyncua applies it: checked as a whole (a refused value refuses the
-        request: nothing changes), then applied by the simulation thread, which answers."""
+    def _plan(self, wv, user) -> _Command | tuple[str, str]:
+        """One WriteValue of our namespace: the command that applies it, or (status, why) refused."""
         ua = self.ua
-        planned: list[tuple[str, str, object]] = []
-        for wv in event.request_params.NodesToWrite:
-            nid = wv.NodeId
-            if nid.NamespaceIndex != self.idx:
+        nid = wv.NodeId
+        key = nid.Identifier
+        forced = isinstance(key, str) and key.endswith(".forced") and key[:-7] in self.points
+        p = self.points.get(key) if isinstance(key, str) else None
+        if p is None and not forced:
+            return "BadNotWritable", f"{key}: not writable"
+        if wv.AttributeId != ua.AttributeIds.Value:
+            return "BadNotWritable", f"{key}: only the Value attribute is writable"
+        if getattr(user, "role", None) is not None and user.role.name == "Anonymous":
+            return "BadUserAccessDenied", f"{key}: anonymous clients may not write"
+        variant = wv.Value.Value if wv.Value is not None else None
+        value = None if variant is None else variant.Value
+        vt = None if variant is None else variant.VariantType
+        if forced:
+            if vt != ua.VariantType.Boolean:
+                return "BadTypeMismatch", f"{key} = {value!r}: must be a Boolean"
+            name = key[:-7]
+            # true: held at its present value; false: released
+            return _Command("force", name, self._last.get(name)) if value else _Command("release", name)
+        assert p is not None
+        if p.writes and vt != self.vtype[p.type]:
+            return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
+                                       f"must be a {self.vtype[p.type].name}")
+        try:
+            checked = check_value(p, value)
+        except WriteRefused as err:
+            return err.status, str(err)
+        return _Command("force" if p.writes == "input" else "set", key, checked)
+
+    async def _write(self, params, user=None) -> list:
+        """The Write service (OPC UA Part 4 5.11.4): a StatusCode per WriteValue, the good ones applied in their
+        order by the simulation thread (before the same step), the bad ones changing nothing. Installed in
+        place of asyncua's attribute service's ``write``: its PreWrite callback can only refuse a request as a
+        whole (a ServiceFault), and it would apply our values to the address space itself."""
+        ua = self.ua
+        results: list = [None] * len(params.NodesToWrite)
+        planned: list[tuple[int, _Command]] = []
+        theirs: list[int] = []
+        for i, wv in enumerate(params.NodesToWrite):
+            if wv.NodeId not in self.server.iserver.aspace:   # asyncua: BadUserAccessDenied unless an admin
+                results[i] = self._status("BadNodeIdUnknown", f"{wv.NodeId.to_string()}: no such node")
                 continue
-            key = nid.Identifier
-            if wv.AttributeId != ua.AttributeIds.Value:
-                raise self._refuse("BadNotWritable", f"{key}: only the Value attribute is writable")
-            if getattr(event.user, "role", None) is not None and event.user.role.name == "Anonymous":
-                raise self._refuse("BadUserAccessDenied", f"{key}: anonymous clients may not write")
-            variant = wv.Value.Value
-            value = None if variant is None else variant.Value
-            vt = None if variant is None else variant.VariantType
-            if isinstance(key, str) and key.endswith(".forced") and key[:-7] in self.points:
-                if vt != ua.VariantType.Boolean:
-                    raise self._refuse("BadTypeMismatch", f"{key} = {value!r}: must be a Boolean")
-                planned.append(("force_here" if value else "release", key[:-7], None))
+            if wv.NodeId.NamespaceIndex != self.idx:
+                theirs.append(i)
                 continue
-            p = self.points.get(key) if isinstance(key, str) else None
-            if p is None:
-                raise self._refuse("BadNotWritable", f"{key}: not writable")
-            if p.writes and vt != self.vtype[p.type]:
-                raise self._refuse("BadTypeMismatch", f"{key} = {value!r} ({vt.name if vt else 'null'}): "
-                                   f"must be a {self.vtype[p.type].name}")
-            try:
-                checked = check_value(p, value)
-            except WriteRefused as err:
-                raise self._refuse(err.status, str(err)) from None
-            planned.append(("force" if p.writes == "input" else "set", key, checked))
-        for what, name, value in planned:
-            if what == "force_here":
-                what, value = "force", self._last.get(name)      # held at its present value
-            refusal = await self._submit(_Command(what, name, value))
-            if refusal is not None:
-                raise self._refuse("BadOutOfRange" if "simulation" not in refusal else "BadInvalidState", refusal)
+            plan = self._plan(wv, user)
+            if isinstance(plan, tuple):
+                results[i] = self._status(*plan)
+            else:
+                planned.append((i, plan))
+        if planned:
+            refusals = await asyncio.gather(*(self._submit(c) for _, c in planned))
+            for (i, c), refusal in zip(planned, refusals):
+                if refusal is None:
+                    results[i] = ua.StatusCode()
+                    self._owned(c, user)
+                else:
+                    status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
+                    results[i] = self._status(status, f"{c.name}: {refusal}")
+            await self._publish_once()
+        if theirs:
+            inner = ua.WriteParameters(NodesToWrite=[params.NodesToWrite[i] for i in theirs])
+            for i, result in zip(theirs, await self._asyncua_write(inner, user=user)):
+                results[i] = result
+        return results
+
+    def _call_result(self, status: str, message: str, arguments: Sequence[str] = ()):
+        # asyncua answers a method's exception with Bad_UnexpectedError; a returned result is the call's own
+        log.info("ncfmu serve: call refused (%s): %s", status, message)
+        codes = self.ua.StatusCodes
+        return self.ua.CallMethodResult(StatusCode=self.ua.StatusCode(getattr(codes, status)),
+                                        InputArgumentResults=[self.ua.StatusCode(getattr(codes, a))
+                                                              for a in arguments])
 
     def _method(self, what: str):
         async def call(parent, *args):
+            if args:
+                return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
+                                         ["BadTooManyArguments"] * len(args))
             if what == "stop" and self.runner.state == "failed":
                 self.stopped.set()
                 return []
             refusal = await self._submit(_Command(what))
             if refusal is not None:
-                return self._method_refusal("BadInvalidState", refusal)
+                return self._call_result("BadInvalidState", refusal)
+            if what == "reset":
+                self._owner.clear()            # nothing is forced after a Reset
+            await self._publish_once()
             return []
         return call
 
-    def _method_refusal(self, status: str, message: str):
-        # asyncua answers a method's exception with Bad_UnexpectedError; a returned StatusCode is the call's own
-        log.info("ncfmu serve: call refused (%s): %s", status, message)
-        return self.ua.StatusCode(getattr(self.ua.StatusCodes, status))
-
-    async def _release_method(self, parent, name):
+    async def _release_method(self, parent, *args):
         ua = self.ua
-        text = name.Value if isinstance(name, ua.Variant) else name
-        if not isinstance(text, str) or text not in self.points or self.points[text].causality != "input":
-            return self._method_refusal("BadInvalidArgument", f"Release({text!r}): not an input INSTANCE.VARIABLE")
+        if not args:
+            return self._call_result("BadArgumentsMissing", "Release(name): the input's name is missing")
+        first = args[0]
+        text = first.Value if isinstance(first, ua.Variant) else first
+        if isinstance(first, ua.Variant) and first.VariantType != ua.VariantType.String or not isinstance(text, str):
+            verdict = "BadTypeMismatch"
+        elif text not in self.points or self.points[text].causality != "input":
+            verdict = "BadInvalidArgument"
+        else:
+            verdict = "Good"
+        if len(args) > 1:
+            return self._call_result("BadTooManyArguments", "Release takes one argument, the input's name",
+                                     [verdict] + ["BadTooManyArguments"] * (len(args) - 1))
+        if verdict == "BadTypeMismatch":
+            return self._call_result(verdict, f"Release({text!r}): the name must be a String", [verdict])
+        if verdict == "BadInvalidArgument":
+            return self._call_result(verdict, f"Release({text!r}): not an input INSTANCE.VARIABLE", [verdict])
         refusal = await self._submit(_Command("release", text))
         if refusal is not None:
-            return self._method_refusal("BadInvalidState", refusal)
+            return self._call_result("BadInvalidState", refusal, ["Good"])
+        self._owner.pop(text, None)
+        await self._publish_once()
         return []
+
+    # -- the watchdog -------------------------------------------------------------------------------------
+    def _watch_sessions(self, iserver) -> None:
+        """Know every client session and when it was last heard. asyncua tells neither (its own session timeout
+        closes a silent session after minutes, and a session with subscriptions outlives its connection): its
+        ``create_session`` and each session's ``touch`` (called on every request) are wrapped, here only."""
+        create = iserver.create_session
+
+        def create_session(*args, **kwargs):
+            session = create(*args, **kwargs)
+            client = self._clients[id(session)] = _Client(session, _time.monotonic())
+            touch = session.touch
+
+            def touched() -> None:
+                touch()
+                client.heard = _time.monotonic()
+            session.touch = touched
+            return session
+        iserver.create_session = create_session
+
+    def _owned(self, command: _Command, user) -> None:
+        if command.what == "release":
+            self._owner.pop(command.name, None)
+            return
+        if command.what != "force":
+            return
+        for client in self._clients.values():
+            if getattr(client.session, "user", None) is user:
+                self._owner[command.name] = client
+                return
+        self._owner.pop(command.name, None)
+
+    async def _watch(self) -> None:
+        """Every tenth of the watchdog's time: a closed or silent session's forced inputs are released (logged,
+        and recorded as any release)."""
+        from asyncua.server.internal_session import SessionState
+        assert self.watchdog is not None
+        while not self.stopped.is_set():
+            now = _time.monotonic()
+            for key, client in list(self._clients.items()):
+                closed = getattr(client.session, "state", None) == SessionState.Closed
+                silent = now - client.heard > self.watchdog
+                if closed or silent:
+                    names = [name for name, owner in self._owner.items() if owner is client]
+                    for name in names:
+                        refusal = await self._submit(_Command("release", name))
+                        if self._owner.get(name) is client:
+                            del self._owner[name]
+                        if refusal is not None:
+                            log.warning("ncfmu serve: watchdog: could not release %s: %s", name, refusal)
+                    if names:
+                        why = "closed" if closed else f"silent for {self.watchdog:g} s"
+                        log.warning("ncfmu serve: watchdog: session %s %s at t = %.3f s: released %s",
+                                    client.name, why, self._last.get("Simulation.time", 0.0), ", ".join(names))
+                if closed:
+                    del self._clients[key]
+            try:
+                await asyncio.wait_for(self.stopped.wait(), min(0.1, self.watchdog / 10))
+            except TimeoutError:
+                pass
 
     # -- publishing ---------------------------------------------------------------------------------------
     async def _publish_once(self) -> None:
+        # one publication at a time: an answer's own publication must not be overwritten by an older snapshot
+        # the periodic one is still writing
+        async with self._publishing:
+            await self._publish_snapshot()
+
+    async def _publish_snapshot(self) -> None:
         ua = self.ua
         snap = self.runner.snapshot()
         if snap is not None:
@@ -720,6 +1183,15 @@ class LiveServer:
             await self._sim_value("overruns", int(snap.overruns))
             await self._sim_value("state", snap.state)
             await self._sim_value("reason", snap.reason)
+            await self._sim_value("forced", [name for name in self.points if name in snap.forced])
+            if self._mirrors:
+                values = {**self._last, **snap.values}
+                for k, m in enumerate(self._mirrors):
+                    value = m.value(values)
+                    if self._mirrored.get(k) != value:
+                        self._mirrored[k] = value
+                        await self.server.write_attribute_value(m.node.nodeid,      # type: ignore[attr-defined]
+                                                                ua.DataValue(ua.Variant(value, m.vtype)))
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -747,8 +1219,11 @@ class LiveServer:
         except OSError as err:          # the port is taken, or the address is not this machine's
             said = os.strerror(err.errno).lower() if err.errno else str(err)
             raise ConfigError("--endpoint", self.endpoint, f"cannot listen there: {said}") from None
+        watch: asyncio.Task | None = None
         try:
             self.runner.start()
+            if self.watchdog is not None:
+                watch = asyncio.create_task(self._watch())
             if ready is not None:
                 ready(self.endpoint)
             while not self.stopped.is_set():
@@ -762,6 +1237,8 @@ class LiveServer:
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
         finally:
+            if watch is not None:
+                watch.cancel()
             if self.runner.thread.is_alive():      # the server failed: the FMUs must not step on while closed
                 self.runner.stop("the server stopped")
                 await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
@@ -794,16 +1271,21 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           start_values: Mapping[str, object] | None = None, stop_time: float | None = None,
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
-          ready: Callable[[str], None] | None = None) -> ServeSummary:
+          ready: Callable[[str], None] | None = None, watchdog: float | None = None,
+          cnc: bool = False) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
-    ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect."""
+    ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
+    (s), the inputs a client session forced fall back (are released) when it closes or is silent that long. With
+    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
     if stop_time is not None and not (math.isfinite(stop_time) and stop_time > 0):
         raise ConfigError("--stop-time", stop_time, "must be a number > 0")
+    if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
+        raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
     _quiet_asyncua()
     sys.setswitchinterval(0.001)    # the server and the simulation thread share the GIL: hand it over often
     archive = system_archive(system, root)
@@ -814,8 +1296,11 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
             start_values=dict(start_values or {}), record=list(record) if record else None,
             sinks=recorder.sinks() if recorder else ())
-        runner = Runner(session, points_of(opened.slaves), speed, recorder)
-        server = LiveServer(opened.system.name, runner, endpoint, security)
+        components = {c.name: c.model for c in opened.system.components}
+        runner = Runner(session, points_of(opened.slaves), speed, recorder,
+                        check_parameter=parameter_check(components, session))
+        server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
+                            cnc_components=components if cnc else None)
         try:
             asyncio.run(server.serve(ready))
         finally:
@@ -824,8 +1309,9 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             # a served run ends by being stopped: its recording is complete unless the simulation failed
             session.close(complete=runner.state != "failed", reason=runner.reason)
             if recorder is not None:
-                recorder.end_segment(writes, final=True)
+                recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files
+            writes = runner.earlier_writes + writes          # the summary counts every segment's
         p50, p99, pmax = runner.stats.percentiles()
         return ServeSummary(opened.system.name, end, runner.state, runner.reason,
                             runner.stats.overruns, p50, p99, pmax, files, writes, runner.wall)

@@ -189,7 +189,7 @@ def test_feed_hold_override_and_restart_in_a_program(shaft):
 
 
 # -- the parser's refusals: each names the line and the column --------------------------------------------
-HEAD = "G18 G21 G90\nG00 X30 Z2\nG71 U1 R0.5\n"
+HEAD = "G18 G21 G90 G8\nG00 X30 Z2\nG71 U1 R0.5\n"   # X as radius (G8; a diameter without it)
 PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
 
 
@@ -207,16 +207,16 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nG02 X25 Z-25 R2\nN20 X30\nM30\n", 7, 14,
      "R2 does not define a circle"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nG01 Z-5\nN20 X30\nM30\n", 7, 1, "moves +Z"),
-    (HEAD + "G71 P10 Q20 F300\nN10 G00 X20 Z1\nG01 Z-10\nN20 X30\nM30\n", 5, 1, "must move in X only"),
+    (HEAD + "G71 P10 Q20 F300\nN10 G00 X20 Z3\nG01 Z-10\nN20 X30\nM30\n", 5, 1, "not in front of the start point's Z"),
     (HEAD + "G71 P10 Q20 U-0.2 F300\n" + PROFILE + "M30\n", 4, 13, "negative allowance"),
     ("G00 X30 Z2\nG71 P10 Q20 F300\n" + PROFILE + "M30\n", 2, 1, "needs G71's first block"),
     ("G17\nM30\n", 1, 1, "XZ plane"),
     ("G01 X10 Y2 F100\nM30\n", 1, 9, "no Y axis"),
-    ("G00 X30 Z2\nG41 G01 X10 F100\nM30\n", 2, 1, "tool nose radius compensation"),
+    ("G00 X30 Z2\nG41 G01 X10 F100\nM30\n", 2, 1, "G41/G42 tool-nose radius compensation is not built yet"),
     ("G01 G00 X10\nM30\n", 1, 5, "modal group motion"),
     ("G7 G8 X10\nM30\n", 1, 4, "modal group X mode"),
     ("G01 X10 Z1\nM30\n", 1, 1, "no feed"),
-    ("G00 X10 U2\nM30\n", 1, 9, "U and W as incremental"),
+    ("G00 X10 U2\nM30\n", 1, 9, "X and U in one block"),
     ("G00 X10\n", 1, 1, "does not end with M02 or M30"),
     ("G00 X10\nM30\nG00 X5\n", 3, 1, "text after the program end"),
     ("G00 X#1\nM30\n", 1, 5, "parameters and expressions"),

@@ -52,17 +52,19 @@ def test_type_mismatch_is_named(project, tmp_path):
 
 
 @pytest.mark.parametrize("version, kind, says", [
-    ("3.0", "CoSimulation", "an FMI 3.0 FMU"),
+    ("3.0", "CoSimulation", "variable x is an FMI 3.0 Float32: not supported"),
+    ("3.0", "ModelExchange", "a model-exchange-only FMU"),
     ("2.0", "ModelExchange", "a model-exchange-only FMU"),
 ])
 def test_fmus_the_master_cannot_run_are_named(tmp_path, version, kind, says):
-    """An SSP may reference an FMI 3.0 or a model-exchange-only FMU: a clear error, not a KeyError."""
+    """An SSP may reference an FMU the master cannot run (model exchange only; an FMI 3.0 type it does not run):
+    a clear error, not a KeyError."""
     import zipfile
 
     from ncfmu.cosim.fmu import UnpackedFmu
     from ncfmu.errors import SystemDefinitionError
     variables = ('<ModelVariables><Float64 name="time" valueReference="1" causality="independent"/>'
-                 '<Float64 name="x" valueReference="0" causality="output"/></ModelVariables>'
+                 '<Float32 name="x" valueReference="0" causality="output"/></ModelVariables>'
                  '<ModelStructure><Output valueReference="0"/></ModelStructure>' if version == "3.0" else
                  '<ModelVariables><ScalarVariable name="x" valueReference="0" causality="output" '
                  'variability="discrete"><Real/></ScalarVariable></ModelVariables>'

@@ -2,6 +2,8 @@
 output interval change no value, an interrupted run leaves a valid prefix under ``.partial`` and says where it
 stopped, and only what is kept in memory is refused for its size."""
 
+import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -137,3 +139,63 @@ def test_a_csv_that_cannot_fit_on_the_disk_is_refused_before_the_run(project, tm
                  sinks=[CsvSink(tmp_path / "huge.csv", expected_rows=10 ** 12 + 1,
                                 run="stop time 1e+09 s at a step of 0.001 s")])
     assert not (tmp_path / "huge.csv").exists() and not (tmp_path / "huge.csv.partial").exists()
+
+
+#: A run whose folder fills up: a 64 MB tmpfs in a mount namespace of its own (no root needed, nothing left
+#: mounted), filled by another writer once the run has written its first rows. $1 the mount point, $2 a folder
+#: outside it that keeps what the test reads, $3 the ncfmu console script.
+FILLS_UP = r'''
+mount -t tmpfs -o size=64m tmpfs "$1" || exit 97
+"$3" run lathe_taper --stop-time 40 --out "$1" 2> "$2/stderr" & pid=$!
+while kill -0 $pid 2>/dev/null && [ "$(stat -c %s "$1/lathe_taper.csv.partial" 2>/dev/null || echo 0)" -lt 300000 ]
+do sleep 0.02; done
+dd if=/dev/zero of="$1/filler" bs=64k 2>/dev/null
+wait $pid; echo $? > "$2/status"
+cp "$1/lathe_taper.csv.partial" "$2/"
+ls "$1" > "$2/listing"
+'''
+
+
+def _run_until_the_disk_is_full(tmp_path: Path) -> tuple[int, str, Path, Path]:
+    """``ncfmu run`` into a folder that fills up during the run: (exit status, stderr, the folder it wrote to,
+    a copy of what it left). A real ENOSPC where the machine allows a mount namespace; else the write refused by
+    a file-size limit (EFBIG, RLIMIT_FSIZE) -- the same kind of refusal, at the same place."""
+    ncfmu = Path(sys.executable).with_name("ncfmu")
+    full, kept = tmp_path / "full", tmp_path / "kept"
+    full.mkdir()
+    kept.mkdir()
+    if shutil.which("unshare"):
+        proc = subprocess.run(["unshare", "-rm", "sh", "-c", FILLS_UP, "sh", str(full), str(kept), str(ncfmu)],
+                              cwd=ROOT, capture_output=True, text=True, timeout=300)
+        if proc.returncode == 0:
+            status = int((kept / "status").read_text())
+            return status, (kept / "stderr").read_text(), full, kept / "lathe_taper.csv.partial"
+        assert proc.returncode == 97 or "unshare" in proc.stderr, proc.stderr    # no namespaces here: the limit
+
+    def limit_file_size():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)          # a refused write, not a killed process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))
+
+    proc = subprocess.run([str(ncfmu), "run", "lathe_taper", "--stop-time", "40", "--out", str(full)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300, preexec_fn=limit_file_size)
+    return proc.returncode, proc.stderr, full, full / "lathe_taper.csv.partial"
+
+
+@pytest.mark.slow
+def test_a_full_disk_keeps_whole_rows_and_says_where(project, tmp_path):
+    """The disk fills during ``ncfmu run``: the CSV keeps whole rows only (a prefix of the run, byte for byte)
+    and one line says why, the file and how many rows it holds -- as Ctrl-C does."""
+    status, err, folder, partial = _run_until_the_disk_is_full(tmp_path)
+    lines = err.strip().splitlines()
+    assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
+    line = lines[0]
+    assert line.startswith("ncfmu run: writing the rows failed (No space left on device") or \
+        line.startswith("ncfmu run: writing the rows failed (File too large"), line
+    assert "rows up to t = " in line and f"in {folder / 'lathe_taper.csv.partial'} (the run did not finish)" in line
+    text = partial.read_bytes()
+    rows = int(line.split("): ")[1].split(" rows")[0])
+    assert text.endswith(b"\n") and len(text.splitlines()) == rows + 1 and rows > 100, (rows, text[-200:])
+    stopped = float(line.split("rows up to t = ")[1].split(" s")[0])
+    data = read_csv(str(partial))
+    assert data["time"][-1] == pytest.approx(stopped, abs=5e-4)
+    assert csv_bytes(simulate("lathe_taper", stop_time=float(data["time"][-1])).data) == text

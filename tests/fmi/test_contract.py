@@ -82,27 +82,20 @@ def test_the_ports_table_speaks_the_contracts_codes(fmus):
 def test_a_serialized_state_is_the_slaves_bytes_and_its_time(fmus):
     """The shim appends the state's time (contract.STATE_TRAILER) so a state restored from bytes goes on from it;
     a state whose trailer is gone is refused naming why, and one with an edited time goes on from that time."""
-    import tempfile
+    from ncfmu.cosim.fmu import FmuSlave, UnpackedFmu
+    from ncfmu.errors import SimulationError
 
-    from fmpy import extract, read_model_description
-    from fmpy.fmi1 import FMICallException
-    from fmpy.fmi2 import FMU2Slave
-
-    md = read_model_description(str(fmus["CutSequencer"]))
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmus["CutSequencer"]), tempfile.mkdtemp()),
-                    modelIdentifier="CutSequencer", instanceName="dut")
-    fmu.instantiate()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
+    unpacked = UnpackedFmu(fmus["CutSequencer"])
+    slave = FmuSlave(unpacked, "dut")
+    slave.initialize(0.0, 1e6)
     for k in range(7):
-        fmu.doStep(k * 1e-3, 1e-3)
-    blob = bytes(fmu.serializeFMUstate(fmu.getFMUstate()))
+        slave.do_step(k * 1e-3, 1e-3)
+    blob = slave.serialize_state(slave.get_state())
     data, time = contract.split_state(blob)
     assert data.startswith(b'{"format":"ncfmu-fmu-state"') and time == 6e-3 + 1e-3
-    with pytest.raises(FMICallException):
-        fmu.deSerializeFMUstate(data)                                 # no trailer: refused
-    fmu.setFMUstate(fmu.deSerializeFMUstate(contract.join_state(data, 0.5)))
-    fmu.doStep(0.5, 1e-3)                                             # goes on from the state's time
-    fmu.terminate()
-    fmu.freeInstance()
+    with pytest.raises(SimulationError, match="dut: fmi2DeSerializeFMUstate returned fmi2Error"):
+        slave.deserialize_state(data)                                 # no trailer: refused (our error, not fmpy's)
+    slave.set_state(slave.deserialize_state(contract.join_state(data, 0.5)))
+    slave.do_step(0.5, 1e-3)                                          # goes on from the state's time
+    slave.terminate()
+    unpacked.cleanup()

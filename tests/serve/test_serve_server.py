@@ -197,7 +197,7 @@ def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
     assert writes[0] == '"time","seq.feed_override"' and writes[1].endswith(",0.5") and len(writes) == 2
     after = (out / "lathe_roughing.csv").read_text().splitlines()
     assert after[1].startswith("0.0,") and 0.3 <= float(after[-1].split(",")[0]) < 5.0
-    assert (out / "session_inputs.csv").read_text() == '"time"\n'
+    assert (out / "session_inputs.csv").read_text() == '"time"\n0.0\n'     # no writes since the Reset
 
 
 

@@ -27,13 +27,14 @@ FRICTIONLESS = dict(b_visc=0.0, tau_coulomb=0.0, power_max=1e4)
 RESOLUTION = 60.0 / (2 ** 20 * DT)
 
 
-def run(runner, commands, direction=None, enable=None, start=0):
+def run(runner, commands, direction=None, enable=None, start=0, load=None):
     """Step the FMU 1 ms per command (rev/min) from step ``start``; every output per step as arrays."""
     names = ("speed", "torque", "power", "revolutions", "at_speed", "limited")
     out = {k: [] for k in names}
     for i, cmd in enumerate(commands):
         runner.set(speed_cmd=float(cmd), direction=1 if direction is None else int(direction[i]),
-                   enable=True if enable is None else bool(enable[i]))
+                   enable=True if enable is None else bool(enable[i]),
+                   load_torque=0.0 if load is None else float(load[i]))
         runner.slave.do_step((start + i) * DT, DT)
         for k in names:
             out[k].append(runner.get(k))
@@ -159,6 +160,36 @@ def test_above_the_base_speed_the_ramp_is_limited_by_power(fmus, fmu_runner):
     assert out["speed"][-1] == pytest.approx(4000.0, abs=RESOLUTION)
 
 
+# -- load -----------------------------------------------------------------------------------------------------
+def test_a_cutting_torque_dips_the_speed_as_the_designed_loop_answers_it(fmus, fmu_runner):
+    """30 N.m of load at a steady 1000 rev/min: the speed dips as the closed loop's answer to a load step
+    (control.step_response of spindle_drive's torque_load input: 10.9 rev/min at 19 ms), the integral brings it
+    back, and the motor then gives the load on top of its friction."""
+    n0, n1 = 600, 400
+    load = np.array([0.0] * n0 + [30.0] * n1)
+    out = run(fmu_runner(fmus["SpindleDrive"]).start(), [1000.0] * (n0 + n1), load=load)
+    t = np.arange(n1 + 1) * DT
+    ref = ct.step_response(spindle_drive(load_input=True)[0, 1], T=t)        # torque_load -> speed
+    w_ref = np.asarray(ref.outputs).reshape(-1) * 30.0 / RAD_S_PER_RPM
+    dip = 1000.0 + (w_ref[:-1] + w_ref[1:]) / 2                              # mean over each step
+    # the digital loop (sampling, encoder) moves the answer by 3 % of the dip at most
+    assert np.abs(out["speed"][n0:] - dip).max() <= 0.03 * abs(w_ref.min()) + RESOLUTION
+    assert out["speed"][n0:].min() == pytest.approx(1000.0 + w_ref.min(), rel=5e-4)
+    assert out["speed"][-1] == pytest.approx(1000.0, abs=RESOLUTION)
+    torque_before = out["torque"][n0 - 100:n0].mean()
+    assert out["torque"][-50:].mean() - torque_before == pytest.approx(30.0, rel=1e-3)
+
+
+def test_a_load_beyond_the_motor_stalls_the_spindle_and_never_turns_it(fmus, fmu_runner):
+    """150 N.m of load against 100 N.m of motor torque: the spindle stands (the load holds it as friction
+    does); with the load gone it turns up to speed."""
+    load = np.array([150.0] * 500 + [0.0] * 500)
+    out = run(fmu_runner(fmus["SpindleDrive"]).start(), [1000.0] * 1000, load=load)
+    assert np.all(out["speed"][:500] == 0.0) and np.all(out["revolutions"][:500] == 0.0)
+    assert np.all(out["torque"][20:500] == pytest.approx(T_MAX, rel=1e-6)) and out["limited"][:500].all()
+    assert out["speed"][-1] == pytest.approx(1000.0, abs=RESOLUTION) and out["at_speed"][-1]
+
+
 # -- stop, reverse, coast ---------------------------------------------------------------------------
 def test_m04_turns_the_other_way_and_m05_brakes_to_a_standstill(fmus, fmu_runner):
     """direction -1 (M04): the same ramp, negative; the revolutions count down. direction 0 (M05): braking at the
@@ -213,7 +244,8 @@ def test_a_command_beyond_speed_max_is_limited_to_it(fmus, fmu_runner):
 
 
 def test_a_broken_command_is_held_not_acted_on(fmus, fmu_runner):
-    """NaN speed, or a direction of 2: the last good command is held, and the FMU says why once a spell."""
+    """NaN speed, a direction of 2, a negative load: the last good inputs are held, and the FMU says why once a
+    spell."""
     r = fmu_runner(fmus["SpindleDrive"]).start()
     run(r, [800.0] * 500)
     before = len(r.slave.messages)
@@ -222,7 +254,43 @@ def test_a_broken_command_is_held_not_acted_on(fmus, fmu_runner):
     run(r, [800.0] * 10, start=600)                          # a good command ends the spell
     out = run(r, [800.0] * 100, direction=[2] * 100, start=610)
     assert np.all(out["speed"] == pytest.approx(800.0, abs=0.5))
+    run(r, [800.0] * 10, start=710)
+    out = run(r, [800.0] * 100, load=[-5.0] * 100, start=720)              # a load cannot drive the spindle
+    assert np.all(out["speed"] == pytest.approx(800.0, abs=0.5))
     said = [text for _, text in r.slave.messages[before:]]
-    assert len(said) == 2, said
+    assert len(said) == 3, said
     assert "input speed_cmd = nan: must be finite; holding the last command" in said[0]
     assert "input direction = 2: must be -1, 0 or 1; holding the last command" in said[1]
+    assert "input load_torque = -5: must be finite and >= 0; holding the last command" in said[2]
+
+
+# -- in a system, under the master ---------------------------------------------------------------------
+def test_two_spindles_in_a_system_run_the_same_in_the_c_and_the_python_loop(fmus, tmp_path):
+    """A system of two SpindleDrives, the follower commanded with the leader's actual speed (a Real connection),
+    the leader by an input table (its Integer direction too): both loops record the same values, and the
+    follower tracks the leader through a reversal."""
+    from ncfmu.cosim.master import InputTable
+    from ncfmu.cosim.ssp import Connection, System, pack, write_system
+    from ncfmu.project import OpenSystem
+    from ncfmu.systems.compose import component
+
+    system = System("spindles", [component("leader", "SpindleDrive"), component("follower", "SpindleDrive")],
+                    [Connection("leader", "speed", "follower", "speed_cmd")], stop_time=2.0)
+    archive = pack(write_system(system, tmp_path), fmus["SpindleDrive"].parent, tmp_path / "spindles.ssp")
+    table = InputTable(np.array([0.0, 1.0]), {"leader.speed_cmd": np.array([1200.0, 1200.0]),
+                                              "leader.direction": np.array([1.0, -1.0])})
+    runs = []
+    for native in (False, True):
+        with OpenSystem(archive) as opened:
+            opened.master.native = native
+            runs.append(opened.run(inputs=table))
+            assert opened.master.loop_used == ("c" if native else "python")
+    python, c = runs
+    for name in python.data.dtype.names:
+        assert np.array_equal(python.data[name], c.data[name]), name
+    t, lead, follow = python["time"], python["leader.speed"], python["follower.speed"]
+    assert lead[np.searchsorted(t, 0.9)] == pytest.approx(1200.0, abs=RESOLUTION)
+    assert lead[-1] == pytest.approx(-1200.0, abs=RESOLUTION)
+    # the follower lags a step behind (it reads the leader's speed of the step before), and its own loop
+    assert follow[np.searchsorted(t, 0.9)] == pytest.approx(1200.0, abs=1.0)
+    assert follow[-1] == pytest.approx(-1200.0, abs=1.0) and python["follower.at_speed"][-1]

@@ -7,6 +7,7 @@ through ``dt`` (``t`` is for messages). Nothing here imports pythonfmu or fmpy.
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 from collections.abc import Mapping
@@ -81,8 +82,13 @@ class Controller:
         return {p.name: p.check(values[p.name]) for p in cls.ports("parameter")}
 
     def retune(self, values: Mapping[str, object]) -> None:
-        """Apply parameters changed during a run (tunable ones): checked as at construction."""
-        self.configure(self.check_parameters(values))
+        """Apply parameters changed during a run (tunable ones): checked as at construction, and all or nothing.
+
+        ``configure()`` stores each value as it reads it and may raise at a later rule, so the values are first
+        tried on a copy: a refused change (ConfigError) leaves this controller exactly as it was."""
+        checked = self.check_parameters(values)
+        copy.deepcopy(self).configure(checked)    # raises for a refused change, this controller untouched
+        self.configure(checked)                   # the same values on the same state: every rule holds
 
     @classmethod
     def unread(cls, values: Mapping[str, object]) -> dict[str, str]:

@@ -18,102 +18,77 @@ coordinate Z (to the right), second X (the radius, up), as a lathe drawing shows
 RS274/NGC's G02 is clockwise with Z to the right and X up, so G02 is a clockwise arc of the geometry (negative
 sweep) and G03 a counter-clockwise one. The controller's commands are (x, z): :func:`xz` turns a point round.
 
-The profile N<P>..N<Q>: its first block moves in X only, from the cycle's start point S to the profile's
-start A (Fanuc's form); the rest runs toward the chuck (Z never increases), inside the stock (at most S's X,
-never below the axis). The stock is what lies between S's X and the profile, behind S's Z (S stands in front
-of it), up to the profile's end; beyond the profile's end a wall at its Z is left standing.
-
-G71 roughing: the allowances shift the profile by U in X and W in Z (Fanuc's meaning) -- the rough
-boundary. Levels at X = S.x - k*U while above the boundary's lowest point; at each level one pass per Z range
-where the boundary lies below the level: one range for a monotone profile (Fanuc's type I), one more for each
-pocket or undercut the level reaches (type II: X falls along -Z). Each pass is SC1 (reach the range's start:
-at S's Z a rapid infeed; into a pocket up over the material left, along Z, and down at the feed, at most U
-into it), SC2 (cut in -Z at the feed to the range's end), SC3 (retract by R in +X), SC4 (rapid return in +Z to
-the range's start). Then one more pass along the rough boundary (SC1 at the feed, SC2 along it, SC3 up clear
-of it, SC4 back to S's Z), so the stock left is the allowance everywhere, and a rapid move back to S. Rapid
-moves pass only through air. With a pocket, W must be 0: a shift in Z would move the pocket's near wall into
-the part (on a vertical wall in a pocket the finishing allowance is then 0, as with Fanuc's type II). A
-monotone profile shifted by (W, U) with W >= 0 is never below the profile plus U at any Z.
-
-G70 finishing: SC1 the profile's first block (from where the tool stands), SC2 the profile as programmed
-(G70's F when given, else each block's own feed), SC3 +X clear of the start point's X, SC4 +Z to its Z.
-After a cycle whose profile follows it, the program goes on after N<Q>, from the start point, in the modes
-in force before the profile.
+Reading and checking are the one front end's (:mod:`.gcode`, with the dialect :data:`LATHE` here: every
+reading error of a program at once, in line order); this module converts the blocks to moves (the modes, the
+positions, arcs by I/K or R) and reads the profile of each cycle; the cycles' geometry and planning are
+:mod:`.g7x`'s.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
-from .geometry import Arc, Element, Line, Point, arc_through
-from .motion import LinearMove
-from .rs274 import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, check_once, program_lines, strip_comments, words
-
-#: More planned moves than this are refused: one part, a few hundred passes at most.
-MAX_SEGMENTS = 20_000
-#: Points closer than this are one point (mm).
-EPS = 1e-9
-#: Geometric tolerance of the profile checks (monotone, inside the stock), mm.
-TOL = 1e-6
-#: On an arc: tangential and centripetal acceleration as fractions of ``accel`` (as the contour interpolator).
-ARC_TANGENTIAL, ARC_CENTRIPETAL = 0.8, 0.55
+from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
+    EPS,
+    MAX_SEGMENTS,
+    NO_MODAL,
+    TOL,
+    Dwell,
+    Finish,
+    Home,
+    Modal,
+    Op,
+    Profile,
+    Rough,
+    Segment,
+    State,
+    Stop,
+    Tool,
+    check_profile,
+    monotone_pieces,
+    plan_ops,
+    rough_boundary,
+)
+from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move, arc, read
+from .geometry import Arc, Element, Line, Point
 
 _MOTION = {0, 1, 2, 3}
-_GROUPS = {**{g: "motion (G00-G03)" for g in _MOTION}, 18: "plane (G18)", 21: "units (G21)",
-           90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
-           70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)"}
-_REFUSED_G = {17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
-              20: "inch units are not in the subset: write the program in mm (G21)",
-              40: "tool nose radius compensation is not in the subset (the tool point is programmed)",
-              41: "tool nose radius compensation is not in the subset (the tool point is programmed)",
-              42: "tool nose radius compensation is not in the subset (the tool point is programmed)",
-              72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
-              73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"}
-
-
-def xz(p: Point) -> tuple[float, float]:
-    """A (z, x) point of the geometry as the controller's (x, z)."""
-    return (p[1], p[0])
-
-
-@dataclass(frozen=True)
-class Segment:
-    """One planned move of the program and what the sequencer reports while it runs."""
-
-    element: Element        # in the (z, x) plane
-    rate: float             # mm/s
-    feed: bool              # a cutting feed (the override applies), else rapid
-    subcycle: int           # 0 outside a pass, 1..4 the seed's sub-cycles
-    pass_no: int            # pass of the cycle (0 outside a cycle)
-    sigma_x: float          # depth of the pass below the cycle's start point, mm
-    line: int               # program line being executed (1-based)
-    cycle: int              # 71, 70 or 0
+_NOSE_RADIUS = ("G41/G42 tool-nose radius compensation is not built yet: program the tool tip (the nose radius "
+                "of seq.tool[k] is not applied)")
+#: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
+LATHE = Dialect(
+    name="lathe",
+    groups={**{g: "motion (G00-G03)" for g in _MOTION}, 18: "plane (G18)", 21: "units (G21)",
+            90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
+            70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)",
+            4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
+            40: "tool-nose radius compensation (G40)", 96: "spindle speed mode (G96/G97)",
+            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
+    refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
+               20: "inch units are not in the subset: write the program in mm (G21)",
+               41: _NOSE_RADIUS, 42: _NOSE_RADIUS,
+               72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
+               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G40, G50, G70, G71, G90, G91, G96-G99",
+    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
+    coordinates="XZIKRUWPQSTO",
+    refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
+                     "D": "tool nose radius compensation is not in the subset"},
+    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
+    unique_numbers=True,
+)
 
 
 @dataclass(frozen=True)
-class ProfileBlock:
-    element: Element
-    rapid: bool
-    feed: float             # mm/s (0: none in force)
-    line: int
-    raw: str                # the block as written (for messages)
+class Setup:
+    """What a lathe program is read with besides its text: the sequencer's parameters."""
 
-
-@dataclass(frozen=True)
-class Profile:
-    """The profile N<P>..N<Q>: the first block's move from the start point, then the part's outline."""
-
-    p: int
-    q: int
-    lead: ProfileBlock              # the N<P> block: S -> A, in X only
-    blocks: tuple[ProfileBlock, ...]
-    pocket: int = 0                 # the line where X first falls along -Z (type II), 0: monotone (type I)
-
-    @property
-    def elements(self) -> list[Element]:
-        return [b.element for b in self.blocks]
+    diameter: bool = True                 # X is a diameter until G7/G8 (seq.x_diameter; Fanuc's lathes)
+    feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
+    tools: tuple[Tool, ...] = ()          # the tool table, offset k = tools[k - 1]
+    home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
 
 
 @dataclass
@@ -121,60 +96,11 @@ class _Modes:
     motion: int | None = None
     incremental: bool = False
     diameter: bool = False
-    feed: float = 0.0       # mm/s
+    feed: float = 0.0       # mm/s (under G99: mm/s per rev/min)
+    machine: Modal = field(default_factory=Modal)
 
 
-@dataclass
-class _Block:
-    line: int
-    raw: str
-    words: list[tuple[str, float, str, int]]
-    n: int | None
-
-    def col(self, letter: str) -> int:
-        return next((c for w, _, _, c in self.words if w == letter), 1)
-
-    def err(self, col: int, reason: str) -> ProgramError:
-        return ProgramError(self.line, col, self.raw.strip(), reason)
-
-
-# -- reading the blocks -------------------------------------------------------------------------------
-def _blocks(text: str) -> list[_Block]:
-    lines = program_lines(text)
-    out: list[_Block] = []
-    ended_at = 0
-    for n, raw in enumerate(lines, start=1):
-        if raw.strip() == "%":
-            continue
-        clean = strip_comments(raw, n)
-        if ended_at:
-            if clean.strip():
-                raise ProgramError(n, len(clean) - len(clean.lstrip()) + 1, raw.strip(),
-                                   f"text after the program end (line {ended_at})")
-            continue
-        block = words(clean, n)
-        if not block:
-            continue
-        number = None
-        seen: dict[str, int] = {}
-        for i, (letter, value, spelled, col) in enumerate(block):
-            check_once(seen, i, letter, col, n, raw)
-            if letter == "N":
-                if value != int(value) or value < 0:
-                    raise ProgramError(n, col, raw.strip(), f"N{spelled}: a block number is a whole number >= 0")
-                number = int(value)
-            elif letter == "M":
-                if value not in (2, 30):
-                    raise ProgramError(n, col, raw.strip(), f"M{spelled} is not in the subset (M02, M30)")
-                ended_at = n
-        out.append(_Block(n, raw, block, number))
-    if not ended_at:
-        last = max((n for n, line in enumerate(lines, start=1) if line.strip()), default=1)
-        raise ProgramError(last, 1, lines[last - 1].strip(), "the program does not end with M02 or M30")
-    return out
-
-
-def _r_centre(b: _Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
+def _r_centre(b: Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
     """The centre of an R-format arc (RS274/NGC: R > 0 at most half a circle, R < 0 more)."""
     dz, dx = end[0] - start[0], end[1] - start[1]
     chord = math.hypot(dz, dx)
@@ -190,10 +116,16 @@ def _r_centre(b: _Block, start: Point, end: Point, r: float, ccw: bool) -> Point
     return (start[0] + dz / 2 + side * along * nz, start[1] + dx / 2 + side * along * nx)
 
 
-def _move(b: _Block, modes: _Modes, here: Point, values: dict[str, float],
+def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
           new_motion: int | None, motion_col: int | None, profile: bool) -> tuple[Element | None, Point]:
     """The element of a move block from ``here`` ((z, x)), and its end point."""
     motion = new_motion if new_motion is not None else modes.motion
+    for absolute, incremental in (("X", "U"), ("Z", "W")):
+        if absolute in values and incremental in values:
+            raise b.err(b.col(incremental), f"{absolute} and {incremental} in one block: give the end point as "
+                                            f"{absolute} (absolute) or {incremental} (incremental)")
+    values = {**values, **{a: values[inc] for a, inc in (("X", "U"), ("Z", "W")) if inc in values}}
+    relative = {k for k, inc in (("X", "U"), ("Z", "W")) if inc in b.values}
     has_end = "X" in values or "Z" in values
     has_centre = "I" in values or "K" in values
     if has_centre and motion not in (2, 3):
@@ -202,7 +134,7 @@ def _move(b: _Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(b.col("R"), "R outside G71 is an arc radius: it belongs to G02/G03")
     if not (has_end or has_centre or "R" in values):
         return None, here
-    xz_col = min((b.col(k) for k in "XZ" if k in values), default=1)
+    xz_col = min((b.col(k if k in b.values else {"X": "U", "Z": "W"}[k]) for k in "XZ" if k in values), default=1)
     if motion is None:
         raise b.err(xz_col, "a move with no motion mode: give G00, G01, G02 or G03 first")
     move_col = motion_col or xz_col
@@ -210,8 +142,9 @@ def _move(b: _Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(move_col, f"G{motion:02d} with no feed: give F (mm/min) first")
     scale = 0.5 if modes.diameter else 1.0
     z, x = here
-    tz = z + values.get("Z", 0.0) if modes.incremental else values.get("Z", z)
-    tx = x + scale * values.get("X", 0.0) if modes.incremental else (scale * values["X"] if "X" in values else x)
+    tz = z + values.get("Z", 0.0) if modes.incremental or "Z" in relative else values.get("Z", z)
+    tx = (x + scale * values.get("X", 0.0) if modes.incremental or "X" in relative else
+          (scale * values["X"] if "X" in values else x))
     if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
         raise b.err(xz_col, f"the move ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
     end = (tz, tx)
@@ -225,17 +158,8 @@ def _move(b: _Block, modes: _Modes, here: Point, values: dict[str, float],
             centre = (z + values.get("K", 0.0), x + values.get("I", 0.0))
         else:
             raise b.err(move_col, f"G{motion:02d} needs the centre as I/K or the radius as R")
-        r0, r1 = math.dist(here, centre), math.dist(end, centre)
         ccol = b.col("R") if "R" in values else min(b.col(k) for k in "IK" if k in values)
-        if r0 < ARC_RADIUS_TOLERANCE:
-            raise b.err(ccol, "the centre is the start point: this arc does not define a circle")
-        if abs(r0 - r1) > ARC_RADIUS_TOLERANCE:
-            raise b.err(ccol, f"I/K do not define a circle through start and end: radius {r0:.4f} mm to the start, "
-                              f"{r1:.4f} mm to the end (tolerance {ARC_RADIUS_TOLERANCE:g} mm)")
-        if math.dist(here, end) <= EPS:
-            end = here
-        arc = arc_through(here, end, centre, ccw, ARC_RADIUS_TOLERANCE)
-        return arc, arc.end if math.dist(arc.end, end) > 1e-12 else end
+        return arc(b, here, end, centre, ccw, ccol, "R" if "R" in values else "I/K")
     if math.dist(here, end) <= EPS:
         return None, end
     return Line(here, end), end
@@ -244,56 +168,24 @@ def _move(b: _Block, modes: _Modes, here: Point, values: dict[str, float],
 @dataclass
 class _Cycle:
     code: int
-    block: _Block
+    block: Block
     values: dict[str, float]
 
 
-def _interpret(b: _Block, modes: _Modes, here: Point,
+def _interpret(b: Block, modes: _Modes, here: Point,
                profile: bool = False) -> tuple[Element | None, Point, bool, _Cycle | None]:
     """Apply one block's modes; its move (or None), end point, rapid flag and canned cycle (or None)."""
-    groups: dict[str, int] = {}
-    values: dict[str, float] = {}
+    values = b.values
     new_motion, motion_col, cycle = None, None, None
-    for letter, value, spelled, col in b.words:
-        word = f"{letter}{spelled}"
-        if letter in "NM":
-            continue
-        if letter == "G":
-            if value != int(value) or value > 99:
-                raise b.err(col, f"{word} is not in the subset")
-            g = int(value)
-            if g in _REFUSED_G:
-                raise b.err(col, f"{word}: {_REFUSED_G[g]}")
-            if g not in _GROUPS:
-                raise b.err(col, f"{word} is not in the subset (G00-G03, G7, G8, G18, G21, G70, G71, G90, G91)")
-            group = _GROUPS[g]
-            if group in groups:
-                raise b.err(col, f"G{groups[group]:02d} and {word} in one block: both belong to the modal group "
-                                 f"{group}")
-            groups[group] = g
-            if g in _MOTION:
-                new_motion, motion_col = g, col
-            elif g in (90, 91):
-                modes.incremental = g == 91
-            elif g in (7, 8):
-                modes.diameter = g == 7
-            elif g in (70, 71):
-                cycle = g
-            continue
-        if letter == "F":
-            if not value > 0:
-                raise b.err(col, f"{word}: the feed must be > 0 mm/min")
-            values["F"] = value
-            continue
-        if letter in "XZIKRUWPQ":
-            if abs(value) > COORDINATE_LIMIT:
-                raise b.err(col, f"{word}: beyond {COORDINATE_LIMIT:g} mm, no machine is that large")
-            values[letter] = value
-            continue
-        reason = ("the lathe subset has no Y axis (XZ plane)" if letter == "Y" else
-                  "tool nose radius compensation is not in the subset" if letter == "D" else
-                  f"word {letter} is not in the subset (G, M, N, X, Z, I, K, R, F, U, W, P, Q)")
-        raise b.err(col, f"{word}: {reason}")
+    for g, col in b.g:
+        if g in _MOTION:
+            new_motion, motion_col = g, col
+        elif g in (90, 91):
+            modes.incremental = g == 91
+        elif g in (7, 8):
+            modes.diameter = g == 7
+        elif g in (70, 71):
+            cycle = g
     if "F" in values:
         modes.feed = values["F"] / 60.0                # modal, a cycle's F too (RS274)
     if cycle is not None:
@@ -304,55 +196,105 @@ def _interpret(b: _Block, modes: _Modes, here: Point,
             if k in values:
                 raise b.err(b.col(k), f"{k}: G{cycle} takes P, Q, U, W, R and F (the profile is in N<P>..N<Q>)")
         return None, here, False, _Cycle(cycle, b, values)
-    for k in "UWPQ":
+    for k in "PQ":
         if k in values:
-            reason = ("U and W as incremental X/Z are not in the subset: use G91" if k in "UW" else
-                      "P and Q belong to G70/G71")
-            raise b.err(b.col(k), f"{k}{values[k]:g}: {reason}")
+            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71 (and P to G04)")
     element, end = _move(b, modes, here, values, new_motion, motion_col, profile)
     if new_motion is not None:
         modes.motion = new_motion
     return element, end, modes.motion == 0, None
 
 
+# -- the machine: tools, spindle, coolant, dwell, stops, reference return ------------------------------
+_BEFORE_MOVE = {3: 1, 4: -1}          # M03/M04 start the spindle before the block's move (M05 stops it after)
+
+
+def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
+    """The block's words that set the machine's state before its move: G50 S, S, G96/G97, G98/G99, T, M03/M04,
+    M08 (Fanuc runs them with the move's start)."""
+    m, v = modes.machine, b.values
+    codes = {g for g, _ in b.g}
+    if 50 in codes:
+        for k in "XZUW":
+            if k in v:
+                raise b.err(b.col(k), f"G50 {k}: setting the coordinate system is not in the subset (the program "
+                                      "starts where the sequencer's x_start/z_start are)")
+        if "S" not in v:
+            raise b.err(b.col("G"), "G50 takes S<the highest spindle speed, rev/min> here")
+        modes.machine = replace(m, s_max=v["S"])
+        return
+    if "S" in v:
+        if v["S"] < 0:
+            raise b.err(b.col("S"), f"S{v['S']:g}: the spindle speed must be >= 0")
+        m = replace(m, s=v["S"])
+    if 96 in codes:
+        if m.s_max <= 0:
+            raise b.err(b.col("G"), "G96 needs the highest spindle speed first (G50 S<rev/min>): at the axis the "
+                                    "constant surface speed asks for an endless speed")
+        m = replace(m, css=True)
+    elif 97 in codes:
+        m = replace(m, css=False)
+    if 98 in codes or 99 in codes:
+        m = replace(m, per_rev=99 in codes)
+    if "T" in v:
+        t = v["T"]
+        tool, row = divmod(int(t), 100)
+        if t != int(t) or t < 0 or not 0 <= tool <= len(setup.tools) or not 0 <= row <= len(setup.tools):
+            raise b.err(b.col("T"), f"T{t:g}: T<tool><offset> with tool and offset 0..{len(setup.tools)} (T0101: "
+                                    "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
+        row_tool = setup.tools[row - 1] if row else Tool()
+        m = replace(m, tool=tool, offset=(row_tool.z_offset, row_tool.x_offset))
+    for code, _ in b.m:
+        if code in _BEFORE_MOVE:
+            m = replace(m, spindle=_BEFORE_MOVE[code])
+        elif code == 8:
+            m = replace(m, coolant=True)
+    modes.machine = m
+
+
+def _after_move(b: Block, modes: _Modes) -> Op | None:
+    """The block's words that act after its move: M05, M09, M00/M01 (a stop), M02/M30 (spindle and coolant off)."""
+    for code, _ in b.m:
+        if code in (0, 1):
+            return Stop(b.line, code == 1)
+        if code in (5, 9, 2, 30):
+            m = modes.machine
+            m = replace(m, spindle=0 if code != 9 else m.spindle, coolant=False if code != 5 else m.coolant)
+            if m != modes.machine:
+                modes.machine = m
+                return State(b.line, m)
+    return None
+
+
+def _dwell(b: Block) -> Dwell:
+    v = b.values
+    given = [k for k in "PXU" if k in v]
+    if len(given) != 1:
+        raise b.err(b.col("G"), "G04 takes the dwell once: P<ms> or X/U<s>")
+    seconds = v["P"] / 1000.0 if given[0] == "P" else v[given[0]]
+    if not seconds >= 0:
+        raise b.err(b.col(given[0]), f"{given[0]}{v[given[0]]:g}: a dwell is >= 0")
+    return Dwell(b.line, seconds)
+
+
+def _home(b: Block, modes: _Modes, here: Point, setup: Setup) -> Home:
+    v = b.values
+    if setup.home is None:
+        raise b.err(b.col("G"), "G28 needs the machine reference (seq.x_home, seq.z_home)")
+    axes = [k for k in "XZUW" if k in v]
+    if not axes:
+        raise b.err(b.col("G"), "G28 names the axes to return: X/U and/or Z/W (the intermediate point)")
+    scale = 0.5 if modes.diameter else 1.0
+    z, x = here
+    vz = z + v["W"] if "W" in v else (z + v["Z"] if modes.incremental else v["Z"]) if "Z" in v else z
+    vx = (x + scale * v["U"] if "U" in v else (x + scale * v["X"] if modes.incremental else scale * v["X"])
+          if "X" in v else x)
+    return Home(b.line, (vz, vx), (setup.home[0] if "Z" in v or "W" in v else None,
+                                   setup.home[1] if "X" in v or "U" in v else None))
+
+
 # -- the program ------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Rough:
-    """A G71 cycle: from ``start`` ((z, x)), depth ``depth`` and retract ``retract`` (radius), allowances
-    ``u`` (radius) and ``w``, ``feed`` mm/s."""
-
-    line: int
-    start: Point
-    profile: Profile
-    depth: float
-    retract: float
-    u: float
-    w: float
-    feed: float
-
-
-@dataclass(frozen=True)
-class Finish:
-    """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none)."""
-
-    line: int
-    start: Point
-    profile: Profile
-    feed: float
-
-
-@dataclass(frozen=True)
-class Move:
-    element: Element
-    rapid: bool
-    feed: float
-    line: int
-
-
-Op = Move | Rough | Finish
-
-
-def _whole(b: _Block, values: dict[str, float], letter: str, code: int) -> int:
+def _whole(b: Block, values: dict[str, float], letter: str, code: int) -> int:
     if letter not in values:
         raise b.err(1, f"G{code} P Q: {letter} (the {'first' if letter == 'P' else 'last'} block number of the "
                        "profile) is missing")
@@ -362,7 +304,7 @@ def _whole(b: _Block, values: dict[str, float], letter: str, code: int) -> int:
     return int(v)
 
 
-def _read_profile(blocks: list[_Block], i: int, b: _Block, p: int, q: int, modes: _Modes,
+def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: _Modes,
                   start: Point, code: int) -> tuple[Profile, int]:
     """The profile N<p>..N<q> that starts at ``blocks[i]`` (it must), and the index after N<q>."""
     if i >= len(blocks) or blocks[i].n != p:
@@ -374,22 +316,31 @@ def _read_profile(blocks: list[_Block], i: int, b: _Block, p: int, q: int, modes
         raise b.err(b.col("Q"), f"Q{q}: the profile's last block N{q} is not in the program after N{p}")
     saved = replace(modes)
     here = start
-    pieces: list[ProfileBlock] = []
+    front: Element | None = None
+    pieces: list[Move] = []
     j = i
     while True:
         blk = blocks[j]
-        if any(w[0] == "M" for w in blk.words):
+        if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
+        machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 50, 96, 97, 98, 99)]
+        if machine:
+            raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
+                                                  "part's outline (moves, F), give it before G71/G70")
         element, end, rapid, cycle = _interpret(blk, modes, here, profile=True)
         if cycle is not None:
             raise blk.err(blk.col("G"), f"G{cycle.code} inside the profile N{p}..N{q}")
         if j == i:
-            if element is None or isinstance(element, Arc) or abs(end[0] - start[0]) > EPS:
-                raise blk.err(1, f"the profile's first block N{p} must move in X only from the start point "
-                                 f"(X {start[1]:g}, Z {start[0]:g}) to the profile's start (Fanuc's form)")
-            lead = ProfileBlock(element, rapid, modes.feed, blk.line, blk.raw.strip())
+            if element is None or isinstance(element, Arc) or end[0] > start[0] + EPS:
+                raise blk.err(1, f"the profile's first block N{p} moves in a straight line from the start point "
+                                 f"(X {start[1]:g}, Z {start[0]:g}) to the profile's start, in X (type I) or in X "
+                                 "and Z (type II), not in front of the start point's Z (Fanuc's form)")
+            lead = Move(element, rapid, modes.feed, blk.line, raw=blk.raw.strip())
+            if end[0] < start[0] - EPS:          # the profile in front of its start: at its X from S's Z on
+                front = Line((start[0], end[1]), end)
         elif element is not None:
-            pieces.append(ProfileBlock(element, rapid, modes.feed, blk.line, blk.raw.strip()))
+            pieces.append(Move(element, rapid, modes.feed, blk.line, raw=blk.raw.strip()))
         here = end
         j += 1
         if blk.n == q:
@@ -398,81 +349,57 @@ def _read_profile(blocks: list[_Block], i: int, b: _Block, p: int, q: int, modes
                                                                    saved.diameter, saved.feed)
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
-    profile = Profile(p, q, lead, tuple(pieces))
-    return replace(profile, pocket=_check_profile(profile, start)), j
+    profile = Profile(p, q, lead, tuple(pieces), front=front)
+    return replace(profile, pocket=check_profile(profile, start)), j
 
 
-def _extreme(arc: Arc, angle: float) -> Point | None:
-    """The arc's point in the direction ``angle`` from its centre, if it passes it strictly between its ends."""
-    p = (arc.center[0] + arc.radius * math.cos(angle), arc.center[1] + arc.radius * math.sin(angle))
-    return p if EPS < arc.param(p) < arc.length - EPS else None
-
-
-def _check_profile(profile: Profile, start: Point) -> int:
-    """Toward -Z all along, inside the stock (below the start point's X, above the axis); returns the line where X
-    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I)."""
-    pocket = 0
-    a = profile.lead.element.end
-    if a[1] > start[1] + TOL:
-        raise ProgramError(profile.lead.line, 1, profile.lead.raw,
-                           f"the profile starts above the start point: X {a[1]:g} > {start[1]:g} (radius)")
-    for pb in profile.blocks:
-        e, line, raw = pb.element, pb.line, pb.raw
-        s, t = e.start, e.end
-        # an arc may pass an extreme of Z or X between its ends: by more than TOL, the profile is not monotone
-        z_hi, z_lo, x_lo, x_hi = ((_extreme(e, a) for a in (0.0, math.pi, -math.pi / 2, math.pi / 2))
-                                  if isinstance(e, Arc) else (None, None, None, None))
-        if (z_hi and z_hi[0] > s[0] + TOL) or (z_lo and z_lo[0] < t[0] - TOL):
-            raise ProgramError(line, 1, raw, "this arc turns back in Z: the profile must run toward the "
-                                                        "chuck (-Z) all along")
-        if t[0] > s[0] + TOL:
-            raise ProgramError(line, 1, raw, f"the profile moves +Z here (Z {s[0]:g} -> {t[0]:g}): it must "
-                                                        "run toward the chuck (-Z) all along")
-        falls = t[1] < s[1] - TOL or bool(x_lo and x_lo[1] < s[1] - TOL) or bool(x_hi and x_hi[1] > t[1] + TOL)
-        if falls and not pocket:
-            pocket = line
-        if isinstance(e, Line) and abs(t[0] - s[0]) <= TOL and t[1] < s[1] - TOL:
-            # a wall falling at the profile's end (against the stock left standing there) or straight back up:
-            # a groove of no width, which no pass can enter at most U deep
-            k = profile.blocks.index(pb)
-            after = profile.blocks[k + 1].element if k + 1 < len(profile.blocks) else None
-            if after is None or (abs(after.start[0] - after.end[0]) <= TOL and after.end[1] > after.start[1]):
-                raise ProgramError(line, 1, raw, "a groove of no width: this wall falls at the profile's end or "
-                                                 "the next block climbs straight back up at the same Z")
-        top = max(s[1], t[1])
-        if top > start[1] + TOL:
-            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:g} above the start "
-                                                        f"point's X {start[1]:g}")
-        if min(s[1], t[1]) < -TOL:
-            raise ProgramError(line, 1, raw, "the profile crosses the spindle axis (X < 0)")
-    if profile.blocks[-1].element.end[0] >= start[0] - TOL:
-        last = profile.blocks[-1]
-        raise ProgramError(last.line, 1, last.raw, "the profile ends in front of the start point's Z: nothing to cut")
-    return pocket
-
-
-def parse(text: str, start: tuple[float, float]) -> list[Op]:
-    """The operations of a lathe program; the tool starts at ``start`` = (x, z).
+def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> list[Op]:
+    """The operations of a lathe program read with ``setup`` (default :class:`Setup`: X a diameter, feed per
+    minute, eight tools without offsets, no G28); the tool starts at ``start`` = (x, z).
 
     Raises
     ------
     ProgramError
-        naming the line, the column and the reason, for the first thing outside the subset or wrong.
+        naming the line, the column and the reason: every reading error at once (:func:`.gcode.read`), else
+        the first error of conversion.
     """
-    blocks = _blocks(text)
-    modes = _Modes()
+    setup = setup or Setup()
+    blocks = read(text, LATHE)
+    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
     here: Point = (start[1], start[0])
-    ops: list[Op] = []
+    ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
     profiles: dict[tuple[int, int], Profile] = {}
     g71_first: tuple[float, float] | None = None
     i = 0
     while i < len(blocks):
         b = blocks[i]
         i += 1
-        element, end, rapid, cycle = _interpret(b, modes, here)
-        if element is not None:
-            ops.append(Move(element, rapid, modes.feed, b.line))
-        here = end
+        before = modes.machine
+        _machine(b, modes, setup)
+        if modes.machine != before:
+            ops.append(State(b.line, modes.machine))
+        codes = {g for g, _ in b.g}
+        cycle = None
+        if codes & {4, 28, 50}:
+            for g, col in b.g:
+                if g not in (4, 28, 50, 40):
+                    raise b.err(col, f"G{g:02d} in a G04/G28/G50 block: give it a block of its own")
+            if 4 in codes:
+                ops.append(_dwell(b))
+            elif 28 in codes:
+                home = _home(b, modes, here, setup)
+                ops.append(home)
+                dz, dx = modes.machine.offset           # the reference is the axes': the programmed point is off
+                here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
+                        home.home[1] - dx if home.home[1] is not None else home.via[1])
+        else:
+            element, end, rapid, cycle = _interpret(b, modes, here)
+            if element is not None:
+                ops.append(Move(element, rapid, modes.feed, b.line))
+            here = end
+        after = _after_move(b, modes)
+        if after is not None:
+            ops.append(after)
         if cycle is None:
             continue
         v = cycle.values
@@ -531,263 +458,19 @@ def parse(text: str, start: tuple[float, float]) -> list[Op]:
                                     "point's Z: nothing to cut")
         if feed == 0.0:
             raise b.err(1, "G71 with no feed: give F (mm/min) here or before")
-        ops.append(Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed))
+        rough = Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed)
+        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(rough)))
+        if low >= here[1] - TOL:
+            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere below "
+                                    f"the start point's X {here[1]:g} (its lowest X {low:g}): nothing to rough, and "
+                                    "G70 would take the whole depth in one pass")
+        ops.append(rough)
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
     return ops
 
 
-# -- planning the cycles ----------------------------------------------------------------------------
-def shifted(e: Element, dz: float, dx: float) -> Element:
-    if isinstance(e, Line):
-        return Line((e.start[0] + dz, e.start[1] + dx), (e.end[0] + dz, e.end[1] + dx))
-    return Arc((e.center[0] + dz, e.center[1] + dx), e.radius, e.a0, e.sweep)
-
-
-def _solve(e: Element, f, target: float) -> float:
-    """Path length on ``e`` where the monotone coordinate ``f(point)`` reaches ``target`` (bisection)."""
-    lo, hi = 0.0, e.length
-    rising = f(e.end) > f(e.start)
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        if (f(e.point(mid)) < target) == rising:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def clip_front(chain: list[Element], z0: float) -> list[Element]:
-    """The part of a chain running toward -Z that lies at Z <= ``z0``."""
-    out: list[Element] = []
-    for e in chain:
-        if out:
-            out.append(e)
-        elif e.end[0] <= z0 - EPS:
-            if e.start[0] <= z0:
-                out.append(e)
-            else:
-                s = _solve(e, lambda p: p[0], z0)
-                out.append(e.sub(s, e.length))
-    return out
-
-
-def monotone_pieces(chain: list[Element]) -> list[Element]:
-    """The chain with every arc split where X turns (its lowest or highest point): each piece monotone in X."""
-    out: list[Element] = []
-    for e in chain:
-        if isinstance(e, Arc):
-            turns = sorted(e.param((e.center[0] + e.radius * math.cos(a), e.center[1] + e.radius * math.sin(a)))
-                           for a in (math.pi / 2, -math.pi / 2))
-            ends = [0.0, *(c for c in turns if EPS < c < e.length - EPS), e.length]
-            out += [e.sub(a, b) for a, b in zip(ends, ends[1:])]
-        else:
-            out.append(e)
-    return out
-
-
-def below(pieces: list[Element], level: float) -> list[tuple[float, float]]:
-    """The Z ranges (high, low), front to back, where the chain (running toward -Z, each piece monotone) is below
-    X ``level``; ranges of no length (a wall touching the level) are left out."""
-    ranges: list[tuple[float, float]] = []
-    for e in pieces:
-        (zs, xs), (ze, xe) = e.start, e.end
-        if max(xs, xe) < level:
-            part = (zs, ze)
-        elif min(xs, xe) >= level:
-            continue
-        else:
-            zc = e.point(_solve(e, lambda p: p[1], level))[0]
-            part = (zs, zc) if xs < level else (zc, ze)
-        if ranges and ranges[-1][1] - part[0] <= EPS:
-            ranges[-1] = (ranges[-1][0], part[1])
-        else:
-            ranges.append(part)
-    return [(hi, lo) for hi, lo in ranges if hi - lo > TOL]
-
-
-def rough_boundary(op: Rough) -> list[Element]:
-    """The profile shifted by the allowances (W in Z, U in X), from the start point's Z on."""
-    return clip_front([shifted(e, op.w, op.u) for e in op.profile.elements], op.start[0])
-
-
-class _Stock:
-    """What is left of the stock: up to X ``top`` (the start point's) behind Z ``front``, cut down by the passes."""
-
-    def __init__(self, top: float, front: float) -> None:
-        self.top, self.front = top, front
-        self.cuts: list[tuple[float, float, float]] = []      # (z low, z high, X cut to)
-
-    def cut(self, z_lo: float, z_hi: float, x: float) -> None:
-        self.cuts.append((z_lo, z_hi, x))
-
-    def at(self, z: float) -> float:
-        """The highest X of material at ``z`` (-inf in front of the stock)."""
-        if z >= self.front - EPS:
-            return -math.inf
-        return min([self.top] + [x for lo, hi, x in self.cuts if lo - EPS <= z <= hi + EPS])
-
-    def highest(self, z_a: float, z_b: float) -> float:
-        """The highest X of material anywhere in Z between ``z_a`` and ``z_b``."""
-        lo, hi = min(z_a, z_b), max(z_a, z_b)
-        zs = sorted({lo, hi, *(z for c in self.cuts for z in c[:2] if lo < z < hi)})
-        probes = zs + [(a + b) / 2 for a, b in zip(zs, zs[1:])]
-        return max(self.at(z) for z in probes)
-
-
-def _plan_rough(op: Rough, rapid: float) -> list[Segment]:
-    """The passes: at X = S.x - k*U, one pass per Z range where the rough boundary lies below that X (one range
-    for a monotone profile; each pocket adds its own), each the seed's SC1-SC4; then the pass along the boundary.
-    SC1 reaches a pass's start clear of the material left: up, along Z, down (into a pocket at the feed)."""
-    z0, x0 = op.start
-    bound = rough_boundary(op)
-    pieces = monotone_pieces(bound)
-    x_min = min(min(e.start[1], e.end[1]) for e in pieces)
-    if (x0 - x_min) / op.depth > MAX_SEGMENTS / 4:
-        raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS // 4} passes of U{op.depth:g} "
-                                                          f"down to X {x_min:g}: U is too small")
-    x_max = max(max(e.start[1], e.end[1]) for e in pieces)
-    stock = _Stock(x0, z0)
-    out: list[Segment] = []
-    here = op.start
-    k = 0
-
-    def add(to: Point, rate: float, feed: bool, sub: int, sigma: float) -> None:
-        nonlocal here
-        out.append(Segment(Line(here, to), rate, feed, sub, k, sigma, op.line, 71))
-        here = to
-        if len(out) > MAX_SEGMENTS:
-            raise ProgramError(op.line, 1, f"line {op.line}", f"more than {MAX_SEGMENTS} moves: U is too small")
-
-    def reach(z: float, x: float, plunge: bool, sigma: float) -> None:
-        """SC1: from where the tool is to (z, x) over the material between, the last leg down."""
-        clear = max(stock.highest(here[0], z) + op.retract, here[1], x)
-        if clear > here[1] + EPS:
-            add((here[0], clear), rapid, False, 1, sigma)
-        if abs(z - here[0]) > EPS:
-            add((z, clear), rapid, False, 1, sigma)
-        add((z, x), op.feed if plunge else rapid, plunge, 1, sigma)
-
-    n = 0
-    level = x0 - op.depth
-    while level > x_min + TOL:
-        sigma = x0 - level
-        for z_hi, z_lo in below(pieces, level):
-            k += 1
-            reach(z_hi, level, z_hi < z0 - TOL, sigma)           # in front of the stock at rapid, else a plunge
-            add((z_lo, level), op.feed, True, 2, sigma)
-            stock.cut(z_lo, z_hi, level)
-            add((z_lo, level + op.retract), rapid, False, 3, sigma)
-            add((z_hi, level + op.retract), rapid, False, 4, sigma)
-        n += 1
-        level = x0 - (n + 1) * op.depth
-    k += 1
-    sigma = x0 - x_min
-    reach(bound[0].start[0], bound[0].start[1], True, sigma)
-    for e, line in zip(bound, _lines_of(op, bound)):
-        out.append(Segment(e, op.feed, True, 2, k, sigma, line, 71))
-    end = bound[-1].end
-    here = end
-    add((end[0], x_max + op.retract), rapid, False, 3, sigma)
-    add((z0, x_max + op.retract), rapid, False, 4, sigma)
-    k = 0
-    add(op.start, rapid, False, 0, 0.0)
-    return out
-
-
-def _lines_of(op: Rough, bound: list[Element]) -> list[int]:
-    """The program line of each element of the rough boundary (the clipped chain keeps the tail's order)."""
-    lines = [pb.line for pb in op.profile.blocks]
-    return lines[len(lines) - len(bound):]
-
-
-def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
-    out: list[Segment] = []
-    z0, x0 = op.start
-    a = op.profile.lead.element.end
-    lead = op.profile.lead
-
-    def rate(pb: ProfileBlock) -> tuple[float, bool]:
-        return (rapid, False) if pb.rapid else (op.feed or pb.feed, True)
-
-    r, f = rate(lead)
-    out.append(Segment(Line(op.start, a), r, f, 1, 1, 0.0, lead.line, 70))
-    for pb in op.profile.blocks:
-        r, f = rate(pb)
-        out.append(Segment(pb.element, r, f, 2, 1, 0.0, pb.line, 70))
-    bz, bx = op.profile.blocks[-1].element.end
-    clear = max(x0, bx)
-    # up the wall the profile ends at, at the feed: below the stock's X the roughing left its allowance there
-    up = op.feed or op.profile.blocks[-1].feed
-    out.append(Segment(Line((bz, bx), (bz, clear)), up or rapid, up > 0, 3, 1, 0.0, op.line, 70))
-    out.append(Segment(Line((bz, clear), (z0, clear)), rapid, False, 4, 1, 0.0, op.line, 70))
-    if clear > x0:
-        out.append(Segment(Line((z0, clear), op.start), rapid, False, 0, 0, 0.0, op.line, 70))
-    return out
-
-
-def plan_ops(ops: list[Op], rapid: float) -> list[Segment]:
-    out: list[Segment] = []
-    for op in ops:
-        if isinstance(op, Move):
-            out.append(Segment(op.element, rapid if op.rapid else op.feed, not op.rapid, 0, 0, 0.0, op.line, 0))
-        elif isinstance(op, Rough):
-            out += _plan_rough(op, rapid)
-        else:
-            out += _plan_finish(op, rapid)
-    return out
-
-
-def plan(text: str, start: tuple[float, float], rapid: float) -> list[Segment]:
-    """Every move of a program (the tool at ``start`` = (x, z)), G00 and the cycles' rapids at ``rapid`` mm/s."""
-    return plan_ops(parse(text, start), rapid)
-
-
-# -- motion along a line or an arc ------------------------------------------------------------------
-class ElementMove(LinearMove):
-    """:class:`.motion.LinearMove`'s online speed profile along a line or an arc of the (z, x) plane; positions
-    and velocities in (x, z). On an arc the tangential acceleration is ``ARC_TANGENTIAL * accel`` and the speed
-    at most ``sqrt(ARC_CENTRIPETAL * accel * R)``, so the vector acceleration stays below ``accel``."""
-
-    def __init__(self, accel: float) -> None:
-        super().__init__(accel)
-        self.full_accel = accel
-        self.arc: Arc | None = None
-
-    def begin(self, start: tuple[float, ...], end: tuple[float, ...], rate: float) -> None:
-        self.arc = None
-        self.accel = self.full_accel
-        super().begin(start, end, rate)
-
-    @staticmethod
-    def rate_on(element: Element, rate: float, accel: float) -> float:
-        """The rate a move along ``element`` runs at: ``rate``, on an arc at most its centripetal cap."""
-        if isinstance(element, Arc):
-            return min(rate, math.sqrt(ARC_CENTRIPETAL * accel * element.radius))
-        return rate
-
-    def begin_element(self, element: Element, rate: float) -> None:
-        self.begin(xz(element.start), xz(element.end), rate)
-        if isinstance(element, Arc):
-            self.arc = element
-            self.length = element.length
-            self.done = self.length == 0.0
-            self.accel = ARC_TANGENTIAL * self.full_accel
-            self.rate = self.rate_on(element, rate, self.full_accel)
-
-    def _end_here(self) -> None:
-        """Halted on an arc: the move ends where it rests, a straight move of no length from then on."""
-        super()._end_here()
-        self.arc = None
-        self.accel = self.full_accel
-
-    def position(self) -> tuple[float, ...]:
-        if self.arc is None or self.done:
-            return super().position()
-        return xz(self.arc.point(self.s))
-
-    def velocity(self) -> tuple[float, ...]:
-        if self.arc is None or self.done:
-            return super().velocity()
-        tz, tx = self.arc.tangent(self.s)
-        return (tx * self.v, tz * self.v)
+def plan(text: str, start: tuple[float, float], rapid: float, setup: Setup | None = None) -> list[Segment]:
+    """Every move of a program read with ``setup`` (the tool at ``start`` = (x, z)), G00 and the cycles' rapids at
+    ``rapid`` mm/s."""
+    return plan_ops(parse(text, start, setup), rapid, (start[1], start[0]))

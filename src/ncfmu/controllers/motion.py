@@ -10,6 +10,11 @@ from __future__ import annotations
 
 import math
 
+from .geometry import Arc, Element, Point
+
+#: On an arc: tangential and centripetal acceleration as fractions of ``accel`` (as the contour interpolator).
+ARC_TANGENTIAL, ARC_CENTRIPETAL = 0.8, 0.55
+
 
 def stop_speed(room: float, v_old: float, accel: float, dt: float) -> float:
     """Highest end-of-step speed toward a stop point ``room`` ahead from which braking at ``accel`` still
@@ -114,3 +119,57 @@ class LinearMove:
         self.length = self.s = self.v = 0.0
         self.done = True
         self.halting = False
+
+
+def xz(p: Point) -> tuple[float, float]:
+    """A (z, x) point of the geometry as the controller's (x, z)."""
+    return (p[1], p[0])
+
+
+class ElementMove(LinearMove):
+    """:class:`.motion.LinearMove`'s online speed profile along a line or an arc of the (z, x) plane; positions
+    and velocities in (x, z). On an arc the tangential acceleration is ``ARC_TANGENTIAL * accel`` and the speed
+    at most ``sqrt(ARC_CENTRIPETAL * accel * R)``, so the vector acceleration stays below ``accel``."""
+
+    def __init__(self, accel: float) -> None:
+        super().__init__(accel)
+        self.full_accel = accel
+        self.arc: Arc | None = None
+
+    def begin(self, start: tuple[float, ...], end: tuple[float, ...], rate: float) -> None:
+        self.arc = None
+        self.accel = self.full_accel
+        super().begin(start, end, rate)
+
+    @staticmethod
+    def rate_on(element: Element, rate: float, accel: float) -> float:
+        """The rate a move along ``element`` runs at: ``rate``, on an arc at most its centripetal cap."""
+        if isinstance(element, Arc):
+            return min(rate, math.sqrt(ARC_CENTRIPETAL * accel * element.radius))
+        return rate
+
+    def begin_element(self, element: Element, rate: float) -> None:
+        self.begin(xz(element.start), xz(element.end), rate)
+        if isinstance(element, Arc):
+            self.arc = element
+            self.length = element.length
+            self.done = self.length == 0.0
+            self.accel = ARC_TANGENTIAL * self.full_accel
+            self.rate = self.rate_on(element, rate, self.full_accel)
+
+    def _end_here(self) -> None:
+        """Halted on an arc: the move ends where it rests, a straight move of no length from then on."""
+        super()._end_here()
+        self.arc = None
+        self.accel = self.full_accel
+
+    def position(self) -> tuple[float, ...]:
+        if self.arc is None or self.done:
+            return super().position()
+        return xz(self.arc.point(self.s))
+
+    def velocity(self) -> tuple[float, ...]:
+        if self.arc is None or self.done:
+            return super().velocity()
+        tz, tx = self.arc.tangent(self.s)
+        return (tx * self.v, tz * self.v)

@@ -51,10 +51,14 @@ from ..ports import boolean, integer, real, string
 from . import lathe_program
 from .base import int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
-from .lathe_program import ElementMove, Segment
-from .motion import LinearMove
+from .g7x import NO_MODAL, Segment, Tool
+from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
 
 MAX_BLOCKS = 8
+#: Rows of the tool table (T<tool><offset>: tool and offset 1..8).
+MAX_TOOLS = 8
+#: A dwell whose time left is below this is over (s): steps of dt do not sum exactly to its time.
+DWELL_EPS = 1e-9
 
 IDLE, SC1, SC2, SC3, SC4 = 0, 1, 2, 3, 4
 #: Phase before SC1 when the command is not at STP on start (reported as sub-cycle 0 while busy).
@@ -111,6 +115,26 @@ def _block_ports():
     return tuple(ports)
 
 
+def _tool_ports():
+    ports = []
+    for k in range(1, MAX_TOOLS + 1):
+        p = f"tool[{k}]"
+        ports += [
+            real(f"{p}.x_offset", "parameter", 0.0, "mm", f"tool offset {k} (T..{k:02d}): X (radius) of the axes "
+                 "with the tool's tip at the programmed X 0"),
+            real(f"{p}.z_offset", "parameter", 0.0, "mm", f"tool offset {k}: Z of the axes with the tip at Z 0"),
+            real(f"{p}.nose_radius", "parameter", 0.0, "mm", f"tool offset {k}: nose radius of the insert", min=0.0),
+            integer(f"{p}.tip", "parameter", 0, f"tool offset {k}: imaginary tool-nose number (Fanuc's 0-9)",
+                    min=0, max=9),
+            real(f"{p}.max_depth", "parameter", 0.0, "mm", f"tool offset {k}: deepest cut the insert takes (0: not "
+                 "given)", min=0.0),
+        ]
+    return tuple(ports)
+
+
+_PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout"}
+
+
 class CutSequencer(CycleController):
     """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
 
@@ -150,6 +174,26 @@ class CutSequencer(CycleController):
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
         integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
+        # the Fanuc 0i-T dialect of a program (appended: the value references before stay what they were)
+        boolean("x_diameter", "parameter", True, "program: X and U are diameters until G7/G8, as on Fanuc's lathes; "
+                "false: radii (the axes and every other length are radii)"),
+        boolean("feed_per_rev", "parameter", False, "program: F is mm/rev (G99) until G98/G99; false: mm/min (G98), "
+                "the power-on mode"),
+        real("x_home", "parameter", 50.0, "mm", "X (radius, axes) of the machine reference G28 returns to"),
+        real("z_home", "parameter", 50.0, "mm", "Z (axes) of the machine reference G28 returns to"),
+        *_tool_ports(),
+        real("spindle_band", "parameter", 0.05, "1", "speed arrival: a cut begins when the actual spindle speed is "
+             "within this fraction of the commanded speed (Fanuc's SAR)", min=0.0, max=1.0, min_exclusive=True),
+        real("spindle_timeout", "parameter", 10.0, "s", "alarm when the spindle has not arrived at speed this long "
+             "after a cut was to begin", min=0.0, min_exclusive=True),
+        real("spindle_speed", "input", 0.0, "rev/min", "actual spindle speed (from the spindle drive; its sign is "
+             "the direction)"),
+        boolean("optional_stop", "input", False, "optional-stop switch: M01 stops the program while true"),
+        integer("tool", "output", None, "turret station of the active tool (T<tool><offset>; 0 none)"),
+        real("s_cmd", "output", None, "rev/min", "commanded spindle speed (G97: S; G96: 1000 S / (pi D) at the "
+             "tool's diameter, at most G50 S; 0 stopped)"),
+        integer("spindle_dir", "output", None, "spindle direction: +1 M03, -1 M04, 0 M05"),
+        boolean("coolant", "output", None, "coolant on (M08) / off (M09)"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -160,6 +204,10 @@ class CutSequencer(CycleController):
             for p in cls.ports("parameter"):
                 if (p.name.startswith("block[") and p.name != "block[1].rapid") or p.name == "n_blocks":
                     out[p.name] = "runs its program (program is set), not the registers"
+        else:
+            for p in cls.ports("parameter"):
+                if p.name.startswith("tool[") or p.name in _PROGRAM_ONLY:
+                    out[p.name] = "runs the registers (program is empty): only a program reads it"
         return out
 
     def configure(self, values: Mapping[str, object]) -> None:
@@ -191,9 +239,18 @@ class CutSequencer(CycleController):
             stps.append(stp)
         self.stps = stps
         self.program = str(values["program"])
+        self.spindle_band = real_param(values, "spindle_band")
+        self.spindle_timeout = real_param(values, "spindle_timeout")
+        tools = tuple(Tool(x_offset=real_param(values, f"tool[{k}].x_offset"),
+                           z_offset=real_param(values, f"tool[{k}].z_offset"),
+                           nose_radius=real_param(values, f"tool[{k}].nose_radius"),
+                           tip=int_param(values, f"tool[{k}].tip"),
+                           max_depth=real_param(values, f"tool[{k}].max_depth")) for k in range(1, MAX_TOOLS + 1))
+        setup = lathe_program.Setup(diameter=bool(values["x_diameter"]), feed_per_rev=bool(values["feed_per_rev"]),
+                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")))
         # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
-        self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid)
-                                    if self.program.strip() else [])
+        self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
+                                                       setup) if self.program.strip() else [])
         if self.plan:
             self.stps = [(self.x_start, self.z_start)]
 
@@ -224,7 +281,13 @@ class CutSequencer(CycleController):
         self.segment = 0                     # index into self.plan while a program runs
         self._waypoints: list[tuple[float, float]] = []
         self._then_block = 0                 # block to begin once the approach is done
+        self.dwell_left = 0.0                # s of a G04 dwell still to wait
+        self.stop_wait = False               # at an M00 (or M01 with optional_stop): waiting for START
+        self.spindle_wait: float | None = None   # s waited for the spindle to arrive at speed (None: not waiting)
+        self.program_started = False         # a program's state (tool, spindle ...) is its present move's
         self._outputs: dict[str, object] = {}
+        self._optional_stop = False
+        self._pressed = False
         self._publish()
 
     # -- the cycle ------------------------------------------------------------------------------
@@ -256,6 +319,11 @@ class CutSequencer(CycleController):
         self.segment = index
         self.phase = seg.subcycle if seg.subcycle else PROGRAM_MOVE
         self.pass_no, self.sigma_x = seg.pass_no, seg.sigma_x
+        self.program_started = True
+        self.dwell_left = seg.dwell
+        self.stop_wait = seg.stop == 1 or (seg.stop == 2 and self._optional_stop)
+        turning = seg.modal.spindle and seg.modal.rpm(self.x_cmd - seg.modal.offset[1]) > 0
+        self.spindle_wait = 0.0 if seg.feed and turning else None
         assert isinstance(self.move, ElementMove)
         self.move.begin_element(seg.element, seg.rate)
 
@@ -332,6 +400,14 @@ class CutSequencer(CycleController):
     def command_point(self) -> list[float]:
         return [self.x_cmd, self.z_cmd]
 
+    def read_buttons(self, inputs: Mapping[str, object]) -> Any:
+        """START's edge, kept for a program's stop (M00/M01) too, and the optional-stop switch. The inputs
+        appended later are read with their defaults: a caller that gives the first release's inputs runs as
+        before (no optional stop, a spindle standing still)."""
+        self._pressed = bool(super().read_buttons(inputs))
+        self._optional_stop = bool(inputs.get("optional_stop", False))
+        return self._pressed
+
     def rebase(self, actual: Mapping[str, float]) -> None:
         self.x_cmd, self.z_cmd = actual["x"], actual["z"]
         self.move.begin((self.x_cmd, self.z_cmd), (self.x_cmd, self.z_cmd), 1.0)
@@ -344,9 +420,13 @@ class CutSequencer(CycleController):
             override = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
-            self.move.advance(dt, scale)
-            if self.arrival(t, dt, self.move.done, inputs):
-                self._next_phase()
+            held = False
+            if self.plan and self.phase != APPROACH:
+                scale, held = self._machine(t, dt, inputs, scale)
+            if not held:
+                self.move.advance(dt, scale)
+                if self.arrival(t, dt, self.move.done, inputs):
+                    self._next_phase()
             self.x_cmd, self.z_cmd = self.move.position()
             self.x_vff, self.z_vff = self.move.velocity()
         elif not self.move.done:
@@ -355,6 +435,33 @@ class CutSequencer(CycleController):
             self.x_vff, self.z_vff = self.move.velocity()
         else:
             self.x_vff = self.z_vff = 0.0
+
+    def _machine(self, t: float, dt: float, inputs: Mapping[str, object], scale: float) -> tuple[float, bool]:
+        """A program's move waits for its dwell, for START at a stop and, at a cut's start, for the spindle to
+        arrive at speed (held: the move neither starts nor ends); a feed per revolution follows the actual
+        spindle speed. Returns the feed scale and whether the move is held."""
+        seg = self.plan[self.segment]
+        if self.dwell_left > DWELL_EPS:
+            self.dwell_left = max(self.dwell_left - dt, 0.0)
+            return 0.0, True
+        if self.stop_wait:
+            self.stop_wait = not self._pressed
+            return 0.0, True
+        actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
+        if self.spindle_wait is not None:
+            wanted = seg.modal.rpm(self.x_cmd - seg.modal.offset[1])
+            if abs(actual - wanted) <= self.spindle_band * wanted:
+                self.spindle_wait = None
+            else:
+                self.spindle_wait += dt
+                if self.spindle_wait > self.spindle_timeout:
+                    self.stop(t, f"spindle: {actual:.1f} rev/min, not within {self.spindle_band:g} of the commanded "
+                                 f"{wanted:.1f} rev/min {self.spindle_timeout:g} s after the cut on line {seg.line} "
+                                 "was to begin (speed arrival)")
+                return 0.0, True
+        if seg.feed and seg.modal.per_rev:
+            self.move.rate = ElementMove.rate_on(seg.element, seg.rate * actual, self.accel)
+        return scale, False
 
     def _publish(self) -> dict[str, object]:
         out = self._outputs
@@ -369,6 +476,14 @@ class CutSequencer(CycleController):
         out["line"] = self.plan[self.segment].line if running else 0
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
+        seg = self.plan[self.segment] if self.plan and self.program_started else None
+        modal = seg.modal if seg is not None else NO_MODAL
+        out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
+        if modal.css and seg is not None:                # G96: at the tool's X (a rapid: at its end, as Fanuc)
+            x = self.x_cmd if seg.feed else seg.element.end[1]
+            out["s_cmd"] = modal.rpm(x - modal.offset[1])
+        else:
+            out["s_cmd"] = modal.rpm(0.0)
         return out
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
@@ -428,7 +543,7 @@ class CutSequencer(CycleController):
             if m.arc != seg.element:
                 return f"move.arc = {m.arc!r}: not the program's move {self.segment}"
             cap = ElementMove.rate_on(m.arc, seg.rate, self.accel)
-            if (m.accel, m.rate, m.length) != (lathe_program.ARC_TANGENTIAL * self.accel, cap, m.arc.length):
+            if (m.accel, m.rate, m.length) != (ARC_TANGENTIAL * self.accel, cap, m.arc.length):
                 return f"move.accel, rate, length = {(m.accel, m.rate, m.length)!r}: not those of its arc"
             if not (0.0 <= m.s <= m.length and 0.0 <= m.v <= 1.5 * m.rate):
                 return f"move.s = {m.s!r}, v = {m.v!r}: not within the arc (length {m.length!r})"

@@ -9,7 +9,6 @@ through :meth:`Execution.apply`.
 
 from __future__ import annotations
 
-import math
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import ConfigError, SimulationError, SimulationTimeout
+from ..errors import SimulationError, SimulationTimeout
 from .algorithm import Algorithm
 from .interrupts import raise_pending
 from .native_loop import NativePlan
@@ -110,7 +109,9 @@ class Execution:
                 slave.set_start(v.name, value)          # an input outside the plan keeps what it is set to
                 self.unbound[name] = value
             else:
-                self.values[b.kind][b.force_slot] = value
+                conv = self.master.conversions.get((slave.name, v.name))
+                # the slot is gathered like the connection's source: in the source's unit
+                self.values[b.kind][b.force_slot] = value if conv is None else (value - conv.offset) / conv.gain
                 b.idx[b.pos] = b.force_slot
             self.forced[name] = value
         elif action == "ext_release":
@@ -219,17 +220,3 @@ def as_python(kind: str, value) -> object:
     if kind == "Boolean":
         return bool(value)
     return int(value)
-
-
-def check_range(qualified: str, v: Variable, value: object) -> None:
-    """The modelDescription's rule for a value written during a run (type checked already)."""
-    if v.type == "Real" and not math.isfinite(float(value)):     # type: ignore[arg-type]
-        raise ConfigError(qualified, value, "must be finite")
-    if v.type in ("Real", "Integer"):
-        x = float(value)                                          # type: ignore[arg-type]
-        low, high = v.min, v.max
-        if (low is not None and x < low) or (high is not None and x > high):
-            rule = (f"must be in [{low:g}, {high:g}]" if low is not None and high is not None
-                    else f"must be >= {low:g}" if low is not None else f"must be <= {high:g}")
-            raise ConfigError(qualified, value, rule)
-

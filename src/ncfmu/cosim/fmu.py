@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import read_model_description
-from fmpy.fmi1 import calloc, free
+from fmpy.fmi1 import FMICallException, calloc, free
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -29,11 +29,12 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from ..errors import ConfigError, SimulationError, SystemDefinitionError
+from ..errors import ConfigError, SimulationError, SystemDefinitionError, TerminationRequested
 from ..ports import Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
+from .units import unit_from_fmpy, variable_unit
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -87,6 +88,19 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
     return value
 
 
+def check_range(qualified: str, v: Variable, value: object) -> None:
+    """The modelDescription's rule for a value given to ``v`` (type checked already): finite, within min/max."""
+    if v.type == "Real" and not math.isfinite(float(value)):     # type: ignore[arg-type]
+        raise ConfigError(qualified, value, "must be finite")
+    if v.type in ("Real", "Integer"):
+        x = float(value)                                          # type: ignore[arg-type]
+        low, high = v.min, v.max
+        if (low is not None and x < low) or (high is not None and x > high):
+            rule = (f"must be in [{low:g}, {high:g}]" if low is not None and high is not None
+                    else f"must be >= {low:g}" if low is not None else f"must be <= {high:g}")
+            raise ConfigError(qualified, value, rule)
+
+
 def safe_extract(archive: Path, target: Path) -> Path:
     """Unzip ``archive`` into ``target``, refusing entries that escape it (``../``, absolute paths) and symbolic
     links (zipfile would write a link as a file holding its target; no tool should find one there)."""
@@ -136,6 +150,31 @@ def unpacked_fmu(path: Path) -> UnpackedFmu:
     return unpacked
 
 
+#: The FMI 3.0 types the master runs, as the FMI 2.0 kinds its buffers hold (the rest are refused, naming them)
+FMI3_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
+def _supported_fmi3(fmu: str, v) -> None:
+    """An FMI 3.0 variable the master can run, or SystemDefinitionError naming it and what is not supported."""
+    if v.causality == "independent":
+        return
+    if v.type not in FMI3_TYPES:
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is an FMI 3.0 {v.type}: not supported (ncfmu's master "
+                                    f"runs {', '.join(FMI3_TYPES)} variables)")
+    if getattr(v, "dimensions", None):
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is an array: FMI 3.0 arrays are not supported")
+    if getattr(v, "clocks", None) or getattr(v, "intervalVariability", None):
+        raise SystemDefinitionError(f"{fmu}: variable {v.name} is clocked: FMI 3.0 clocks are not supported")
+
+
+def make_slave(unpacked: UnpackedFmu, instance_name: str):
+    """The slave of one instance of ``unpacked``: :class:`FmuSlave` for FMI 2.0, :class:`Fmu3Slave` for 3.0."""
+    if unpacked.fmi3:
+        from .fmu3 import Fmu3Slave
+        return Fmu3Slave(unpacked, instance_name)
+    return FmuSlave(unpacked, instance_name)
+
+
 class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 
@@ -153,18 +192,24 @@ class UnpackedFmu:
         except Exception as err:                         # fmpy's own errors name the schema problem
             raise SystemDefinitionError(f"{self.path.name}: cannot read its modelDescription.xml: {err}") from None
         md = self.model_description
-        if md.fmiVersion != "2.0":
+        if md.fmiVersion not in ("2.0", "3.0"):
             raise SystemDefinitionError(f"{self.path.name}: an FMI {md.fmiVersion} FMU; ncfmu's master runs FMI 2.0 "
-                                        "co-simulation FMUs only")
+                                        "and 3.0 co-simulation FMUs only")
         if md.coSimulation is None:
             raise SystemDefinitionError(f"{self.path.name}: a model-exchange-only FMU; ncfmu's master runs FMI 2.0 "
-                                        "co-simulation FMUs only (no solver for model exchange)")
+                                        "and 3.0 co-simulation FMUs only (no solver for model exchange)")
+        self.fmi3 = md.fmiVersion == "3.0"
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
+            if self.fmi3:
+                _supported_fmi3(self.path.name, v)
+                if v.causality == "independent":
+                    continue
+            typ = FMI3_TYPES.get(v.type, v.type) if self.fmi3 else v.type
             start = v.start
             if start is not None:
                 try:
-                    start = parse_text(v.type, str(start))
+                    start = parse_text(typ, str(start))
                 except ValueError:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has start {start!r}, not a "
                                                 f"valid {v.type}") from None
@@ -175,9 +220,11 @@ class UnpackedFmu:
                 except ValueError:
                     raise SystemDefinitionError(f"{self.path.name}: variable {v.name} has a range bound "
                                                 f"{bound!r} that is not a number") from None
-            self.variables[v.name] = Variable(v.name, v.type, v.causality, v.valueReference,
-                                              getattr(v, "unit", None), start, v.description or "",
-                                              v.variability or "", bounds[0], bounds[1])
+            unit = variable_unit(v)
+            self.variables[v.name] = Variable(v.name, typ, v.causality, v.valueReference,
+                                              unit, start, v.description or "",
+                                              v.variability or "", bounds[0], bounds[1],
+                                              None if unit is None else unit_from_fmpy(unit, md.unitDefinitions))
 
     def cleanup(self) -> None:
         if self._tmp:
@@ -219,7 +266,11 @@ class FmuSlave:
         self._step = self._dll.fmi2DoStep
         self._alive = True
 
-    def _fail(self, what: str, status: int) -> SimulationError:
+    def _fail(self, what: str, status: int, time: float | None = None) -> SimulationError:
+        """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
+        if status == 2 and time is not None and self._asks_to_terminate():
+            detail = [msg for _lvl, msg in self.messages[-3:]]
+            return TerminationRequested(self.name, time, "; ".join(detail))
         if status >= 4:
             self._alive = False   # after fmi2Fatal the FMI standard allows no further call, not even freeing
         recent = self.messages[-5:]
@@ -230,9 +281,27 @@ class FmuSlave:
         return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {said}" if said else ""))
 
+    def _asks_to_terminate(self) -> bool:
+        """After fmi2Discard from fmi2DoStep: fmi2GetBooleanStatus(fmi2Terminated) says whether the FMU asks to end
+        the simulation (an FMU that cannot say does not)."""
+        try:
+            return bool(self.fmu.getBooleanStatus(3))      # 3: fmi2Terminated
+        except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say, so it does not ask
+            return False
+
+    def _call(self, what: str, call: Callable[[], object]) -> object:
+        """A call through fmpy's wrappers: fmpy's FMICallException becomes our SimulationError (the contract)."""
+        try:
+            return call()
+        except FMICallException as err:
+            raise self._fail(what, int(getattr(err, "status", 3))) from None
+
     def fmi2_failure(self, what: str, status: int) -> SimulationError:
         """The error for ``what`` returning ``status`` (for the C loop, which calls the functions directly)."""
-        return self._fail(what, status)
+        time = None
+        if what.startswith("fmi2DoStep at t = "):
+            time = float(what.removeprefix("fmi2DoStep at t = ").split()[0])
+        return self._fail(what, status, time)
 
     def fmi2_functions(self) -> Fmi2Functions:
         """The component and the addresses of the loop's FMI functions, for the C loop
@@ -340,7 +409,7 @@ class FmuSlave:
         else:
             status = self._step(self._component, t, h, NO_SET_FMU_STATE_PRIOR)
         if status > 1:
-            raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status)
+            raise self._fail(f"fmi2DoStep at t = {t:.6f} s", status, t)
 
     def read_outputs(self) -> None:
         self._transfer(self._reads, "Get")
@@ -349,31 +418,31 @@ class FmuSlave:
         """Read one variable (for checks outside the loop)."""
         v = self.variables[name]
         if v.type == "Real":
-            return self.fmu.getReal([v.vr])[0]
-        if v.type == "Integer":
-            return self.fmu.getInteger([v.vr])[0]
+            return self._call(f"fmi2GetReal({name})", lambda: self.fmu.getReal([v.vr])[0])
+        if v.type in ("Integer", "Enumeration"):
+            return self._call(f"fmi2GetInteger({name})", lambda: self.fmu.getInteger([v.vr])[0])
         if v.type == "Boolean":
-            return self.fmu.getBoolean([v.vr])[0]
-        value = self.fmu.getString([v.vr])[0]
+            return self._call(f"fmi2GetBoolean({name})", lambda: self.fmu.getBoolean([v.vr])[0])
+        value = self._call(f"fmi2GetString({name})", lambda: self.fmu.getString([v.vr])[0])
         return value.decode() if isinstance(value, bytes) else value
 
     # -- FMU state ------------------------------------------------------------------------------
     def get_state(self):
         """fmi2GetFMUstate: an opaque handle (free it with :meth:`free_state`)."""
-        return self.fmu.getFMUstate()
+        return self._call("fmi2GetFMUstate", self.fmu.getFMUstate)
 
     def set_state(self, state) -> None:
-        self.fmu.setFMUstate(state)
+        self._call("fmi2SetFMUstate", lambda: self.fmu.setFMUstate(state))
         self._sent = [None] * len(self._writes)
 
     def free_state(self, state) -> None:
-        self.fmu.freeFMUstate(state)
+        self._call("fmi2FreeFMUstate", lambda: self.fmu.freeFMUstate(state))
 
     def serialize_state(self, state) -> bytes:
-        return bytes(self.fmu.serializeFMUstate(state))
+        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))  # type: ignore[call-overload]
 
     def deserialize_state(self, data: bytes):
-        return self.fmu.deSerializeFMUstate(bytes(data))
+        return self._call("fmi2DeSerializeFMUstate", lambda: self.fmu.deSerializeFMUstate(bytes(data)))
 
     def reset(self) -> None:
         """fmi2Reset: back to the instantiated state (for batch runs); bindings and the log of the run before

@@ -30,10 +30,11 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import SystemDefinitionError
+from ..errors import SystemDefinitionError, TerminationRequested
 from .algorithm import MODES, Algorithm, algorithm
-from .execution import COLUMN_DTYPES, BoundInput, Execution, article, check_range, described
-from .fmu import typed_value
+from .connect import check_units
+from .execution import COLUMN_DTYPES, BoundInput, Execution, article, described
+from .fmu import check_range, typed_value
 from .inputs import EMPTY, RELEASE, TIME_SLACK, InputTable, write_input_csv
 from .interrupts import Interrupted, deferred_interrupts
 from .native_loop import NativePlan, NativeSlave, library
@@ -100,6 +101,9 @@ class Master:
         self.loop_used = ""
         self.by_name = {s.name: s for s in slaves}
         self.check_connections()
+        checked = check_units(system, self.by_name)
+        #: input (instance, variable) -> the unit conversion its connection applies; the warnings of the checks
+        self.conversions, self.warnings = checked.conversions, checked.warnings
         self.sources = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
                         for c in system.connections}
 
@@ -167,6 +171,12 @@ class Master:
                                     output_interval, sinks, keep=keep)
         try:
             session.run_to_stop(progress, deadline)
+        except TerminationRequested as ended:
+            # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
+            session.failed = None
+            result = session.close(reason=str(ended))
+            result.ended_by = str(ended)
+            return result
         except BaseException as err:
             session.close(complete=False, reason=str(err) or type(err).__name__)
             raise
@@ -281,7 +291,7 @@ class Master:
             for buf, take, idx in prepared:
                 take(idx, out=buf)             # what each input is given at the first step (Session.value)
         natives = [s for s in self.slaves if isinstance(s, NativeSlave)]
-        if self.native and len(natives) == len(self.slaves) and library() is not None:
+        if self.native and len(natives) == len(self.slaves) and library() is not None and not self.conversions:
             records = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
             run.native = NativePlan(natives, bindings, values, records, run.start_time, h, self.algorithm.jacobi,
                                     every)
@@ -349,10 +359,12 @@ class Master:
         applied: dict[str, dict[str, object]] = {s.name: {} for s in self.slaves}
         for comp in self.system.components:
             for name, value in comp.parameters.items():
+                self._in_range(f"{comp.name}.{name}", value)
                 self.by_name[comp.name].set_start(name, value)
                 applied[comp.name][name] = value
         for qualified, value in (start_values or {}).items():
             slave, v = self.variable(qualified)
+            self._in_range(qualified, value)
             if (slave.name, v.name) in self.sources:
                 c = self.sources[(slave.name, v.name)]
                 raise SystemDefinitionError(f"{qualified} is driven by the connection {c} -> {qualified}: a start "
@@ -426,10 +438,31 @@ class Master:
                     q = f"{s.name}.{v.name}"
                     bound[q] = BoundInput(kind, idx, pos, in_buf, int(idx[pos]), force_slot[q])
                 if len(ins):
-                    gathers.append((in_buf, values[kind].take, idx))
+                    gathers.append((in_buf, self._gather(s, kind, ins, values[kind]), idx))
             plan.append((s, tuple(gathers)))
             bindings.append(kinds_bound)
         return plan, bindings, bound
+
+    def _in_range(self, qualified: str, value: object) -> None:
+        """A start value within its modelDescription's min/max, whichever FMU it is for (an FMU need not check)."""
+        slave, v = self.variable(qualified)
+        if v.type in ("Real", "Integer") and not isinstance(value, (bool, str)):
+            check_range(qualified, v, typed_value(qualified, v.type, value))
+
+    def _gather(self, s: Slave, kind: str, ins: list[Variable], vector: np.ndarray) -> Callable:
+        """``take(idx, out)`` for a slave's inputs of ``kind``: the vector's values, converted to the inputs' units
+        where a connection converts (then the Python loop runs: the C loop gathers without converting)."""
+        convs = [self.conversions.get((s.name, v.name)) for v in ins]
+        if not any(convs):
+            return vector.take
+        gain = np.array([1.0 if c is None else c.gain for c in convs])
+        offset = np.array([0.0 if c is None else c.offset for c in convs])
+
+        def take(idx: np.ndarray, out: np.ndarray) -> None:
+            vector.take(idx, out=out)
+            out *= gain
+            out += offset
+        return take
 
     def _schedule(self, run: Execution, inputs: InputTable, forced: set[str]) -> list:
         """The CSV's changes as (first step they apply to, actions) in time order: a change at time tc applies

@@ -9,19 +9,22 @@ the sinks once at the end, saying whether the run completed. What a sink holds i
 Interrupted runs: a :class:`CsvSink` writes ``PATH.partial`` and renames it to ``PATH`` only when the run
 completed. An interrupted run (Ctrl-C, SIGTERM, a deadline, an FMU error) leaves ``PATH.partial``: a valid CSV
 in the same layout holding every row written so far (whole rows only); ``PATH`` itself is never written
-half-way. :attr:`CsvSink.final_path` says which of the two holds the rows after :meth:`CsvSink.close`.
+half-way. :attr:`CsvSink.final_path` says which of the two holds the rows after :meth:`CsvSink.close`. A write
+the machine refuses (a full disk, a file-size limit) is the same: ``PATH.partial`` is cut back to its last whole
+row and :class:`RecordWriteError` says so; the run ends as interrupted.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 from pathlib import Path
-from typing import BinaryIO, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..errors import SystemDefinitionError
+from ..errors import NcfmuError, SystemDefinitionError
 from .result import Result, csv_header, csv_rows
 
 #: The most a run may keep in memory: more is a mistake (stream it to a file instead).
@@ -97,10 +100,19 @@ class MemorySink:
         return Result(self.data, self.system)
 
 
+class RecordWriteError(NcfmuError):
+    """The machine refused to take more rows (``ENOSPC``, ``EFBIG``, ...): the file keeps the whole rows written
+    before; the message names the file and the reason (``errno``: the machine's error number)."""
+
+    def __init__(self, path: Path, reason: str, errno: int | None) -> None:
+        super().__init__(f"{path}: {reason}: no more rows could be written")
+        self.path, self.reason, self.errno = path, reason, errno
+
+
 class CsvSink:
     """fmpy's CSV layout, byte for byte what :meth:`Result.to_csv` writes, streamed chunk by chunk.
 
-    The rows go to ``PATH.partial`` (flushed after every chunk); :meth:`close` renames it to ``PATH`` when the
+    The rows go to ``PATH.partial`` (unbuffered, a chunk in one write); :meth:`close` renames it to ``PATH`` when the
     run completed, and leaves it as ``PATH.partial`` (a valid CSV of every row written) when it did not.
     """
 
@@ -117,7 +129,9 @@ class CsvSink:
         self.final_path: Path | None = None
         self.rows = 0
         self.stopped_at: float | None = None
-        self._file: BinaryIO | None = None
+        self._file: io.FileIO | None = None
+        self._whole = 0
+        self.failed: OSError | None = None
 
     def open(self, columns: list[tuple[str, np.dtype]]) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -131,27 +145,45 @@ class CsvSink:
                     f"{label}{self.expected_rows} rows of {len(columns)} columns: the CSV may need up to "
                     f"{need / 2 ** 30:.3g} GiB and {self.path.parent} has {free / 2 ** 30:.3g} GiB free: shorten the "
                     "run, record fewer variables or write fewer rows (a longer output interval)")
-        self._file = open(self.partial, "wb")
-        self._file.write(csv_header([name for name, _ in columns]))
+        # unbuffered: each chunk goes to the file at once, and a refused write leaves nothing pending in a buffer
+        self._file = open(self.partial, "wb", buffering=0)
+        self._whole = 0                       # the file's bytes up to the end of its last whole row
+        self.failed = None
         self.rows = 0
+        self._append(csv_header([name for name, _ in columns]))
 
     def write(self, rows: np.ndarray) -> None:
         assert self._file is not None, "write before open"
-        if len(rows):
-            # one write of whole rows, then flushed: what is on disk always ends at a row boundary
-            self._file.write(csv_rows(rows))
-            self._file.flush()
+        if len(rows) and self.failed is None:
+            # one write of whole rows: what is on disk always ends at a row boundary
+            self._append(csv_rows(rows))
             self.rows += len(rows)
             self.stopped_at = float(rows["time"][-1])
+
+    def _append(self, data: bytes) -> None:
+        """Write all of ``data`` or nothing: a refused write (the disk full) cuts the file back to its last whole
+        row and raises :class:`RecordWriteError`; the rows after it are not written (the run is over)."""
+        assert self._file is not None
+        view = memoryview(data)
+        try:
+            while view:
+                done = self._file.write(view)
+                view = view[done or 0:]
+        except OSError as err:
+            self.failed = err
+            self._file.truncate(self._whole)  # the half-written chunk goes (cutting a file needs no room)
+            raise RecordWriteError(self.partial, err.strerror or str(err), err.errno) from None
+        self._whole += len(data)
 
     def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
         if self._file is None:
             return
         f, self._file = self._file, None
-        f.flush()
-        os.fsync(f.fileno())
-        f.close()
-        if complete:
+        try:
+            os.fsync(f.fileno())
+        finally:
+            f.close()
+        if complete and self.failed is None:
             self.partial.replace(self.path)
             self.final_path = self.path
         else:

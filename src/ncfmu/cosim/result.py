@@ -60,6 +60,10 @@ class Result:
         self.messages = messages or {}
         self.parameters = parameters or {}
         self.models = models or {}
+        #: the master's warning lines about the system (units, connections, free inputs), one per problem
+        self.warnings: list[str] = []
+        #: why the run ended before its stop time when an FMU asked it to (else "")
+        self.ended_by = ""
 
     @property
     def time(self) -> np.ndarray:

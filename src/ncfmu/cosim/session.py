@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError
-from .execution import COLUMN_DTYPES, Execution, as_python, check_range, described
-from .fmu import typed_value
+from .execution import COLUMN_DTYPES, Execution, as_python, described
+from .fmu import check_range, typed_value
 from .record import RecordSink
 from .result import Result
 from .slave import KINDS, ReadableSlave, ResettableSlave

@@ -18,7 +18,9 @@ Error contract (libcosim's ``slave.hpp`` in Python): a value the slave refuses (
 parameter during the run) raises :class:`~ncfmu.errors.ConfigError` naming the variable, the value and the rule,
 and the slave is unchanged; a call the slave fails (an FMU's fmi2Error or fmi2Fatal) raises
 :class:`~ncfmu.errors.SimulationError` naming the instance, the call and the time, and the run ends there; nothing
-else escapes. What the slave said (its FMU's log) is in ``messages``, ``(level, text)`` pairs in order, kept until
+else escapes. An FMU that asks to end the simulation raises the SimulationError
+:class:`~ncfmu.errors.TerminationRequested` from ``do_step``: the run ends cleanly at the step before. What the
+slave said (its FMU's log) is in ``messages``, ``(level, text)`` pairs in order, kept until
 :meth:`ResettableSlave.reset`.
 
 Optional capabilities, each a protocol the master checks with ``isinstance`` before it relies on it:
@@ -41,6 +43,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .units import Unit
+
 KINDS = ("Real", "Integer", "Boolean")
 DTYPES = {"Real": np.float64, "Integer": np.int32, "Boolean": np.int32}
 
@@ -59,6 +63,7 @@ class Variable:
     variability: str = ""     # fixed, tunable, discrete, continuous ("" when the slave does not say)
     min: float | None = None  # the modelDescription's range (Real and Integer)
     max: float | None = None
+    unit_definition: Unit | None = None   # the unit with its SI exponents, factor and offset, where defined
 
 
 class Slave(Protocol):

@@ -25,6 +25,7 @@ from pathlib import Path
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
 from ..ports import UNITS, parse_text
+from .units import BASE, Unit
 
 #: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
 MAX_UNPACKED = 2 ** 30
@@ -88,6 +89,7 @@ class System:
     stop_time: float
     step_size: float = 1e-3
     description: str = ""
+    units: dict[str, Unit] = field(default_factory=dict)     # the SSD's unit definitions, by name
 
     def component(self, name: str) -> Component:
         for c in self.components:
@@ -120,6 +122,21 @@ def ssv_document(parameters: dict[str, object], name: str = PARAMETER_SET) -> by
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def _unit_spec(name: str, defined: dict[str, Unit]) -> dict | None:
+    """A unit's ``BaseUnit`` attributes: ncfmu's own units (ports.UNITS), else the system's definition."""
+    if name in UNITS:
+        return dict(UNITS[name])
+    u = defined.get(name)
+    if u is None or u.exponents is None:
+        return None
+    spec: dict[str, object] = {b: e for b, e in zip(BASE, u.exponents) if e}
+    if u.factor != 1.0:
+        spec["factor"] = u.factor
+    if u.offset != 0.0:
+        spec["offset"] = u.offset
+    return spec
+
+
 def ssd_document(system: System) -> bytes:
     root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=system.name)
     sys_el = ET.SubElement(root, _q("ssd:System"), name=system.name, description=system.description)
@@ -150,11 +167,14 @@ def ssd_document(system: System) -> bytes:
     if units:
         units_el = ET.SubElement(root, _q("ssd:Units"))
         for name in sorted(units):
+            spec = _unit_spec(name, system.units)
+            if spec is None:              # a unit known by its name only: referenced, not defined
+                continue
             u = ET.SubElement(units_el, _q("ssc:Unit"), name=name)
-            spec = dict(UNITS[name])
-            base = {k: str(v) for k, v in spec.items() if k != "factor"}
-            if "factor" in spec:
-                base["factor"] = repr(spec["factor"])
+            base = {k: str(v) for k, v in spec.items() if k not in ("factor", "offset")}
+            for key in ("factor", "offset"):
+                if key in spec:
+                    base[key] = repr(spec[key])
             ET.SubElement(u, _q("ssc:BaseUnit"), base)
     exp = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(float(system.stop_time)))
     ann = ET.SubElement(ET.SubElement(exp, _q("ssd:Annotations")), _q("ssc:Annotation"),
@@ -338,6 +358,12 @@ def read_ssd(path: Path, read_file=None) -> System:
     connections = [Connection(_attribute(c, "startElement", path), _attribute(c, "startConnector", path),
                               _attribute(c, "endElement", path), _attribute(c, "endConnector", path))
                    for c in sys_el.iterfind(f"{_q('ssd:Connections')}/{_q('ssd:Connection')}")]
+    units: dict[str, Unit] = {}
+    for u in root.iterfind(f"{_q('ssd:Units')}/{_q('ssc:Unit')}"):
+        name = _attribute(u, "name", path)
+        base_unit = u.find(_q("ssc:BaseUnit"))
+        attrs = dict(base_unit.attrib) if base_unit is not None else {}
+        units[name] = Unit.of(name, attrs, attrs.get("factor", 1.0), attrs.get("offset", 0.0))
     exp = root.find(_q("ssd:DefaultExperiment"))
     stop = _time_attribute(path, exp, "stopTime") if exp is not None and exp.get("stopTime") else math.nan
     step = 1e-3
@@ -347,7 +373,7 @@ def read_ssd(path: Path, read_file=None) -> System:
         if not step > 0:
             raise SystemDefinitionError(f"{path}: baseStepSize = {step!r}: must be > 0")
     return System(_attribute(root, "name", path), components, connections, stop, step,
-                  sys_el.get("description", ""))
+                  sys_el.get("description", ""), units)
 
 
 def read_ssp(archive: Path) -> System:

@@ -134,6 +134,10 @@ class ControllerSlave(Fmi2Slave):
         if not (isinstance(state, tuple) and len(state) == 3
                 and (state[0] is None or isinstance(state[0], self.logic_class))):
             return self._refuse("fmi2SetFMUstate", "not a state of this FMU")
+        if state[0] is None and self.logic is not None:
+            return self._refuse("fmi2SetFMUstate", "a state taken before initialisation holds no controller: it "
+                                "cannot be set into an initialised instance, which keeps its state (fmi2Reset "
+                                "returns an instance to before initialisation)")
         logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
         # in place: the registered getters and setters hold these very dicts
         self.parameters.clear()

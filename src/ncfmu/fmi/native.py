@@ -199,7 +199,7 @@ def _design_html(m: NativeModel, stage: Path) -> str:
     from ..servo.spindle import SpindleDrive
     logic = m.logic()
     if isinstance(logic, SpindleDrive):
-        return _spindle_design_html(m, logic)
+        return _spindle_design_html(m, logic, stage)
     assert isinstance(logic, ServoAxis), "the native models are servo axes and spindle drives"
     d, p = logic.design, logic.p
     bode = bode_design(p)
@@ -245,7 +245,7 @@ the C sources are in <code>sources/</code> (fmi2_native.c, {m.model_c.name}; C99
 platform.</p>"""
 
 
-def _spindle_design_html(m: NativeModel, logic) -> str:
+def _spindle_design_html(m: NativeModel, logic, stage: Path) -> str:
     """The SpindleDrive's design figures (default parameters) and what its ramps take."""
     from ..servo.spindle_model import MIN_PHASE_MARGIN
     d, p = logic.design, logic.p
@@ -261,14 +261,32 @@ def _spindle_design_html(m: NativeModel, logic) -> str:
              f"{accel * 60.0 / (2.0 * math.pi):.0f} rev/min/s"),
             ("base speed power_max / torque_max (constant power above it)", f"{base:.0f} rev/min")]
     table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
+    c_files = ", ".join(sorted(name for name in m.sources() if name.endswith(".c")))
+    figure = ""
+    try:
+        from ..servo.bode import spindle_bode_figure
+        fig, bode = spindle_bode_figure(p)
+        out = io.BytesIO()
+        fig.savefig(out, format="png", dpi=80)
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        (stage / "documentation").mkdir(exist_ok=True)
+        (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
+        figure = (f'<p><img src="bode.png" alt="Bode plot of the open speed loop from {bode.band[0]:.1f} to '
+                  f'{bode.band[1]:.0f} rad/s, with its phase margin"></p>\n'
+                  f"<p>From a decade below the PI zero ({bode.band[0] * 10:.0f} rad/s) to a decade above the current "
+                  "loop's corner. Dotted: the gain crossover, the phase margin the bar up from -180 deg.</p>")
+    except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
+        pass
     return f"""<h2>Design (python-control, default parameters)</h2>
 <p>At fmi2ExitInitializationMode the FMU computes the speed loop's phase margin from the parameters (the continuous
 models of ncfmu.servo.spindle_model) and refuses, with fmi2Error naming speed_bandwidth, a loop that is unstable or
 has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
 <table>{table}</table>
+{figure}
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> (fmi2_native.c, {m.model_c.name}; C99, link with -lm), so
+the C sources are in <code>sources/</code> ({c_files}; C99, link with -lm), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 

@@ -50,6 +50,7 @@ class ServoAxis(Controller):
     DERIVED = ("linear", "plant")
     #: The native FMU's C model, relative to this package (ncfmu.servo); it is built from that, not from Python.
     NATIVE_SOURCE = "native/servo_model.c"
+    NATIVE_HEADERS = ("native/drive_math.h",)
     #: The other files of this package the native FMU is made from (its design; its documentation's Bode plot).
     NATIVE_DEFINED_BY = ("model.py", "bode.py")
 

@@ -12,15 +12,16 @@ speed change is a ramp at the acceleration the torque allows, (torque limit - fr
 the speed runs into its setpoint without winding up. The current loop and the mechanics
 (:func:`~ncfmu.servo.spindle_model.spindle_plant`) are discretised exactly over the substep, with
 viscous and Coulomb friction (stick at zero speed while the torque stays within ``tau_coulomb``).
-``enable`` false: no torque, the spindle coasts.
+``enable`` false: no torque, the spindle coasts. The input ``load_torque`` (a cutting torque) acts
+as Coulomb friction does: it opposes the rotation and holds a standing spindle, never turns it.
 
 Outputs: ``speed`` (rev/min, mean over the step, from the encoder), ``at_speed`` (the speed-arrival
 signal: ``|speed - commanded| <= max(at_speed_band * |commanded|, at_speed_min)``, the commanded
 speed as limited to ``speed_max``), ``torque`` (motor torque), ``power`` (kW, torque times the
 step's mean speed), ``limited`` (a torque, power or speed limit acted during the step) and
 ``revolutions`` (the encoder's angle in revolutions, signed, for threading and feed per revolution).
-A non-finite ``speed_cmd`` or a ``direction`` other than -1, 0, +1 is not acted on: the last good
-command is held and the reason said once.
+A non-finite ``speed_cmd``, a ``direction`` other than -1, 0, +1 or a negative or non-finite
+``load_torque`` is not acted on: the last good inputs are held and the reason said once.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ class SpindleDrive(Controller):
     DERIVED = ("plant",)
     NATIVE_SOURCE = "native/spindle_model.c"
     NATIVE_HEADERS = ("native/drive_math.h",)
-    NATIVE_DEFINED_BY = ("spindle_model.py", "parameters.py")
+    NATIVE_DEFINED_BY = ("spindle_model.py", "parameters.py", "bode.py")
 
     PORTS = (
         real("J", "parameter", 0.2, "kg.m2", "inertia of motor + spindle + chuck + workpiece", min=1e-5, max=100.0),
@@ -84,6 +85,8 @@ class SpindleDrive(Controller):
         real("power", "output", None, "kW", "mechanical power: torque times the step's mean speed"),
         boolean("limited", "output", None, "a torque, power or speed limit acted during the step"),
         real("revolutions", "output", None, "rev", "spindle angle (encoder), signed, in revolutions"),
+        real("load_torque", "input", 0.0, "N.m", "load on the spindle (the cutting torque), >= 0: it opposes the "
+             "rotation as friction does and cannot turn the spindle"),
     )
 
     def configure(self, values: Mapping[str, object]) -> None:
@@ -125,6 +128,7 @@ class SpindleDrive(Controller):
         self.x = [0.0, 0.0, 0.0, 0.0]          # integral (rad), torque (N·m), angle (rad), speed (rad/s)
         self.a_meas = self.a_last = 0.0        # the encoder's angle at the step's end; the last sample taken
         self.command = 0.0                     # the held command, rev/min, signed (before the speed limit)
+        self.load = 0.0                        # the held load torque, N·m
         self.limited = False
         self.fault: str | None = None
         self._outputs: dict[str, object] = {}
@@ -150,6 +154,9 @@ class SpindleDrive(Controller):
             return f"input speed_cmd = {cmd!r}: must be finite"
         if direction not in (-1, 0, 1):
             return f"input direction = {direction!r}: must be -1, 0 or 1"
+        load = inputs["load_torque"]
+        if not (load >= 0.0 and math.isfinite(load)):  # type: ignore[operator, arg-type]
+            return f"input load_torque = {load!r}: must be finite and >= 0"
         return None
 
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
@@ -162,6 +169,7 @@ class SpindleDrive(Controller):
         else:
             self.fault = None
             self.command = to_float(inputs["direction"]) * to_float(inputs["speed_cmd"])
+            self.load = to_float(inputs["load_torque"])
         a0 = self.a_meas
         self._digital(dt, bool(inputs["enable"]))
         return self._publish((self.a_meas - a0) / dt, self.x[1])
@@ -178,7 +186,8 @@ class SpindleDrive(Controller):
         (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ad
         (b00, b01), (b10, b11), (b20, b21) = bd
         xi, torque, angle, speed = self.x
-        kp, ki, t_max, p_max, tc, q = self.kp, self.ki, self.torque_max, self.power_max, self.tau_coulomb, self.quantum
+        kp, ki, t_max, p_max, q = self.kp, self.ki, self.torque_max, self.power_max, self.quantum
+        tc = self.tau_coulomb + self.load        # the load opposes the rotation as Coulomb friction does
         setpoint, limited = self._setpoint()
         w_set = setpoint * RAD_S_PER_RPM
         a_meas = self.a_last
@@ -200,7 +209,7 @@ class SpindleDrive(Controller):
                     xi += e * h
             else:
                 t_cmd, xi = 0.0, 0.0
-            # Coulomb friction: sliding opposes the speed; at rest it balances up to tau_coulomb.
+            # Coulomb friction and load: sliding they oppose the speed; at rest they balance up to their sum.
             if tc == 0.0:
                 t_fr = 0.0
             elif speed != 0.0:

@@ -91,24 +91,36 @@ def _renamed(sys: ct.StateSpace, states: list[str], name: str) -> ct.StateSpace:
                  states=states, name=name)
 
 
-def spindle_drive(p: SpindleParameters = SpindleParameters(), name: str = "spindle_drive") -> ct.StateSpace:
+def spindle_drive(p: SpindleParameters = SpindleParameters(), load_input: bool = False,
+                  name: str = "spindle_drive") -> ct.StateSpace:
     """The linear closed speed loop of the spindle (no limits, no Coulomb friction).
 
     Parameters
     ----------
     p : SpindleParameters
+    load_input : bool
+        Add the input ``torque_load`` (N·m, opposing positive rotation): the loop's answer to a cutting torque.
+    name : str
+        Name of the system.
 
     Returns
     -------
     control.StateSpace
-        Input ``speed_cmd`` (rad/s); outputs ``speed`` (rad/s), ``torque`` (N·m); states ``integral, torque,
-        angle, speed`` (in that order). The angle is the speed's integral: its pole at 0 is not the loop's.
+        Input ``speed_cmd`` (rad/s) (and ``torque_load``); outputs ``speed`` (rad/s), ``torque`` (N·m); states
+        ``integral, torque, angle, speed`` (in that order). The angle is the speed's integral: its pole at 0 is
+        not the loop's.
     """
     kp, ki = p.speed_gains
     sys = ct.interconnect(
-        [speed_controller(kp, ki), current_loop(p.tau_current), spindle_mechanics(p.J, p.b_visc)],
-        inputs=["speed_cmd"], outputs=["speed", "torque"], ignore_outputs=["angle"], name=name)
-    return _renamed(sys, ["integral", "torque", "angle", "speed"], name)
+        [speed_controller(kp, ki), current_loop(p.tau_current),
+         spindle_mechanics(p.J, p.b_visc, friction_input=load_input)],
+        inputs=["speed_cmd", "torque_friction"] if load_input else ["speed_cmd"], outputs=["speed", "torque"],
+        ignore_outputs=["angle"], name=name)
+    sys = _renamed(sys, ["integral", "torque", "angle", "speed"], name)
+    if load_input:
+        sys = ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=["speed_cmd", "torque_load"], outputs=sys.output_labels,
+                    states=sys.state_labels, name=name)
+    return sys
 
 
 def spindle_plant(p: SpindleParameters = SpindleParameters(), name: str = "spindle_plant") -> ct.StateSpace:

@@ -56,13 +56,16 @@ def parameters(name: str, instance: str) -> dict[str, object]:
 def report_for(name: str, models: Mapping[str, str] | None = None) -> Report:
     """The report of system ``name``.
 
-    ``models`` (instance -> model, as an .ssp declares them), when given, must match the definition of
-    that name; an .ssp of another make (renamed instances, other models) gets the generic report of its
-    servo axes.
+    ``models`` (instance -> the model its FMU is, :mod:`~ncfmu.systems.roles`), when given, must match the
+    definition of that name -- but for its axes, which may be any plant (a user's axis in place of ServoAxis); an
+    .ssp of another make (renamed instances, other controllers) gets the generic report of its servo axes.
     """
     definition = SYSTEMS.get(name)
     if definition is not None:
-        if models is None or {c.name: c.model for c in definition.build().components} == dict(models):
+        own = {c.name: c.model for c in definition.build().components}
+        axes = set(definition.report.axes)
+        if models is None or (own.keys() == dict(models).keys()
+                              and all(models[i] == m or i in axes for i, m in own.items())):
             return definition.report
     return generic_report([inst for inst, model in (models or {}).items() if model == "ServoAxis"])
 

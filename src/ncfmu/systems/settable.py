@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from ..cosim.ssp import System
 from ..ports import Port
 from .compose import MODELS
+from .roles import identify
 
 
 @dataclass(frozen=True)
@@ -58,17 +59,29 @@ def _from_ports(inst: str, ports: tuple[Port, ...], values: dict[str, object]) -
 
 def _from_model_description(inst: str, md_xml: bytes, values: dict[str, object]) -> list[Settable]:
     out = []
-    for sv in ET.fromstring(md_xml).iter("ScalarVariable"):
+    root = ET.fromstring(md_xml)
+    declared = {t.get("name"): t[0].get("unit", "") for t in root.iterfind("TypeDefinitions/SimpleType") if len(t)}
+    if root.get("fmiVersion", "").startswith("3"):
+        # FMI 3.0: the variable is its type's element (Float64, Int32, ...), with the attributes on it
+        declared.update({t.get("name"): t.get("unit", "") for t in root.iterfind("TypeDefinitions/*")})
+        variables = [(v, v) for v in root.iterfind("ModelVariables/*")]
+    else:
+        variables = [(sv, sv[0]) for sv in root.iter("ScalarVariable") if len(sv)]
+    for sv, typed in variables:
         causality = sv.get("causality", "local")
-        if causality not in ("parameter", "input") or not len(sv):
+        if causality not in ("parameter", "input"):
             continue
-        typed, name = sv[0], sv.get("name", "")
+        name = sv.get("name", "")
         lo, hi = typed.get("min"), typed.get("max")
         rule = (f"must be in [{lo}, {hi}]" if lo and hi else f"must be >= {lo}" if lo else f"must be <= {hi}" if hi
                 else "")
         kind = "input" if causality == "input" else f"parameter, {sv.get('variability', 'fixed')}"
-        out.append(Settable(f"{inst}.{name}", kind, typed.tag, typed.get("unit", ""),
-                            text(values[name]) if name in values else typed.get("start", ""), rule,
+        start = typed.get("start", "")
+        if not start and typed.find("Start") is not None:            # FMI 3.0's String start
+            start = typed.find("Start").get("value", "")             # type: ignore[union-attr]
+        unit = typed.get("unit") or declared.get(typed.get("declaredType"), "")
+        out.append(Settable(f"{inst}.{name}", kind, typed.tag, unit,
+                            text(values[name]) if name in values else start, rule,
                             sv.get("description", "")))
     return out
 
@@ -76,18 +89,21 @@ def _from_model_description(inst: str, md_xml: bytes, values: dict[str, object])
 def settable(system: System, model_description: Callable[[str], bytes] | None = None) -> list[Settable]:
     """Every parameter and input of ``system``, instance by instance in stepping order.
 
-    ``model_description(model)`` gives the modelDescription.xml of a model ncfmu does not define (an .ssp's
-    own FMU); without it such instances are left out.
+    ``model_description(instance)`` gives the modelDescription.xml of an instance's FMU (an .ssp's own): the FMU
+    is then known by it (:func:`~ncfmu.systems.roles.identify`), never by its file name -- one of ncfmu's models
+    is listed from its ports, any other FMU from its modelDescription. Without it the components are taken to be
+    the models they name (a system ncfmu defines).
     """
     drivers = {(c.end_element, c.end_connector): f"{c.start_element}.{c.start_connector}"
                for c in system.connections}
     out: list[Settable] = []
     for comp in system.components:
-        logic = MODELS.get(comp.model)
+        md = None if model_description is None else model_description(comp.name)
+        logic = MODELS.get(comp.model if md is None else identify(md, comp.name).model)
         if logic is not None:
             rows = _from_ports(comp.name, logic.PORTS, comp.parameters)
-        elif model_description is not None:
-            rows = _from_model_description(comp.name, model_description(comp.model), comp.parameters)
+        elif md is not None:
+            rows = _from_model_description(comp.name, md, comp.parameters)
         else:
             continue
         for row in rows:

@@ -1,9 +1,8 @@
 /*
  * ncfmu: the numerics the native drive models share -- exact zero-order-hold discretisation (matrix
  * exponential by balancing, scaling and squaring of a Pade approximant, as scipy's expm does) and the
- * phase margin of a PI velocity/speed loop (as control.margin gives it). Static functions, included by
- * a model's C file (spindle_model.c). servo_model.c still carries its own copy of the same code (static,
- * not inline); it moves here when the servo's model next changes.
+ * phase margin of a PI velocity/speed loop, and of a position loop around it (as control.margin gives
+ * them). Static inline functions, included by each drive's C file (servo_model.c, spindle_model.c).
  */
 #ifndef NCFMU_DRIVE_MATH_H
 #define NCFMU_DRIVE_MATH_H

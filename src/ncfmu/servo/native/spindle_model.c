@@ -25,7 +25,7 @@ struct ModelState {
     double plant_h, Ad[3][3], Bd[3][2];  /* the plant's ZOH map for one sub-step (cached) */
     /* the dynamic state */
     double x[4];                         /* integral, torque, angle, speed */
-    double a_meas, a_last, command;
+    double a_meas, a_last, command, load;
     int limited, fault;
 };
 
@@ -125,7 +125,8 @@ static void digital(const double *values, struct ModelState *m, double dt, int e
     double h = dt / n;
     double (*ad)[3] = m->Ad, (*bd)[2] = m->Bd;
     double xi = m->x[0], torque = m->x[1], angle = m->x[2], speed = m->x[3];
-    double kp = m->kp, ki = m->ki, t_max = P(VR_torque_max), p_max = m->power_max, tc = P(VR_tau_coulomb);
+    double kp = m->kp, ki = m->ki, t_max = P(VR_torque_max), p_max = m->power_max;
+    double tc = P(VR_tau_coulomb) + m->load;   /* the load opposes the rotation as Coulomb friction does */
     double q = m->quantum;
     double w_set = setpoint(values, m, &limited) * RAD_S_PER_RPM;
     double a_meas = m->a_last;
@@ -190,18 +191,22 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
                  "substep = %g s in one step; take shorter steps", dt, MAX_SUBSTEPS, P(VR_substep));
         return -1;
     }
-    double cmd = P(VR_speed_cmd), dir = P(VR_direction);
-    int bad_cmd = !isfinite(cmd), bad_dir = dir != -1.0 && dir != 0.0 && dir != 1.0, bad = bad_cmd || bad_dir;
+    double cmd = P(VR_speed_cmd), dir = P(VR_direction), load = P(VR_load_torque);
+    int bad_cmd = !isfinite(cmd), bad_dir = dir != -1.0 && dir != 0.0 && dir != 1.0;
+    int bad_load = !(load >= 0.0 && isfinite(load)), bad = bad_cmd || bad_dir || bad_load;
     if (bad && !m->fault) {   /* never act on a broken command: hold the last good one, say why once */
         if (bad_cmd)
             FMI2_SAY(log, fmi2Warning, "warning", "t = %.4f s: input speed_cmd = %g: must be finite; holding the "
                      "last command", t, cmd);
-        else
+        else if (bad_dir)
             FMI2_SAY(log, fmi2Warning, "warning", "t = %.4f s: input direction = %.0f: must be -1, 0 or 1; holding "
                      "the last command", t, dir);
+        else
+            FMI2_SAY(log, fmi2Warning, "warning", "t = %.4f s: input load_torque = %g: must be finite and >= 0; "
+                     "holding the last command", t, load);
     }
     m->fault = bad;
-    if (!bad) m->command = dir * cmd;
+    if (!bad) { m->command = dir * cmd; m->load = load; }
     double a0 = m->a_meas;
     if (plant_matrices(m, dt / substeps(values, dt)) != 0) goto numeric;
     digital(values, m, dt, P(VR_enable) != 0.0);
@@ -218,13 +223,17 @@ int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log)
 {
     if (!judged && !parameters_ok(values, log)) return -1;
     derive(values, m);                       /* never trust derived data from a state record */
-    double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->a_meas, m->a_last, m->command};
+    double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->a_meas, m->a_last, m->command, m->load};
     for (size_t k = 0; k < sizeof dyn / sizeof dyn[0]; k++)
         if (!isfinite(dyn[k]) || fabs(dyn[k]) > 1e12) {
             FMI2_SAY(log, fmi2Error, "error", "FMU state: the spindle state holds %g, not a finite spindle value",
                      dyn[k]);
             return -1;
         }
+    if (!(m->load >= 0.0)) {
+        FMI2_SAY(log, fmi2Error, "error", "FMU state: the spindle state holds a load torque of %g, not >= 0", m->load);
+        return -1;
+    }
     if ((m->limited != 0 && m->limited != 1) || (m->fault != 0 && m->fault != 1)) {
         FMI2_SAY(log, fmi2Error, "error", "FMU state: a flag of the spindle state is neither 0 nor 1");
         return -1;
