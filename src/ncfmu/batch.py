@@ -397,6 +397,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     ``scheduler_file`` runs them on an existing dask cluster, else on a LocalCluster of ``workers`` processes.
     An existing cluster must answer, with at least one worker, within ``connect_timeout`` seconds.
     """
+    from .cosim.master import steps_per_row
     from .cosim.ssp import read_ssp
     from .project import system_archive
     out = Path(out)
@@ -412,13 +413,11 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     data = archive.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     step = read_ssp(archive).step_size
-    every = 1
-    if output_interval is not None:
-        ratio = output_interval / step
-        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) <= 1e-9 * ratio):
-            raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
-                                        f"system's step {step:g} s")
-        every = int(round(ratio))
+    try:
+        every = steps_per_row(output_interval, step)         # the master's rule, said as the option
+    except SystemDefinitionError:
+        raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
+                                    f"system's step {step:g} s") from None
     if record is not None:
         known = set(output_names(archive))
         unknown = [n for n in record if n not in known]
