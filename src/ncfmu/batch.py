@@ -57,6 +57,7 @@ from .files import write_atomic
 from .systems import report_for
 
 if TYPE_CHECKING:
+    from .cosim.ssp import System
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
@@ -242,10 +243,11 @@ def _complete(path: Path, rows: str) -> bool:
         return False
 
 
-def output_names(archive: Path) -> list[str]:
-    """``INSTANCE.VARIABLE`` of every output in the archive (read from the SSD and the FMUs' modelDescriptions)."""
+def output_names(archive: Path, system: System | None = None) -> list[str]:
+    """``INSTANCE.VARIABLE`` of every output in the archive (read from the SSD -- or ``system``, the archive's as
+    read already -- and the FMUs' modelDescriptions)."""
     from .cosim.ssp import read_ssp
-    system = read_ssp(archive)
+    system = system or read_ssp(archive)
     names = []
     with zipfile.ZipFile(archive) as z:
         for comp in system.components:
@@ -412,14 +414,15 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     archive = system_archive(system, root).resolve()
     data = archive.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
-    step = read_ssp(archive).step_size
+    read = read_ssp(archive)                             # read once: the step and the outputs
+    step = read.step_size
     try:
         every = steps_per_row(output_interval, step)         # the master's rule, said as the option
     except SystemDefinitionError:
         raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
                                     f"system's step {step:g} s") from None
     if record is not None:
-        known = set(output_names(archive))
+        known = set(output_names(archive, read))
         unknown = [n for n in record if n not in known]
         if unknown:
             raise SystemDefinitionError(f"--record {unknown[0]!r}: not an output of {archive.name} "
