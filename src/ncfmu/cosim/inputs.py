@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SystemDefinitionError
+from ..ports import NUMBER_RULE, parse_real
 
 __all__ = ["EMPTY", "RELEASE", "VALUE", "InputTable", "write_input_csv"]
 
@@ -82,11 +83,11 @@ class InputTable:
                     kinds[i, j] = RELEASE
                 else:
                     try:
-                        table[i, j] = float(cell)
+                        table[i, j] = parse_real(cell)
                     except ValueError:
                         raise SystemDefinitionError(f"{path}: line {k}: {header[j]} = {raw!r}: not a number"
                                                     + ("" if j == 0 else ", empty (no change) or 'release'")
-                                                    ) from None
+                                                    + ("" if cell.isascii() else f" ({NUMBER_RULE})")) from None
         t = table[:, 0]
         if not np.all(np.isfinite(t)):
             k = rows[int(np.flatnonzero(~np.isfinite(t))[0])][0]
