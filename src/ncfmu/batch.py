@@ -54,7 +54,6 @@ import numpy as np
 
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
-from .systems import report_for
 
 if TYPE_CHECKING:
     from .cosim.ssp import System
@@ -112,12 +111,11 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         else:
             for slave in opened.slaves:
                 slave.reset()
-        system = opened.system
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
         # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
         # report reads) every k-th row
-        keep = list(record) if record is not None else report_for(system.name, opened.models).record()
+        keep = list(record) if record is not None else opened.report().record()
         how = recording(opened, variant, csv, keep, every=every)
         metrics = how.summary
         assert metrics is not None

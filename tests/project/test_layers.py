@@ -1,8 +1,9 @@
 """Layers point one way: a module imports only from the layers below its own (docs/architecture.md).
 
 Every module of the package, down to the package root, belongs to a layer: the layers below the front end
-(:data:`ALLOWED`) or the front end (:data:`FRONT`); the C sources too (:data:`C_INCLUDES`). Read from the source
-(``ast``, the ``#include`` lines), not by importing, so an import hidden inside a function counts too.
+(:data:`ALLOWED`) or the front end (:data:`FRONT`); the C sources too (:data:`C_INCLUDES`, :data:`C_STANDALONE`).
+Read from the source (``ast``, the ``#include`` lines), not by importing, so an import hidden inside a function
+counts too.
 """
 
 from __future__ import annotations
@@ -39,14 +40,6 @@ FRONT: dict[str, set[str]] = {
     "pytest_plugin": {"project"},
     "cli": {"project", "batch", "serving", "plots"},
     "__init__": {"serving"},
-}
-#: The C sources by folder (relative to the package): the quoted headers each may include besides its own folder's.
-#: The FMI layer includes the standard's headers (from fmpy) and a model's generated variables; a native model
-#: includes only the model interface (fmi/c/fmi2_model.h) and its variables; the master's loop includes nothing.
-C_INCLUDES: dict[str, set[str]] = {
-    "fmi/c": {"fmi2Functions.h", "model_vars.h"},
-    "servo/native": {"fmi2_model.h", "model_vars.h"},
-    "cosim": set(),
 }
 #: third-party packages a layer must not import (the controllers run inside FMUs on the standard library)
 FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control"},
@@ -131,29 +124,20 @@ def test_the_front_end_rule_catches_a_front_import():
         "line 5: serving imports the front-end module cli"]
 
 
-def _c_sources():
-    return sorted(p for p in SRC.rglob("*") if p.suffix in (".c", ".h"))
+#: C outside the FMI layers and the native models (whose includes are C_INCLUDES below): the master's loop, which
+#: includes no project header at all.
+C_STANDALONE = {"cosim/loop.c"}
 
 
-def _includes(text: str) -> list[tuple[int, str]]:
-    return [(n, m.group(1)) for n, line in enumerate(text.splitlines(), start=1)
-            if (m := re.match(r'\s*#\s*include\s+"([^"]+)"', line))]
-
-
-@pytest.mark.parametrize("path", _c_sources(), ids=lambda p: str(p.relative_to(SRC)))
-def test_c_includes_point_down(path):
-    folder = path.parent.relative_to(SRC).as_posix()
-    assert folder in C_INCLUDES, f"{path.relative_to(SRC)}: C in a folder without a layer ({folder})"
-    own = {p.name for p in path.parent.iterdir()}
-    bad = [f"line {n}: includes {h!r}" for n, h in _includes(path.read_text())
-           if h not in own and h not in C_INCLUDES[folder]]
-    assert not bad, f"{path.relative_to(SRC)}: " + "; ".join(bad)
-
-
-def test_the_c_rule_catches_an_upward_include():
-    assert [h for _, h in _includes('#include <math.h>\n#include "fmi2_machine.h"\n  # include "x.h"\n')] == [
-        "fmi2_machine.h", "x.h"]
-    assert "fmi2_machine.h" not in C_INCLUDES["servo/native"]        # a native model sees the interface only
+def test_every_c_file_has_a_layer():
+    """Down to the package root: a C source neither under the FMI layers' or the models' rule (C_FILES) nor standalone
+    is unplaced; a standalone one includes no project header."""
+    files = {p.relative_to(SRC).as_posix() for p in SRC.rglob("*.[ch]")}
+    placed = {p.relative_to(SRC).as_posix() for p in C_FILES} | C_STANDALONE
+    assert not files - placed, f"C sources without a layer: {sorted(files - placed)}"
+    assert not C_STANDALONE - files, f"C_STANDALONE names no file: {sorted(C_STANDALONE - files)}"
+    for name in C_STANDALONE:
+        assert not _c_includes((SRC / name).read_text()), f"{name} includes a project header"
 
 
 def test_the_rule_catches_an_upward_import():
@@ -162,3 +146,39 @@ def test_the_rule_catches_an_upward_import():
     assert [t for _, t in _imports_in(source, ("ncfmu", "cosim"))] == ["numpy", "errors", "project"]
     assert [t for _, t in _imports_in("from . import master\nimport ncfmu.cli\n", ("ncfmu", "cosim"))] == [
         "cosim", "cli"]
+
+
+# -- the C layers: the FMI layers stand over the model interface only; models never reach into a layer -------------
+#: For each C file (by name, or "model" for a native model's own files under servo/native/), the project headers it
+#: may include (system headers <...> and the FMI standard's headers, as fmpy ships them, always).
+C_INCLUDES = {
+    "fmi2_machine.h": set(),
+    "fmi2_model.h": {"fmi2_machine.h"},
+    "fmi2_functions.c": {"fmi2_machine.h", "fmi2_model.h"},
+    "fmi3_functions.c": {"fmi2_machine.h", "fmi2_model.h"},
+    "native_model.c": {"fmi2_machine.h", "fmi2_model.h", "model_vars.h"},
+    "python_model.c": {"fmi2_model.h", "ncfmu_contract.h"},
+    "ncfmu_contract.h": set(),
+    "model": {"fmi2_model.h", "model_vars.h"},        # + the model's own headers beside it
+}
+FMI_STANDARD_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3Functions.h",
+                        "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"}
+C_FILES = sorted([*(SRC / "fmi" / "c").glob("*.[ch]"), *(SRC / "servo" / "native").glob("*.[ch]")])
+
+
+def _c_includes(text: str) -> list[str]:
+    return re.findall(r'^\s*#\s*include\s+"([^"]+)"', text, re.MULTILINE)
+
+
+@pytest.mark.parametrize("path", C_FILES, ids=lambda p: str(p.relative_to(SRC)))
+def test_c_includes_follow_the_layers(path):
+    own = {p.name for p in path.parent.glob("*.h")} if path.parent.name == "native" else set()
+    allowed = (C_INCLUDES["model"] | own) if path.parent.name == "native" else C_INCLUDES[path.name]
+    bad = [h for h in _c_includes(path.read_text()) if h not in allowed | FMI_STANDARD_HEADERS]
+    assert not bad, f"{path.relative_to(SRC)} includes {bad}: allowed {sorted(allowed)}"
+
+
+def test_the_c_rule_catches_a_model_reaching_into_a_layer():
+    assert _c_includes('#include <math.h>\n#include "fmi2_model.h"\n  # include "python_model.c"\n') == [
+        "fmi2_model.h", "python_model.c"]
+    assert "python_model.c" not in C_INCLUDES["model"] and "ncfmu_contract.h" not in C_INCLUDES["fmi2_functions.c"]
