@@ -54,10 +54,9 @@ import numpy as np
 
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
-from .systems import report_for
-from .systems.report import start_parameters
 
 if TYPE_CHECKING:
+    from .cosim.ssp import System
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
@@ -99,8 +98,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
     client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
-    from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
-    from .project import OpenSystem, plant_axes
+    from .cosim.record import CsvSink
+    from .project import OpenSystem, recording
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -112,18 +111,17 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         else:
             for slave in opened.slaves:
                 slave.reset()
-        system = opened.system
-        report = report_for(system.name, opened.models, plant_axes(opened.archive, system, opened.models))
-        keep = list(record) if record is not None else report.record()
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
-        metrics = report.accumulator(start_parameters(system.components, variant))
-        # the metrics read every step of what the report needs; the file gets the kept columns every k-th row
-        kept: RecordSink = SelectColumns(csv, keep)
+        # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
+        # report reads) every k-th row
+        keep = list(record) if record is not None else opened.report().record()
+        how = recording(opened, variant, csv, keep, every=every)
+        metrics = how.summary
+        assert metrics is not None
         deadline = None if timeout is None else time.perf_counter() + timeout
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
-                   record=list(dict.fromkeys([*keep, *report.record()])),
-                   sinks=[kept if every == 1 else EveryKth(kept, every), metrics])
+                   **how.run_arguments())
         row.update(status="ok", error="")
         if not metrics.finished():
             row.update(status="unfinished", error=f"cycle not finished by t = {metrics.last_time:g} s")
@@ -243,10 +241,11 @@ def _complete(path: Path, rows: str) -> bool:
         return False
 
 
-def output_names(archive: Path) -> list[str]:
-    """``INSTANCE.VARIABLE`` of every output in the archive (read from the SSD and the FMUs' modelDescriptions)."""
+def output_names(archive: Path, system: System | None = None) -> list[str]:
+    """``INSTANCE.VARIABLE`` of every output in the archive (read from the SSD -- or ``system``, the archive's as
+    read already -- and the FMUs' modelDescriptions)."""
     from .cosim.ssp import read_ssp
-    system = read_ssp(archive)
+    system = system or read_ssp(archive)
     names = []
     with zipfile.ZipFile(archive) as z:
         for comp in system.components:
@@ -409,6 +408,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     ``scheduler_file`` runs them on an existing dask cluster, else on a LocalCluster of ``workers`` processes.
     An existing cluster must answer, with at least one worker, within ``connect_timeout`` seconds.
     """
+    from .cosim.master import steps_per_row
     from .cosim.ssp import read_ssp
     from .project import system_archive
     out = Path(out)
@@ -423,16 +423,15 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     archive = system_archive(system, root).resolve()
     data = archive.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
-    step = read_ssp(archive).step_size
-    every = 1
-    if output_interval is not None:
-        ratio = output_interval / step
-        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) <= 1e-9 * ratio):
-            raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
-                                        f"system's step {step:g} s")
-        every = int(round(ratio))
+    read = read_ssp(archive)                             # read once: the step and the outputs
+    step = read.step_size
+    try:
+        every = steps_per_row(output_interval, step)         # the master's rule, said as the option
+    except SystemDefinitionError:
+        raise SystemDefinitionError(f"--output-interval {output_interval!r}: must be a whole multiple of the "
+                                    f"system's step {step:g} s") from None
     if record is not None:
-        known = set(output_names(archive))
+        known = set(output_names(archive, read))
         unknown = [n for n in record if n not in known]
         if unknown:
             raise SystemDefinitionError(f"--record {unknown[0]!r}: not an output of {archive.name} "

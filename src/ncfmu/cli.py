@@ -8,10 +8,13 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from .errors import NcfmuError
 from .ports import is_integer_text, parse_integer, parse_real
+
+if TYPE_CHECKING:
+    from .cosim.ssp import System
 
 
 def epilog() -> str:
@@ -127,14 +130,16 @@ def _summary(result, report_lines: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str]) -> list[str]:
+def _unreached_lines(system: str, runs: list[dict[str, object]], option: dict[str, str],
+                     opened: System | None = None) -> list[str]:
     """Summary lines warning of the settings (of any of ``runs``) that reach no connected port of ``system``
-    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting."""
+    (the rule: ``ncfmu.systems.reach``); ``option`` names the command-line option of each setting; ``opened``: the
+    system an .ssp path held, as the run read it (not read again)."""
     from .cosim.ssp import read_ssp
     from .systems import SYSTEMS, get_system
     from .systems.reach import unreached
-    definition = read_ssp(Path(system)) if system.endswith(".ssp") else get_system(system) if system in SYSTEMS \
-        else None
+    definition = (opened or read_ssp(Path(system))) if system.endswith(".ssp") else get_system(system) \
+        if system in SYSTEMS else None
     if definition is None:
         return []
     why: dict[str, str] = {}
@@ -220,80 +225,70 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
 def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
     completed) and the summary computed as the run goes; only ``--plot`` keeps the trajectory in memory.
-    Prints the summary; returns the result and where its CSV is."""
+    Prints the summary; returns the result, where its CSV is and the system run (its .ssp read once)."""
     import math
     import signal
 
-    from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink, EveryKth, RecordSink, RecordWriteError, SelectColumns
-    from .cosim.ssp import read_ssp
-    from .project import ScaledSink, archive_models, plant_axes, report_scales, simulate, system_archive
-    from .systems import report_for
+    from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.record import CsvSink, RecordWriteError
+    from .project import OpenSystem, recording, system_archive
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import columns_of, start_parameters
     archive = system_archive(args.system, args.root)
-    system = read_ssp(archive)
-    models = archive_models(archive, system)
-    report = report_for(system.name, models, plant_axes(archive, system, models))
     if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
         raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
     settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
                             args.max_depth)
-    report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
-    scales = report_scales(archive, system, report.record())     # a user's axis in m: the report reads mm
-    parameters = start_parameters(system.components, start_values)
-    record = None if args.record is None else list(dict.fromkeys(args.record))
-    step = system.step_size if args.step is None else args.step
-    stop = system.stop_time if args.stop_time is None else args.stop_time
-    rows = None
-    if step > 0 and math.isfinite(stop / step):
-        rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
-    csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
-                       run=f"stop time {stop:g} s at a step of {step:g} s")
-    accumulator = None
-    sinks: list[RecordSink]
-    interval = args.output_interval
-    if args.plot:                       # the plot needs the whole trajectory: kept in memory
-        sinks, run_record = [csv_sink], record
-    else:
-        # the summary reads every step; the CSV gets the --record columns at the --output-interval
-        accumulator = report.accumulator(parameters)     # its parts are made when the run opens it
-        run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
-        csv_view: RecordSink = csv_sink if run_record == record else SelectColumns(csv_sink, record or [])
-        every = steps_per_row(interval, step)
-        sinks = [csv_view if every == 1 else EveryKth(csv_view, every), ScaledSink(accumulator, scales)]
-        interval = None
+    csv_sink = None
     try:
         with deferred_interrupts():
-            result = simulate(str(archive), stop_time=args.stop_time, step_size=args.step,
-                              start_values=start_values, input_csv=args.input, mode=args.mode, root=args.root,
-                              record=run_record, output_interval=interval, sinks=sinks, keep=args.plot)
+            inputs = InputTable.from_csv(args.input) if args.input else None
+            with OpenSystem(archive, args.mode) as opened:
+                system = opened.system
+                step = system.step_size if args.step is None else args.step
+                stop = system.stop_time if args.stop_time is None else args.stop_time
+                rows = None
+                if step > 0 and math.isfinite(stop / step):
+                    rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+                csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
+                                   run=f"stop time {stop:g} s at a step of {step:g} s")
+                # the summary reads every step; the CSV gets the --record columns at the --output-interval (with
+                # --plot the run keeps the trajectory, and the summary is made from it)
+                report = opened.report()
+                report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
+                how = recording(opened, start_values, csv_sink, args.record, args.output_interval, args.step,
+                                summary=not args.plot, in_mm=True,    # a user's axis in m: the report reads mm
+                                report=report)
+                result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
+                                    inputs=inputs, keep=args.plot, **how.run_arguments())
     except KeyboardInterrupt as err:
         terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
-        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {_where_stopped(csv_sink)}",
-              file=sys.stderr)
+        where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
+        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {where}", file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
     except RecordWriteError as err:       # the disk full: whole rows kept, said as for Ctrl-C
-        if csv_sink.final_path is None:
+        if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
     except NcfmuError as err:
-        if csv_sink.final_path is None:
+        if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    if accumulator is None:              # --plot: the kept trajectory, its axes in mm for the summary and the plot
-        for name, gain in scales.items():
+    if how.summary is None:              # --plot: the kept trajectory, its axes in mm for the summary and the plot
+        for name, gain in how.scales.items():
             if name in result:
                 result.data[name] *= gain
         # the summary (and the part check) over the kept trajectory
-        accumulator = report.accumulator(result.parameters or parameters)
+        accumulator = how.report.accumulator(result.parameters or start_parameters(system.components, start_values))
         accumulator.open(columns_of(result.data))
         if len(result.data):
             accumulator.write(result.data)
         accumulator.close(True, float(result.time[-1]) if len(result.data) else None)
+    else:
+        accumulator = how.summary
     print(_summary(result, accumulator.summary()))
-    return result, csv_sink.final_path, accumulator
+    return result, csv_sink.final_path, system, accumulator
 
 
 def _where_stopped(sink) -> str:
@@ -327,11 +322,11 @@ def cmd_run(args) -> int:
     start_values = _parse_set(args.set)
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
-    result, csv, accumulator = _run_streamed(args, start_values)
+    result, csv, system, accumulator = _run_streamed(args, start_values)
     for line in replace_warnings:
         print(f"  [warning] {line}")
     out = Path(args.out)
-    for line in _unreached_lines(args.system, [start_values], {}):
+    for line in _unreached_lines(args.system, [start_values], {}, system):
         print(line)
     print(f"  results: {csv}")
     from .systems.part import verdict_of
@@ -552,6 +547,7 @@ def cmd_validate(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .cosim.algorithm import MODES
     help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
                      "run closed loop with servo axes.", epilog=help_epilog)
@@ -569,7 +565,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
     p.add_argument("--input", type=Path, default=None, help="CSV of input changes (columns time, INSTANCE.VARIABLE)")
-    p.add_argument("--mode", choices=("gauss-seidel", "jacobi"), default="gauss-seidel", help="master algorithm")
+    p.add_argument("--mode", choices=MODES, default=MODES[0], help="master algorithm")
     p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out); the rows are streamed to "
                    "SYSTEM.csv.partial and renamed when the run completed (an interrupted run leaves the .partial: "
                    "a valid CSV of every row up to where it stopped)")

@@ -18,16 +18,17 @@ from typing import Any
 
 from .cosim.connect import free_inputs
 from .cosim.fmu import UnpackedFmu, make_slave, safe_extract, unpacked_fmu
-from .cosim.master import InputTable, Master
+from .cosim.master import InputTable, Master, Session, steps_per_row
 from .cosim.native_loop import build_library
-from .cosim.record import RecordSink
+from .cosim.record import EveryKth, RecordSink, SelectColumns
 from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, Component, System, fmu_path, pack, read_ssd, read_ssp, write_system
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
 from .fmi.fmi3 import build_all_fmi3
-from .systems import SYSTEMS, get_system
+from .systems import SYSTEMS, get_system, report_for
+from .systems.report import Report, ReportAccumulator, start_parameters
 from .systems.roles import identify
 
 
@@ -219,16 +220,26 @@ class OpenSystem:
         return {f"{c.name}.{p.name}" for c in own.components if models.get(c.name) == c.model
                 for p in MODELS[c.model].PORTS if p.causality == "input" and (c.name, p.name) not in driven}
 
+    def report(self) -> Report:
+        """The system's report, by what its FMUs are (a user's plant: its axes found in it)."""
+        return report_for(self.system.name, self.models, plant_axes(self.archive, self.system, self.models))
+
     @property
     def models(self) -> dict[str, str]:
         """instance -> the catalogue model its FMU is, or ``foreign:<modelName>``."""
         return {inst: i.model or f"foreign:{i.model_name}" for inst, i in self.identities.items()}
 
     def run(self, **kwargs) -> Result:
+        """One run from start to stop (:meth:`Master.run <ncfmu.cosim.master.Master.run>`), with the system's
+        warnings and what each instance's FMU is."""
         result = self.master.run(**kwargs)
         result.warnings = self.warnings(kwargs.get("start_values"), kwargs.get("inputs"))
         result.models = self.models
         return result
+
+    def open_session(self, **kwargs) -> Session:
+        """A run stepped from outside (:meth:`Master.open_session <ncfmu.cosim.master.Master.open_session>`)."""
+        return self.master.open_session(**kwargs)
 
     def close(self) -> None:
         try:
@@ -241,6 +252,53 @@ class OpenSystem:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@dataclass
+class Recording:
+    """How a run records: the outputs it records, the sinks its rows go to, the interval the run itself records
+    at, the system's report and its metrics computed as the run goes, and the factors that bring a user's axis
+    into the report's mm. Made one way (:func:`recording`) for every front end."""
+
+    record: list[str] | None
+    sinks: list[RecordSink]
+    output_interval: float | None
+    report: Report
+    summary: ReportAccumulator | None
+    scales: dict[str, float]
+
+    def run_arguments(self) -> dict[str, object]:
+        """The arguments of ``Master.run`` / ``open_session`` that say what is recorded and where it goes."""
+        return {"record": self.record, "sinks": self.sinks, "output_interval": self.output_interval}
+
+
+def recording(opened: OpenSystem, start_values: Mapping[str, object], rows: RecordSink | None = None,
+              columns: Sequence[str] | None = None, output_interval: float | None = None,
+              step_size: float | None = None, summary: bool = True, every: int | None = None,
+              in_mm: bool = False, report: Report | None = None) -> Recording:
+    """What a run of the ``opened`` system records: ``rows`` (a CSV, any sink) gets ``columns`` (default every
+    output) every ``output_interval`` s (or ``every`` steps); with ``summary`` the system's report (by what its FMUs
+    are) reads every step of what it needs -- its accumulator, made for the run's parameters: the system's sets with
+    ``start_values`` on top -- while the run records only those columns and ``columns``. Without ``summary`` the run
+    itself records ``columns`` at ``output_interval``. ``in_mm``: the report reads a user's axis recorded in another
+    length unit in mm (:func:`report_scales`; the rows keep the FMU's units). ``report``: another report than
+    the system's own (the system's with the part check's settings, say)."""
+    system = opened.system
+    report = opened.report() if report is None else report
+    scales = report_scales(opened.archive, system, report.record()) if in_mm else {}
+    record = None if columns is None else list(dict.fromkeys(columns))
+    if not summary:
+        return Recording(record, [] if rows is None else [rows], output_interval, report, None, scales)
+    accumulator = report.accumulator(start_parameters(system.components, start_values))
+    run_record = None if record is None else list(dict.fromkeys([*record, *report.record()]))
+    sinks: list[RecordSink] = []
+    if rows is not None:
+        view = rows if run_record == record else SelectColumns(rows, record or [])
+        if every is None:
+            every = steps_per_row(output_interval, system.step_size if step_size is None else step_size)
+        sinks.append(view if every == 1 else EveryKth(view, every))
+    sinks.append(ScaledSink(accumulator, scales) if scales else accumulator)
+    return Recording(run_record, sinks, None, report, accumulator, scales)
 
 
 def simulate(system: str = "lathe_roughing", stop_time: float | None = None, step_size: float | None = None,

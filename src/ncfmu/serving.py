@@ -1292,7 +1292,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     files: list[Path] = []
     with OpenSystem(archive) as opened:
         recorder = Recorder(opened.system.name, Path(out)) if out is not None else None
-        session = opened.master.open_session(
+        session = opened.open_session(
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
             start_values=dict(start_values or {}), record=list(record) if record else None,
             sinks=recorder.sinks() if recorder else ())

@@ -89,3 +89,22 @@ def test_plot_of_a_csv_without_the_plane_columns_draws_what_it_has(project, tmp_
     assert main(["plot", str(tmp_path / "traj.csv"), "--system", "lathe_taper", "--png",
                  str(tmp_path / "traj.png")]) == 0, capsys.readouterr().err
     assert (tmp_path / "traj.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_run_reads_its_ssp_once(project, tmp_path, monkeypatch):
+    """One ``ncfmu run`` of an .ssp opens the archive once: the run, its summary and its warnings of settings that
+    reach nothing all use the system as the run read it."""
+    import ncfmu.cosim.ssp as ssp
+    import ncfmu.project as project_module
+    reads = []
+    real = ssp.read_ssp
+
+    def counted(*args, **kwargs):
+        reads.append(args[0])
+        return real(*args, **kwargs)
+    monkeypatch.setattr(ssp, "read_ssp", counted)
+    monkeypatch.setattr(project_module, "read_ssp", counted)
+    from conftest import ROOT
+    archive = ROOT / "ssp" / "lathe_taper.ssp"
+    assert main(["run", str(archive), "--stop-time", "0.2", "--out", str(tmp_path)]) == 0
+    assert len(reads) == 1

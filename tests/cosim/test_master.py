@@ -26,6 +26,18 @@ def test_jacobi_uses_the_previous_communication_point():
     assert list(r["a.y"]) == [0, 1, 11, 12] and list(r["b.y"]) == [0, 10, 11, 21]
 
 
+def test_the_algorithm_is_chosen_once_by_name():
+    """Gauss-Seidel vs Jacobi is decided in one place (cosim/algorithm.py): by name, or an Algorithm given; an
+    unknown name is refused naming the choices; the C loop is told by the algorithm's own flag."""
+    from ncfmu.cosim.algorithm import ALGORITHMS, MODES, GaussSeidel, Jacobi, algorithm
+    assert MODES == ("gauss-seidel", "jacobi") and [a.jacobi for a in ALGORITHMS.values()] == [False, True]
+    m, _ = chain("jacobi")
+    assert m.algorithm is ALGORITHMS["jacobi"] and m.mode == "jacobi"
+    assert isinstance(algorithm(GaussSeidel()), GaussSeidel) and algorithm(Jacobi()).jacobi
+    with pytest.raises(SystemDefinitionError, match="mode = 'gauss': must be one of gauss-seidel, jacobi"):
+        chain("gauss")
+
+
 @pytest.mark.parametrize("conn, message", [
     (Connection("a", "y", "c", "u"), "no component 'c'"),
     (Connection("a", "nope", "b", "u"), "a has no variable 'nope'"),

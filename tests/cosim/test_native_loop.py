@@ -132,8 +132,8 @@ def test_fake_slaves_keep_the_python_loop():
 
 def test_a_run_longer_than_one_chunk_is_the_same_run(project, monkeypatch):
     """The C loop hands back to Python every NATIVE_CHUNK steps (so Ctrl-C is seen): the chunks join seamlessly."""
-    import ncfmu.cosim.master as master
-    monkeypatch.setattr(master, "NATIVE_CHUNK", 997)           # 3000 steps: three whole chunks and a part
+    import ncfmu.cosim.execution as execution
+    monkeypatch.setattr(execution, "NATIVE_CHUNK", 997)           # 3000 steps: three whole chunks and a part
     archive = ROOT / "ssp" / "lathe_taper.ssp"
     python, _ = run(archive, False, stop_time=3.0, start_values=HOLD)
     native, loop = run(archive, True, stop_time=3.0, start_values=HOLD)

@@ -27,18 +27,18 @@ def test_serialised_state_round_trips(project, name):
     """Save a system mid-run as bytes, run on, load the bytes, run again: the same outputs."""
     with OpenSystem(system_archive(name)) as opened:
         master = opened.master
-        run = master._prepare(3.0, None, None, None, 0.0)
-        master._loop(run, 0, 1500)
+        run = master.prepare(3.0, None, None, None, 0.0)
+        run.steps(0, 1500)
         blobs = [s.serialize_state(st) for s, st in ((s, s.get_state()) for s in opened.slaves)]
         assert all(len(b) > 100 for b in blobs)
-        master._loop(run, 1500, 3000)
+        run.steps(1500, 3000)
         once = {k: v[1500:].copy() for k, v in run.rec.items()}
         assert any(np.ptp(v) > 0 for v in once.values())     # it moved on: the restore has something to undo
         for s, blob in zip(opened.slaves, blobs):
             s.set_state(s.deserialize_state(blob))
         for s in opened.slaves:
             s.read_outputs()
-        master._loop(run, 1500, 3000)
+        run.steps(1500, 3000)
         for k in once:
             assert np.array_equal(run.rec[k][1500:], once[k])
 

@@ -1,6 +1,9 @@
 """Layers point one way: a module imports only from the layers below its own (docs/architecture.md).
 
-Read from the source (``ast``), not by importing, so an import hidden inside a function counts too.
+Every module of the package, down to the package root, belongs to a layer: the layers below the front end
+(:data:`ALLOWED`) or the front end (:data:`FRONT`); the C sources too (:data:`C_INCLUDES`, :data:`C_STANDALONE`).
+Read from the source (``ast``, the ``#include`` lines), not by importing, so an import hidden inside a function
+counts too.
 """
 
 from __future__ import annotations
@@ -27,8 +30,18 @@ ALLOWED: dict[str, set[str]] = {
     "machining": {"errors"},
     "systems": {"errors", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue", "machining"},
 }
-#: what nothing below the front end may import: the front end itself
-FRONT = {"project", "cli", "batch", "serve", "plots", "docs", "pytest_plugin"}
+#: The front end: what nothing below it may import. Each front module may import every layer of ALLOWED and the
+#: front modules named here (``__init__`` is the package root: ``ncfmu.serve``).
+FRONT: dict[str, set[str]] = {
+    "docs": set(),
+    "plots": set(),
+    "project": {"docs"},
+    "batch": {"project"},
+    "serving": {"project"},
+    "pytest_plugin": {"project"},
+    "cli": {"project", "batch", "serving", "plots"},
+    "__init__": {"serving"},
+}
 #: third-party packages a layer must not import (the controllers run inside FMUs on the standard library)
 FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control", "shapely"},
                       "cosim": {"pythonfmu"}}
@@ -71,18 +84,61 @@ def _modules():
     return sorted(p for p in SRC.rglob("*.py") if "__pycache__" not in p.parts)
 
 
-@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
-def test_imports_point_down(path):
-    layer = _layer(path)
-    layers = set(ALLOWED) | FRONT | {_layer(p) for p in _modules()}
+def _layers() -> set[str]:
+    return {_layer(p) for p in _modules()}
+
+
+def test_every_module_has_a_layer():
+    """Down to the package root: a module (or package) in neither ALLOWED nor FRONT is unplaced; a name in
+    FRONT that is no module (a misspelling) checks nothing."""
+    layers, placed = _layers(), set(ALLOWED) | set(FRONT)
+    assert not layers - placed, f"modules without a layer: {sorted(layers - placed)}"
+    assert not placed - layers, f"layers naming no module: {sorted(placed - layers)}"
+    assert not set(ALLOWED) & set(FRONT)
+
+
+def _violations(layer: str, imports: list[tuple[int, str]], layers: set[str]) -> list[str]:
     bad = []
-    for line, target in _imports(path):
+    for line, target in imports:
         if target in layers and target != layer:
             if layer in ALLOWED and target not in ALLOWED[layer]:
                 bad.append(f"line {line}: {layer} imports {target}")
+            elif layer in FRONT and target in FRONT and target not in FRONT[layer]:
+                bad.append(f"line {line}: {layer} imports the front-end module {target}")
         elif target in FORBIDDEN_PACKAGES.get(layer, ()):
             bad.append(f"line {line}: {layer} imports {target}")
+    return bad
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
+def test_imports_point_down(path):
+    bad = _violations(_layer(path), _imports(path), _layers())
     assert not bad, f"{path.relative_to(SRC)}: " + "; ".join(bad)
+
+
+def test_the_front_end_rule_catches_a_front_import():
+    """The check itself: a layer below the front end importing a front module, and a front module importing a front
+    module it is not given, are found; front to a lower layer is fine."""
+    layers = _layers()
+    assert _violations("cosim", [(3, "project")], layers) == ["line 3: cosim imports project"]
+    assert _violations("serving", [(5, "cli"), (6, "project"), (7, "cosim")], layers) == [
+        "line 5: serving imports the front-end module cli"]
+
+
+#: C outside the FMI layers and the native models (whose includes are C_INCLUDES below): the master's loop, which
+#: includes no project header at all.
+C_STANDALONE = {"cosim/loop.c"}
+
+
+def test_every_c_file_has_a_layer():
+    """Down to the package root: a C source neither under the FMI layers' or the models' rule (C_FILES) nor standalone
+    is unplaced; a standalone one includes no project header."""
+    files = {p.relative_to(SRC).as_posix() for p in SRC.rglob("*.[ch]")}
+    placed = {p.relative_to(SRC).as_posix() for p in C_FILES} | C_STANDALONE
+    assert not files - placed, f"C sources without a layer: {sorted(files - placed)}"
+    assert not C_STANDALONE - files, f"C_STANDALONE names no file: {sorted(C_STANDALONE - files)}"
+    for name in C_STANDALONE:
+        assert not _c_includes((SRC / name).read_text()), f"{name} includes a project header"
 
 
 def test_the_rule_catches_an_upward_import():

@@ -1,4 +1,5 @@
-"""The master loop in C (``loop.c``): the same steps as :meth:`Master._loop`, outside Python.
+"""The master loop in C (``loop.c``): the same steps as
+:meth:`Execution.steps <ncfmu.cosim.execution.Execution.steps>`, outside Python.
 
 Used when every slave offers its raw FMI 2.0 functions (:class:`NativeSlave`, i.e. every
 :class:`~ncfmu.cosim.fmu.FmuSlave`) and the library could be built; otherwise the master runs its

@@ -1,0 +1,222 @@
+"""One prepared run of a master's slaves (libcosim's ``execution``): its value vectors, step plan, record window
+and input schedule, made once by :meth:`~ncfmu.cosim.master.Master.prepare`, and the loop that steps it.
+
+The loop runs the steps in chunks that end where Python must act before the next step; each chunk runs in C
+(``loop.c``) when every slave allows it, else in Python with the master's :mod:`algorithm <.algorithm>`. Both
+make the same calls. Writes between steps (an input CSV's cells, a session's force, release and parameter) go
+through :meth:`Execution.apply`.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import SimulationError, SimulationTimeout
+from .algorithm import Algorithm
+from .interrupts import raise_pending
+from .native_loop import NativePlan
+from .slave import KINDS, Variable
+
+if TYPE_CHECKING:
+    from .master import Master
+
+__all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution"]
+
+#: Steps run before the loop hands back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper in C).
+NATIVE_CHUNK = 10_000
+
+#: The dtype of a recorded column of each kind (Booleans as bool, as fmpy's results)
+COLUMN_DTYPES: dict[str, np.dtype] = {"Real": np.dtype(np.float64), "Integer": np.dtype(np.int32),
+                                     "Boolean": np.dtype(np.bool_)}
+
+
+@dataclass
+class BoundInput:
+    """An input in the gather plan: read from ``source`` (a connection's output, or an input-CSV slot), or
+    from ``force_slot`` while forced."""
+
+    kind: str
+    idx: np.ndarray          # the gather indices of its slave and kind (shared with the C loop)
+    pos: int
+    in_buf: np.ndarray
+    source: int
+    force_slot: int
+
+
+@dataclass
+class Execution:
+    """Everything one run needs inside the loop, prepared once (:meth:`~ncfmu.cosim.master.Master.prepare`)."""
+
+    master: Master
+    algorithm: Algorithm
+    h: float
+    start_time: float
+    stop_time: float          # math.inf: until closed
+    n_steps: int | None       # None: no stop time
+    values: dict
+    plan: list
+    record_names: dict        # kind -> every output of that kind, in vector order
+    n_rec: dict
+    rec: dict                 # kind -> the record window: row r holds the run's row row_base + r
+    every: int                # record every ``every``-th step (and the start)
+    capacity: int             # rows in the window
+    columns: list[tuple[str, str, int]]   # (name, kind, index in record_names[kind]): what the rows carry
+    start_values: dict        # instance -> variable -> value: the system's parameter sets with the caller's applied
+    bound: dict               # INSTANCE.VARIABLE -> BoundInput
+    ext: dict                 # INSTANCE.VARIABLE -> (kind, slot): inputs no connection drives, set by the CSV
+    schedule: list            # (first step, [actions]) of the input CSV, in time order
+    native: NativePlan | None = None
+    row_base: int = 0
+    step: int = 0             # steps done
+    next_change: int = 0
+    forced: dict = field(default_factory=dict)
+    unbound: dict = field(default_factory=dict)   # inputs outside the plan: the value last set
+    flush: Callable[[], None] | None = None
+
+    def time_of(self, step: int) -> float:
+        """The communication point after ``step`` steps: computed as both loops compute it."""
+        return self.start_time + self.h * step
+
+    @property
+    def rows_done(self) -> int:
+        """Rows of the window that hold finished steps."""
+        return self.step // self.every - self.row_base + 1
+
+    def rows(self, count: int) -> np.ndarray:
+        """The first ``count`` rows of the window as a structured array of the recorded columns."""
+        dtype = [("time", np.float64)] + [(name, COLUMN_DTYPES[kind]) for name, kind, _ in self.columns]
+        data = np.empty(count, dtype=dtype)
+        data["time"] = self.start_time + self.h * ((self.row_base + np.arange(count)) * self.every)
+        for name, kind, j in self.columns:
+            data[name] = self.rec[kind][:count, j]
+        return data
+
+    # -- writes between steps -------------------------------------------------------------------
+    def apply(self, action: str, name: str, value) -> None:
+        """One write between steps: a CSV row's cell or a session's force/release/parameter."""
+        slave, v = self.master.variable(name)
+        if action == "ext":
+            kind, slot = self.ext[name]
+            self.values[kind][slot] = value
+        elif action == "force":
+            b = self.bound.get(name)
+            if b is None:
+                slave.set_start(v.name, value)          # an input outside the plan keeps what it is set to
+                self.unbound[name] = value
+            else:
+                conv = self.master.conversions.get((slave.name, v.name))
+                # the slot is gathered like the connection's source: in the source's unit
+                self.values[b.kind][b.force_slot] = value if conv is None else (value - conv.offset) / conv.gain
+                b.idx[b.pos] = b.force_slot
+            self.forced[name] = value
+        elif action == "ext_release":
+            kind, slot = self.ext[name]
+            start = self.start_values[slave.name].get(v.name, v.start)
+            self.values[kind][slot] = 0 if start is None else start
+        elif action == "release":
+            self.forced.pop(name, None)
+            b = self.bound.get(name)
+            start = self.start_values[slave.name].get(v.name, v.start)
+            if b is not None:
+                b.idx[b.pos] = b.source
+            elif start is not None:
+                slave.set_start(v.name, start)
+                self.unbound[name] = start
+        else:                                           # a tunable parameter
+            slave.set_start(v.name, value)
+            self.start_values[slave.name][v.name] = value
+
+    # -- the loop -------------------------------------------------------------------------------
+    def steps(self, first: int, last: int, progress: Callable[[float], None] | None = None,
+              deadline: float | None = None) -> float:
+        """Steps ``first`` .. ``last - 1``; returns the wall time.
+
+        The steps run in chunks that end where Python must act before the next step (an input change, a
+        progress report, a deadline check every 64 steps, a full record window, and every ``NATIVE_CHUNK``
+        steps so that Ctrl-C is seen); each chunk runs in C when every slave allows it, else in Python. Both
+        make the same calls.
+        """
+        schedule, every = self.schedule, self.every
+        report_every = max(1, (self.n_steps or 1) // 100)
+        self.master.loop_used = "python" if self.native is None else "c"
+        advance: Callable[[int, int, int], None]
+        if self.native is not None:
+            self.native.forget_sent()     # start values, a restored state or a direct set may have changed inputs
+            advance = self.native.run
+        else:
+            advance = self._python_steps()
+        wall0 = _time.perf_counter()
+        i = first
+        try:
+            while i < last:
+                while self.next_change < len(schedule) and schedule[self.next_change][0] <= i:
+                    for action, name, value in schedule[self.next_change][1]:
+                        self.apply(action, name, value)
+                    self.next_change += 1
+                if i // every + 1 - self.row_base >= self.capacity:
+                    assert self.flush is not None, "the record window is full and nothing takes its rows"
+                    self.flush()
+                end = min(last, i + NATIVE_CHUNK, (self.row_base + self.capacity) * every - 1)
+                if self.next_change < len(schedule):
+                    end = min(end, schedule[self.next_change][0])
+                if progress is not None:
+                    end = min(end, (i + report_every) // report_every * report_every)   # the next row to report
+                if deadline is not None:
+                    end = min(end, (i + 64) // 64 * 64)
+                advance(i, end, self.row_base)
+                i = self.step = end
+                raise_pending()
+                if progress is not None and end % report_every == 0 and self.n_steps:
+                    progress(end / self.n_steps)
+                if deadline is not None and end % 64 == 0 and _time.perf_counter() > deadline:
+                    stop = f" of {self.time_of(self.n_steps):.3f} s" if self.n_steps is not None else ""
+                    raise SimulationTimeout(f"stopped at t = {self.time_of(end):.3f} s{stop}: over the time allowed "
+                                            f"({_time.perf_counter() - wall0:.1f} s of wall time)")
+        except SimulationError:
+            failed = getattr(self.native, "failed_step", None)
+            if failed is not None and i <= failed:
+                self.step = failed          # the C loop says how far it got: those rows are whole
+            raise
+        return _time.perf_counter() - wall0
+
+    def _python_steps(self) -> Callable[[int, int, int], None]:
+        """The Python loop: ``advance(first, end, row_base)`` steps ``first`` .. ``end - 1`` and records the rows."""
+        rec, n_rec, h, start, every = self.rec, self.n_rec, self.h, self.start_time, self.every
+        # the rows to record and the slices of the output vectors they copy, prepared once
+        record = [(rec[k], self.values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
+        step = self.algorithm.stepper(self.plan)
+
+        def advance(first: int, end: int, row_base: int) -> None:
+            for i in range(first, end):
+                step(start + h * i, h)
+                done = i + 1
+                if done % every == 0:
+                    row = done // every - row_base
+                    for table, vector in record:
+                        table[row] = vector
+                self.step = done
+        return advance
+
+
+# -- what the master and a session say of variables -------------------------------------------------
+def article(causality: str) -> str:
+    """``an output``, ``a parameter``: a causality with its article, for messages."""
+    return f"{'an' if causality[:1] in 'aeiou' else 'a'} {causality}"
+
+
+def described(v: Variable) -> str:
+    """``a fixed parameter``, ``an output``: what a variable is, with its article, for messages."""
+    return f"a {v.variability} parameter" if v.causality == "parameter" and v.variability else article(v.causality)
+
+
+def as_python(kind: str, value) -> object:
+    if kind == "Real":
+        return float(value)
+    if kind == "Boolean":
+        return bool(value)
+    return int(value)

@@ -1,0 +1,46 @@
+"""Ctrl-C and SIGTERM during a run: noted by a signal handler, raised by the master between chunks of steps."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+
+__all__ = ["Interrupted", "deferred_interrupts", "raise_pending"]
+
+#: Signals noted inside :func:`deferred_interrupts`, raised by the loop between chunks of steps.
+_PENDING: list[int] = []
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM during a run, raised between chunks of steps (``signum`` says which)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+@contextmanager
+def deferred_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Inside: Ctrl-C and SIGTERM are noted and raised as :class:`Interrupted` by the master between chunks of
+    steps, never inside an FMU's own Python code (a pythonfmu FMU runs in this interpreter and turns an
+    exception raised in its step into fmi2Fatal). Only in the main thread; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.signal(signum, lambda received, frame: _PENDING.append(received))
+                for signum in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        _PENDING.clear()
+
+
+def raise_pending() -> None:
+    """Raise :class:`Interrupted` for a signal noted since :func:`deferred_interrupts` began (the master calls this
+    between chunks of steps)."""
+    if _PENDING:
+        raise Interrupted(_PENDING[0])
