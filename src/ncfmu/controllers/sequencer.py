@@ -31,7 +31,8 @@ of it AND the servos report in-position, so a move held downstream (by the area 
 counts as done. After an alarm, START re-bases the command on the actual position (follow-up, as an
 NC does after a stop it did not command) and approaches the start point safely.
 
-A part program (``program``, :mod:`.lathe_program`) replaces the registers: an RS274 lathe subset whose
+A part program (``program``, :mod:`.lathe_program`) replaces the registers: the Fanuc 0i-T dialect (tools and
+their offsets, the spindle with G96/G99 read back from ``spindle_speed``, dwells, stops, G28), whose
 G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii, pockets -- and runs
 each as the seed's SC1 infeed (at most U deeper), SC2 cut in -Z to the profile plus its allowances, SC3
 retract by R, SC4 return in Z, then one pass along the profile shifted by the allowances, so the stock left
@@ -171,8 +172,9 @@ class CutSequencer(CycleController):
         boolean("done", "output", None, "the last block has finished (until the next start)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
         # last, so the value references of the ports before them stay what they were
-        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
-               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
+        string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
+               "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
+               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
                "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
@@ -478,6 +480,13 @@ class CutSequencer(CycleController):
             self.move.rate = ElementMove.rate_on(seg.element, seg.rate * actual, self.accel)
         return scale, False
 
+    def _per_rev_now(self) -> bool:
+        """The present move is a program's feed per revolution (G99): its rate follows the spindle."""
+        if not (type(self.segment) is int and 0 <= self.segment < len(self.plan)):
+            return False
+        seg = self.plan[self.segment]
+        return seg.feed and seg.modal.per_rev and self.phase != APPROACH
+
     def _publish(self) -> dict[str, object]:
         out = self._outputs
         out["x_cmd"], out["z_cmd"] = self.x_cmd, self.z_cmd
@@ -514,6 +523,8 @@ class CutSequencer(CycleController):
         why = self._program_fault() if self.plan else None
         if why:
             return why
+        if self.plan and self._per_rev_now():
+            rates.add(self.move.rate)            # a feed per revolution: the rate follows the spindle (checked there)
         if not isinstance(self.move, ElementMove) or self.move.arc is None:
             why = self.move_fault(self.move, self.accel, rates)
             if why:
@@ -551,6 +562,20 @@ class CutSequencer(CycleController):
                 and 0 <= self.segment < len(self.plan)):
             return f"segment = {self.segment!r}: not a move of the program ({len(self.plan)} moves)"
         seg = self.plan[self.segment]
+        if not (type(self.dwell_left) is float and 0.0 <= self.dwell_left <= seg.dwell):
+            return f"dwell_left = {self.dwell_left!r}: not within the move's dwell 0..{seg.dwell:g} s"
+        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop"):
+            if type(getattr(self, flag)) is not bool:
+                return f"{flag} = {getattr(self, flag)!r}: not a bool"
+        if self.stop_wait and not seg.stop:
+            return f"stop_wait = True: the program's move {self.segment} is no stop (M00/M01)"
+        if self.spindle_wait is not None and not (type(self.spindle_wait) is float
+                                                  and 0.0 <= self.spindle_wait <= self.spindle_timeout + 1.0):
+            return f"spindle_wait = {self.spindle_wait!r}: not None or 0..spindle_timeout s"
+        if self._per_rev_now():
+            top = ElementMove.rate_on(seg.element, seg.rate * 1e5, self.accel)
+            if not (type(self.move.rate) is float and 0.0 <= self.move.rate <= top):
+                return f"move.rate = {self.move.rate!r}: not a feed per revolution of this move (0..{top:g})"
         running = self.busy and self.phase != APPROACH
         if running and (self.pass_no, self.sigma_x) != (seg.pass_no, seg.sigma_x):
             return f"pass_no, sigma_x = {(self.pass_no, self.sigma_x)!r}: not the program's move {self.segment}"
@@ -558,7 +583,7 @@ class CutSequencer(CycleController):
         if m.arc is not None:
             if m.arc != seg.element:
                 return f"move.arc = {m.arc!r}: not the program's move {self.segment}"
-            cap = ElementMove.rate_on(m.arc, seg.rate, self.accel)
+            cap = m.rate if self._per_rev_now() else ElementMove.rate_on(m.arc, seg.rate, self.accel)
             if (m.accel, m.rate, m.length) != (ARC_TANGENTIAL * self.accel, cap, m.arc.length):
                 return f"move.accel, rate, length = {(m.accel, m.rate, m.length)!r}: not those of its arc"
             if not (0.0 <= m.s <= m.length and 0.0 <= m.v <= 1.5 * m.rate):

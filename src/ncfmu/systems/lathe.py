@@ -1,4 +1,6 @@
-"""The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos."""
+"""The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos; the sequencer's spindle
+commands (a program's S, M03/M04/M05, G96) drive the spindle, whose actual speed the sequencer reads back (the
+speed-arrival wait, feed per revolution)."""
 
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
                       use_actual=True, **table(CHUCK_TABLE)),
             component("x_axis", "ServoAxis", pos_start=X_START),
             component("z_axis", "ServoAxis", pos_start=Z_START),
+            component("spindle", "SpindleDrive"),
         ],
         connections=wire(
             "panel.start -> seq.start", "panel.feed_hold -> seq.feed_hold",
@@ -46,6 +49,8 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
             "x_axis.pos -> seq.x_pos", "x_axis.in_position -> seq.x_in_position",
             "z_axis.pos -> seq.z_pos", "z_axis.in_position -> seq.z_in_position",
             "x_axis.pos -> limiter.lim_pos", "z_axis.pos -> limiter.ref_pos",
+            "seq.s_cmd -> spindle.speed_cmd", "seq.spindle_dir -> spindle.direction",
+            "spindle.speed -> seq.spindle_speed",
         ),
         stop_time=stop_time,
     )
