@@ -307,7 +307,9 @@ class FeedCycle(Part):
         return f"{self.feed}.alarm"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
-        return _FeedAccumulator(self)
+        from ..controllers.feed import ProgrammableFeed
+        default = ProgrammableFeed.default_parameters()["wear_address"]
+        return _FeedAccumulator(self, to_int(parameters.get(self.feed, {}).get("wear_address", default)))
 
 
 
@@ -317,24 +319,45 @@ class _FeedAccumulator(PartAccumulator):
 
     part: FeedCycle
 
-    def __init__(self, part: FeedCycle) -> None:
+    def __init__(self, part: FeedCycle, wear_address: int) -> None:
         super().__init__(part)
         self.deepest = -math.inf
         self.ended = EndOfActivity()
         self.x = self.counter = math.nan       # the last row's X and return counter
+        # the cycles RUN ran (a soak's panel.repeat_every runs many): a stretch of RUN entered at the wear
+        # address is a wear compensation (START2), any other a part (START1); a part stretch that ends without
+        # the emergency return is a part completed
+        self.wear_address = wear_address
+        self.running = self.emergency = False  # RUN and the emergency return at the last row
+        self.in_part = False                   # the present stretch of RUN is a part's
+        self.parts = self.completed = self.wear_cycles = self.emergencies = 0
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
         p = self.part
         x = rows[f"{p.x}.pos"]
         self.deepest = float(np.maximum(self.deepest, x.max()))
-        self.ended.write(rows["time"], rows[f"{p.feed}.run"] | rows[f"{p.feed}.emergency_active"])
+        run, emergency = rows[f"{p.feed}.run"].astype(bool), rows[f"{p.feed}.emergency_active"].astype(bool)
+        self.ended.write(rows["time"], run | emergency)
         self.x, self.counter = float(x[-1]), float(rows[f"{p.feed}.return_counter_x"][-1])
+        self.emergencies += int(np.count_nonzero(emergency & ~np.concatenate(([self.emergency], emergency[:-1]))))
+        before = np.concatenate(([self.running], run[:-1]))
+        pc = rows[f"{p.feed}.pc"]
+        for i in np.flatnonzero(run != before):          # the edges of RUN: a few per cycle
+            if run[i]:
+                self.in_part = int(pc[i]) != self.wear_address
+                self.parts += self.in_part
+                self.wear_cycles += not self.in_part
+            elif self.in_part and not emergency[i]:
+                self.completed += 1
+        self.running, self.emergency = bool(run[-1]), bool(emergency[-1])
 
     def summary(self) -> list[str]:
         end = "not finished" if math.isnan(self.ended.value) else f"{self.ended.value:.3f} s"
         return [f"  deepest X: {self.deepest:.4f} mm; cycle ended: {end}; "
                 f"X at the end {self.x:.4f} mm; return counter X {self.counter:.4f} mm",
+                f"  cycles: {self.parts} parts started (START1), {self.completed} completed; "
+                f"{self.wear_cycles} wear compensations (START2); {self.emergencies} emergency returns",
                 f"  alarm: {'yes' if self.alarmed else 'no'}"]
 
     def metrics(self) -> dict[str, float]:
