@@ -285,3 +285,55 @@ def test_a_broken_run_record_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["plot", str(csv)]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "lathe_roughing.run.json: not a run record" in err
+
+
+# -- the grinder: a feed hold marked; no empty panel for following errors not recorded ---------------------
+def _spans(ax) -> dict[str, tuple[float, float]]:
+    """The shaded time spans of a panel: label -> (first, last) time they cover."""
+    out = {}
+    for coll in ax.collections:
+        xs = np.concatenate([path.vertices[:, 0] for path in coll.get_paths()]) if coll.get_paths() else []
+        if len(xs) and not coll.get_label().startswith("_"):
+            out[coll.get_label()] = (float(np.min(xs)), float(np.max(xs)))
+    return out
+
+
+def test_the_grinder_plot_marks_a_feed_hold(ncfmu_run):
+    """Before: a feed hold left no mark; the flat stretch of X looked like a dwell."""
+    import matplotlib.pyplot as plt
+
+    from ncfmu.plots import result_figure
+    held = ncfmu_run("grinder_feed", start_values={"panel.hold_at": 12.0, "panel.release_at": 15.0})
+    fig = result_figure(held)
+    ax_pos, ax_err = fig.axes
+    spans = _spans(ax_pos)
+    assert list(spans) == ["feed hold: 1 time, 3 s"]
+    start, end = spans["feed hold: 1 time, 3 s"]
+    assert start == pytest.approx(12.0, abs=2e-3) and end == pytest.approx(15.0, abs=2e-3)
+    assert "feed hold: 1 time, 3 s" in [t.get_text() for t in ax_pos.get_legend().get_texts()]
+    assert _spans(ax_err).keys() == spans.keys()                     # the error panel shows it too
+    # what is marked is a hold: the infeed stands still in it (its rough feed runs before and after)
+    t, x = held.time, held["x_axis.pos"]
+    inside = (t > 12.2) & (t < 15.0)
+    assert np.ptp(x[inside]) < 1e-4 and x[(t > 15.5) & (t < 16)].min() > x[inside].max()
+    plt.close(fig)
+    plain = result_figure(ncfmu_run("grinder_feed"))
+    assert all(not _spans(ax) for ax in plain.axes)                  # no hold, no mark
+    plt.close(plain)
+
+
+def test_a_run_recorded_without_following_errors_gets_no_empty_panel(ncfmu_run):
+    """Before: the second panel said "no following_error recorded" and was otherwise empty (a soak recorded with
+    --record to keep it small); now the positions are the figure and the title says what to record."""
+    import matplotlib.pyplot as plt
+    from numpy.lib import recfunctions as rfn
+
+    from ncfmu.cosim.result import Result
+    from ncfmu.plots import result_figure
+    run = ncfmu_run("grinder_feed", start_values={"panel.hold_at": 12.0, "panel.release_at": 15.0})
+    kept = rfn.repack_fields(run.data[["time", "x_axis.pos", "feed.run", "panel.feed_hold"]])
+    fig = result_figure(Result(kept, "grinder_feed"))
+    [ax] = fig.axes
+    assert "following errors not recorded: --record x_axis.following_error" in ax.get_title()
+    assert list(_spans(ax)) == ["feed hold: 1 time, 3 s"]
+    plt.close(fig)

@@ -159,6 +159,9 @@ class Part:
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Add to the machine-plane panel (path, envelope, contour)."""
 
+    def draw_time(self, ax, result) -> None:
+        """Mark on a panel over time what the part did when (a feed hold, an emergency return)."""
+
 
 @dataclass(frozen=True)
 class Axes(Part):
@@ -297,6 +300,7 @@ class FeedCycle(Part):
 
     feed: str
     x: str
+    hold: str = ""      # the variable wired to the feed's feed_hold input (a panel's switch), marked in the plot
 
     def variables(self) -> tuple[str, ...]:
         return (*(f"{self.feed}.{v}" for v in ("pc", "run", "emergency_active", "alarm", "return_counter_x")),
@@ -310,6 +314,26 @@ class FeedCycle(Part):
         from ..controllers.feed import ProgrammableFeed
         default = ProgrammableFeed.default_parameters()["wear_address"]
         return _FeedAccumulator(self, to_int(parameters.get(self.feed, {}).get("wear_address", default)))
+
+    def draw_time(self, ax, result) -> None:
+        """Shade the stretches of feed hold (while a cycle ran: it holds nothing else) and of the emergency
+        return, with how many and how long in the legend; a variable not recorded marks nothing."""
+        t = result.time
+        run = result[f"{self.feed}.run"].astype(bool) if f"{self.feed}.run" in result else np.ones(len(t), bool)
+        spans = []
+        if self.hold and self.hold in result:
+            spans.append(("feed hold", "tab:orange", result[self.hold].astype(bool) & run))
+        if f"{self.feed}.emergency_active" in result:
+            spans.append(("emergency return", "tab:red", result[f"{self.feed}.emergency_active"].astype(bool)))
+        for what, colour, on in spans:
+            if not on.any():
+                continue
+            starts = int(np.count_nonzero(on & ~np.concatenate(([False], on[:-1]))))
+            # a row stands for the time to the next one (the last row for none)
+            held = float(np.sum(np.diff(t)[on[:-1]]))
+            ax.fill_between(t, 0, 1, where=on, step="post", color=colour, alpha=0.2, lw=0,
+                            transform=ax.get_xaxis_transform(),
+                            label=f"{what}: {starts} time{'s' if starts != 1 else ''}, {held:.3g} s")
 
 
 
@@ -668,6 +692,11 @@ class Report:
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         return self._fed(result, parameters).metrics(wall_time=result.wall_time)
+
+    def draw_time(self, ax, result) -> None:
+        """Mark on a panel over time what the parts did when (see :meth:`Part.draw_time`)."""
+        for p in self.parts:
+            p.draw_time(ax, result)
 
     def draw_plane(self, ax, result, parameters: Parameters) -> None:
         assert self.plane is not None
