@@ -12,6 +12,13 @@
    halfway between the last good and the first bad speed, twice: the fastest speed held with 0 overruns.
 
 The numbers depend on what else the machine runs: say so with them.
+
+    python bench/serve_lag.py --against REV [--options "--watchdog 5 --cnc"] [--repeats 3] [--seconds 30]
+
+compares instead, side by side in one run: ``ncfmu serve`` of the commit REV (its worktree and venv from
+bench/compare.py, built once and cached) with no options against this checkout's with ``--options``,
+interleaved (old, new, old, new, ...), each at --speed 1 with the subscribed client, the load average beside
+every trial. Claim nothing from the first mode's numbers about a change; claim from this one.
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 WALL = re.compile(r"after (?P<wall>[\d.]+) s of wall time")
 SUMMARY = re.compile(r"lag p50 (?P<p50>[\d.]+) ms, p99 (?P<p99>[\d.]+) ms, max (?P<max>[\d.]+) ms; "
@@ -46,15 +54,16 @@ async def watch(endpoint: str, namespace: str, axes: list[str], stop: asyncio.Ev
 
         def datachange_notification(self, node, val, data):
             Count.n += 1
-    for _ in range(200):
+    give_up = time.monotonic() + 120.0          # a loaded machine may take long to start a server
+    while True:
         try:
             client = Client(endpoint, timeout=10)
             await client.connect()
             break
         except OSError:
+            if time.monotonic() > give_up:
+                raise RuntimeError(f"no server at {endpoint}") from None
             await asyncio.sleep(0.1)
-    else:
-        raise RuntimeError(f"no server at {endpoint}")
     try:
         idx = await client.get_namespace_index(namespace)
         sub = await client.create_subscription(10, Count())
@@ -85,12 +94,13 @@ def wake_up_baseline(seconds: float) -> dict:
             "over_10ms": sum(x > 0.010 for x in late)}
 
 
-def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str]) -> dict:
+def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str], python: str = sys.executable,
+               cwd: str | None = None, options: tuple[str, ...] = ()) -> dict:
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}/ncfmu"
-    proc = subprocess.Popen([sys.executable, "-m", "ncfmu.cli", "serve", system, "--endpoint", endpoint,
-                             "--speed", repr(speed), "--stop-time", repr(sim_seconds)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    proc = subprocess.Popen([python, "-m", "ncfmu.cli", "serve", system, "--endpoint", endpoint,
+                             "--speed", repr(speed), "--stop-time", repr(sim_seconds), *options],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
 
     async def client() -> int:
@@ -108,10 +118,40 @@ def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str]) -
     if proc.returncode != 0 or m is None:
         raise RuntimeError(f"ncfmu serve failed (rc {proc.returncode}):\n{out}")
     w = WALL.search(out)
-    return {"speed": speed, "simulated_s": sim_seconds, "wall_s": float(w["wall"]) if w else round(wall, 2),
+    return {"speed": speed, "options": list(options), "load_average": os.getloadavg()[0],
+            "simulated_s": sim_seconds, "wall_s": float(w["wall"]) if w else round(wall, 2),
             "data_changes": changes,
             "lag_p50_ms": float(m["p50"]), "lag_p99_ms": float(m["p99"]), "lag_max_ms": float(m["max"]),
             "overruns": int(m["overruns"])}
+
+
+def compare(args, axes: list[str]) -> dict:
+    """Old (REV, no options) and new (this checkout, ``--options``) interleaved, at --speed 1."""
+    import shlex
+    sys.path.insert(0, str(Path(__file__).parent))
+    # bench/compare.py: a revision's worktree and venv
+    from compare import REPO, prepare, resolve
+    sha = resolve(args.against)
+    src, python = prepare(sha, args.work, REPO / ".ci" / "constraints.txt")
+    options = tuple(shlex.split(args.options))
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} (1 min) at the start")
+    rows: dict[str, list[dict]] = {"old": [], "new": []}
+    for k in range(args.repeats):
+        for which in ("old", "new"):
+            r = (serve_once(args.system, 1.0, args.seconds, axes, str(python), str(src)) if which == "old"
+                 else serve_once(args.system, 1.0, args.seconds, axes, options=options))
+            rows[which].append(r)
+            print(f"  {k + 1} {which} ({sha[:10] if which == 'old' else 'this checkout ' + args.options}): "
+                  f"lag p50 {r['lag_p50_ms']:.2f} ms, p99 {r['lag_p99_ms']:.2f} ms, max {r['lag_max_ms']:.2f} ms; "
+                  f"overruns {r['overruns']}; {r['data_changes']} data changes; load average "
+                  f"{r['load_average']:.2f}", flush=True)
+    for which, rs in rows.items():
+        p99 = sorted(r["lag_p99_ms"] for r in rs)
+        print(f"{which}: lag p99 median {p99[len(p99) // 2]:.2f} ms (of {', '.join(f'{x:.2f}' for x in p99)}); "
+              f"overruns {sum(r['overruns'] for r in rs)} in {len(rs)} runs of {args.seconds:g} s")
+    print(f"machine: load average {os.getloadavg()[0]:.2f} (1 min) at the end")
+    return {"system": args.system, "against": sha, "options": list(options), "old": rows["old"], "new": rows["new"],
+            "cores": os.cpu_count()}
 
 
 def main() -> dict:
@@ -122,8 +162,20 @@ def main() -> dict:
     parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds at --speed 1 (default 60)")
     parser.add_argument("--headroom-wall", type=float, default=10.0, help="wall seconds per headroom trial")
     parser.add_argument("--json", default=None)
+    parser.add_argument("--against", default=None, metavar="REV",
+                        help="compare with ncfmu serve of this commit, side by side (see the docstring)")
+    parser.add_argument("--options", default="", help="ncfmu serve options of this checkout's runs (with --against)")
+    parser.add_argument("--repeats", type=int, default=3, help="old/new pairs (with --against)")
+    parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
+                        help="where bench/compare.py keeps the revisions' worktrees and venvs")
     args = parser.parse_args()
     axes = ["x_axis", "z_axis"] if args.system.startswith("lathe") else ["x_axis"]
+    if args.against is not None:
+        result = compare(args, axes)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump(result, f, indent=2)
+        return result
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} (1 min) at the start")
     base = wake_up_baseline(min(args.seconds, 30.0))
     print(f"baseline: a bare 1 ms sleep loop for {base['seconds']:g} s wakes up late by p50 "

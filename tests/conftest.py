@@ -106,3 +106,29 @@ def foreign(tmp_path_factory) -> dict[str, Path]:
     """The foreign FMUs of ``tests/foreign/`` (models written without ncfmu's code), compiled once per session."""
     import foreign_fmus
     return foreign_fmus.build(tmp_path_factory.mktemp("foreign"))
+
+
+# fmpy's logger proxy (fmpy.logging.addLoggerProxy, which formats an FMU's printf-style messages) keeps the last
+# logger it was given in one process-wide global, and every FMU2Slave made with fmpy's default callbacks logs through
+# it. A test that hands it a short-lived logger (its own callbacks, or simulate_fmu(logger=...)) leaves that global
+# dangling when the logger is freed, and the next FMU that logs in this process calls freed memory (a segfault in
+# whatever test comes next). After every test the global points back at a logger that lives as long as the process
+# (given anew each time: the proxy ignores callbacks whose logger is already the proxy).
+def _printer():
+    import fmpy.fmi2 as fmi2
+    return fmi2.fmi2CallbackLoggerTYPE(fmi2.printLogMessage)
+
+
+_PRINTER = _printer()
+
+
+@pytest.fixture(autouse=True)
+def _logger_proxy_points_at_a_living_logger():
+    yield
+    from ctypes import byref
+
+    import fmpy.fmi2 as fmi2
+    from fmpy.logging import addLoggerProxy
+    callbacks = fmi2.fmi2CallbackFunctions()
+    callbacks.logger = _PRINTER
+    addLoggerProxy(byref(callbacks))

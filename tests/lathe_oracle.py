@@ -270,3 +270,31 @@ SHAFT_DEPTH, SHAFT_RETRACT, SHAFT_U, SHAFT_W = 1.5, 0.5, 0.2, 0.1
 POCKETS = build_part(30.0, 2.0, 22.0, [("z", 5.0), ("face", -8.0), ("z", 6.0), ("taper", 4.0, 6.0), ("z", 3.0),
                                        ("convex", 3.0, math.pi / 2, math.pi), ("z", 4.0),
                                        ("concave", 2.5, -math.pi / 2, -math.pi), ("z", 3.0), ("face", 30.0 - 22.5)])
+
+
+#: What :func:`spindle_run` records of the sequencer (and the spindle's speed).
+OUT = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "line", "canned_cycle", "busy", "done", "alarm", "tool",
+       "s_cmd", "spindle_dir", "coolant")
+
+
+def spindle_run(seq, dt: float = 1e-3, limit: int = 600_000, tau: float = 0.05, events=None):
+    """START, then step until done: ideal axes, a spindle reaching its command with time constant ``tau``."""
+    inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": seq.x_cmd, "z_pos": seq.z_cmd,
+              "x_in_position": True, "z_in_position": True, "alarm_in": False, "spindle_speed": 0.0,
+              "optional_stop": False}
+    rows, speed = [], 0.0
+    for k in range(limit):
+        if events is not None:
+            events(k, inputs)
+        out = seq.step(k * dt, dt, inputs)
+        inputs["start"] = False
+        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+        target = out["s_cmd"] * out["spindle_dir"]
+        speed += (target - speed) * (1.0 - math.exp(-dt / tau))
+        inputs["spindle_speed"] = speed
+        rows.append((*(out[n] for n in OUT), speed))
+        if out["done"] or out["alarm"]:
+            break
+    cols = {n: np.array([r[i] for r in rows]) for i, n in enumerate((*OUT, "speed"))}
+    cols["t"] = np.arange(1, len(rows) + 1) * dt
+    return cols

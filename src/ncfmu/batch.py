@@ -100,7 +100,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
     from .cosim.record import CsvSink, EveryKth, RecordSink, SelectColumns
-    from .project import OpenSystem
+    from .project import OpenSystem, plant_axes
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -113,7 +113,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
             for slave in opened.slaves:
                 slave.reset()
         system = opened.system
-        report = report_for(system.name, opened.models)
+        report = report_for(system.name, opened.models, plant_axes(opened.archive, system, opened.models))
         keep = list(record) if record is not None else report.record()
         folder = _worker_folder() / "rows"
         csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")

@@ -54,7 +54,8 @@ def _negative_values(argv: list[str]) -> list[str]:
 
 
 #: options of a command that take a number that must be > 0 and finite (checked before the command runs)
-POSITIVE = {"run": ("--stop-time", "--step", "--branch-at"), "sweep": ("--connect-timeout",)}
+POSITIVE = {"run": ("--stop-time", "--step", "--branch-at", "--tolerance", "--max-depth"),
+            "sweep": ("--connect-timeout",)}
 
 
 def _check_positive(args: argparse.Namespace) -> None:
@@ -226,12 +227,19 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.master import Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, EveryKth, RecordSink, RecordWriteError, SelectColumns
     from .cosim.ssp import read_ssp
-    from .project import ScaledSink, archive_models, report_scales, simulate, system_archive
+    from .project import ScaledSink, archive_models, plant_axes, report_scales, simulate, system_archive
     from .systems import report_for
-    from .systems.report import start_parameters
+    from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
+    from .systems.report import columns_of, start_parameters
     archive = system_archive(args.system, args.root)
     system = read_ssp(archive)
-    report = report_for(system.name, archive_models(archive, system))
+    models = archive_models(archive, system)
+    report = report_for(system.name, models, plant_axes(archive, system, models))
+    if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
+        raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
+    settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
+                            args.max_depth)
+    report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
     scales = report_scales(archive, system, report.record())     # a user's axis in m: the report reads mm
     parameters = start_parameters(system.components, start_values)
     record = None if args.record is None else list(dict.fromkeys(args.record))
@@ -279,10 +287,16 @@ def _run_streamed(args, start_values: dict[str, object]):
         for name, gain in scales.items():
             if name in result:
                 result.data[name] *= gain
-    print(_summary(result, None if accumulator is None else accumulator.summary()))
+        # the summary (and the part check) over the kept trajectory
+        accumulator = report.accumulator(result.parameters or parameters)
+        accumulator.open(columns_of(result.data))
+        if len(result.data):
+            accumulator.write(result.data)
+        accumulator.close(True, float(result.time[-1]) if len(result.data) else None)
+    print(_summary(result, accumulator.summary()))
     if csv_sink.final_path is not None:
         _write_run_record(csv_sink.final_path, system.name, result.parameters or parameters)
-    return result, csv_sink.final_path
+    return result, csv_sink.final_path, accumulator
 
 
 #: what ``ncfmu run`` keeps beside OUT/SYSTEM.csv for ``ncfmu plot``: the parameters the run applied (a part
@@ -363,21 +377,34 @@ def cmd_run(args) -> int:
     start_values = _parse_set(args.set)
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
-    result, csv = _run_streamed(args, start_values)
+    result, csv, accumulator = _run_streamed(args, start_values)
     for line in replace_warnings:
         print(f"  [warning] {line}")
     out = Path(args.out)
     for line in _unreached_lines(args.system, [start_values], {}):
         print(line)
     print(f"  results: {csv}")
+    from .systems.part import verdict_of
+    verdict = verdict_of(accumulator)
+    if verdict is not None:
+        import json
+
+        from .files import write_atomic
+        part_json = out / f"{result.system}.part.json"
+        write_atomic(part_json, (json.dumps(verdict.as_json(), indent=1) + "\n").encode())
+        print(f"  part check: {part_json}")
     if args.plot:
         try:
             import matplotlib  # noqa: F401
 
-            from .plots import plot_result
+            from .plots import plot_part, plot_result
         except ImportError:
             raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
         print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
+        if verdict is not None and verdict.made is not None:
+            print(f"  plot: {plot_part(verdict, result.system, out / f'{result.system}.part.png')}")
+    if verdict is not None and verdict.within_tolerance is False:
+        return PART_REJECTED
     return 0
 
 
@@ -392,6 +419,10 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     if not vary:
         raise NcfmuError("sweep needs at least one --vary INSTANCE.VARIABLE=V1,V2,...")
     return vary
+
+
+#: ``ncfmu run``'s exit status when the part check saw a crash or a part out of tolerance (2 is a refusal).
+PART_REJECTED = 3
 
 
 #: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
@@ -600,6 +631,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="write a row every S seconds of simulated time (a whole multiple of the step; default: "
                         "every step)")
     p.add_argument("--plot", action="store_true", help="also write SYSTEM.png (keeps the trajectory in memory)")
+    p.add_argument("--tolerance", type=_real_option, default=None, metavar="MM",
+                   help="the part check's tolerance of the part made against the programmed part, mm (default "
+                        "0.01); exit status 3 on a crash or a part out of tolerance")
+    p.add_argument("--nose-radius", type=_real_option, default=None, metavar="MM",
+                   help="the lathe tool's nose radius for the part check, mm (default: the tool table's "
+                        "seq.tool[k].nose_radius of the program's first T word, else 0: a sharp point)")
+    p.add_argument("--max-depth", type=_real_option, default=None, metavar="MM",
+                   help="the deepest cut (radial engagement) the lathe tool may take, mm (default: the tool "
+                        "table's seq.tool[k].max_depth, else no limit)")
+    p.add_argument("--no-part-check", action="store_true",
+                   help="no material removal, crash and tolerance check (and no SYSTEM.part.json)")
     p.add_argument("--branch-at", type=_real_option, default=None, metavar="T",
                    help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",

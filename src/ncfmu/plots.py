@@ -80,6 +80,51 @@ def result_figure(result):
     return fig
 
 
+def plot_part(verdict, title: str, path: Path) -> Path:
+    """The part check's picture: the part as made over the programmed part, its outline coloured by the
+    deviation (+ material left, - gouged), and the deviation along the outline against the tolerance."""
+    import shapely
+    plt = _plt()
+    fig, (ax, ax_dev) = plt.subplots(2, 1, figsize=(10, 10), height_ratios=(3, 2))
+    u, v = verdict.axes
+    for k, poly in enumerate(shapely.get_parts(verdict.made)):
+        xs, ys = poly.exterior.xy
+        ax.fill(xs, ys, color="0.85", lw=0, zorder=0, label="part as made" if k == 0 else None)
+    for k, poly in enumerate(shapely.get_parts(verdict.programmed)):
+        xs, ys = poly.exterior.xy
+        ax.plot(xs, ys, color="k", lw=0.6, ls="--", label="programmed part" if k == 0 else None)
+    pts = shapely.get_coordinates(shapely.segmentize(verdict.made.boundary, 0.05))
+    inside = shapely.contains_xy(verdict.programmed, pts[:, 0], pts[:, 1])
+    signed = np.where(inside, -1.0, 1.0) * shapely.distance(shapely.points(pts), verdict.programmed.boundary)
+    span = max(verdict.tolerance_mm, float(np.abs(signed).max()))
+    sc = ax.scatter(pts[:, 0], pts[:, 1], c=signed * 1000, cmap="coolwarm", vmin=-span * 1000, vmax=span * 1000,
+                    s=4, zorder=3)
+    fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.01, label="made minus programmed [µm] (+ left, - gouge)")
+    for c in verdict.crashes:
+        ax.plot(*c.at, "rx", ms=10, mew=2)
+        ax.annotate(f"CRASH t = {c.t:.3f} s, line {c.line}", c.at, fontsize=8, color="tab:red")
+    status = ("CRASH" if verdict.crashed else "within" if verdict.within_tolerance else "OUT OF")
+    ax.set(title=f"{title}: the part as made ({status} tolerance {verdict.tolerance_mm:g} mm)", xlabel=f"{u} [mm]",
+           ylabel=f"{v} [mm]")
+    ax.set_aspect("equal")
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(True, alpha=0.3)
+    along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))))
+    ax_dev.plot(along, signed * 1000, lw=0.8, color="tab:blue", label="made minus programmed")
+    for sign in (1, -1):
+        ax_dev.axhline(sign * verdict.tolerance_mm * 1000, color="tab:red", ls=":", lw=1,
+                       label="tolerance" if sign == 1 else None)
+    ax_dev.set(title="deviation along the made part's outline", xlabel="along the outline [mm]",
+               ylabel="deviation [µm]")
+    ax_dev.legend(loc="best", fontsize=8)
+    ax_dev.grid(True, alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 #: Columns of a sweep's summary that are bookkeeping, not metrics of the machine (``ncfmu.batch`` writes them).
 SWEEP_BOOKKEEPING = ("key", "status", "error", "rows", "wall_time", "sim_time")
 

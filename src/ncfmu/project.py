@@ -26,6 +26,7 @@ from .cosim.ssp import SSD_NAME, Component, System, fmu_path, pack, read_ssd, re
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
 from .fmi.builder import build_all
+from .fmi.fmi3 import build_all_fmi3
 from .systems import SYSTEMS, get_system
 from .systems.roles import identify
 
@@ -55,6 +56,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     root = Path(root or project_root())
     (root / "fmus").mkdir(parents=True, exist_ok=True)
     fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale)
+    fmus3 = build_all_fmi3(fmus, root / "fmus" / "fmi3", only_stale=only_stale)    # their FMI 3.0 twins
     if is_checkout(root):
         from .docs import write_docs
         write_docs(root, fmus)
@@ -63,7 +65,7 @@ def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[P
     for name in SYSTEMS:
         folder = write_system(get_system(name), root / "ssp")
         archives.append(pack(folder, root / "fmus", root / "ssp" / f"{name}.ssp"))
-    return {"fmus": fmus, "ssp": archives}
+    return {"fmus": fmus, "fmi3": fmus3, "ssp": archives}
 
 
 def system_archive(system: str, root: Path | None = None, ensure_built: bool = True) -> Path:
@@ -146,6 +148,22 @@ class ScaledSink:
 
     def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
         self.sink.close(complete, stopped_at, reason)
+
+
+def plant_axes(archive: Path, system: System, models: Mapping[str, str]) -> list[str]:
+    """The axes of ``system`` by their role (:func:`~ncfmu.systems.roles.axes`) whose FMU has the outputs a report
+    reads of an axis (``pos``, ``following_error``)."""
+    import xml.etree.ElementTree as ET
+
+    from .systems.roles import axes
+    described = model_descriptions(archive, system)
+    found = []
+    for inst in axes(system, models):
+        root = ET.fromstring(described[inst])
+        outputs = {v.get("name") for v in root.iter() if v.get("causality") == "output"}
+        if {"pos", "following_error"} <= outputs:
+            found.append(inst)
+    return found
 
 
 def archive_models(archive: Path, system: System) -> dict[str, str]:

@@ -5,8 +5,11 @@ Fixtures
 ncfmu_project
     Session: builds what is missing or stale (FMUs in fmus/, systems in ssp/) once; the artefact paths.
 ncfmu_run
-    Session: ``ncfmu_run(system, stop_time=None, start_values=None, input_csv=None, mode="gauss-seidel")``
-    runs a system closed loop through the FMUs and returns the Result; identical calls share one run.
+    Session: ``ncfmu_run(system, stop_time=None, start_values=None, input_csv=None, mode="gauss-seidel",
+    tolerance=0.01, nose_radius=None, max_depth=None)`` runs a system closed loop through the FMUs and returns the
+    Result; identical calls share one run. ``result.part`` is the part check's verdict of a lathe or mill run
+    (``within_tolerance``, ``crashes``, ``max_left_mm``, ``max_gouge_mm``, ...; judged on first use with the
+    call's tolerance and tool -- None: the tool table's), None for a system without one.
 ncfmu_checks
     The :mod:`ncfmu.checks` module (``assert_reaches``, ``assert_no_motion``, ``assert_inside_envelope``,
     ``assert_alarm``).
@@ -48,14 +51,48 @@ def ncfmu_run(ncfmu_project):
     cache: dict[str, object] = {}
 
     def run(system: str = "lathe_roughing", stop_time: float | None = None, start_values: dict | None = None,
-            input_csv=None, mode: str = "gauss-seidel"):
+            input_csv=None, mode: str = "gauss-seidel", tolerance: float = 0.01, nose_radius: float | None = None,
+            max_depth: float | None = None):
+        from ncfmu.systems.part import PartSettings
         key = json.dumps([system, stop_time, sorted((start_values or {}).items()), str(input_csv), mode],
                          default=str)
         if key not in cache:
             cache[key] = simulate(system, stop_time=stop_time, start_values=start_values, input_csv=input_csv,
                                   mode=mode)
-        return cache[key]
+        result = cache[key]
+        result.part = PartView(result, PartSettings(tolerance, nose_radius, max_depth))  # type: ignore[attr-defined]
+        return result
     return run
+
+
+class PartView:
+    """``result.part``: the part check's verdict (:class:`ncfmu.systems.part.PartVerdict`) of a run, judged on
+    first use; ``bool(result.part)`` is False for a system without a part check."""
+
+    def __init__(self, result, settings) -> None:
+        self._result, self._settings = result, settings
+        self._verdict: object = None
+        self._judged = False
+
+    def verdict(self):
+        if not self._judged:
+            from ncfmu.systems import report_of, run_parameters
+            from ncfmu.systems.part import verdict_of_result, with_part_settings
+            report = with_part_settings(report_of(self._result), self._settings)
+            self._verdict = verdict_of_result(report, self._result, run_parameters(self._result))
+            self._judged = True
+        return self._verdict
+
+    def __bool__(self) -> bool:
+        return self.verdict() is not None
+
+    def __getattr__(self, name: str):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        verdict = self.verdict()
+        if verdict is None:
+            raise AttributeError(f"{self._result.system}: no part check (not a lathe or mill system)")
+        return getattr(verdict, name)
 
 
 @pytest.fixture(scope="session")

@@ -118,7 +118,7 @@ def test_a_bad_system_or_instance_is_one_line_and_status_2(capsys):
     assert err.startswith("ncfmu vars: unknown system 'no_such_system'") and err.count("\n") == 1
     assert main(["vars", "lathe_taper", "--instance", "feed"]) == 2
     assert capsys.readouterr().err == ("ncfmu vars: --instance 'feed': lathe_taper has no such instance (instances: "
-                                       "panel, seq, limiter, x_axis, z_axis)\n")
+                                       "panel, seq, limiter, x_axis, z_axis, spindle)\n")
 
 
 def _foreign_ssp(tmp_path, fmus, fmu_bytes: bytes):

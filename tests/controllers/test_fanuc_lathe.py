@@ -6,68 +6,20 @@ speed-arrival wait."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from lathe_oracle import spindle_run
 
 from ncfmu.controllers import CutSequencer
 from ncfmu.controllers.g7x import Tool
 from ncfmu.controllers.lathe_program import Setup, parse, plan
 from ncfmu.errors import ProgramError
 
-OUT = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "line", "canned_cycle", "busy", "done", "alarm", "tool",
-       "s_cmd", "spindle_dir", "coolant")
-
-#: A shaft as Fanuc's manuals write it: O number, safety block, tool 1, G50 S, G96, G99, G71/G70 with the
-#: type I profile in diameters, G28 U0 W0, M30.
-SHAFT = """%
-O1001 (SHAFT)
-N1 G21 G40 G99
-N2 T0101
-N3 G50 S2500
-N4 G96 S180 M03
-N5 G00 X60. Z2. M08
-N6 G71 U1.5 R0.5
-N7 G71 P10 Q20 U0.4 W0.1 F0.25
-N10 G00 X28.
-N11 G01 Z0
-N12 X32. Z-2.
-N13 Z-12.
-N14 X40. Z-20.
-N15 Z-26.
-N16 G02 X48. Z-30. R4.
-N17 G01 X54.
-N18 Z-40.
-N20 X60.
-N21 G70 P10 Q20 F0.1
-N22 G28 U0 W0 M09
-N23 M05
-N24 M30
-%
-"""
-
-
-def spindle_run(seq: CutSequencer, dt: float = 1e-3, limit: int = 600_000, tau: float = 0.05, events=None):
-    """START, then step until done: ideal axes, a spindle reaching its command with time constant ``tau``."""
-    inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": seq.x_cmd, "z_pos": seq.z_cmd,
-              "x_in_position": True, "z_in_position": True, "alarm_in": False, "spindle_speed": 0.0,
-              "optional_stop": False}
-    rows, speed = [], 0.0
-    for k in range(limit):
-        if events is not None:
-            events(k, inputs)
-        out = seq.step(k * dt, dt, inputs)
-        inputs["start"] = False
-        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
-        target = out["s_cmd"] * out["spindle_dir"]
-        speed += (target - speed) * (1.0 - math.exp(-dt / tau))
-        inputs["spindle_speed"] = speed
-        rows.append((*(out[n] for n in OUT), speed))
-        if out["done"] or out["alarm"]:
-            break
-    cols = {n: np.array([r[i] for r in rows]) for i, n in enumerate((*OUT, "speed"))}
-    cols["t"] = np.arange(1, len(rows) + 1) * dt
-    return cols
+#: A shaft as Fanuc's manuals write it (the README's example): O number, safety block, tool 1, G50 S, G96, G99,
+#: G71/G70 with the type I profile in diameters, G28 U0 W0, M30.
+SHAFT = (Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_fanuc.nc").read_text()
 
 
 @pytest.fixture(scope="module")
@@ -202,3 +154,36 @@ def test_g96_with_its_clamp_is_taken():
     """The refusal above can pass: with G50 S first, G96 is read (the spindle then at 2000 rev/min near the axis)."""
     segs = plan("G50 S2000\nG96 S100 M03\nG98 G01 X0.1 F100\nM30\n", (30.0, 2.0), 50.0)
     assert segs[-2].modal.rpm(0.05) == 2000.0 and segs[-1].modal.spindle == 0        # M30 stops the spindle
+
+
+def test_a_state_in_a_feed_per_revolution_cut_restores_and_continues_identically():
+    """Mid-G99 cut (the rate follows the spindle), in a dwell and waiting for the spindle: the FMU state's
+    round trip (fmi/state.py, the controller's own check_state) is accepted and continues bit for bit."""
+    from ncfmu.fmi import state
+
+    parameters = {p.name: p.start for p in CutSequencer.ports("parameter")}
+    parameters.update(program=SHAFT, x_start=30.0, z_start=2.0)
+    for stop_at in (1500, 9000, 30_000):
+        seq = CutSequencer.from_parameters(parameters)
+        inputs = {p.name: p.start for p in CutSequencer.ports("input")}
+        speed = 0.0
+        outs = []
+        for k in range(stop_at + 2000):
+            if k == stop_at:
+                blob = state.dumps(CutSequencer.MODEL_NAME, parameters, dict(inputs), seq)
+                twin, _, _ = state.loads(blob, CutSequencer, CutSequencer.from_parameters)
+                twin_inputs, twin_speed, twin_outs = dict(inputs), speed, []
+            inputs["start"] = k == 0
+            out = seq.step(k * 1e-3, 1e-3, inputs)
+            outs.append((out["x_cmd"], out["z_cmd"], out["s_cmd"]))
+            inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+            speed += (out["s_cmd"] * out["spindle_dir"] - speed) * (1.0 - math.exp(-1e-3 / 0.05))
+            inputs["spindle_speed"] = speed
+        for k in range(stop_at, stop_at + 2000):
+            twin_inputs["start"] = False
+            out = twin.step(k * 1e-3, 1e-3, twin_inputs)
+            twin_outs.append((out["x_cmd"], out["z_cmd"], out["s_cmd"]))
+            twin_inputs["x_pos"], twin_inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+            twin_speed += (out["s_cmd"] * out["spindle_dir"] - twin_speed) * (1.0 - math.exp(-1e-3 / 0.05))
+            twin_inputs["spindle_speed"] = twin_speed
+        assert twin_outs == outs[stop_at:], stop_at

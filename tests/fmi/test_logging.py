@@ -149,3 +149,36 @@ def test_the_native_servo_logs_errors_and_warnings_whatever_the_debug_logging(fm
     declared = [c.name for c in read_model_description(str(fmus["ServoAxis"])).logCategories]
     assert declared == ["logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal", "logAll"]
     assert declared == [c.name for c in read_model_description(str(fmus["CutSequencer"])).logCategories]
+
+
+def test_the_log_is_taken_only_when_something_was_logged(fmus, monkeypatch):
+    """The binary reads the length of the slave's pending_log (a C call) after every call, and calls
+    fmi_take_log only when it is not empty: a quiet run makes no such call (before: about five a step), and
+    what is logged still reaches the logger, once."""
+    import sys
+
+    from ncfmu.fmi.builder import fmu_version
+
+    host = Host(fmus["CutSequencer"], debug_logging=False)
+    digest = fmu_version(fmus["CutSequencer"]).split("+")[1]        # the FMU's own copy of the adapter
+    adapter = sys.modules[f"ncfmu_{digest}.fmi.adapter"]
+    calls = []
+    take = adapter.ControllerSlave.fmi_take_log
+
+    def counted(self):
+        calls.append([m.msg for m in self.pending_log])
+        return take(self)
+
+    monkeypatch.setattr(adapter.ControllerSlave, "fmi_take_log", counted)
+    host.fmu.exitInitializationMode()
+    commands = host.fmu.getReal([host.vr["x_cmd"], host.vr["z_cmd"]])
+    for _ in range(50):                         # the master's calls of a quiet step: the axes follow the commands
+        host.fmu.setReal([host.vr["x_pos"], host.vr["z_pos"]], commands)
+        host.steps(1)
+        commands = host.fmu.getReal([host.vr["x_cmd"], host.vr["z_cmd"]])
+        host.fmu.getBoolean([host.vr["busy"], host.vr["alarm"]])
+    assert calls == [] and host.log == []
+    host.fmu.setReal([host.vr["x_pos"]], [float("nan")])              # an alarm: logged, taken, said once
+    host.steps(3)
+    assert len(calls) == 1 and len(host.log) == 1 and host.log[0][0] == 3, (calls, host.log)
+    host.close()

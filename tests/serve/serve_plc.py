@@ -6,7 +6,11 @@ import asyncio
 import time
 from collections.abc import Callable
 
+import numpy as np
 from asyncua import Client, ua
+
+from ncfmu.cli import main
+from ncfmu.cosim.result import Result
 
 VARIANT = {bool: ua.VariantType.Boolean, int: ua.VariantType.Int32, float: ua.VariantType.Double,
            str: ua.VariantType.String}
@@ -67,3 +71,22 @@ class connect:
 
 def run(coro):
     return asyncio.run(coro)
+
+
+def replay(system: str, served_csv, inputs_csv, tmp_path, *sets: str) -> Result:
+    """``ncfmu run SYSTEM --input inputs_csv`` to the served run's last row; the result read back."""
+    recorded = Result.from_csv(served_csv)
+    out = tmp_path / "replay"
+    args = ["run", system, "--stop-time", repr(float(recorded.time[-1])), "--input", str(inputs_csv),
+            "--out", str(out)]
+    for s in sets:
+        args += ["--set", s]
+    assert main(args) == 0
+    return Result.from_csv(out / f"{system}.csv")
+
+
+def assert_same_trajectory(served: Result, replayed: Result) -> None:
+    assert served.data.dtype.names == replayed.data.dtype.names
+    assert len(served.time) == len(replayed.time)
+    for name in served.data.dtype.names:
+        assert np.array_equal(served[name], replayed[name]), name

@@ -7,9 +7,8 @@ import asyncio
 
 import numpy as np
 import pytest
-from serve_plc import connect, run
+from serve_plc import assert_same_trajectory, connect, replay, run
 
-from ncfmu.cli import main
 from ncfmu.cosim.result import Result
 from ncfmu.project import simulate
 
@@ -19,25 +18,6 @@ BAND = 0.002     # mm: what the systems' own tests allow for a position reached
 #: spark-out: each waits for the auxiliary device's MFIN.
 M_PROGRAM = ("M0: X+D3F7; M1: M1; M2: X+D2F1; M3: M2; M4: X+D5F2; M5: T1; M6: M3; M7: X-D4F7; M8: END; "
              "M41: XF7S1; M42: END; M43: X+D1F2S4; M44: END")
-
-
-def replay(system: str, served_csv, inputs_csv, tmp_path, *sets: str) -> Result:
-    """``ncfmu run SYSTEM --input inputs_csv`` to the served run's last row; the result read back."""
-    recorded = Result.from_csv(served_csv)
-    out = tmp_path / "replay"
-    args = ["run", system, "--stop-time", repr(float(recorded.time[-1])), "--input", str(inputs_csv),
-            "--out", str(out)]
-    for s in sets:
-        args += ["--set", s]
-    assert main(args) == 0
-    return Result.from_csv(out / f"{system}.csv")
-
-
-def assert_same_trajectory(served: Result, replayed: Result) -> None:
-    assert served.data.dtype.names == replayed.data.dtype.names
-    assert len(served.time) == len(replayed.time)
-    for name in served.data.dtype.names:
-        assert np.array_equal(served[name], replayed[name]), name
 
 
 def motion_segments(t, m):

@@ -68,10 +68,16 @@ def test_the_loopback_needs_no_user(endpoint):
 
 @pytest.mark.parametrize("endpoint", ["opc.tcp://0.0.0.0:4840/ncfmu", "opc.tcp://192.168.1.5:4840/ncfmu",
                                       "opc.tcp://plc-net.example:4840/ncfmu"])
-def test_any_other_address_needs_a_user(endpoint):
+def test_any_other_address_needs_a_user_a_certificate_and_a_trust_list(endpoint, tmp_path):
     with pytest.raises(ConfigError, match="needs --user NAME:PASSWORD"):
         check_endpoint(endpoint, Security())
-    check_endpoint(endpoint, Security(users={"plc": "secret"}))
+    users = {"plc": "secret"}
+    with pytest.raises(ConfigError, match="needs --certificate and --private-key"):   # no policy None
+        check_endpoint(endpoint, Security(users=users))
+    with pytest.raises(ConfigError, match="needs --trust DIR"):
+        check_endpoint(endpoint, Security(users, Path("c.der"), Path("k.pem")))
+    check_endpoint(endpoint, Security(users, Path("c.der"), Path("k.pem"), tmp_path))
+    check_endpoint(endpoint, Security(users, allow_insecure=True))          # said explicitly
 
 
 @pytest.mark.parametrize("endpoint", ["http://127.0.0.1:4840/", "opc.tcp://127.0.0.1/ncfmu", "127.0.0.1:4840"])

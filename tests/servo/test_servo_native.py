@@ -156,7 +156,7 @@ def test_documentation_carries_the_design_and_the_runtime_needs(fmus):
     assert f"{d.velocity_margin:.1f} deg" in page and f"{d.position_margin:.1f} deg" in page
     assert "bode.png" in page and "documentation/bode.png" in names
     assert "Runtime requirements" in page
-    assert {"sources/fmi2_native.c", "sources/servo_model.c", "sources/model_vars.h",
+    assert {"sources/fmi2_functions.c", "sources/native_model.c", "sources/servo_model.c", "sources/model_vars.h",
             "sources/buildDescription.xml"} <= set(names)
 
 

@@ -19,7 +19,8 @@ def test_a_foreign_fmu_packed_under_our_models_name_is_known_by_its_model_descri
     archive = packed(system, {"ServoAxis": foreign["PlantAxis"]}, tmp_path)   # ... its content the foreign plant
     assert main(["vars", str(archive), "--instance", "x_axis"]) == 0
     listing = capsys.readouterr().out
-    names = [line.split()[0] for line in listing.splitlines()[2:] if not line.startswith("  ")]
+    names = [line.split()[0] for line in listing.splitlines()[2:]
+             if not line.startswith("  ") and line.split()[1] != "output"]
     assert re.search(r"  foreign FMU x_axis: PlantAxis \(foreign: GUID \{[0-9a-f-]+\}, hand-written C", listing)
     assert names == [f"x_axis.{v}" for v in ("pos_cmd", "vel_ff", "Kv", "tau_vel", "vel_max", "inpos_band",
                                              "pos_start")]
@@ -57,3 +58,20 @@ def test_a_sweep_calls_an_unfinished_cycle_with_a_foreign_axis_unfinished(foreig
     archive = packed(with_plant("lathe_taper", model), foreign, tmp_path)
     rows = sweep(str(archive), {"seq.block[1].N": [4]}, tmp_path / "sweep", workers=0, stop_time=10.0)
     assert [r["status"] for r in rows] == ["unfinished"]
+
+
+def test_a_users_own_system_reports_its_axes_found_by_role(foreign, project, tmp_path, capsys):
+    # lathe_taper renamed, its axes named otherwise and foreign: the generic report finds them by what they feed
+    system = with_plant("lathe_taper", "PlantAxis")
+    system.name = "my_lathe"
+    for comp in system.components:
+        if comp.name.endswith("_axis"):
+            old = comp.name
+            comp.name = {"x_axis": "cross_slide", "z_axis": "carriage"}[old]
+            for c in system.connections:
+                c.start_element = comp.name if c.start_element == old else c.start_element
+                c.end_element = comp.name if c.end_element == old else c.end_element
+    assert main(["run", str(packed(system, foreign, tmp_path)), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"  cross_slide: max \|following error\| \d+\.\d+ um", out)
+    assert re.search(r"  carriage: max \|following error\| \d+\.\d+ um", out)

@@ -180,6 +180,10 @@ class ContourInterpolator(CycleController):
         boolean("alarm", "output", None, "geometry cannot be corrected, or a bad input"),
         # appended: the ports before keep their value references
         *cycle_ports("the contour", "max_following_error", "inpos_band"),
+        # appended: the plate the part check cuts (read by the host's part check, not by the interpolator)
+        real("stock_margin", "parameter", 5.0, "mm", "the plate stock: the contour's bounding box grown by this "
+             "much on every side (the part check's material; the interpolator does not read it)", min=0.0,
+             max=POSITION_LIMIT),
     )
 
     #: What only the point path reads: a program replaces it (its own G41/G42, F and path).

@@ -1,17 +1,22 @@
-"""Lathe part programs: an RS274 lathe subset with G71 stock removal and G70 finishing, planned as the
-seed's sub-cycles (US 4,017,723: SC1 infeed, SC2 cut, SC3 retract, SC4 return).
+"""Lathe part programs in the Fanuc 0i-T dialect (G code system A, mm) with G71 stock removal and G70
+finishing, planned as the seed's sub-cycles (US 4,017,723: SC1 infeed, SC2 cut, SC3 retract, SC4 return).
 
-Words (one block per line, letters in either case)::
+Words (one block per line, letters in either case; the README has the table)::
 
+    % (tape)   O program number   N block number   ( comment )   ; comment to the end of the line
     G00 rapid   G01 line   G02 clockwise arc   G03 counter-clockwise arc        (motion, modal)
-    G18 XZ plane   G21 mm   G90 absolute   G91 incremental                       (modal)
-    G7 X is a diameter   G8 X is a radius (the default, as everywhere in ncfmu)  (modal)
-    X Z end point   I K arc centre relative to the arc's start (radius values)   R arc radius
-    F feed in mm/min (modal)   N block number   M02 / M30 program end
+    X Z end point (X a diameter: Setup.diameter, seq.x_diameter)   U W incremental X (diameter) / Z
+    I K arc centre relative to the arc's start (radius values)   R arc radius
+    G7 X is a diameter   G8 X is a radius   G18 XZ plane   G21 mm   G40   G90/G91     (modal)
+    G04 P<ms> | X/U<s> dwell   G28 X/U Z/W reference return via the intermediate point   G50 S<max rev/min>
+    G96 S<m/min> | G97 S<rev/min>   G98 F mm/min | G99 F mm/rev (Setup.feed_per_rev)   T<tool><offset>
+    M03/M04/M05 spindle   M08/M09 coolant   M00/M01 stops   M02/M30 program end
     G71 U<depth of cut> R<retract>                first block: radius values
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
     G70 P<first N> Q<last N> [F]                  one pass along the profile
-    ( comment )   ; comment to the end of the line   a line holding only % is skipped
+
+Positions are the programmed tool tip; the axes carry the active tool offset (:func:`.g7x.plan_ops`). The
+machine words become :class:`.g7x.State` operations: each planned move runs with its :class:`.g7x.Modal`.
 
 Geometry: elements (:class:`.geometry.Line`, :class:`.geometry.Arc`) in the **(z, x) plane** -- first
 coordinate Z (to the right), second X (the radius, up), as a lathe drawing shows the part. Seen from +Y,
@@ -87,7 +92,7 @@ class Setup:
 
     diameter: bool = True                 # X is a diameter until G7/G8 (seq.x_diameter; Fanuc's lathes)
     feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
-    tools: tuple[Tool, ...] = ()          # the tool table, offset k = tools[k - 1]
+    tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
 
 

@@ -31,7 +31,8 @@ of it AND the servos report in-position, so a move held downstream (by the area 
 counts as done. After an alarm, START re-bases the command on the actual position (follow-up, as an
 NC does after a stop it did not command) and approaches the start point safely.
 
-A part program (``program``, :mod:`.lathe_program`) replaces the registers: an RS274 lathe subset whose
+A part program (``program``, :mod:`.lathe_program`) replaces the registers: the Fanuc 0i-T dialect (tools and
+their offsets, the spindle with G96/G99 read back from ``spindle_speed``, dwells, stops, G28), whose
 G71 stock removal works out the passes from the finished profile -- shoulders, tapers, radii, pockets -- and runs
 each as the seed's SC1 infeed (at most U deeper), SC2 cut in -Z to the profile plus its allowances, SC3
 retract by R, SC4 return in Z, then one pass along the profile shifted by the allowances, so the stock left
@@ -49,7 +50,7 @@ from typing import Any
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
@@ -69,6 +70,9 @@ PROGRAM_MOVE = -2
 
 #: The start point as the FMU starts: a 10 mm radius at Z 0 (a system gives its own, e.g. lathe_roughing's).
 X_START, Z_START = 10.0, 0.0
+#: The bar stock as the FMU starts: up to the default registers' stock outline (X_START - Xf = 9.5 mm radius),
+#: its face at Z_START, 50 mm long.
+STOCK_DIAMETER, STOCK_LENGTH = 19.0, 50.0
 
 
 @dataclass
@@ -168,8 +172,9 @@ class CutSequencer(CycleController):
         boolean("done", "output", None, "the last block has finished (until the next start)"),
         boolean("alarm", "output", None, "alarm latched (external alarm, bad input, excess following error)"),
         # last, so the value references of the ports before them stay what they were
-        string("program", "parameter", "", "lathe part program, RS274 subset (G00-G03 in XZ with I/K or R, G7/G8, "
-               "G18, G21, G90/G91, F mm/min, N, M02/M30) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
+        string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
+               "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
+               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
                "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
@@ -194,6 +199,16 @@ class CutSequencer(CycleController):
              "tool's diameter, at most G50 S; 0 stopped)"),
         integer("spindle_dir", "output", None, "spindle direction: +1 M03, -1 M04, 0 M05"),
         boolean("coolant", "output", None, "coolant on (M08) / off (M09)"),
+        # appended: the bar stock the part check cuts (read by the host's part check, not by the cycle), and
+        # whether the present move runs at rapid
+        real("stock_diameter", "parameter", STOCK_DIAMETER, "mm", "diameter of the bar stock (the part check's "
+             "material; the cycle does not read it)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_length", "parameter", STOCK_LENGTH, "mm", "length of the bar stock from its face toward the "
+             "chuck (-Z)", min=0.0, min_exclusive=True, max=2 * POSITION_LIMIT),
+        real("stock_face_z", "parameter", Z_START, "mm", "Z of the bar stock's face", min=-POSITION_LIMIT,
+             max=POSITION_LIMIT),
+        boolean("rapid", "output", None, "the present move runs at rapid (SC1, SC3, SC4 and the approach of the "
+                "registers; G00 and the cycles' rapid moves of a program); false while cutting or idle"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -286,6 +301,7 @@ class CutSequencer(CycleController):
         self.spindle_wait: float | None = None   # s waited for the spindle to arrive at speed (None: not waiting)
         self.program_started = False         # a program's state (tool, spindle ...) is its present move's
         self._outputs: dict[str, object] = {}
+        self.rapid = False                   # the present move runs at rapid (kept through a controlled stop)
         self._optional_stop = False
         self._pressed = False
         self._publish()
@@ -420,6 +436,7 @@ class CutSequencer(CycleController):
             override = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
+            self.rapid = not cutting
             held = False
             if self.plan and self.phase != APPROACH:
                 scale, held = self._machine(t, dt, inputs, scale)
@@ -463,6 +480,13 @@ class CutSequencer(CycleController):
             self.move.rate = ElementMove.rate_on(seg.element, seg.rate * actual, self.accel)
         return scale, False
 
+    def _per_rev_now(self) -> bool:
+        """The present move is a program's feed per revolution (G99): its rate follows the spindle."""
+        if not (type(self.segment) is int and 0 <= self.segment < len(self.plan)):
+            return False
+        seg = self.plan[self.segment]
+        return seg.feed and seg.modal.per_rev and self.phase != APPROACH
+
     def _publish(self) -> dict[str, object]:
         out = self._outputs
         out["x_cmd"], out["z_cmd"] = self.x_cmd, self.z_cmd
@@ -476,6 +500,7 @@ class CutSequencer(CycleController):
         out["line"] = self.plan[self.segment].line if running else 0
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
+        out["rapid"] = self.rapid and (self.busy or not self.move.done)
         seg = self.plan[self.segment] if self.plan and self.program_started else None
         modal = seg.modal if seg is not None else NO_MODAL
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
@@ -498,6 +523,8 @@ class CutSequencer(CycleController):
         why = self._program_fault() if self.plan else None
         if why:
             return why
+        if self.plan and self._per_rev_now():
+            rates.add(self.move.rate)            # a feed per revolution: the rate follows the spindle (checked there)
         if not isinstance(self.move, ElementMove) or self.move.arc is None:
             why = self.move_fault(self.move, self.accel, rates)
             if why:
@@ -535,6 +562,20 @@ class CutSequencer(CycleController):
                 and 0 <= self.segment < len(self.plan)):
             return f"segment = {self.segment!r}: not a move of the program ({len(self.plan)} moves)"
         seg = self.plan[self.segment]
+        if not (type(self.dwell_left) is float and 0.0 <= self.dwell_left <= seg.dwell):
+            return f"dwell_left = {self.dwell_left!r}: not within the move's dwell 0..{seg.dwell:g} s"
+        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop"):
+            if type(getattr(self, flag)) is not bool:
+                return f"{flag} = {getattr(self, flag)!r}: not a bool"
+        if self.stop_wait and not seg.stop:
+            return f"stop_wait = True: the program's move {self.segment} is no stop (M00/M01)"
+        if self.spindle_wait is not None and not (type(self.spindle_wait) is float
+                                                  and 0.0 <= self.spindle_wait <= self.spindle_timeout + 1.0):
+            return f"spindle_wait = {self.spindle_wait!r}: not None or 0..spindle_timeout s"
+        if self._per_rev_now():
+            top = ElementMove.rate_on(seg.element, seg.rate * 1e5, self.accel)
+            if not (type(self.move.rate) is float and 0.0 <= self.move.rate <= top):
+                return f"move.rate = {self.move.rate!r}: not a feed per revolution of this move (0..{top:g})"
         running = self.busy and self.phase != APPROACH
         if running and (self.pass_no, self.sigma_x) != (seg.pass_no, seg.sigma_x):
             return f"pass_no, sigma_x = {(self.pass_no, self.sigma_x)!r}: not the program's move {self.segment}"
@@ -542,7 +583,7 @@ class CutSequencer(CycleController):
         if m.arc is not None:
             if m.arc != seg.element:
                 return f"move.arc = {m.arc!r}: not the program's move {self.segment}"
-            cap = ElementMove.rate_on(m.arc, seg.rate, self.accel)
+            cap = m.rate if self._per_rev_now() else ElementMove.rate_on(m.arc, seg.rate, self.accel)
             if (m.accel, m.rate, m.length) != (ARC_TANGENTIAL * self.accel, cap, m.arc.length):
                 return f"move.accel, rate, length = {(m.accel, m.rate, m.length)!r}: not those of its arc"
             if not (0.0 <= m.s <= m.length and 0.0 <= m.v <= 1.5 * m.rate):

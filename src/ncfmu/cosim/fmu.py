@@ -286,6 +286,7 @@ class FmuSlave:
         self._raw_step: Callable[..., int] | None = None
         self._step = self._dll.fmi2DoStep
         self._alive = True
+        self._initialized = False      # set by initialize (even when it fails part-way), cleared by reset
 
     def _fail(self, what: str, status: int, time: float | None = None) -> SimulationError:
         """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
@@ -365,6 +366,7 @@ class FmuSlave:
         self._check(f"setting {name} = {typed!r}", status)
 
     def initialize(self, start_time: float, stop_time: float) -> None:
+        self._initialized = True
         for what, call in (("fmi2SetupExperiment", lambda: self._dll.fmi2SetupExperiment(
                                 self._component, 0, 0.0, start_time, int(math.isfinite(stop_time)),
                                 stop_time if math.isfinite(stop_time) else 0.0)),
@@ -469,16 +471,20 @@ class FmuSlave:
         """fmi2Reset: back to the instantiated state (for batch runs); bindings and the log of the run before
         are dropped (a run's messages are its own)."""
         self._check("fmi2Reset", self._dll.fmi2Reset(self._component))
+        self._initialized = False
         self.messages.clear()
         self._reads.clear()
         self._writes.clear()
         self._sent.clear()
 
     def terminate(self) -> None:
-        _SINKS.pop(self._env, None)
-        if self._alive:
-            self._alive = False
-            try:
-                self._dll.fmi2Terminate(self._component)
-            finally:
-                self.fmu.freeInstance()
+        try:
+            if self._alive:
+                self._alive = False
+                try:
+                    if self._initialized:   # fmi2Terminate is for an initialised instance (FMI 2.0 state machine)
+                        self._dll.fmi2Terminate(self._component)
+                finally:
+                    self.fmu.freeInstance()
+        finally:
+            _SINKS.pop(self._env, None)     # after the last call: what fmi2Terminate logs is still this slave's

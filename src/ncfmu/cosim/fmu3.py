@@ -39,6 +39,7 @@ class Fmu3Slave:
         self._alive = False
         self._call("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(loggingOn=True, logMessage=self._log))
         self._alive = True
+        self._initialized = False
         self._reads: list[tuple[str, list[int], np.ndarray]] = []
         self._writes: list[tuple[str, list[int], np.ndarray]] = []
 
@@ -74,6 +75,7 @@ class Fmu3Slave:
         self._call(f"fmi3S{_SET[v.type][1:]}({name} = {typed!r})", lambda: setter([v.vr], [typed]))
 
     def initialize(self, start_time: float, stop_time: float) -> None:
+        self._initialized = True
         stop = stop_time if math.isfinite(stop_time) else None
         self._call("fmi3EnterInitializationMode",
                    lambda: self.fmu.enterInitializationMode(startTime=start_time, stopTime=stop))
@@ -110,6 +112,7 @@ class Fmu3Slave:
 
     def reset(self) -> None:
         self._call("fmi3Reset", self.fmu.reset)
+        self._initialized = False
         self.messages.clear()
         self._reads.clear()
         self._writes.clear()
@@ -118,7 +121,8 @@ class Fmu3Slave:
         if self._alive:
             self._alive = False
             try:
-                self.fmu.terminate()
+                if self._initialized:       # fmi3Terminate is for an initialised instance
+                    self.fmu.terminate()
             except FMICallException:
                 pass              # freed all the same
             finally:

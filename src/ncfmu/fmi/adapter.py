@@ -11,7 +11,7 @@ controller (declared once, as data), builds and checks the controller at
 ``exitInitializationMode`` and steps it in ``doStep``. Messages the controller queues go to the FMU
 log with their level.
 
-The FMU's binary (``fmi/c/status_shim.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
+The FMU's binary (``fmi/c/python_model.c``) calls the ``fmi_*`` methods of :class:`ControllerSlave` and nothing
 else: the contract is the table in :mod:`ncfmu.fmi.contract`, described in ``docs/architecture.md``.
 """
 
@@ -40,7 +40,7 @@ _CONVERT = {"Real": float, "Integer": int, "Boolean": bool, "String": str}
 class ControllerSlave(Fmi2Slave):
     """pythonfmu slave around a controller class (set ``logic_class`` in a subclass).
 
-    The FMU's binary (the shim, ``fmi/c/status_shim.c``) drives it through the ``fmi_*`` methods below,
+    The FMU's binary (``fmi/c/python_model.c``) drives it through the ``fmi_*`` methods below,
     and only those: the contract is the table in :mod:`ncfmu.fmi.contract`. Each returns its status
     (:data:`~ncfmu.fmi.contract.STATUS`) and never raises; what it has to say goes to the log queue,
     which the shim takes after every call (:meth:`fmi_take_log`).
@@ -61,6 +61,9 @@ class ControllerSlave(Fmi2Slave):
         self.out: dict[str, object] = {p.name: p.default() for p in logic.ports("output")}
         self.logic: Controller | None = None
         self._refused = False             # a value fmi_set was given was refused (the old value kept)
+        # What is logged and not yet taken: pythonfmu's queue (Fmi2Slave.log appends to it), the same list for the
+        # slave's life; the shim reads its length after every call and calls fmi_take_log only when it is not empty.
+        self.pending_log: list = self.log_queue
         for port in logic.PORTS:
             self._register(port)
 
@@ -163,9 +166,9 @@ class ControllerSlave(Fmi2Slave):
             return None
 
     def fmi_take_log(self) -> list[tuple[int, str, str]]:
-        queue: list = self.log_queue          # pythonfmu's Fmi2Slave.log appends LogMsg(status, category, msg)
+        queue = self.pending_log              # pythonfmu's Fmi2Slave.log appends LogMsg(status, category, msg)
         taken = [(int(m.status), str(m.category), str(m.msg)) for m in queue]
-        queue.clear()
+        queue.clear()                         # in place: the shim holds this list
         return taken
 
     def _refuse(self, call: str, why: str) -> int:

@@ -54,8 +54,7 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
     """Digest of the model script, every module the FMU carries and the generator of its documentation
     (12 hex digits)."""
     h = hashlib.sha256()
-    for path in [script, *_package_files(package_dir), SHIM_SOURCE, C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
-                 package_dir / "fmi" / "documentation.py"]:
+    for path in [script, *_package_files(package_dir), *PYTHON_FMU_SOURCES, package_dir / "fmi" / "documentation.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
@@ -64,11 +63,18 @@ def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
 
 
 C_LAYER = Path(__file__).with_name("c")
-SHIM_SOURCE = C_LAYER / "status_shim.c"
-#: -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts such as
-#: ecos close a library while an instance made through it lives on.
-SHIM_LINK = ("-ldl", "-lm", "-lpthread", "-Wl,-z,nodelete")
+#: The one FMI 2.0 layer of every ncfmu FMU, over the model interface fmi2_model.h.
+FMI2_LAYER = C_LAYER / "fmi2_functions.c"
+#: The Python runtime as a model behind that interface: the Python FMUs' model.
+PYTHON_MODEL = C_LAYER / "python_model.c"
+#: No -z nodelete: the binary holds a reference to itself exactly while instances made through it live
+#: (fmi2_machine.h), so hosts such as ecos may close it under a live instance and hosts that extract the FMU
+#: per run unload each copy.
+SHIM_LINK = ("-ldl", "-lm", "-lpthread")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
+#: What a Python FMU's binaries are compiled from (the FMI 2.0 one and its FMI 3.0 twin's, fmi3.py).
+PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "fmi2_model.h", C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
+                      C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
 
 
 @functools.lru_cache(maxsize=1)
@@ -85,9 +91,10 @@ def _c_string(text: str) -> str:
 
 
 def compile_shim(guid: str, module: str, cls: str) -> bytes:
-    """The FMU's binary for this platform (linux64): the shim (status_shim.c), with the GUID, the model
-    module and its slave class compiled in. A Python FMU has no binary without it, so no compiler is a
-    BuildError: pythonfmu's own library, which would check nothing, is never shipped instead."""
+    """The FMU's binary for this platform (linux64): the FMI layer (fmi2_functions.c) over the Python model
+    (python_model.c), with the GUID, the model module and its slave class compiled in. A Python FMU has no
+    binary without it, so no compiler is a BuildError: pythonfmu's own library, which would check nothing, is
+    never shipped instead."""
     if get_platform() != "linux64":
         raise BuildError(f"Python FMUs are built for linux64 only (the shim's platform), not {get_platform()}")
     defines = [f"-DNCFMU_GUID={_c_string(guid)}", f"-DNCFMU_MODULE={_c_string(module)}",
@@ -98,14 +105,14 @@ def compile_shim(guid: str, module: str, cls: str) -> bytes:
             if shutil.which(cc) is None:
                 continue
             proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-Wall", *defines, f"-I{fmi_headers()}",
-                                   f"-I{C_LAYER}", "-o", str(out), str(SHIM_SOURCE), *SHIM_LINK],
+                                   f"-I{C_LAYER}", "-o", str(out), str(FMI2_LAYER), str(PYTHON_MODEL), *SHIM_LINK],
                                   capture_output=True, text=True)
             if proc.returncode != 0:
-                raise BuildError(f"compiling the FMU's binary (status_shim.c) with {cc} failed: "
+                raise BuildError(f"compiling the FMU's binary (fmi2_functions.c, python_model.c) with {cc} failed: "
                                  f"{proc.stderr.strip()[:500]}")
             return out.read_bytes()
     raise BuildError("no C compiler (cc, gcc or clang) found: a Python FMU's binary is compiled from "
-                     "src/ncfmu/fmi/c/status_shim.c")
+                     "src/ncfmu/fmi/c/fmi2_functions.c and python_model.c")
 
 
 def binary_name(model: str) -> str:
@@ -179,7 +186,7 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
 
 def python_runtime_record() -> str:
     """``resources/ncfmu_python.txt``: the libpython this FMU was built with (full path, then soname) and its
-    home (``sys.base_prefix``), which the status shim loads and starts in a native host (see status_shim.c;
+    home (``sys.base_prefix``), which the binary loads and starts in a native host (see python_model.c;
     ``NCFMU_LIBPYTHON`` overrides)."""
     import sysconfig
     libdir, soname = sysconfig.get_config_var("LIBDIR") or "", sysconfig.get_config_var("INSTSONAME") or ""
@@ -190,7 +197,8 @@ def python_runtime_record() -> str:
 
 RUNTIME_HTML = """<h2>Runtime requirements</h2>
 <p>Platform: linux64 (x86-64 Linux) only; the binary is compiled by <code>ncfmu build</code> from ncfmu's
-<code>status_shim.c</code> and is the only one this FMU lists.</p>
+FMI layer <code>fmi2_functions.c</code> over its Python model <code>python_model.c</code> and is the only one
+this FMU lists.</p>
 <p>This FMU runs Python code (the controller and pythonfmu's slave API, both inside the FMU's resources):
 it needs the CPython it was built with, {version}, with its shared library, and only its standard library.
 In a Python host (fmpy, ncfmu) it uses the host's interpreter. In a native host (fmusim, ecos, libcosim) the

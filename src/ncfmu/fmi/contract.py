@@ -1,4 +1,4 @@
-"""The contract between a Python FMU's C binary (``fmi/c/status_shim.c``) and its Python slave (``fmi/adapter.py``).
+"""The contract between a Python FMU's C binary (``fmi/c/python_model.c``) and its Python slave (``fmi/adapter.py``).
 
 Written once, here. The C side reads it from ``fmi/c/ncfmu_contract.h``, generated from this table by
 :func:`c_header` (checked in; ``tests/fmi/test_contract.py`` fails when the header, the table or the
@@ -8,8 +8,9 @@ The shim names nothing on the Python side but what this table lists: every call 
 adapter's method, its arguments, what it returns) and the two dicts it reads and writes directly
 for speed. Every ``fmi_*`` call returns its status as an int (:data:`STATUS`); none raises (the
 adapter catches and logs), and the shim turns an exception that escapes anyway into fmi2Error with
-the exception's text. Log messages are handed over by :data:`TAKE_LOG` after every call; the shim
-sends errors and warnings to the host's logger always, the rest only with debug logging on.
+the exception's text. Log messages are handed over by :data:`TAKE_LOG` after every call that logged
+something (the shim reads the length of ``pending_log``, a C call, and calls into Python only when it is not
+zero); the shim sends errors and warnings to the host's logger always, the rest only with debug logging on.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ class Entry:
     macro: str                  # the C macro's suffix: NCFMU_<macro> is the Python name as a string
     name: str                   # the Python name
     on: str                     # "class" (the slave class) or "slave" (an instance)
-    kind: str                   # "method" or "dict" (an attribute the shim reads or writes item by item)
+    kind: str                   # "method", "dict" (an attribute the shim reads or writes item by item) or "list"
+                                #   (an attribute whose length the shim reads)
     args: tuple[str, ...]       # the method's parameters (names as in the adapter), in order
     returns: str                # the return convention
 
@@ -55,6 +57,9 @@ ENTRIES: tuple[Entry, ...] = (
           "a state object, or None when the bytes are refused (the reason is in the log)"),
     Entry("TAKE_LOG", "fmi_take_log", "slave", "method", (),
           "list of (status, category, text) logged since the last call; the queue is emptied"),
+    Entry("PENDING_LOG", "pending_log", "slave", "list", (),
+          "what is logged and not yet taken (the same list for the slave's life): the shim calls fmi_take_log "
+          "only when it is not empty"),
     Entry("OUT", "out", "slave", "dict", (),
           "outputs by name, read by the shim's fast fmi2Get* (re-read every call: the adapter may rebind it)"),
     Entry("INPUTS", "inputs", "slave", "dict", (),

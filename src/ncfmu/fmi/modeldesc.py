@@ -34,7 +34,7 @@ def enrich(xml_text: bytes, logic: type[Controller], version: str) -> bytes:
         "pythonfmu and fmi.native write CoSimulation, ModelVariables and ModelStructure"
     cosim.set("canGetAndSetFMUstate", "true")
     cosim.set("canSerializeFMUstate", "true")
-    # The binary loads the Python runtime itself, as a library, in any host (fmi/c/status_shim.c): no tool
+    # The binary loads the Python runtime itself, as a library, in any host (fmi/c/python_model.c): no tool
     # has to run beside it.
     cosim.set("needsExecutionTool", "false")
 

@@ -9,9 +9,10 @@ What is written where (one home per fact):
 
 - the variables, their start values and their rules come from the model's Python ports
   (:class:`~ncfmu.ports.Port`) and are generated into ``model_vars.h``;
-- the FMI layer is ``fmi/c/fmi2_native.c`` with the state machine of ``fmi/c/fmi2_machine.h``
-  (shared with the status shim of the Python FMUs);
-- the equations are the model's own C file (``servo/native/servo_model.c``).
+- the FMI layer is ``fmi/c/fmi2_functions.c`` (the one layer of every ncfmu FMU, the Python FMUs' too) with the
+  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/fmi2_model.h``, which
+  ``fmi/c/native_model.c`` implements for table-driven native models;
+- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``fmi2_model.h``.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ if TYPE_CHECKING:
 
 C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
+#: What a native FMU carries of the FMI layer (its sources/), beside the model's C file and model_vars.h.
+LAYER_SOURCES = ("fmi2_functions.c", "native_model.c")
+LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h")
 
 
 @dataclass(frozen=True)
@@ -61,9 +65,7 @@ class NativeModel:
         return self.logic.MODEL_NAME
 
     def sources(self) -> dict[str, bytes]:
-        return {"fmi2_machine.h": (C_LAYER / "fmi2_machine.h").read_bytes(),
-                "fmi2_model.h": (C_LAYER / "fmi2_model.h").read_bytes(),
-                "fmi2_native.c": (C_LAYER / "fmi2_native.c").read_bytes(),
+        return {**{name: (C_LAYER / name).read_bytes() for name in (*LAYER_HEADERS, *LAYER_SOURCES)},
                 **{h.name: h.read_bytes() for h in self.headers},
                 self.model_c.name: self.model_c.read_bytes()}
 
@@ -72,7 +74,9 @@ class NativeModel:
         for name, data in sorted(self.sources().items()):
             h.update(name.encode())
             h.update(data)
-        for path in (*self.defined_by, Path(__file__)):
+        # the FMI 3.0 twin (fmi3.py) is built from the same version: its layer is part of what it is
+        fmi3 = (C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
+        for path in (*self.defined_by, Path(__file__), *fmi3):
             h.update(path.read_bytes())
         return h.hexdigest()[:12]
 
@@ -155,7 +159,7 @@ def model_description(m: NativeModel, guid: str) -> bytes:
                        canGetAndSetFMUstate="true", canSerializeFMUstate="true",
                        providesDirectionalDerivative="false")
     files = ET.SubElement(cs, "SourceFiles")
-    for name in ("fmi2_native.c", m.model_c.name):
+    for name in (*LAYER_SOURCES, m.model_c.name):
         ET.SubElement(files, "File", name=name)
     categories = ET.SubElement(root, "LogCategories")          # what fmi2SetDebugLogging takes (fmi2_machine.h)
     for name in log_categories():
@@ -175,9 +179,9 @@ def model_description(m: NativeModel, guid: str) -> bytes:
 
 def build_description(m: NativeModel) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 form, which FMI 2.0 tools that compile sources also read)."""
-    files = "\n".join(f'      <SourceFile name="{n}"/>' for n in ("fmi2_native.c", m.model_c.name))
-    how = ("C99; link with -lm -lpthread (and -Wl,-z,nodelete where the linker has it: the binary keeps its live "
-           "instances)")
+    files = "\n".join(f'      <SourceFile name="{n}"/>' for n in (*LAYER_SOURCES, m.model_c.name))
+    how = ("C99 with -O2 (fmi2FreeInstance drops the library's reference to itself in a tail call); link with -lm "
+           "-lpthread -ldl")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiBuildDescription fmiVersion="3.0">
   <BuildConfiguration modelIdentifier="{m.name}" description="{how}">
@@ -186,6 +190,7 @@ def build_description(m: NativeModel) -> str:
     </SourceFileSet>
     <Library name="m"/>
     <Library name="pthread"/>
+    <Library name="dl"/>
   </BuildConfiguration>
 </fmiBuildDescription>
 """
@@ -240,7 +245,8 @@ that is unstable or has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
 {figure}
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> (fmi2_native.c, {m.model_c.name}; C99, link with -lm), so
+the C sources are in <code>sources/</code> (fmi2_functions.c, native_model.c, {m.model_c.name}; C99, link with
+-lm -lpthread -ldl), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 
@@ -286,7 +292,7 @@ has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
 {figure}
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> ({c_files}; C99, link with -lm), so
+the C sources are in <code>sources/</code> ({c_files}; C99, link with -lm -lpthread -ldl), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 
@@ -342,15 +348,13 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
         (stage / "documentation" / "index.html").write_bytes(fmu_html(md, m.logic, "its C sources", extra))
         log = Path(tmp) / "cmake.log"
         try:
-            # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint).
-            # -z nodelete: the live instances are the binary's own (opaque handles, fmi2_machine.h), and hosts
-            # such as ecos close the library while an instance made through it lives on.
+            # The FMI headers come with fmpy's CMake project; the model needs libm (exp, atan2, nearbyint), the
+            # layer libdl (it holds itself loaded while its instances live: fmi2_machine.h; no -z nodelete).
             (Path(tmp) / "build").mkdir()
             with _output_to(log):
                 build_platform_binary(stage, build_dir=Path(tmp) / "build",
-                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread",
-                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE",
-                                                     "CMAKE_SHARED_LINKER_FLAGS:STRING": "-Wl,-z,nodelete"})
+                                      cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread -ldl",
+                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
         except Exception as err:  # fmpy raises CalledProcessError; the compiler's messages are in the log
             tail = log.read_text(errors="replace").strip().splitlines()[-30:] if log.exists() else []
             raise BuildError(f"{m.name}: compiling the native FMU failed: {err}\n" + "\n".join(tail)) from err

@@ -9,7 +9,7 @@ panel, controller, servos); connector types and units come from the controllers'
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from ..cosim.ssp import System
@@ -53,21 +53,24 @@ def parameters(name: str, instance: str) -> dict[str, object]:
     return dict(get_system(name).component(instance).parameters)
 
 
-def report_for(name: str, models: Mapping[str, str] | None = None) -> Report:
+def report_for(name: str, models: Mapping[str, str] | None = None, axes: Sequence[str] | None = None) -> Report:
     """The report of system ``name``.
 
     ``models`` (instance -> the model its FMU is, :mod:`~ncfmu.systems.roles`), when given, must match the
     definition of that name -- but for its axes, which may be any plant (a user's axis in place of ServoAxis); an
-    .ssp of another make (renamed instances, other controllers) gets the generic report of its servo axes.
+    .ssp of another make (renamed instances, other controllers) gets the generic report of its axes: ``axes``
+    (found by their role, :func:`~ncfmu.systems.roles.axes`), else its ServoAxis instances.
     """
     definition = SYSTEMS.get(name)
     if definition is not None:
         own = {c.name: c.model for c in definition.build().components}
-        axes = set(definition.report.axes)
+        its_axes = set(definition.report.axes)
         if models is None or (own.keys() == dict(models).keys()
-                              and all(models[i] == m or i in axes for i, m in own.items())):
+                              and all(models[i] == m or i in its_axes for i, m in own.items())):
             return definition.report
-    return generic_report([inst for inst, model in (models or {}).items() if model == "ServoAxis"])
+    if axes is None:
+        axes = [inst for inst, model in (models or {}).items() if model == "ServoAxis"]
+    return generic_report(axes)
 
 
 def report_of(result) -> Report:

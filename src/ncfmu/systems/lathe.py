@@ -1,20 +1,26 @@
-"""The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos."""
+"""The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos; the sequencer's spindle
+commands (a program's S, M03/M04/M05, G96) drive the spindle, whose actual speed the sequencer reads back (the
+speed-arrival wait, feed per revolution)."""
 
 from __future__ import annotations
 
 from ..cosim.ssp import System
 from .compose import blocks, component, table, wire
+from .part import LathePart
 from .report import Axes, Envelope, LatheCycle, Plane, Report
 
 #: Lathe envelope: reference Z, limited X. For Z <= -45 (the chuck) X must be >= 40: out of reach.
 CHUCK_TABLE = [(-45.0, 40.0, 1e6), (1e6, -1e6, 1e6)]
 #: The start point STP: X (radius) 30, Z 2; the stock radius is 29.
 X_START, Z_START = 30.0, 2.0
+#: The bar stock: 58 mm in diameter, its face at Z 0, 80 mm long (from Z -45 on it is held in the chuck).
+STOCK = dict(stock_diameter=58.0, stock_length=80.0, stock_face_z=0.0)
 
 REPORT = Report(
     (LatheCycle(seq="seq", x="x_axis", z="z_axis"),
      Envelope(limiter="limiter", ref="z_axis", lim="x_axis", region_names=("chuck",)),
-     Axes(("x_axis", "z_axis"))),
+     Axes(("x_axis", "z_axis")),
+     LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
           ylabel="X (radius) [mm]"))
 
@@ -25,11 +31,12 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
         description=description,
         components=[
             component("panel", "OperatorPanel", start_at=0.1),
-            component("seq", "CutSequencer", x_start=X_START, z_start=Z_START, **program),
+            component("seq", "CutSequencer", x_start=X_START, z_start=Z_START, **STOCK, **program),
             component("limiter", "AreaLimiter", ref_start=Z_START, lim_start=X_START, predictive=True,
                       use_actual=True, **table(CHUCK_TABLE)),
             component("x_axis", "ServoAxis", pos_start=X_START),
             component("z_axis", "ServoAxis", pos_start=Z_START),
+            component("spindle", "SpindleDrive"),
         ],
         connections=wire(
             "panel.start -> seq.start", "panel.feed_hold -> seq.feed_hold",
@@ -42,6 +49,8 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
             "x_axis.pos -> seq.x_pos", "x_axis.in_position -> seq.x_in_position",
             "z_axis.pos -> seq.z_pos", "z_axis.in_position -> seq.z_in_position",
             "x_axis.pos -> limiter.lim_pos", "z_axis.pos -> limiter.ref_pos",
+            "seq.s_cmd -> spindle.speed_cmd", "seq.spindle_dir -> spindle.direction",
+            "spindle.speed -> seq.spindle_speed",
         ),
         stop_time=stop_time,
     )

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from ..cosim.ssp import System
 from .compose import component, points, wire
+from .part import MillPart
 from .report import Axes, ContourCycle, Plane, Report
 
 #: The mill's contour, closed, programmed as terminal points.
 CONTOUR = [(0.0, 0.0), (60.0, 0.0), (60.0, 40.0), (20.0, 40.0), (0.0, 20.0), (0.0, 0.0)]
 
 REPORT = Report(
-    (ContourCycle(contour="contour", x="x_axis", y="y_axis"), Axes(("x_axis", "y_axis"))),
+    (ContourCycle(contour="contour", x="x_axis", y="y_axis"), Axes(("x_axis", "y_axis")),
+     MillPart(contour="contour", x="x_axis", y="y_axis")),
     Plane(horizontal="x_axis", vertical="y_axis", title="contour in the X-Y plane", xlabel="X [mm]",
           ylabel="Y [mm]", path_label="cutter centre (actual)", equal_aspect=True))
 

@@ -1,8 +1,8 @@
 /*
  * ncfmu: the FMI 2.0 co-simulation state machine, written once.
  *
- * Included by both of ncfmu's FMI layers: the Python FMUs' binary, status_shim.c (the
- * controller FMUs) and the native layer of the C FMUs (ServoAxis). It says which call is allowed in
+ * Included by ncfmu's FMI layer (fmi2_functions.c, over the model interface fmi2_model.h: the Python
+ * runtime of the controller FMUs, or a native model such as the ServoAxis) and by the models. It says which call is allowed in
  * which state, what a refused call returns (fmi2Error: the instance stays usable and freeable;
  * fmi2Fatal is kept for a broken instance, never for bad input), and checks what every FMU checks
  * the same way: experiment times, step sizes, UTF-8 strings. Cf. the Reference-FMUs' fmi2Functions.c.
@@ -10,13 +10,16 @@
 #ifndef NCFMU_FMI2_MACHINE_H
 #define NCFMU_FMI2_MACHINE_H
 
+#include <dlfcn.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include "fmi2Functions.h"
 
 /* The states of an instance (FMI 2.0 co-simulation, section 4.2.4), as bits so a call lists the
@@ -36,21 +39,78 @@ static inline const char *fmi2_phase_name(int phase)
          : phase == P_STEP ? "step mode" : phase == P_TERMINATED ? "terminated" : "unknown";
 }
 
-/* The host's logger, as an instance keeps it. */
-typedef struct {
-    fmi2CallbackLogger logger;
+#if defined(__GNUC__)
+#define FMI2_UNUSED __attribute__((unused))     /* a model's file includes this header and uses none of it */
+#define FMI2_PRINTF(f, a) __attribute__((format(printf, f, a)))
+#else
+#define FMI2_UNUSED
+#define FMI2_PRINTF(f, a)
+#endif
+
+/* The log categories of ncfmu's FMUs (their modelDescriptions list them). Errors and warnings reach the
+ * host's logger whatever the debug-logging setting; the rest only with debug logging on, in the chosen
+ * categories (all when none is named). */
+static const char *const FMI2_CATEGORIES[] FMI2_UNUSED = {"logStatusWarning", "logStatusDiscard", "logStatusError",
+                                              "logStatusFatal", "logAll"};
+#define FMI2_N_CATEGORIES (sizeof FMI2_CATEGORIES / sizeof *FMI2_CATEGORIES)
+
+/* The host's logger, as an instance keeps it, with the host's debug-logging choice. */
+typedef struct Fmi2Log {
+    fmi2CallbackLogger logger;          /* an FMI 2.0 host's logger */
     fmi2ComponentEnvironment env;
-    const char *name;
+    const char *name;                   /* the instance's name */
+    int debug;                          /* debug logging on: messages below fmi2Warning are shown too */
+    unsigned categories;                /* with debug on: the categories shown (bit k: FMI2_CATEGORIES[k]); 0: all */
+    /* another FMI version's logger (FMI 3.0's logMessage), called instead of ``logger`` when set */
+    void (*say)(const struct Fmi2Log *log, int status, const char *category, const char *text);
 } Fmi2Log;
 
-#define FMI2_SAY(log, status, category, ...) \
-    do { if ((log) && (log)->logger) (log)->logger((log)->env, (log)->name, (status), (category), __VA_ARGS__); } while (0)
+/* 1 when a message of ``status`` in ``category`` is shown: errors and warnings always, the rest with debug
+ * logging on, in the chosen categories. */
+static inline int fmi2_shown(const Fmi2Log *log, int status, const char *category)
+{
+    if (status >= fmi2Warning) return 1;
+    if (!log->debug) return 0;
+    if (log->categories == 0) return 1;
+    for (unsigned b = 0; b < FMI2_N_CATEGORIES; b++)
+        if ((log->categories & (1u << b)) && category && !strcmp(category, FMI2_CATEGORIES[b])) return 1;
+    return 0;
+}
+
+/* One message, as text, to the host's logger when it is shown. */
+static inline void fmi2_say_text(const Fmi2Log *log, int status, const char *category, const char *text)
+{
+    if (!log || !(log->logger || log->say) || !fmi2_shown(log, status, category)) return;
+    if (log->say) log->say(log, status, category, text);
+    else log->logger(log->env, log->name, (fmi2Status)status, category, "%s", text);
+}
+
+/* One message, formatted here (the host's logger gets plain text). */
+static inline FMI2_PRINTF(4, 5) void fmi2_say(const Fmi2Log *log, int status, const char *category,
+                                              const char *format, ...)
+{
+    if (!log || !(log->logger || log->say) || !fmi2_shown(log, status, category)) return;
+    char small[1024], *text = small;
+    va_list args;
+    va_start(args, format);
+    int n = vsnprintf(small, sizeof small, format, args);
+    va_end(args);
+    if (n >= (int)sizeof small && (text = malloc((size_t)n + 1)) != NULL) {
+        va_start(args, format);
+        vsnprintf(text, (size_t)n + 1, format, args);
+        va_end(args);
+    }
+    fmi2_say_text(log, status, category, text ? text : small);
+    if (text != small) free(text);
+}
+
+#define FMI2_SAY(log, status, category, ...) fmi2_say((log), (status), (category), __VA_ARGS__)
 
 /* 1 when ``call`` is allowed in ``phase``; else logs why and returns 0 (the call returns fmi2Error). */
 static inline int fmi2_allowed(const Fmi2Log *log, int phase, const char *call, int phases)
 {
     if (phase & phases) return 1;
-    FMI2_SAY(log, fmi2Error, "error", "%s: not allowed in the %s state (FMI 2.0 state machine)",
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: not allowed in the %s state (FMI 2.0 state machine)",
              call, fmi2_phase_name(phase));
     return 0;
 }
@@ -58,7 +118,7 @@ static inline int fmi2_allowed(const Fmi2Log *log, int phase, const char *call, 
 static inline int fmi2_experiment_ok(const Fmi2Log *log, double start, int stop_defined, double stop)
 {
     if (isfinite(start) && (!stop_defined || (isfinite(stop) && stop >= start))) return 1;
-    FMI2_SAY(log, fmi2Error, "error", "fmi2SetupExperiment: startTime = %g, stopTime = %g: "
+    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetupExperiment: startTime = %g, stopTime = %g: "
              "times must be finite and stopTime >= startTime", start, stop);
     return 0;
 }
@@ -66,7 +126,7 @@ static inline int fmi2_experiment_ok(const Fmi2Log *log, double start, int stop_
 static inline int fmi2_step_ok(const Fmi2Log *log, double t, double h)
 {
     if (isfinite(t) && isfinite(h) && h > 0.0) return 1;
-    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %g, communicationStepSize = %g: "
+    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint = %g, communicationStepSize = %g: "
              "the step size must be finite and > 0, the time finite", t, h);
     return 0;
 }
@@ -75,7 +135,7 @@ static inline int fmi2_step_ok(const Fmi2Log *log, double t, double h)
 static inline int fmi2_step_ns_ok(const Fmi2Log *log, double h)
 {
     if (nearbyint(h * 1e9) > 0.0) return 1;
-    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
+    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
     return 0;
 }
 
@@ -85,7 +145,7 @@ static inline int fmi2_step_ns_ok(const Fmi2Log *log, double h)
 static inline int fmi2_continues_ok(const Fmi2Log *log, double next, double t)
 {
     if (fabs(t - next) <= 0.5e-9 + 1e-12 * fabs(next)) return 1;
-    FMI2_SAY(log, fmi2Error, "error", "fmi2DoStep: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
+    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
              "last step ended): an FMU steps on from where it is, or from a state restored with fmi2SetFMUstate",
              t, next);
     return 0;
@@ -116,19 +176,20 @@ static inline int fmi2_utf8_ok(const unsigned char *s)
  * on 64-bit machines): a host that dereferences one faults at once instead of corrupting memory. The bits
  * below name the binary (12 bits mixed from where it was loaded: two FMUs in one process differ but for a
  * 1 in 4096 chance) and count up; when the count (2^32) runs out no new handle is made (the call fails)
- * rather than an old one reused. The binary is linked with -z nodelete so that a host that closes and
- * reopens the library keeps the count and the live instances. */
+ * rather than an old one reused.
+ *
+ * The binary keeps itself loaded exactly while instances made through it live: the first live instance
+ * takes a reference to the library (dlopen of its own file, RTLD_NOLOAD), the last fmi2FreeInstance drops
+ * it. So a host that closes the library while an instance lives on (ecos) keeps the instance and the
+ * count, and a host that extracts the FMU anew for every run (fmpy.simulate_fmu) unloads each copy when it
+ * is done with it (-z nodelete kept every copy mapped for the life of the process). A library loaded
+ * again starts a new count under new binary bits (its load time is mixed in), so a handle of an earlier
+ * load is refused as another binary's. */
 #define FMI2_HANDLE_NC       ((uint64_t)0x4E43u << 48)
 #define FMI2_HANDLE_INSTANCE ((uint64_t)0x1u << 44)
 #define FMI2_HANDLE_STATE    ((uint64_t)0x2u << 44)
 
 typedef struct { uintptr_t handle; void *object; } Fmi2Entry;
-
-#if defined(__GNUC__)
-#define FMI2_UNUSED __attribute__((unused))     /* a model's file includes this header and uses none of it */
-#else
-#define FMI2_UNUSED
-#endif
 
 /* The live instances of this binary (hosts such as ecos instantiate, step and free on several threads). */
 static struct {
@@ -136,18 +197,49 @@ static struct {
     Fmi2Entry *live;
     size_t n, cap;
     uint32_t made;
-} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0};
+    uint64_t binary;                    /* the 12 bits naming this load of the binary, + 1 (0: not yet) */
+    void *self;                         /* the reference to this library held while instances live */
+} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0, 0, NULL};
 
 /* A new handle of ``kind``; 0 when the count ran out. Called with fmi2_handles.lock held. */
 static inline uintptr_t fmi2_handle_locked(uint64_t kind)
 {
     if (sizeof(uintptr_t) < 8 || fmi2_handles.made == UINT32_MAX) return 0;
-    uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles;          /* where this binary was loaded, mixed */
-    binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;      /* (splitmix64's finaliser) */
-    binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
-    binary = (binary ^ (binary >> 31)) & 0xFFFu;
-    return (uintptr_t)(FMI2_HANDLE_NC | kind | binary << 32 | ++fmi2_handles.made);
+    if (!fmi2_handles.binary) {         /* where and when this binary was loaded, mixed */
+        struct timespec now = {0, 0};
+        clock_gettime(CLOCK_MONOTONIC, &now);
+        uint64_t binary = (uint64_t)(uintptr_t)&fmi2_handles ^ ((uint64_t)now.tv_sec * 1000000000u + (uint64_t)now.tv_nsec);
+        binary = (binary ^ (binary >> 30)) * 0xBF58476D1CE4E5B9ull;  /* (splitmix64's finaliser) */
+        binary = (binary ^ (binary >> 27)) * 0x94D049BB133111EBull;
+        fmi2_handles.binary = ((binary ^ (binary >> 31)) & 0xFFFu) + 1;
+    }
+    return (uintptr_t)(FMI2_HANDLE_NC | kind | (fmi2_handles.binary - 1) << 32 | ++fmi2_handles.made);
 }
+
+#ifdef _GNU_SOURCE
+/* A reference to this library (the file ``fmi2_handles`` lives in), taken while it is loaded: NULL when
+ * none can be taken (then the library's lifetime is the host's alone). Called with the lock held. */
+static inline void fmi2_library_hold_locked(void)
+{
+    Dl_info info;
+    if (!fmi2_handles.self && dladdr((void *)&fmi2_handles, &info) && info.dli_fname)
+        fmi2_handles.self = dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD);
+}
+
+/* After an instance was freed: this library's reference when no instance lives any more (the caller drops
+ * it with dlclose as the very last thing it does, a tail call: the library may be unmapped by it), else NULL. */
+static inline void *fmi2_library_release(void)
+{
+    pthread_mutex_lock(&fmi2_handles.lock);
+    void *self = fmi2_handles.n == 0 ? fmi2_handles.self : NULL;
+    if (self) fmi2_handles.self = NULL;
+    pthread_mutex_unlock(&fmi2_handles.lock);
+    return self;
+}
+#else
+#define fmi2_library_hold_locked() ((void)0)
+#define fmi2_library_release() ((void *)0)
+#endif
 
 /* A new FMU-state handle; 0 when none can be made. */
 static inline uintptr_t fmi2_state_handle(void)
@@ -168,8 +260,10 @@ static inline fmi2Component fmi2_instance_add(void *object)
         Fmi2Entry *grown = realloc(fmi2_handles.live, cap * sizeof *grown);
         if (grown) { fmi2_handles.live = grown; fmi2_handles.cap = cap; }
     }
-    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0)
+    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0) {
         fmi2_handles.live[fmi2_handles.n++] = (Fmi2Entry){h, object};
+        fmi2_library_hold_locked();
+    }
     pthread_mutex_unlock(&fmi2_handles.lock);
     return (fmi2Component)h;
 }
@@ -226,7 +320,8 @@ static inline int fmi2_instantiate_ok(const fmi2CallbackFunctions *cb, fmi2Strin
                                       char *dir, size_t dir_size)
 {
     int name_ok = name && fmi2_utf8_ok((const unsigned char *)name);
-    Fmi2Log early_log = {cb ? cb->logger : NULL, cb ? cb->componentEnvironment : NULL, name_ok ? name : ""};
+    Fmi2Log early_log = {.logger = cb ? cb->logger : NULL, .env = cb ? cb->componentEnvironment : NULL,
+                         .name = name_ok ? name : ""};
     const Fmi2Log *early = &early_log;
     struct stat st;
     if (!name_ok) {
@@ -253,13 +348,6 @@ static inline int fmi2_instantiate_ok(const fmi2CallbackFunctions *cb, fmi2Strin
 }
 
 /* ---- fmi2SetDebugLogging ---------------------------------------------------------------------------- */
-/* The log categories of ncfmu's FMUs (their modelDescriptions list them). Errors and warnings reach the
- * host's logger whatever the debug-logging setting; the rest only with debug logging on, in the chosen
- * categories (all when none is named). */
-static const char *const FMI2_CATEGORIES[] FMI2_UNUSED = {"logStatusWarning", "logStatusDiscard", "logStatusError",
-                                              "logStatusFatal", "logAll"};
-#define FMI2_N_CATEGORIES (sizeof FMI2_CATEGORIES / sizeof *FMI2_CATEGORIES)
-
 /* The categories named, as bits (bit k: FMI2_CATEGORIES[k]) in ``mask``; 0 (logged) for an unknown one. */
 static inline int fmi2_categories_ok(const Fmi2Log *log, size_t n, const fmi2String categories[], unsigned *mask)
 {

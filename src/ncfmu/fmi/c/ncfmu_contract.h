@@ -31,13 +31,15 @@
 #define NCFMU_DESERIALIZE "fmi_deserialize"
 /* slave.fmi_take_log() [method] -> list of (status, category, text) logged since the last call; the queue is emptied */
 #define NCFMU_TAKE_LOG "fmi_take_log"
+/* slave.pending_log [list] -> what is logged and not yet taken (the same list for the slave's life): the shim calls fmi_take_log only when it is not empty */
+#define NCFMU_PENDING_LOG "pending_log"
 /* slave.out [dict] -> outputs by name, read by the shim's fast fmi2Get* (re-read every call: the adapter may rebind it) */
 #define NCFMU_OUT "out"
 /* slave.inputs [dict] -> inputs by name, written by the shim's fast fmi2Set* (the same dict for the slave's life) */
 #define NCFMU_INPUTS "inputs"
 
 /* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */
-#define NCFMU_CONTRACT_NAMES(X) X(INSTANTIATE) X(PORTS) X(SETUP_EXPERIMENT) X(ENTER_INITIALIZATION) X(EXIT_INITIALIZATION) X(DO_STEP) X(TERMINATE) X(GET) X(SET) X(GET_STATE) X(SET_STATE) X(SERIALIZE) X(DESERIALIZE) X(TAKE_LOG) X(OUT) X(INPUTS)
+#define NCFMU_CONTRACT_NAMES(X) X(INSTANTIATE) X(PORTS) X(SETUP_EXPERIMENT) X(ENTER_INITIALIZATION) X(EXIT_INITIALIZATION) X(DO_STEP) X(TERMINATE) X(GET) X(SET) X(GET_STATE) X(SET_STATE) X(SERIALIZE) X(DESERIALIZE) X(TAKE_LOG) X(PENDING_LOG) X(OUT) X(INPUTS)
 
 #define NCFMU_STATE_TRAILER "ncfmu-t1"  /* then the time, a double */
 #define NCFMU_STATE_TRAILER_SIZE 16

@@ -1,0 +1,666 @@
+/*
+ * ncfmu's Python FMUs: the Python runtime as a model behind the model interface (fmi2_model.h).
+ *
+ * The FMI layer (fmi2_functions.c, the same file the native FMUs are built from) checks every call: the
+ * instance handle, the state machine, value references, their types and settability, String values,
+ * step times. This file drives the Python slave (fmi/adapter.py) through the calls listed in the contract
+ * (fmi/contract.py, generated into ncfmu_contract.h; see docs/architecture.md). Each call returns its
+ * status; the log messages it queued are taken after the call (when there are any: the model reads the
+ * length of the slave's pending_log) and sent to the host's logger: errors and warnings always, the rest only
+ * with debug logging on. pythonfmu provides the Python slave API (Fmi2Slave) and the packaging; its export
+ * library is not used.
+ *
+ * Built per FMU by ncfmu.fmi.builder with -DNCFMU_GUID, -DNCFMU_MODULE (the model script's module in
+ * resources/) and -DNCFMU_CLASS (its slave class, the model identifier).
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+/* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code), the model interface
+ * and the contract with the Python side. */
+#include "fmi2Functions.h"
+#include "fmi2_model.h"
+#include "ncfmu_contract.h"
+
+#if !defined(NCFMU_GUID) || !defined(NCFMU_MODULE) || !defined(NCFMU_CLASS)
+#error "the builder passes NCFMU_GUID, NCFMU_MODULE and NCFMU_CLASS"
+#endif
+
+/* ---- a Python runtime for native hosts ------------------------------------------------------------
+ * In a Python host (fmpy, ncfmu) the interpreter is there. In a native host (fmusim, ecos, libcosim)
+ * the shim loads a libpython with RTLD_GLOBAL, choosing, in this order:
+ *   1. $NCFMU_LIBPYTHON (a path or a soname), and nothing else when it is set;
+ *   2. the library recorded at build time in resources/ncfmu_python.txt (path, then its soname);
+ * and starts the interpreter itself (then releases the GIL). It is never finalised: it lives until the
+ * process ends (numpy's and scipy's clean-up at Py_Finalize crashed native hosts). If no runtime loads,
+ * one message says so, and every instantiation fails (fmi2Instantiate returns NULL). */
+static char python_problem[1024] = "";
+
+static int python_runtime(const char *fmu_binary)
+{
+    static int state = 0;                  /* 0 not tried, 1 ready, -1 failed */
+    if (state) return state > 0;
+    int (*is_init)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (is_init) { state = 1; return 1; }  /* a Python host: its interpreter */
+    char recorded[3][1024] = {"", "", ""}, path[4096], tried[2048] = "";
+    const char *env = getenv("NCFMU_LIBPYTHON");
+    /* resources/ncfmu_python.txt, next to binaries/<platform>/ */
+    snprintf(path, sizeof path, "%s", fmu_binary);
+    for (int up = 0; up < 3; up++) { char *slash = strrchr(path, '/'); if (slash) *slash = 0; }
+    size_t used = strlen(path);
+    if (used + 32 < sizeof path) {
+        strcat(path, "/resources/ncfmu_python.txt");
+        FILE *f = fopen(path, "r");
+        if (f) {
+            for (int k = 0; k < 3 && fgets(recorded[k], sizeof recorded[k], f); k++)
+                recorded[k][strcspn(recorded[k], "\r\n")] = 0;
+            fclose(f);
+        }
+    }
+    const char *candidates[3] = {env, env ? NULL : recorded[0], env ? NULL : recorded[1]};
+    void *lib = NULL;
+    for (int k = 0; k < 3 && !lib; k++) {
+        if (!candidates[k] || !candidates[k][0]) continue;
+        lib = dlopen(candidates[k], RTLD_NOW | RTLD_GLOBAL);
+        size_t n = strlen(tried);
+        snprintf(tried + n, sizeof tried - n, "%s%s", n ? ", " : "", candidates[k]);
+    }
+    if (!lib) {
+        snprintf(python_problem, sizeof python_problem, "ncfmu: this FMU runs Python code and needs a Python "
+                 "runtime (libpython); none could be loaded (tried: %s). Install that Python with its shared "
+                 "library, or set NCFMU_LIBPYTHON to the path of a libpython3.x.so of the same version.",
+                 tried[0] ? tried : "nothing: no NCFMU_LIBPYTHON and no resources/ncfmu_python.txt");
+        fprintf(stderr, "%s\n", python_problem);
+        state = -1;
+        return 0;
+    }
+    is_init = (int (*)(void))dlsym(lib, "Py_IsInitialized");
+    void (*init_ex)(int) = (void (*)(int))dlsym(lib, "Py_InitializeEx");
+    void *(*save_thread)(void) = (void *(*)(void))dlsym(lib, "PyEval_SaveThread");
+    if (!is_init || !init_ex || !save_thread) {
+        snprintf(python_problem, sizeof python_problem, "ncfmu: %s is not a Python runtime library", tried);
+        fprintf(stderr, "%s\n", python_problem);
+        state = -1;
+        return 0;
+    }
+    if (!is_init()) {
+        /* The interpreter's home is the one recorded at build time (line 3 of ncfmu_python.txt): left to
+         * itself, an embedded Python looks for "python3" on PATH and may take another installation's
+         * standard library. $PYTHONHOME, when the host sets it, still wins. */
+        void (*set_home)(const wchar_t *) = (void (*)(const wchar_t *))dlsym(lib, "Py_SetPythonHome");
+        wchar_t *(*decode)(const char *, size_t *) = (wchar_t *(*)(const char *, size_t *))dlsym(lib, "Py_DecodeLocale");
+        if (!getenv("PYTHONHOME") && !env && recorded[2][0] && set_home && decode) {
+            wchar_t *home = decode(recorded[2], NULL);   /* kept for the interpreter's life, as the API asks */
+            if (home) set_home(home);
+        }
+        init_ex(0);                         /* 0: leave the host's signal handlers alone */
+        save_thread();                      /* release the GIL: every call takes it with PyGILState_Ensure */
+    }
+    state = 1;
+    return 1;
+}
+
+/* ---- the Python C API, resolved at run time (the binary links no libpython) ------------------------- */
+typedef struct _object PyObject;
+typedef int PyGILState_STATE;
+typedef long Py_ssize_t_;
+static struct {
+    PyGILState_STATE (*GILEnsure)(void);
+    void (*GILRelease)(PyGILState_STATE);
+    PyObject *(*DictGetItem)(PyObject *, PyObject *);
+    PyObject *(*DictGetItemString)(PyObject *, const char *);
+    int (*DictSetItem)(PyObject *, PyObject *, PyObject *);
+    double (*FloatAs)(PyObject *);
+    PyObject *(*FloatFrom)(double);
+    long (*LongAs)(PyObject *);
+    PyObject *(*LongFrom)(long);
+    int (*IsTrue)(PyObject *);
+    PyObject *(*BoolFrom)(long);
+    PyObject *(*GetAttr)(PyObject *, PyObject *);
+    PyObject *(*GetAttrString)(PyObject *, const char *);
+    PyObject *(*CallMethod)(PyObject *, PyObject *, ...);
+    PyObject *(*StrFrom)(const char *);
+    PyObject *(*InternFrom)(const char *);
+    const char *(*Utf8)(PyObject *);
+    Py_ssize_t_ (*SeqSize)(PyObject *);
+    PyObject *(*SeqGetItem)(PyObject *, Py_ssize_t_);
+    int (*SeqContains)(PyObject *, PyObject *);
+    PyObject *(*ListNew)(Py_ssize_t_);
+    int (*ListSetItem)(PyObject *, Py_ssize_t_, PyObject *);
+    int (*ListInsert)(PyObject *, Py_ssize_t_, PyObject *);
+    Py_ssize_t_ (*ListSize)(PyObject *);
+    PyObject *(*SysGet)(const char *);
+    PyObject *(*Import)(const char *);
+    PyObject *(*BytesFrom)(const char *, Py_ssize_t_);
+    int (*BytesAs)(PyObject *, char **, Py_ssize_t_ *);
+    PyObject *(*Occurred)(void);
+    void (*Fetch)(PyObject **, PyObject **, PyObject **);
+    PyObject *(*Str)(PyObject *);
+    void (*Clear)(void);
+    void (*IncRef)(PyObject *);
+    void (*DecRef)(PyObject *);
+    PyObject *None;
+} py;
+
+static int py_load(void)
+{
+    static int ready = 0;
+    if (ready) return ready > 0;
+    void *h = RTLD_DEFAULT;
+#define L(field, name) if (!(py.field = (__typeof__(py.field))dlsym(h, name))) { ready = -1; return 0; }
+    L(GILEnsure, "PyGILState_Ensure") L(GILRelease, "PyGILState_Release") L(DictGetItem, "PyDict_GetItem")
+    L(DictGetItemString, "PyDict_GetItemString")
+    L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
+    L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
+    L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
+    L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString")
+    L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
+    L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
+    L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(ListSize, "PyList_Size") L(SysGet, "PySys_GetObject")
+    L(Import, "PyImport_ImportModule") L(BytesFrom, "PyBytes_FromStringAndSize")
+    L(BytesAs, "PyBytes_AsStringAndSize") L(Occurred, "PyErr_Occurred") L(Fetch, "PyErr_Fetch")
+    L(Str, "PyObject_Str") L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef")
+    L(None, "_Py_NoneStruct")
+#undef L
+    ready = 1;
+    return 1;
+}
+
+static void py_drop(PyObject *o)
+{
+    if (o) py.DecRef(o);
+}
+
+/* The pending Python exception as text (and cleared). */
+static void py_error_text(char *out, size_t size)
+{
+    PyObject *type = NULL, *value = NULL, *tb = NULL;
+    py.Fetch(&type, &value, &tb);
+    PyObject *s = value ? py.Str(value) : type ? py.Str(type) : NULL;
+    const char *text = s ? py.Utf8(s) : NULL;
+    snprintf(out, size, "%s", text ? text : "an exception without text");
+    if (py.Occurred()) py.Clear();
+    py_drop(s); py_drop(type); py_drop(value); py_drop(tb);
+}
+
+/* The contract's names, interned once (under the GIL). */
+#define NAME_ENUM(m) N_##m,
+enum { NCFMU_CONTRACT_NAMES(NAME_ENUM) N_COUNT };
+#define NAME_TEXT(m) NCFMU_##m,
+static const char *const name_text[N_COUNT] = { NCFMU_CONTRACT_NAMES(NAME_TEXT) };
+static PyObject *names[N_COUNT];
+
+static int names_ready(void)
+{
+    if (names[0]) return 1;
+    for (int k = 0; k < N_COUNT; k++)
+        if (!(names[k] = py.InternFrom(name_text[k]))) { py.Clear(); return 0; }
+    return 1;
+}
+
+const char FMU_MODEL_GUID[] = NCFMU_GUID;
+const char FMU_MODEL_IDENTIFIER[] = NCFMU_CLASS;
+
+/* ---- the model ----------------------------------------------------------------------------------- */
+struct Model {
+    const Fmi2Log *log;                   /* the instance's: the host's logger, its debug-logging choice */
+    char name[128];
+    char resources[4096];                 /* the resources folder, for fmu_model_reset's new slave */
+    int visible;
+    PyObject *slave, *inputs;
+    PyObject *pending;                    /* the slave's pending_log: fmi_take_log only when not empty */
+    unsigned n;                           /* value references 0 .. n-1 */
+    VarInfo *vars;                        /* by value reference (name NULL: none) */
+    PyObject **port_name;                 /* by value reference: the variable's name as a str */
+    PyObject *strings;                    /* the last Get's strings, kept alive until the next */
+    unsigned char *bytes;                 /* the last serialized state */
+};
+
+/* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
+/* Send what the slave logged to the host (errors and warnings always, the rest with debug logging on:
+ * fmi2_say_text); nothing is called when nothing was logged. */
+static void flush_log(Model *m)
+{
+    if (!m->slave) return;
+    Py_ssize_t_ pending = py.ListSize(m->pending);          /* a C call: nothing logged, nothing called */
+    if (pending == 0) return;
+    if (pending < 0) py.Clear();                             /* not a list: take the log anyway */
+    PyObject *taken = py.CallMethod(m->slave, names[N_TAKE_LOG], NULL);
+    Py_ssize_t_ n = taken ? py.SeqSize(taken) : 0;
+    for (Py_ssize_t_ k = 0; k < n; k++) {
+        PyObject *msg = py.SeqGetItem(taken, k);
+        PyObject *st = msg ? py.SeqGetItem(msg, 0) : NULL, *cat = msg ? py.SeqGetItem(msg, 1) : NULL;
+        PyObject *text = msg ? py.SeqGetItem(msg, 2) : NULL;
+        long status = st ? py.LongAs(st) : fmi2Error;
+        const char *c_s = cat ? py.Utf8(cat) : NULL, *t_s = text ? py.Utf8(text) : NULL;
+        if (t_s)
+            fmi2_say_text(m->log, status < fmi2OK || status > fmi2Fatal ? fmi2Error : (fmi2Status)status,
+                          c_s ? c_s : "logAll", t_s);
+        py_drop(st); py_drop(cat); py_drop(text); py_drop(msg);
+    }
+    if (py.Occurred()) py.Clear();
+    py_drop(taken);
+}
+
+/* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
+static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
+{
+    PyObject *r = py.CallMethod(m->slave, names[entry], a, b, c, NULL);
+    if (!r) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the Python slave raised: %s", fmi_call, text);
+    }
+    return r;
+}
+
+/* A call that returns a status (the contract's STATUS). */
+static fmi2Status call_status(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
+{
+    PyObject *r = call(m, fmi_call, entry, a, b, c);
+    long st = r ? py.LongAs(r) : NCFMU_STATUS_ERROR;
+    if (py.Occurred()) { py.Clear(); st = NCFMU_STATUS_ERROR; }
+    py_drop(r);
+    if (st < NCFMU_STATUS_OK || st > NCFMU_STATUS_FATAL) st = NCFMU_STATUS_ERROR;
+    return st == NCFMU_STATUS_FATAL ? fmi2Error : (fmi2Status)st;   /* nothing the slave says breaks the instance */
+}
+
+static fmi2Status simple_call(Model *m, const char *fmi_call, int entry)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = call_status(m, fmi_call, entry, NULL, NULL, NULL);
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+/* ---- making and dropping the Python slave -------------------------------------------------------- */
+static void slave_drop(Model *m)
+{
+    py_drop(m->slave); py_drop(m->inputs); py_drop(m->pending); py_drop(m->strings);
+    for (unsigned k = 0; m->port_name && k < m->n; k++) py_drop(m->port_name[k]);
+    free(m->port_name); free(m->vars);
+    m->slave = m->inputs = m->pending = m->strings = NULL;
+    m->port_name = NULL; m->vars = NULL;
+    m->n = 0;
+}
+
+/* The slave class: the model script's module, imported once per process from the FMU's resources folder
+ * (its folder goes on sys.path then, not again: a host that extracts the FMU anew per run adds no entry a run). */
+static PyObject *slave_class(const Fmi2Log *log, const char *resources)
+{
+    PyObject *modules = py.SysGet("modules");                    /* borrowed */
+    if (!modules || !py.DictGetItemString(modules, NCFMU_MODULE)) {
+        PyObject *path = py.SysGet("path");                      /* borrowed */
+        PyObject *dir = py.StrFrom(resources);
+        if (path && dir && py.SeqContains(path, dir) == 0) py.ListInsert(path, 0, dir);
+        py_drop(dir);
+    }
+    PyObject *module = py.Import(NCFMU_MODULE);   /* the import lock: another thread's import finishes first */
+    PyObject *cls = module ? py.GetAttrString(module, NCFMU_CLASS) : NULL;
+    py_drop(module);
+    if (!cls) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2Instantiate: the model %s could not be loaded from %s: %s",
+                 NCFMU_MODULE, resources, text);
+    }
+    return cls;
+}
+
+/* The contract's codes -> the model interface's. */
+static VarType var_type(long code)
+{
+    return code == NCFMU_TYPE_INTEGER ? V_INTEGER : code == NCFMU_TYPE_BOOLEAN ? V_BOOLEAN
+         : code == NCFMU_TYPE_STRING ? V_STRING : V_REAL;
+}
+
+static VarCausality var_causality(long code)
+{
+    return code == NCFMU_CAUSALITY_PARAMETER ? V_PARAMETER : code == NCFMU_CAUSALITY_INPUT ? V_INPUT
+         : code == NCFMU_CAUSALITY_OUTPUT ? V_OUTPUT : V_OTHER;
+}
+
+/* A new Python slave for ``m`` and its table of variables; 0 (logged) if it cannot be made. */
+static int slave_make(Model *m)
+{
+    PyObject *cls = slave_class(m->log, m->resources);
+    if (!cls) return 0;
+    PyObject *n = py.StrFrom(m->name), *res = py.StrFrom(m->resources), *vis = py.BoolFrom(m->visible);
+    PyObject *slave = (n && res && vis) ? py.CallMethod(cls, names[N_INSTANTIATE], n, res, vis, NULL) : NULL;
+    py_drop(n); py_drop(res); py_drop(vis); py_drop(cls);
+    PyObject *ports = slave ? py.CallMethod(slave, names[N_PORTS], NULL) : NULL;
+    PyObject *inputs = slave ? py.GetAttr(slave, names[N_INPUTS]) : NULL;
+    PyObject *pending = slave ? py.GetAttr(slave, names[N_PENDING_LOG]) : NULL;
+    if (!slave || !ports || !inputs || !pending) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2Instantiate: the slave %s could not be made: %s",
+                 NCFMU_CLASS, text);
+        py_drop(slave); py_drop(ports); py_drop(inputs); py_drop(pending);
+        return 0;
+    }
+    Py_ssize_t_ count = py.SeqSize(ports);
+    unsigned n_vr = 0;
+    for (Py_ssize_t_ k = 0; k < count; k++) {
+        PyObject *p = py.SeqGetItem(ports, k), *vr = p ? py.SeqGetItem(p, 0) : NULL;
+        long v = vr ? py.LongAs(vr) : -1;
+        if (v >= 0 && v < 1000000 && (unsigned)v + 1 > n_vr) n_vr = (unsigned)v + 1;
+        py_drop(vr); py_drop(p);
+    }
+    m->n = n_vr;
+    m->port_name = calloc(n_vr ? n_vr : 1, sizeof *m->port_name);
+    m->vars = calloc(n_vr ? n_vr : 1, sizeof *m->vars);
+    for (Py_ssize_t_ k = 0; k < count && m->port_name && m->vars; k++) {
+        PyObject *p = py.SeqGetItem(ports, k);
+        PyObject *f[5] = {NULL, NULL, NULL, NULL, NULL};
+        for (int j = 0; p && j < 5; j++) f[j] = py.SeqGetItem(p, j);
+        long vr = f[0] ? py.LongAs(f[0]) : -1;
+        const char *name = f[4] ? py.Utf8(f[4]) : NULL;
+        if (vr >= 0 && (unsigned long)vr < n_vr && name && !m->port_name[vr]) {
+            VarInfo *v = &m->vars[vr];
+            v->name = name;                                       /* lives as long as port_name[vr] */
+            v->type = var_type(f[1] ? py.LongAs(f[1]) : 0);
+            v->causality = var_causality(f[2] ? py.LongAs(f[2]) : 0);
+            v->tunable = !(f[3] && py.IsTrue(f[3]) > 0);
+            v->rule = NULL;                                       /* the Python side judges every value */
+            m->port_name[vr] = f[4];
+            f[4] = NULL;                                          /* kept */
+        }
+        for (int j = 0; j < 5; j++) py_drop(f[j]);
+        py_drop(p);
+    }
+    py_drop(ports);
+    if (py.Occurred()) py.Clear();
+    m->slave = slave;
+    m->inputs = inputs;
+    m->pending = pending;
+    if (!m->port_name || !m->vars) { slave_drop(m); return 0; }
+    return 1;
+}
+
+static int binary_ready(void)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    pthread_mutex_lock(&lock);
+    Dl_info info;
+    int ok = dladdr((void *)&binary_ready, &info) && info.dli_fname && python_runtime(info.dli_fname) && py_load();
+    pthread_mutex_unlock(&lock);
+    return ok;
+}
+
+/* ---- the model interface ------------------------------------------------------------------------- */
+Model *fmu_model_new(const char *name, const char *resources, int visible, const Fmi2Log *log)
+{
+    if (!binary_ready()) {
+        FMI2_SAY(log, fmi2Error, "logStatusError", "%s",
+                 python_problem[0] ? python_problem : "ncfmu: the Python runtime's API could not be found");
+        return NULL;
+    }
+    Model *m = calloc(1, sizeof *m);
+    if (!m) return NULL;
+    m->log = log;
+    snprintf(m->name, sizeof m->name, "%s", name);
+    snprintf(m->resources, sizeof m->resources, "%s", resources);
+    m->visible = visible;
+    PyGILState_STATE g = py.GILEnsure();
+    int made = names_ready() && slave_make(m);
+    if (made) flush_log(m);
+    py.GILRelease(g);
+    if (!made) { free(m); return NULL; }
+    return m;
+}
+
+void fmu_model_free(Model *m)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    flush_log(m);
+    slave_drop(m);
+    py.GILRelease(g);
+    free(m->bytes);
+    free(m);
+}
+
+const VarInfo *fmu_model_variables(Model *m, unsigned *n)
+{
+    *n = m->n;
+    return m->vars;
+}
+
+int fmu_model_reset(Model *m)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    flush_log(m);
+    slave_drop(m);
+    int made = slave_make(m);
+    if (made) flush_log(m);
+    py.GILRelease(g);
+    return made ? 0 : -1;
+}
+
+fmi2Status fmu_model_setup_experiment(Model *m, int tolerance_defined, double tolerance, double start,
+                                      int stop_defined, double stop)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *a = py.FloatFrom(start), *b = stop_defined ? py.FloatFrom(stop) : (py.IncRef(py.None), py.None);
+    PyObject *t = tolerance_defined ? py.FloatFrom(tolerance) : (py.IncRef(py.None), py.None);
+    fmi2Status st = (a && b && t) ? call_status(m, "fmi2SetupExperiment", N_SETUP_EXPERIMENT, a, b, t) : fmi2Error;
+    py_drop(a); py_drop(b); py_drop(t);
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+fmi2Status fmu_model_enter_initialization(Model *m)
+{
+    return simple_call(m, "fmi2EnterInitializationMode", N_ENTER_INITIALIZATION);
+}
+
+fmi2Status fmu_model_exit_initialization(Model *m)
+{
+    return simple_call(m, "fmi2ExitInitializationMode", N_EXIT_INITIALIZATION);
+}
+
+fmi2Status fmu_model_terminate(Model *m)
+{
+    return simple_call(m, "fmi2Terminate", N_TERMINATE);
+}
+
+fmi2Status fmu_model_do_step(Model *m, double t, double h)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
+    fmi2Status st = (a && b) ? call_status(m, "fmi2DoStep", N_DO_STEP, a, b, NULL) : fmi2Error;
+    py_drop(a); py_drop(b);
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+/* ---- values ---------------------------------------------------------------------------------------- */
+static const char *type_name(VarType type)
+{
+    return type == V_REAL ? "Real" : type == V_INTEGER ? "Integer" : type == V_BOOLEAN ? "Boolean" : "String";
+}
+
+static void value_out(PyObject *v, VarType type, void *values, size_t k)
+{
+    if (type == V_REAL) ((double *)values)[k] = py.FloatAs(v);
+    else if (type == V_INTEGER) ((int *)values)[k] = (int)py.LongAs(v);
+    else if (type == V_BOOLEAN) ((int *)values)[k] = py.IsTrue(v) > 0;
+    else ((const char **)values)[k] = py.Utf8(v);
+}
+
+static PyObject *value_in(VarType type, const void *values, size_t k)
+{
+    if (type == V_REAL) return py.FloatFrom(((const double *)values)[k]);
+    if (type == V_INTEGER) return py.LongFrom(((const int *)values)[k]);
+    if (type == V_BOOLEAN) return py.BoolFrom(((const int *)values)[k] != 0);
+    return py.StrFrom(((const char *const *)values)[k]);
+}
+
+static int all_of(Model *m, const unsigned vr[], size_t n, VarCausality causality)
+{
+    for (size_t k = 0; k < n; k++)
+        if (m->vars[vr[k]].causality != causality) return 0;
+    return 1;
+}
+
+fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, void *values)
+{
+    const char *fmi_call = type == V_REAL ? "fmi2GetReal" : type == V_INTEGER ? "fmi2GetInteger"
+                         : type == V_BOOLEAN ? "fmi2GetBoolean" : "fmi2GetString";
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = fmi2OK;
+    if (type != V_STRING && all_of(m, vr, n, V_OUTPUT)) {
+        /* the master's every-step call: straight from the outputs dict */
+        PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
+        for (size_t k = 0; out && k < n; k++) {
+            PyObject *v = py.DictGetItem(out, m->port_name[vr[k]]);         /* borrowed */
+            if (!v) { st = fmi2Error; break; }
+            value_out(v, type, values, k);
+        }
+        if (!out) st = fmi2Error;
+        py_drop(out);
+    } else {
+        PyObject *list = py.ListNew((Py_ssize_t_)n);
+        for (size_t k = 0; list && k < n; k++) py.ListSetItem(list, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
+        PyObject *got = list ? call(m, fmi_call, N_GET, list, NULL, NULL) : NULL;
+        py_drop(list);
+        if (!got || py.SeqSize(got) != (Py_ssize_t_)n) st = fmi2Error;
+        for (size_t k = 0; st == fmi2OK && k < n; k++) {
+            PyObject *v = py.SeqGetItem(got, (Py_ssize_t_)k);
+            if (!v) { st = fmi2Error; break; }
+            value_out(v, type, values, k);
+            py_drop(v);                   /* a string stays alive in ``got``, kept below */
+        }
+        if (type == V_STRING && st == fmi2OK) { py_drop(m->strings); m->strings = got; got = NULL; }
+        py_drop(got);
+    }
+    if (py.Occurred()) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: a value could not be read as %s: %s", fmi_call,
+                 type_name(type), text);
+        st = fmi2Error;
+    }
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, const void *values)
+{
+    const char *fmi_call = type == V_REAL ? "fmi2SetReal" : type == V_INTEGER ? "fmi2SetInteger"
+                         : type == V_BOOLEAN ? "fmi2SetBoolean" : "fmi2SetString";
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = fmi2OK;
+    if (type != V_STRING && all_of(m, vr, n, V_INPUT)) {
+        /* the master's every-step call: straight into the inputs dict */
+        for (size_t k = 0; k < n && st == fmi2OK; k++) {
+            PyObject *v = value_in(type, values, k);
+            if (!v || py.DictSetItem(m->inputs, m->port_name[vr[k]], v) != 0) st = fmi2Error;
+            py_drop(v);
+        }
+    } else {
+        PyObject *refs = py.ListNew((Py_ssize_t_)n), *vals = py.ListNew((Py_ssize_t_)n);
+        for (size_t k = 0; refs && vals && k < n; k++) {
+            py.ListSetItem(refs, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
+            py.ListSetItem(vals, (Py_ssize_t_)k, value_in(type, values, k));
+        }
+        st = refs && vals ? call_status(m, fmi_call, N_SET, refs, vals, NULL) : fmi2Error;
+        py_drop(refs); py_drop(vals);
+    }
+    if (py.Occurred()) py.Clear();
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+/* ---- FMU states: the adapter's state objects ------------------------------------------------------- */
+void *fmu_model_state_take(Model *m)
+{
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *object = call(m, "fmi2GetFMUstate", N_GET_STATE, NULL, NULL, NULL);
+    flush_log(m);
+    py.GILRelease(g);
+    return object;
+}
+
+fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
+{
+    (void)initialized;                    /* the adapter judges a state's parameters itself */
+    PyGILState_STATE g = py.GILEnsure();
+    fmi2Status st = call_status(m, "fmi2SetFMUstate", N_SET_STATE, state, NULL, NULL);
+    flush_log(m);
+    py.GILRelease(g);
+    return st;
+}
+
+void fmu_model_state_free(Model *m, void *state)
+{
+    (void)m;
+    PyGILState_STATE g = py.GILEnsure();
+    py_drop(state);
+    py.GILRelease(g);
+}
+
+/* The serialized state: the Python side's bytes, then STATE_TRAILER and the state's time, so that a state
+ * restored from bytes continues from its own time (the phase is not kept: a restored state leaves it). */
+#define TRAILER_SIZE NCFMU_STATE_TRAILER_SIZE
+#define STATE_TRAILER NCFMU_STATE_TRAILER
+_Static_assert(sizeof NCFMU_STATE_TRAILER - 1 + sizeof(double) == NCFMU_STATE_TRAILER_SIZE, "trailer: 8 bytes + a double");
+
+const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size)
+{
+    (void)phase;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *bytes = call(m, "fmi2SerializeFMUstate", N_SERIALIZE, state, NULL, NULL);
+    char *data = NULL;
+    Py_ssize_t_ n = 0;
+    unsigned char *out = NULL;
+    if (bytes && py.BytesAs(bytes, &data, &n) == 0 && (out = realloc(m->bytes, (size_t)n + TRAILER_SIZE))) {
+        m->bytes = out;
+        memcpy(out, data, (size_t)n);
+        memcpy(out + n, STATE_TRAILER, sizeof STATE_TRAILER - 1);
+        memcpy(out + n + sizeof STATE_TRAILER - 1, &time, sizeof time);
+        *size = (size_t)n + TRAILER_SIZE;
+    }
+    if (py.Occurred()) py.Clear();
+    py_drop(bytes);
+    flush_log(m);
+    py.GILRelease(g);
+    return out;
+}
+
+void *fmu_model_deserialize(Model *m, const unsigned char *b, size_t size, int *phase, double *time)
+{
+    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, sizeof STATE_TRAILER - 1) != 0) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: %zu bytes that are not a "
+                 "state this FMU serialized (no time trailer)", size);
+        return NULL;
+    }
+    memcpy(time, b + size - sizeof *time, sizeof *time);
+    if (!isfinite(*time)) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: the state's time is %g",
+                 *time);
+        return NULL;
+    }
+    *phase = -1;
+    PyGILState_STATE g = py.GILEnsure();
+    PyObject *bytes = py.BytesFrom((const char *)b, (Py_ssize_t_)(size - TRAILER_SIZE));
+    PyObject *object = bytes ? call(m, "fmi2DeSerializeFMUstate", N_DESERIALIZE, bytes, NULL, NULL) : NULL;
+    py_drop(bytes);
+    if (object == py.None) { py_drop(object); object = NULL; }    /* refused: the reason is in the log */
+    if (py.Occurred()) py.Clear();
+    flush_log(m);
+    py.GILRelease(g);
+    return object;
+}

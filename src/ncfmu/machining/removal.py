@@ -1,0 +1,321 @@
+"""Material removal on the fly: the tool swept along its actual positions, subtracted from the stock.
+
+Geometry is planar and in the machine's own coordinates (a lathe's half-section ``(z, x)`` with x the radius,
+a mill's ``(x, y)``). Polygons and their Boolean operations are shapely's (GEOS).
+
+Per chunk of rows, the rows are cut into *moves* -- runs of one program line and one rapid/feed state. A move's
+path (the tool's reference point at every row, joined to the last row of the chunk before) is simplified by
+Douglas-Peucker within :data:`RESOLUTION`; the tool swept along each straight piece of it is the convex hull of
+the tool at both ends (the tool is convex, the translation straight); their union is the move's swept region.
+What of the stock lies inside it is the move's chip: its depth (the largest distance of the chip from the
+stock's outline as the move began, also when the move spans chunks) is the radial engagement. Then the chip
+leaves the stock.
+
+Crashes, each with the time and program line of the first row where the tool entered:
+
+- a rapid move whose chip is deeper than :data:`TOUCH` ("rapid into the stock");
+- a cutting move whose chip is deeper than the tool's ``max_depth`` (plus :data:`TOUCH`);
+- the swept region entering a forbidden region (:class:`Forbidden`: chuck jaws, the far side of the spindle axis,
+  a mill part's finished contour) deeper than the region's own threshold.
+
+Accuracy: a circle is a polygon whose chords stay within :data:`RESOLUTION` of it (inscribed), the path is
+simplified within :data:`RESOLUTION`, and the stock's outline is simplified within ``RESOLUTION / 5`` after each
+cut (so its vertex count stays bounded however often a surface is recut): the part made is exact to about
+1 um -- a hundredth of the default tolerance. Memory: the stock, the forbidden regions and at most
+:data:`MAX_CRASHES` crash records, whatever the length of the run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import shapely
+from shapely.geometry import Point as ShapelyPoint
+from shapely.geometry import Polygon
+from shapely.geometry.base import BaseGeometry
+
+#: Geometric resolution of the engine (mm): circles' chords, the path's simplification.
+RESOLUTION = 0.0005
+#: A chip thinner than this is a touch, not a cut (mm): the servo settling against a surface it just made.
+TOUCH = 0.005
+#: Chips of a smaller area are not subtracted (mm^2): a recut surface stays as it was.
+MIN_AREA = 1e-6
+#: Walls of the stock thinner than twice this are no part of the part made (mm): see MaterialRemoval.part.
+SLIVER = 0.002
+#: How many crash records are kept (the count goes on).
+MAX_CRASHES = 100
+#: Spacing of the points at which a region's depth is measured (mm).
+PROBE = 0.05
+
+#: The lathe tool's blade above its nose (the insert and its holder in the half-section), mm high.
+BLADE = 100.0
+
+
+def _circle_segments(radius: float) -> int:
+    """Segments per quarter circle so that the chords stay within RESOLUTION of the circle."""
+    if radius <= RESOLUTION:
+        return 1
+    step = 2.0 * math.acos(1.0 - RESOLUTION / radius)
+    return max(1, math.ceil((math.pi / 2) / step))
+
+
+def _disc(centre: tuple[float, float], radius: float) -> BaseGeometry:
+    return ShapelyPoint(centre).buffer(radius, quad_segs=_circle_segments(radius))
+
+
+def lathe_tool(nose_radius: float, blade: float = BLADE) -> np.ndarray:
+    """The turning tool in the half-section ``(z, x)`` around its programmed point at the origin: the vertices of
+    its convex outline.
+
+    The programmed point is the imaginary tool tip (no nose radius compensation, as the programs are written):
+    the nose circle's centre is ``(r, r)``, so the tool's lowest point is at x = 0 and its leftmost at z = 0.
+    Above the nose stands the blade (the insert and its holder), as wide as the nose, ``blade`` mm up: what the
+    tool passes under is cut away (the chip), whatever the direction -- along Z, into a groove, up a face.
+    ``nose_radius`` 0 is a sharp point under a blade of no width (a segment: it cuts by moving in Z, and a move
+    in X alone removes nothing, though a rapid one into the stock is still a crash).
+    """
+    r = float(nose_radius)
+    if r <= 0.0:
+        return np.array([[0.0, 0.0], [0.0, blade]])
+    nose = _disc((r, r), r)
+    outline = shapely.union_all([nose, shapely.box(0.0, r, 2 * r, r + blade)]).convex_hull
+    return np.asarray(outline.exterior.coords)[:-1]
+
+
+def mill_cutter(radius: float) -> np.ndarray:
+    """The milling cutter in ``(x, y)`` around its centre at the origin: the vertices of its outline. A radius
+    below RESOLUTION is taken as RESOLUTION (a point cuts nothing)."""
+    disc = _disc((0.0, 0.0), max(abs(float(radius)), RESOLUTION))
+    return np.asarray(disc.exterior.coords)[:-1]
+
+
+@dataclass(frozen=True)
+class Forbidden:
+    """A region the tool must not enter deeper than ``threshold`` mm; ``what`` names the crash."""
+
+    what: str
+    region: BaseGeometry
+    threshold: float = TOUCH
+
+
+@dataclass(frozen=True)
+class Crash:
+    """A crash: when (``t``, s), the program ``line`` (0: none), what, how deep (mm) and where (the first row's
+    tool position)."""
+
+    t: float
+    line: int
+    what: str
+    depth_mm: float
+    at: tuple[float, float]
+
+    def as_dict(self) -> dict[str, object]:
+        return {"t": self.t, "line": self.line, "what": self.what, "depth_mm": self.depth_mm,
+                "at": list(self.at)}
+
+
+@dataclass(frozen=True)
+class Move:
+    """One move of a chunk: rows ``start..stop`` (the path includes the row before ``start``)."""
+
+    start: int
+    stop: int
+    rapid: bool
+    line: int
+
+
+def depth_in(piece: BaseGeometry, outline: BaseGeometry) -> tuple[float, tuple[float, float]]:
+    """The largest distance of ``piece`` from ``outline`` (a boundary), probed at its vertices and every
+    :data:`PROBE` mm along its edges; and where."""
+    if piece.is_empty:
+        return 0.0, (math.nan, math.nan)
+    points = shapely.get_coordinates(shapely.segmentize(piece, PROBE))
+    if not len(points):
+        return 0.0, (math.nan, math.nan)
+    d = shapely.distance(shapely.points(points), outline)
+    i = int(np.argmax(d))
+    return float(d[i]), (float(points[i, 0]), float(points[i, 1]))
+
+
+def _areal(geometry: BaseGeometry) -> BaseGeometry:
+    """The polygons of ``geometry`` larger than MIN_AREA (a Boolean operation may leave lines and slivers)."""
+    parts = [g for g in shapely.get_parts(geometry) if g.geom_type == "Polygon" and g.area > MIN_AREA]
+    return shapely.union_all(parts) if parts else Polygon()
+
+
+class MaterialRemoval:
+    """The stock cut by a tool moving along positions fed in chunks (a streamed run's rows).
+
+    Parameters
+    ----------
+    stock
+        the material at the start (a polygon in the machine plane).
+    tool
+        the vertices of the tool's convex outline around its reference point (the origin), (m, 2); two
+        vertices: a segment.
+    forbidden
+        regions the tool must not enter (chuck jaws, the axis, a part's finished contour).
+    max_depth
+        deepest chip a cutting move may take (mm); ``inf``: no limit.
+    """
+
+    def __init__(self, stock: BaseGeometry, tool: np.ndarray, forbidden: Sequence[Forbidden] = (),
+                 max_depth: float = math.inf) -> None:
+        self.stock: BaseGeometry = stock
+        self.initial = stock
+        self.tool_xy = np.asarray(tool, dtype=float).reshape(-1, 2)          # (m, 2), convex
+        self.forbidden = list(forbidden)
+        for f in self.forbidden:
+            shapely.prepare(f.region)
+        self.max_depth = float(max_depth)
+        self.crashes: list[Crash] = []
+        self.crash_count = 0
+        self.removed_area = 0.0
+        self.deepest_cut = 0.0                 # the deepest chip of a cutting move so far
+        self._last: tuple[float, float, float] | None = None         # (t, u, v) of the last row fed
+        # the move that ended the last chunk, and the stock's outline where it began: a move that goes on into the
+        # next chunk measures its chip's depth from that outline, not from the face its first part just cut
+        self._open: tuple[bool, int] | None = None
+        self._outline_before: BaseGeometry = stock.boundary
+        # the crashes the open move has been reported for (once per move): what -> its index in crashes
+        self._reported: dict[str, int | None] = {}
+
+    # -- feeding ---------------------------------------------------------------------------------------
+    def write(self, t: np.ndarray, u: np.ndarray, v: np.ndarray, rapid: np.ndarray, line: np.ndarray) -> None:
+        """One chunk of rows in time order: time, the tool's two coordinates, whether the move is at rapid, the
+        program line. Rows with a position that is not finite are left out."""
+        ok = np.isfinite(u) & np.isfinite(v)
+        if not ok.all():
+            t, u, v, rapid, line = t[ok], u[ok], v[ok], rapid[ok], line[ok]
+        if not len(t):
+            return
+        rapid = np.asarray(rapid, dtype=bool)
+        line = np.asarray(line, dtype=np.int64)
+        if self._last is not None:         # the path goes on from the last row of the chunk before
+            t0, u0, v0 = self._last
+            t = np.concatenate(([t0], t))
+            u = np.concatenate(([u0], u))
+            v = np.concatenate(([v0], v))
+            rapid = np.concatenate((rapid[:1], rapid))
+            line = np.concatenate((line[:1], line))
+            first = 1
+        else:
+            first = 0
+        self._last = (float(t[-1]), float(u[-1]), float(v[-1]))
+        xy = np.column_stack((u, v))
+        change = np.flatnonzero((rapid[first + 1:] != rapid[first:-1]) | (line[first + 1:] != line[first:-1]))
+        bounds = [first, *(change + first + 1).tolist(), len(t)]
+        for a, b in zip(bounds, bounds[1:]):
+            if b > a:
+                move = Move(a, b, bool(rapid[a]), int(line[a]))
+                if not (a == first == 1 and self._open == (move.rapid, move.line)):
+                    self._outline_before = self.stock.boundary
+                    self._reported = {}
+                self._move(t, xy, move)
+                self._open = (move.rapid, move.line)
+
+    def _swept(self, path: np.ndarray) -> BaseGeometry:
+        """The tool swept along ``path`` ((n, 2) positions)."""
+        if len(path) > 2:
+            path = shapely.get_coordinates(shapely.LineString(path).simplify(RESOLUTION, preserve_topology=False))
+        steps = np.flatnonzero(np.any(np.diff(path, axis=0) != 0.0, axis=1))
+        if not len(steps):
+            return shapely.convex_hull(shapely.multipoints(self.tool_xy + path[0]))
+        ends = np.stack((path[steps], path[steps + 1]), axis=1)               # (k, 2, 2)
+        corners = ends[:, :, None, :] + self.tool_xy[None, None, :, :]        # (k, 2, m, 2)
+        hulls = shapely.convex_hull(shapely.multipoints(corners.reshape(len(steps), -1, 2)))
+        return shapely.union_all(hulls)
+
+    def _tools_at(self, xy: np.ndarray) -> np.ndarray:
+        return shapely.convex_hull(shapely.multipoints(xy[:, None, :] + self.tool_xy[None, :, :]))
+
+    def _first_entry(self, t: np.ndarray, xy: np.ndarray, move: Move, piece: BaseGeometry,
+                     depth: float) -> tuple[float, tuple[float, float]]:
+        """The time and tool position of the move's first row whose tool reaches into ``piece`` (the chip, or
+        what of a forbidden region it entered) by more than TOUCH: when it went in (the row before the move
+        included)."""
+        a = max(move.start - 1, 0)
+        deep = piece.buffer(-min(TOUCH, depth / 4.0)) if depth > 0 else piece
+        if deep.is_empty:
+            deep = piece
+        shapely.prepare(deep)
+        hits = np.flatnonzero(shapely.intersects(deep, self._tools_at(xy[a:move.stop])))
+        i = a + (int(hits[0]) if len(hits) else move.stop - 1 - a)
+        return float(t[i]), (float(xy[i, 0]), float(xy[i, 1]))
+
+    def _crash(self, t: np.ndarray, xy: np.ndarray, move: Move, what: str, piece: BaseGeometry,
+               depth: float) -> None:
+        if what in self._reported:           # a move going on from the chunk before: reported there, deeper now?
+            k = self._reported[what]
+            if k is not None and depth > self.crashes[k].depth_mm:
+                self.crashes[k] = replace(self.crashes[k], depth_mm=depth)
+            return
+        self.crash_count += 1
+        self._reported[what] = None
+        if len(self.crashes) < MAX_CRASHES:
+            when, at = self._first_entry(t, xy, move, piece, depth)
+            self._reported[what] = len(self.crashes)
+            self.crashes.append(Crash(when, move.line, what, depth, at))
+
+    def _move(self, t: np.ndarray, xy: np.ndarray, move: Move) -> None:
+        path = xy[max(move.start - 1, 0):move.stop]
+        swept = self._swept(path)
+        for f in self.forbidden:
+            if shapely.intersects(f.region, swept):
+                inside = swept.intersection(f.region)
+                depth, _ = depth_in(inside, f.region.boundary)
+                if depth > f.threshold:
+                    self._crash(t, xy, move, f.what, inside, depth)
+        if self.stock.is_empty or not self.stock.intersects(swept):
+            return
+        # what of the stock the tool passed through: an area (the chip), or a line where a point moved in X only
+        inside = self.stock.intersection(swept)
+        depth, _ = depth_in(inside, self._outline_before)
+        if move.rapid and depth > TOUCH:
+            self._crash(t, xy, move, "rapid into the stock", inside, depth)
+        elif not move.rapid:
+            self.deepest_cut = max(self.deepest_cut, depth)
+            if depth > self.max_depth + TOUCH:
+                self._crash(t, xy, move, f"cut deeper than the tool's max_depth {self.max_depth:g} mm", inside,
+                            depth)
+        chip = _areal(inside)
+        if chip.is_empty:
+            return
+        self.removed_area += chip.area
+        self.stock = _areal(self.stock.difference(swept).simplify(RESOLUTION / 5, preserve_topology=True))
+
+    # -- the part ---------------------------------------------------------------------------------------
+    def part(self, anchor: BaseGeometry) -> BaseGeometry:
+        """The piece of the stock left that holds most of ``anchor`` (the chuck's end of a bar, the finished
+        contour of a plate): what is cut off elsewhere is not the part. Walls thinner than ``2 * SLIVER`` are
+        not part of it: where two cuts met a hair apart (a pass ending a micrometre short of the face the next
+        one cuts), a point tool's path leaves a wall no real tool would; the opening that removes them keeps
+        every other edge and corner where it is (square joins)."""
+        stock = self.stock.buffer(-SLIVER, join_style="mitre", mitre_limit=1e3)
+        stock = _areal(stock.buffer(SLIVER, join_style="mitre", mitre_limit=1e3))
+        pieces = list(shapely.get_parts(stock))
+        if not pieces:
+            return Polygon()
+        return max(pieces, key=lambda p: (p.intersection(anchor).area, p.area))
+
+
+@dataclass(frozen=True)
+class Deviation:
+    """The part made against the programmed part: the largest excess (material left outside the programmed
+    outline, mm) and the largest gouge (material missing inside it, mm), each with where (None: none)."""
+
+    left: float
+    left_at: tuple[float, float] | None
+    gouge: float
+    gouge_at: tuple[float, float] | None
+
+
+def deviation(made: BaseGeometry, programmed: BaseGeometry) -> Deviation:
+    """How far the part ``made`` departs from the ``programmed`` part, both polygons of the same plane."""
+    outline = programmed.boundary
+    left, left_at = depth_in(_areal(made.difference(programmed)), outline)
+    gouge, gouge_at = depth_in(_areal(programmed.difference(made)), outline)
+    return Deviation(left, left_at if left > 0 else None, gouge, gouge_at if gouge > 0 else None)

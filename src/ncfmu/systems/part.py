@@ -1,0 +1,432 @@
+"""The part check of a run: did it crash, and is the part it made within tolerance of the programmed part.
+
+A report part (:class:`LathePart`, :class:`MillPart`) like the others of :mod:`.report`: its accumulator reads
+the recorded rows chunk by chunk -- the servo axes' *actual* positions, the controller's program line and
+whether the move is at rapid -- and feeds them to the material-removal engine (:mod:`ncfmu.machining`), which
+keeps the stock left and the crashes, never the trajectory. Everything it needs besides comes from the run's
+parameters: the bar stock (``seq.stock_diameter``, ``seq.stock_length``, ``seq.stock_face_z``) and the chuck
+jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``contour.stock_margin`` around the
+contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
+profile or the outline its registers define (the deepest pass of each block), the mill's closed contour.
+
+The tool's nose radius and deepest cut come from :class:`PartSettings` (the tool table's, when there is one):
+0 is a sharp point, ``max_depth`` unlimited unless given. The verdict (:class:`PartVerdict`) is judged at the
+end of the run: crashes (time, program line, what, depth), the largest excess and gouge against the programmed
+part with where and which program line, and whether the part is within ``tolerance``. A part whose cycle did
+not finish is not judged (its crashes still count).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..controllers.base import POSITION_LIMIT
+from ..machining import Crash, Deviation, MaterialRemoval, deviation, lathe_tool, mill_cutter
+from ..machining.removal import Forbidden
+from ..ports import to_float, to_int
+from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
+
+#: The default tolerance of the part against the programmed part (mm): ``--tolerance``.
+TOLERANCE = 0.01
+#: How many crash lines a summary prints (the JSON keeps up to the engine's MAX_CRASHES).
+CRASH_LINES = 5
+#: Far enough for any machine (mm): the extent of the open sides of regions.
+FAR = 1e4
+#: Spacing of the points along a programmed profile's arcs (mm): chords within 0.1 um of an arc of 1 mm radius.
+ARC_SPACING = 0.02
+
+
+@dataclass(frozen=True)
+class PartSettings:
+    """How the part is judged: ``tolerance`` (mm), and the lathe tool's ``nose_radius`` (mm, 0: a point) and
+    ``max_depth`` (mm, the deepest radial engagement it may take; inf: no limit). None: the tool table's
+    (``seq.tool[k].nose_radius``, ``seq.tool[k].max_depth`` of the offset the program's first T word names), else
+    0 and no limit."""
+
+    tolerance: float = TOLERANCE
+    nose_radius: float | None = None
+    max_depth: float | None = None
+
+
+def first_tool_offset(program: str) -> int:
+    """The offset row (1-based) of a lathe program's first T word (``T0101``: tool 1, offset 1); 0: none."""
+    import re
+    for raw in program.splitlines():
+        text = re.sub(r"\([^)]*\)", " ", raw.split(";")[0])
+        found = re.search(r"[Tt]\s*(\d+)", text)
+        if found:
+            digits = found.group(1)
+            return int(digits[-2:]) if len(digits) >= 3 else int(digits)
+    return 0
+
+
+@dataclass
+class PartVerdict:
+    """What the part check says about a run (``OUT/<system>.part.json``, ``result.part`` in the pytest plugin)."""
+
+    crashes: list[Crash]
+    crash_count: int
+    tolerance_mm: float
+    judged: str                           # "" when judged, else why not ("the cycle did not finish", ...)
+    max_left_mm: float = math.nan
+    max_gouge_mm: float = math.nan
+    left_at: tuple[float, float] | None = None
+    gouge_at: tuple[float, float] | None = None
+    left_line: int = 0
+    gouge_line: int = 0
+    axes: tuple[str, str] = ("u", "v")    # the names of the plane's coordinates (Z, X or X, Y)
+    made: Any = field(default=None, repr=False)          # the part as made (a shapely geometry), for the plot
+    programmed: Any = field(default=None, repr=False)    # the programmed part
+
+    @property
+    def crashed(self) -> bool:
+        return self.crash_count > 0
+
+    @property
+    def within_tolerance(self) -> bool | None:
+        """False on a crash or a part out of tolerance; None when the part was not judged (and nothing crashed)."""
+        if self.crashed:
+            return False
+        if self.judged:
+            return None
+        return self.max_left_mm <= self.tolerance_mm and self.max_gouge_mm <= self.tolerance_mm
+
+    def as_json(self) -> dict[str, object]:
+        def number(v: float) -> float | None:
+            return None if math.isnan(v) else v
+
+        return {"crashes": [c.as_dict() for c in self.crashes], "crash_count": self.crash_count,
+                "max_left_mm": number(self.max_left_mm), "max_gouge_mm": number(self.max_gouge_mm),
+                "tolerance_mm": self.tolerance_mm, "within_tolerance": self.within_tolerance,
+                "left_at": self._where(self.left_at, self.left_line),
+                "gouge_at": self._where(self.gouge_at, self.gouge_line), "not_judged": self.judged or None}
+
+    def _where(self, at: tuple[float, float] | None, line: int) -> dict[str, object] | None:
+        if at is None:
+            return None
+        return {self.axes[0]: at[0], self.axes[1]: at[1], "line": line}
+
+    def _place(self, at: tuple[float, float] | None, line: int) -> str:
+        if at is None:
+            return ""
+        return (f" at {self.axes[0]} {at[0]:.3f} {self.axes[1]} {at[1]:.3f}"
+                + (f" (line {line})" if line else ""))
+
+    def summary(self) -> list[str]:
+        lines = [f"  part: CRASH at t = {c.t:.3f} s, line {c.line}: {c.what}, {c.depth_mm:.3g} mm deep"
+                 for c in self.crashes[:CRASH_LINES]]
+        if self.crash_count > CRASH_LINES:
+            lines.append(f"  part: ... {self.crash_count - CRASH_LINES} more crashes (OUT/<system>.part.json)")
+        tol = f"{self.tolerance_mm:.4f} mm"
+        if self.judged:
+            lines.append(f"  part: not judged: {self.judged}")
+        elif self.max_left_mm <= self.tolerance_mm and self.max_gouge_mm <= self.tolerance_mm:
+            lines.append(f"  part: within {tol}: left <= {self.max_left_mm:.4f} mm, "
+                         f"gouge <= {self.max_gouge_mm:.4f} mm")
+        else:
+            left = (f"left {self.max_left_mm:.4f} mm{self._place(self.left_at, self.left_line)}"
+                    if self.max_left_mm > self.tolerance_mm else f"left <= {self.max_left_mm:.4f} mm")
+            gouge = (f"gouge {self.max_gouge_mm:.4f} mm{self._place(self.gouge_at, self.gouge_line)}"
+                     if self.max_gouge_mm > self.tolerance_mm else f"gouge <= {self.max_gouge_mm:.4f} mm")
+            lines.append(f"  part: OUT OF TOLERANCE {tol}: {left}, {gouge}")
+        return lines
+
+    def metrics(self) -> dict[str, float]:
+        within = self.within_tolerance
+        return {"part_crashes": float(self.crash_count), "max_left_mm": self.max_left_mm,
+                "max_gouge_mm": self.max_gouge_mm,
+                "within_tolerance": math.nan if within is None else float(within)}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What the engine and the verdict need, from a run's parameters."""
+
+    removal: MaterialRemoval
+    programmed: Any                       # the programmed part (a shapely polygon), None: nothing to judge against
+    anchor: Any                           # what of the stock is the part (the chuck's end, the contour)
+    lines: list[tuple[Any, int]]          # (shapely geometry of a programmed element, its program line)
+    why_not: str = ""                     # why the part cannot be judged at all
+    rapid_lines: tuple[int, ...] | None = None     # the program lines at rapid, when no output says so
+
+
+class _PartCheckAccumulator(PartAccumulator):
+    """Feeds the engine chunk by chunk; judges the part when asked (and again only after more rows)."""
+
+    part: MachinedPart
+
+    def __init__(self, part: MachinedPart, parameters: Parameters) -> None:
+        super().__init__(part)
+        self.setup = part.setup(parameters)
+        self.done = FirstTime()
+        self._verdict: PartVerdict | None = None
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        p = self.part
+        u, v = p.plane_columns()
+        line = rows[p.line_column()]
+        rapid = (rows[p.rapid_column()] if self.setup.rapid_lines is None
+                 else np.isin(line, np.array(self.setup.rapid_lines, dtype=np.int64)))
+        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line)
+        self.done.write(rows["time"], rows[p.done_column()])
+        self._verdict = None
+
+    def verdict(self) -> PartVerdict:
+        if self._verdict is None:
+            self._verdict = self.part.judge(self.setup, finished=not math.isnan(self.done.value))
+        return self._verdict
+
+    def summary(self) -> list[str]:
+        return self.verdict().summary()
+
+    def metrics(self) -> dict[str, float]:
+        return self.verdict().metrics()
+
+
+class MachinedPart(Part):
+    """The part check's share of a report (the lathe's and the mill's are below)."""
+
+    settings: PartSettings
+    axes: tuple[str, str]
+
+    def plane_columns(self) -> tuple[str, str]:
+        raise NotImplementedError
+
+    def line_column(self) -> str:
+        raise NotImplementedError
+
+    def done_column(self) -> str:
+        raise NotImplementedError
+
+    def rapid_column(self) -> str:
+        """The output that says the move is at rapid (a part without one gives its Setup's rapid_lines)."""
+        raise NotImplementedError
+
+    def setup(self, parameters: Parameters) -> Setup:
+        raise NotImplementedError
+
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _PartCheckAccumulator(self, parameters)
+
+    def judge(self, setup: Setup, finished: bool) -> PartVerdict:
+        m = setup.removal
+        verdict = PartVerdict(list(m.crashes), m.crash_count, self.settings.tolerance, "", axes=self.axes)
+        if setup.programmed is None:
+            verdict.judged = setup.why_not or "no programmed part to judge against"
+            return verdict
+        made = m.part(setup.anchor)
+        verdict.made, verdict.programmed = made, setup.programmed
+        if not finished:
+            verdict.judged = "the cycle did not finish"
+            return verdict
+        d: Deviation = deviation(made, setup.programmed)
+        verdict.max_left_mm, verdict.max_gouge_mm = d.left, d.gouge
+        verdict.left_at, verdict.gouge_at = d.left_at, d.gouge_at
+        verdict.left_line, verdict.gouge_line = _line_at(setup, d.left_at), _line_at(setup, d.gouge_at)
+        return verdict
+
+
+def _line_at(setup: Setup, at: tuple[float, float] | None) -> int:
+    """The program line of the programmed element nearest to ``at`` (0: none)."""
+    if at is None or not setup.lines:
+        return 0
+    import shapely
+    point = shapely.Point(at)
+    return min(setup.lines, key=lambda gl: gl[0].distance(point))[1]
+
+
+def _elements_polyline(elements) -> list[tuple[float, float]]:
+    from ..controllers.geometry import sample
+    return [(float(a), float(b)) for a, b in sample(list(elements), ARC_SPACING)]
+
+
+@dataclass(frozen=True)
+class LathePart(MachinedPart):
+    """A CutSequencer turning a bar with its radius axis ``x`` and length axis ``z``; the chuck jaws are the
+    ``limiter``'s regions with a lower X bound."""
+
+    seq: str
+    x: str
+    z: str
+    limiter: str | None = None
+    settings: PartSettings = PartSettings()
+    axes: tuple[str, str] = ("Z", "X")
+
+    def variables(self) -> tuple[str, ...]:
+        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos")
+
+    def plane_columns(self) -> tuple[str, str]:
+        return f"{self.z}.pos", f"{self.x}.pos"
+
+    def line_column(self) -> str:
+        return f"{self.seq}.line"
+
+    def done_column(self) -> str:
+        return f"{self.seq}.done"
+
+    def rapid_column(self) -> str:
+        return f"{self.seq}.rapid"
+
+    def setup(self, parameters: Parameters) -> Setup:
+        import shapely
+        from shapely.geometry import LineString, Polygon, box
+
+        from ..controllers.sequencer import CutSequencer
+        seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
+        radius = to_float(seq["stock_diameter"]) / 2.0
+        length = to_float(seq["stock_length"])
+        face = to_float(seq["stock_face_z"])
+        stock = box(face - length, 0.0, face, radius)
+        forbidden = [Forbidden("tool across the spindle axis", box(-FAR, -FAR, FAR, 0.0))]
+        if self.limiter is not None and self.limiter in parameters:
+            lower = -FAR
+            for ref_max, lim_min, _lim_max in table_of(parameters[self.limiter]):
+                top = min(ref_max, FAR)
+                if abs(lim_min) < POSITION_LIMIT and top > lower:
+                    forbidden.append(Forbidden("tool into the chuck jaws", box(lower, -1.0, top, lim_min)))
+                lower = top
+        program = str(seq.get("program") or "")
+        # the tool: its nose and deepest cut as set, else the tool table's row of the program's first T word; the
+        # axes stand at the programmed point plus that row's offsets, so the tool's tip is there less them
+        k = first_tool_offset(program) if program.strip() else 0
+        row = f"tool[{k}]."
+        has_row = row + "nose_radius" in seq
+        nose = self.settings.nose_radius
+        if nose is None:
+            nose = to_float(seq[row + "nose_radius"]) if has_row else 0.0
+        depth_limit = self.settings.max_depth
+        if depth_limit is None:
+            depth_limit = to_float(seq[row + "max_depth"]) if has_row else 0.0
+            depth_limit = depth_limit if depth_limit > 0 else math.inf
+        shift = np.array([to_float(seq[row + "z_offset"]), to_float(seq[row + "x_offset"])]) if has_row else 0.0
+        removal = MaterialRemoval(stock, lathe_tool(nose) - shift, forbidden, depth_limit)
+        anchor = box(face - length, 0.0, face - length + min(1.0, length), radius)
+        removed: list[Any] = []
+        lines: list[tuple[Any, int]] = []
+        if program.strip():
+            from ..controllers.lathe_program import Finish, Rough, parse
+            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])))
+            profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
+            if not profiles:
+                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against")
+            for profile in profiles.values():
+                outline = _elements_polyline(profile.elements)
+                (za, _), (ze, _) = outline[0], outline[-1]
+                removed.append(Polygon([*outline, (ze, FAR), (za, FAR)]).buffer(0))
+                lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
+        else:
+            stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
+            for k in range(1, to_int(seq["n_blocks"]) + 1):
+                b = f"block[{k}]."
+                if seq.get(b + "own_stp"):
+                    stp = (to_float(seq[b + "x_stp"]), to_float(seq[b + "z_stp"]))
+                x0, z0 = stp
+                depth = to_float(seq[b + "Xf"]) + to_int(seq[b + "N"]) * to_float(seq[b + "Xd"])
+                xp, zp = to_float(seq[b + "Xp"]), to_float(seq[b + "Zp"])
+                # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
+                removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
+        programmed = stock.difference(shapely.union_all(removed))
+        return Setup(removal, programmed, anchor, lines)
+
+
+@dataclass(frozen=True)
+class MillPart(MachinedPart):
+    """A ContourInterpolator milling around a closed contour with the axes ``x`` and ``y``: the contour is the
+    part's outline (milled outside); the cutter's radius is the compensation's."""
+
+    contour: str
+    x: str
+    y: str
+    settings: PartSettings = PartSettings()
+    axes: tuple[str, str] = ("X", "Y")
+
+    def variables(self) -> tuple[str, ...]:
+        return (*(f"{self.contour}.{v}" for v in ("segment", "done")), f"{self.x}.pos", f"{self.y}.pos")
+
+    def plane_columns(self) -> tuple[str, str]:
+        return f"{self.x}.pos", f"{self.y}.pos"
+
+    def line_column(self) -> str:
+        return f"{self.contour}.segment"
+
+    def done_column(self) -> str:
+        return f"{self.contour}.done"
+
+    def setup(self, parameters: Parameters) -> Setup:
+        import shapely
+        from shapely.geometry import LineString, Polygon, box
+
+        from ..controllers.contour import ContourInterpolator
+        values = {**ContourInterpolator.default_parameters(), **parameters.get(self.contour, {})}
+        c = ContourInterpolator(**values)
+        margin = to_float(values["stock_margin"])
+        cutter = mill_cutter(abs(c.diameter_delta) / 2.0)
+        rapid_lines: list[int] = []
+        if c.program.strip():
+            from ..controllers import rs274
+            moves = rs274.parse(c.program, (c.x_start, c.y_start))
+            rapid_lines = sorted({m.line for m in moves if m.rapid})
+            chain = [m for m in moves if m.comp_before != 0 and m.comp_after != 0]
+            elements, labels = [m.element for m in chain], [m.line for m in chain]
+        else:
+            elements, labels = list(c.contour), list(range(1, len(c.contour) + 1))
+        outline = _elements_polyline(elements) if elements else []
+        closed = len(outline) > 3 and math.dist(outline[0], outline[-1]) < 1e-6
+        part = Polygon(outline).buffer(0) if closed else None
+        if part is None or part.is_empty:
+            xs = [p[0] for p in outline] or [c.x_start]
+            ys = [p[1] for p in outline] or [c.y_start]
+            plate = box(min(xs) - margin, min(ys) - margin, max(xs) + margin, max(ys) + margin)
+            return Setup(MaterialRemoval(plate, cutter), None, plate, [], "the contour is not closed: no part outline",
+                         tuple(rapid_lines))
+        x0, y0, x1, y1 = part.bounds
+        plate = box(x0 - margin, y0 - margin, x1 + margin, y1 + margin)
+        gouge = Forbidden("cutter into the part's finished contour (gouge)", part, self.settings.tolerance)
+        lines = [(LineString(_elements_polyline([e])), line) for e, line in zip(elements, labels)]
+        shapely.prepare(part)
+        return Setup(MaterialRemoval(plate, cutter, [gouge]), part, part, lines, "", tuple(rapid_lines))
+
+
+def with_part_settings(report: Report, settings: PartSettings) -> Report:
+    """``report`` with its part check judging by ``settings``."""
+    parts = tuple(replace(p, settings=settings) if isinstance(p, (LathePart, MillPart)) else p for p in report.parts)
+    return replace(report, parts=parts)
+
+
+def without_part_check(report: Report) -> Report:
+    """``report`` without its part check (``--no-part-check``; the benchmark's other side)."""
+    return replace(report, parts=tuple(p for p in report.parts if not isinstance(p, MachinedPart)))
+
+
+def verdict_of(accumulator: ReportAccumulator) -> PartVerdict | None:
+    """The part check's verdict of a run summarised as it went (None: the report has no part check)."""
+    for acc in accumulator.parts:
+        if isinstance(acc, _PartCheckAccumulator):
+            return acc.verdict()
+    return None
+
+
+def crashes_so_far(accumulator: ReportAccumulator) -> list[Crash]:
+    """The crashes a run fed to ``accumulator`` has had up to its last row, without judging the part: what a
+    live server publishes as they happen (``ncfmu serve``'s crash node and event read this after every chunk;
+    the list only grows, up to the engine's MAX_CRASHES records)."""
+    for acc in accumulator.parts:
+        if isinstance(acc, _PartCheckAccumulator):
+            return list(acc.setup.removal.crashes)
+    return []
+
+
+def verdict_of_result(report: Report, result, parameters: Parameters) -> PartVerdict | None:
+    """The part check's verdict of a whole in-memory run."""
+    if not any(isinstance(p, MachinedPart) for p in report.parts) or not len(result.data):
+        return None
+    acc = report.accumulator(parameters)
+    acc.open(columns_of(result.data))
+    acc.write(result.data)
+    acc.close(True, float(result.time[-1]))
+    return verdict_of(acc)
