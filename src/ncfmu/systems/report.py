@@ -224,7 +224,27 @@ class LatheCycle(Part):
         return f"{self.seq}.alarm"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
-        return _LatheAccumulator(self)
+        return _LatheAccumulator(self, self.x_written(parameters))
+
+    def x_written(self, parameters: Parameters) -> str | None:
+        """How the run's part program writes X: "diameter", "radius", "diameter and radius" (G7 and G8 both), or
+        None for a run of the registers (radii): its G7/G8 words outside comments, else seq.x_diameter. The axis
+        and the summary's X are radii either way."""
+        import re
+
+        from ..controllers.sequencer import CutSequencer
+        seq = parameters.get(self.seq, {})
+        program = str(seq.get("program") or "")
+        if not program.strip():
+            return None
+        words = re.findall(r"(?i)G0*([78])(?![\d.])", re.sub(r"\([^)]*\)", "", program))
+        if words:
+            modes = {"7": "diameter", "8": "radius"}
+            return " and ".join(dict.fromkeys(modes[w] for w in sorted(words)))
+        diameter = seq.get("x_diameter", CutSequencer.default_parameters().get("x_diameter", False))
+        if isinstance(diameter, str):
+            diameter = diameter.strip().lower() in ("true", "1")
+        return "diameter" if bool(diameter) else "radius"
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         seq = parameters.get(self.seq, {})
@@ -259,8 +279,9 @@ class _LatheAccumulator(PartAccumulator):
 
     part: LatheCycle
 
-    def __init__(self, part: LatheCycle) -> None:
+    def __init__(self, part: LatheCycle, x_written: str | None = None) -> None:
         super().__init__(part)
+        self.x_written = x_written             # how the part program writes X (None: a run of the registers)
         self.sub: int | None = None            # the sub-cycle of the last row seen
         self.cut_starts: list[float] = []      # X at the start of each cut (one value per cut, not per step)
         self.cut = False                       # any row in SC2
@@ -290,6 +311,12 @@ class _LatheAccumulator(PartAccumulator):
         end = "not finished" if math.isnan(self.done.value) else f"{self.done.value:.3f} s"
         lines.append(f"  cycle done: {end}; tool at X {self.x:.4f}, Z {self.z:.4f} mm; "
                      f"alarm: {'yes' if self.alarmed else 'no'}")
+        if self.x_written and "diameter" in self.x_written:
+            smallest = f"smallest during the cuts {2 * self.x_cut:.4f} mm, " if self.cut else ""
+            lines.append(f"  X above is a radius (the axis); the program writes X as a {self.x_written}; as a "
+                         f"diameter: {smallest}tool at the end {2 * self.x:.4f} mm")
+        elif self.x_written == "radius":
+            lines.append("  X above is a radius, as the program writes it")
         return lines
 
     def metrics(self) -> dict[str, float]:
