@@ -250,6 +250,7 @@ def _run_streamed(args, start_values: dict[str, object]):
                 rows = None
                 if step > 0 and math.isfinite(stop / step):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+                _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
                 # the summary reads every step; the CSV gets the --record columns at the --output-interval (with
@@ -288,7 +289,56 @@ def _run_streamed(args, start_values: dict[str, object]):
     else:
         accumulator = how.summary
     print(_summary(result, accumulator.summary()))
+    if csv_sink.final_path is not None:
+        _write_run_record(csv_sink.final_path, system.name,
+                          result.parameters or start_parameters(system.components, start_values))
     return result, csv_sink.final_path, system, accumulator
+
+
+#: what ``ncfmu run`` keeps beside OUT/SYSTEM.csv for ``ncfmu plot``: the parameters the run applied (a part
+#: program, --set values), which a CSV has no place for
+RUN_RECORD_SUFFIX = ".run.json"
+RUN_RECORD_FORMAT = "ncfmu-run/1"
+
+
+def _run_record_path(csv: Path) -> Path:
+    return csv.with_name(csv.name.removesuffix(".csv") + RUN_RECORD_SUFFIX)
+
+
+def _write_run_record(csv: Path, system: str, parameters) -> Path:
+    """OUT/SYSTEM.run.json beside the run's CSV: its system and the parameters it applied (instance ->
+    variable -> value), so the offline plot draws what ``--plot`` drew (e.g. a part program's profile)."""
+    import json
+
+    def plain(value: object) -> object:
+        return value.item() if hasattr(value, "item") else value      # a numpy scalar: its Python value
+    record = {"format": RUN_RECORD_FORMAT, "system": system, "csv": csv.name,
+              "parameters": {inst: {k: plain(v) for k, v in values.items()} for inst, values in parameters.items()}}
+    path = _run_record_path(csv)
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def _read_run_record(csv: Path, system: str) -> dict[str, dict[str, object]] | None:
+    """The parameters of OUT/SYSTEM.run.json beside ``csv`` when it is that system's run record, else None."""
+    import json
+    path = _run_record_path(csv)
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as err:
+        raise NcfmuError(f"{path}: not a run record of 'ncfmu run' ({err}); delete it to plot without it") from None
+    parameters = record.get("parameters") if isinstance(record, dict) else None
+    if (not isinstance(record, dict) or record.get("format") != RUN_RECORD_FORMAT or not isinstance(parameters, dict)
+            or not all(isinstance(v, dict) for v in parameters.values())):
+        raise NcfmuError(f"{path}: not a run record of 'ncfmu run' (format {RUN_RECORD_FORMAT}, parameters by "
+                         "instance); delete it to plot without it")
+    if record.get("system") != system:
+        return None                       # another system's record (the CSV was renamed or --system differs)
+    return parameters
 
 
 def _where_stopped(sink) -> str:
@@ -310,6 +360,7 @@ def cmd_run(args) -> int:
         out = Path(args.out)
         for i, (variant, result) in enumerate(zip(variants, results)):
             csv = result.to_csv(out / f"{result.system}_branch{i}.csv")
+            _write_run_record(csv, result.system, result.parameters)
             label = ", ".join(f"{k}={v}" for k, v in variant.items()) or "no change"
             print(f"branch {i} from t = {args.branch_at} s ({label}):")
             print(_summary(result))
@@ -435,6 +486,7 @@ def cmd_plot(args) -> int:
                 raise NcfmuError(f"{src}: has none of the signals a {name} plot draws ({', '.join(missing[:4])}, ...): "
                                  "not a result of that system (leave --system out to draw the CSV's own signals)")
             result.system = name
+            result.parameters = _read_run_record(src, name) or {}      # else the system's own parameter sets
             print(plots.plot_result(result, out))
         else:
             result.system = src.stem
@@ -568,7 +620,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--mode", choices=MODES, default=MODES[0], help="master algorithm")
     p.add_argument("--out", default="out", help="folder for SYSTEM.csv (default: out); the rows are streamed to "
                    "SYSTEM.csv.partial and renamed when the run completed (an interrupted run leaves the .partial: "
-                   "a valid CSV of every row up to where it stopped)")
+                   "a valid CSV of every row up to where it stopped); a completed run also writes "
+                   "SYSTEM.run.json, the parameters it applied, which 'ncfmu plot' reads")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs written to SYSTEM.csv, INSTANCE.VARIABLE (default: every output)")
     p.add_argument("--output-interval", type=_real_option, default=None, metavar="S",
@@ -632,8 +685,10 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
                        description="A known system's CSV gets its plot (positions, following errors, the path with "
-                                   "its envelope or contour); any other result CSV in fmpy's layout (a single FMU "
-                                   "run by fmpy, another tool's) its recorded signals over time.")
+                                   "its envelope or contour), with the parameters of its run from SYSTEM.run.json "
+                                   "beside it when 'ncfmu run' left one there (a part program's profile, --set "
+                                   "values), else the system's own; any other result CSV in fmpy's layout (a single "
+                                   "FMU run by fmpy, another tool's) its recorded signals over time.")
     p.add_argument("file", help="OUT/SYSTEM.csv from 'ncfmu run', a CSV fmpy wrote, or OUT/summary.csv from "
                                 "'ncfmu sweep'")
     p.add_argument("--system", default=None, help="system the CSV came from (default: from the file name; a CSV "

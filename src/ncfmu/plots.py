@@ -28,6 +28,18 @@ def _plt():
 def plot_result(result, path: Path) -> Path:
     """Plot a run: positions, following errors and, for a system with a machine plane, the path in it with
     the envelope or the contour of the parameters the run used (see :func:`ncfmu.systems.run_parameters`)."""
+    plt = _plt()
+    fig = result_figure(result)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def result_figure(result):
+    """The figure of :func:`plot_result` (a matplotlib Figure): the positions with what the cycle did when (a
+    feed hold, an emergency return), the following errors when they were recorded, the machine plane."""
     from .systems import report_of, run_parameters
     plt = _plt()
     report = report_of(result)
@@ -35,34 +47,37 @@ def plot_result(result, path: Path) -> Path:
     # the plane needs both of its axes' positions (a sweep's --record may have kept fewer)
     has_plane = report.plane is not None and all(f"{a}.pos" in result for a in (report.plane.horizontal,
                                                                                   report.plane.vertical))
-    fig, panels = plt.subplots(3 if has_plane else 2, 1, figsize=(10, 12 if has_plane else 8))
-    ax_pos, ax_err = panels[0], panels[1]
+    # a trajectory recorded without the following errors (a run's or a sweep's --record) gets no panel for them
+    errors = [a for a in axes if f"{a}.following_error" in result]
+    count = 1 + bool(errors) + has_plane
+    fig, panels = plt.subplots(count, 1, figsize=(10, 4 * count), squeeze=False)
+    ax_pos = panels[0, 0]
+    ax_err = panels[1, 0] if errors else None
     t = result.time
     for a in axes:
         line, = ax_pos.plot(t, result[f"{a}.pos"], label=f"{a}.pos (actual)")
-        if f"{a}.following_error" in result:
+        if a in errors:
             ax_pos.plot(t, result[f"{a}.pos"] + result[f"{a}.following_error"], "--", lw=0.8,
                         color=line.get_color(), label=f"{a} command")
+    title = f"{result.system}: axis positions"
+    if not errors:
+        title += " (following errors not recorded: --record " + " ".join(f"{a}.following_error" for a in axes) + ")"
+    ax_pos.set(title=title, xlabel="time [s]", ylabel="position [mm]")
+    report.draw_time(ax_pos, result)
+    if ax_err is not None:
+        for a in errors:
             ax_err.plot(t, result[f"{a}.following_error"] * 1000, label=f"{a}")
-    ax_pos.set(title=f"{result.system}: axis positions", xlabel="time [s]", ylabel="position [mm]")
-    ax_err.set(title="following error (command - actual)", xlabel="time [s]", ylabel="error [µm]")
-    if not ax_err.lines:                      # a trajectory recorded without them (a sweep's --record)
-        ax_err.text(0.5, 0.5, "no following_error recorded", transform=ax_err.transAxes, ha="center",
-                    va="center", color="0.4")
+        ax_err.set(title="following error (command - actual)", xlabel="time [s]", ylabel="error [µm]")
         ax_err.set_xlim(ax_pos.get_xlim())
-        ax_err.set_yticks([])
+        report.draw_time(ax_err, result)
     for ax in (ax_pos, ax_err):
-        if ax.lines:
+        if ax is not None:
             ax.legend(loc="best", fontsize=8)
-        ax.grid(True, alpha=0.3)
+            ax.grid(True, alpha=0.3)
     if has_plane:
-        report.draw_plane(panels[2], result, run_parameters(result))
+        report.draw_plane(panels[-1, 0], result, run_parameters(result))
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def plot_part(verdict, title: str, path: Path) -> Path:

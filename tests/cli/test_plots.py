@@ -202,3 +202,138 @@ def test_roles_and_literals_render_as_their_names():
     text = "see :func:`~ncfmu.servo.model.servo_axis`, :mod:`.rs274`, :meth:`A.b` and ``x < 1``"
     assert _rendered(text, str, lambda n: f"[{n}]") == \
         "see [ncfmu.servo.model.servo_axis()], [rs274], [A.b()] and [x < 1]"
+
+
+# -- the offline plot of a run draws what its --plot drew ------------------------------------------------------
+def _plane_lines(result) -> dict[str, list[np.ndarray]]:
+    """The machine plane's labelled lines of a result's plot (label -> the xy data of each line with it), and
+    its constant lines (a stock outline) under their labels: what the plane panel draws, not its pixels."""
+    import matplotlib.pyplot as plt
+
+    from ncfmu.systems import report_of, run_parameters
+    fig, ax = plt.subplots()
+    report_of(result).draw_plane(ax, result, run_parameters(result))
+    lines: dict[str, list[np.ndarray]] = {}
+    label = ""
+    for line in ax.lines:
+        label = line.get_label() if not line.get_label().startswith("_") else label   # unlabelled: the one before
+        lines.setdefault(label, []).append(np.asarray(line.get_xydata(), dtype=float))
+    plt.close(fig)
+    return lines
+
+
+def _plotted_planes(monkeypatch, argv: list[str]) -> list[dict[str, list[np.ndarray]]]:
+    """Run ``ncfmu`` with ``argv``; the plane lines of every result it plotted."""
+    from ncfmu import plots
+    from ncfmu.cli import main
+    planes: list[dict[str, list[np.ndarray]]] = []
+
+    def plotted(result, path, _plot=plots.plot_result):
+        planes.append(_plane_lines(result))
+        return _plot(result, path)
+    monkeypatch.setattr(plots, "plot_result", plotted)
+    assert main(argv) == 0
+    return planes
+
+
+@pytest.mark.slow
+def test_the_offline_plot_of_a_part_program_run_draws_its_profile_as_plot_did(project, tmp_path, monkeypatch,
+                                                                                capsys):
+    """Before: ``ncfmu plot OUT/lathe_roughing.csv`` read no parameters, so it drew the registers' "stock
+    outline X = 29" of the system's parameter set and no profile, while ``--plot`` drew the program's profile."""
+    from conftest import ROOT
+    program = (ROOT / "docs" / "examples" / "lathe_shaft.ngc").read_text()
+    out = tmp_path / "out"
+    [live] = _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "1", "--out", str(out),
+                                           "--set", f"seq.program={program}", "--plot"])
+    assert (out / "lathe_roughing.run.json").is_file()
+    [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv"), "--png",
+                                              str(tmp_path / "offline.png")])
+    assert offline.keys() == live.keys()
+    assert "profile (finished part)" in offline and not any(k.startswith("stock outline") for k in offline)
+    for label in ("profile (finished part)", "planned moves"):
+        assert len(offline[label]) == len(live[label]) > 0
+        for a, b in zip(offline[label], live[label]):
+            assert np.array_equal(a, b), label
+    # the profile is the program's: the shaft's shoulder at X 27 and its end face at X 14
+    profile = np.concatenate(offline["profile (finished part)"])
+    assert profile[:, 1].min() == pytest.approx(14.0) and 27.0 in profile[:, 1]
+    # the tool path from the CSV is the run's (the CSV keeps the positions to the digit)
+    np.testing.assert_allclose(offline["tool (actual)"][0], live["tool (actual)"][0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_the_offline_plot_draws_the_stock_of_a_runs_set_registers(project, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "out"
+    _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "0.5", "--out", str(out),
+                                  "--set", "seq.block[1].Xf=2.5"])
+    [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv")])
+    assert "stock outline X = 27.5" in offline                # 30 - 2.5 (the system's own: X = 29)
+    # a CSV moved away from its run record is plotted with the system's parameter sets, as before
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    (out / "lathe_roughing.csv").rename(moved / "lathe_roughing.csv")
+    [bare] = _plotted_planes(monkeypatch, ["plot", str(moved / "lathe_roughing.csv")])
+    assert "stock outline X = 29" in bare
+
+
+def test_a_broken_run_record_is_one_line_and_exit_2(tmp_path, capsys):
+    from ncfmu.cli import main
+    csv = tmp_path / "lathe_roughing.csv"
+    csv.write_text("time,x_axis.pos,z_axis.pos\n0,30,2\n0.1,29,2\n")
+    (tmp_path / "lathe_roughing.run.json").write_text("{not json")
+    assert main(["plot", str(csv)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "lathe_roughing.run.json: not a run record" in err
+
+
+# -- the grinder: a feed hold marked; no empty panel for following errors not recorded ---------------------
+def _spans(ax) -> dict[str, tuple[float, float]]:
+    """The shaded time spans of a panel: label -> (first, last) time they cover."""
+    out = {}
+    for coll in ax.collections:
+        xs = np.concatenate([path.vertices[:, 0] for path in coll.get_paths()]) if coll.get_paths() else []
+        if len(xs) and not coll.get_label().startswith("_"):
+            out[coll.get_label()] = (float(np.min(xs)), float(np.max(xs)))
+    return out
+
+
+def test_the_grinder_plot_marks_a_feed_hold(ncfmu_run):
+    """Before: a feed hold left no mark; the flat stretch of X looked like a dwell."""
+    import matplotlib.pyplot as plt
+
+    from ncfmu.plots import result_figure
+    held = ncfmu_run("grinder_feed", start_values={"panel.hold_at": 12.0, "panel.release_at": 15.0})
+    fig = result_figure(held)
+    ax_pos, ax_err = fig.axes
+    spans = _spans(ax_pos)
+    assert list(spans) == ["feed hold: 1 time, 3 s"]
+    start, end = spans["feed hold: 1 time, 3 s"]
+    assert start == pytest.approx(12.0, abs=2e-3) and end == pytest.approx(15.0, abs=2e-3)
+    assert "feed hold: 1 time, 3 s" in [t.get_text() for t in ax_pos.get_legend().get_texts()]
+    assert _spans(ax_err).keys() == spans.keys()                     # the error panel shows it too
+    # what is marked is a hold: the infeed stands still in it (its rough feed runs before and after)
+    t, x = held.time, held["x_axis.pos"]
+    inside = (t > 12.2) & (t < 15.0)
+    assert np.ptp(x[inside]) < 1e-4 and x[(t > 15.5) & (t < 16)].min() > x[inside].max()
+    plt.close(fig)
+    plain = result_figure(ncfmu_run("grinder_feed"))
+    assert all(not _spans(ax) for ax in plain.axes)                  # no hold, no mark
+    plt.close(plain)
+
+
+def test_a_run_recorded_without_following_errors_gets_no_empty_panel(ncfmu_run):
+    """Before: the second panel said "no following_error recorded" and was otherwise empty (a soak recorded with
+    --record to keep it small); now the positions are the figure and the title says what to record."""
+    import matplotlib.pyplot as plt
+    from numpy.lib import recfunctions as rfn
+
+    from ncfmu.cosim.result import Result
+    from ncfmu.plots import result_figure
+    run = ncfmu_run("grinder_feed", start_values={"panel.hold_at": 12.0, "panel.release_at": 15.0})
+    kept = rfn.repack_fields(run.data[["time", "x_axis.pos", "feed.run", "panel.feed_hold"]])
+    fig = result_figure(Result(kept, "grinder_feed"))
+    [ax] = fig.axes
+    assert "following errors not recorded: --record x_axis.following_error" in ax.get_title()
+    assert list(_spans(ax)) == ["feed hold: 1 time, 3 s"]
+    plt.close(fig)

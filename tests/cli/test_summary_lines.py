@@ -66,3 +66,33 @@ def test_an_input_csv_column_that_is_an_output_is_said_in_good_grammar(project, 
     assert main(["run", "lathe_taper", "--stop-time", "0.1", "--input", str(csv_file), "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err == ("ncfmu run: input CSV column 'seq.accel' is a fixed parameter: only inputs and "
                                        "tunable parameters change during a run\n")
+
+
+@pytest.mark.slow
+def test_a_program_in_diameters_gets_its_x_as_diameters_too(project, capsys, tmp_path):
+    """Before: a program written in diameters (G7) got its summary in radii with no word that they were."""
+    from conftest import ROOT
+    pockets = (ROOT / "docs" / "examples" / "lathe_pockets.ngc").read_text()     # G7: X as diameter, X60 Z2
+    assert main(["run", "lathe_roughing", "--stop-time", "3", "--set", f"seq.program={pockets}",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    smallest = float(re.search(r"smallest X during the cuts: (\d+\.\d{4}) mm", out)[1])
+    end = re.search(r"tool at X (\d+\.\d{4}),", out)[1]
+    line = _line(out, "X above is a radius")
+    m = re.fullmatch(r"X above is a radius \(the axis\); the program writes X as a diameter; as a diameter: "
+                     r"smallest during the cuts (\d+\.\d{4}) mm, tool at the end (\d+\.\d{4}) mm", line)
+    assert m, line
+    assert float(m[1]) == pytest.approx(2 * smallest, abs=2e-4) and float(m[2]) == pytest.approx(2 * float(end),
+                                                                                                 abs=2e-4)
+    assert 55.0 < float(m[1]) < 60.0           # the first passes of the 60 mm bar, at most 2 x 1.25 mm deep
+
+
+@pytest.mark.slow
+def test_a_program_in_radii_and_a_register_run_say_so(project, capsys, tmp_path):
+    from conftest import ROOT
+    shaft = (ROOT / "docs" / "examples" / "lathe_shaft.ngc").read_text()         # G8: X as radius
+    assert main(["run", "lathe_roughing", "--stop-time", "1", "--set", f"seq.program={shaft}",
+                 "--out", str(tmp_path)]) == 0
+    assert _line(capsys.readouterr().out, "X above") == "X above is a radius, as the program writes it"
+    assert main(["run", "lathe_roughing", "--stop-time", "1", "--out", str(tmp_path)]) == 0
+    assert "X above" not in capsys.readouterr().out                   # the registers: radii, no program

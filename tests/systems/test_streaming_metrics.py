@@ -30,6 +30,9 @@ RUNS = {
     "grinder_envelope": ("grinder_envelope", None, {}),
     "lathe_alarm": ("lathe_roughing", 14.0, {"seq.block[1].Zp": 50.0}),       # the tool runs into the chuck zone
     "grinder_emergency": ("grinder_feed", 13.5, {"panel.emergency_at": 12.0}),  # emergency return mid-cycle
+    # a soak: wear compensation at 0.1 s and parts at 5 and 45 s of every 80 s (README), cut off mid-part
+    "grinder_soak": ("grinder_feed", 170.0, {"panel.repeat_every": 80.0, "panel.wear_start_at": 0.1,
+                                             "panel.start_at": 5.0, "panel.restart_at": 45.0}),
 }
 
 
@@ -90,8 +93,19 @@ def oracle(report, data, parameters) -> tuple[list[str], dict[str, float]]:
             x = data[f"{p.x}.pos"]
             active = data[f"{p.feed}.run"] | data[f"{p.feed}.emergency_active"]
             end = (float(t[np.flatnonzero(active)[-1] + 1]) if active.any() and not active[-1] else float("nan"))
+            run, emergency = data[f"{p.feed}.run"].astype(bool), data[f"{p.feed}.emergency_active"].astype(bool)
+            rises = np.flatnonzero(run & ~np.concatenate(([False], run[:-1])))
+            falls = np.flatnonzero(~run & np.concatenate(([False], run[:-1])))
+            wear = int(parameters.get(p.feed, {}).get("wear_address", 43))
+            part_rises = [i for i in rises if data[f"{p.feed}.pc"][i] != wear]
+            # a part completed: its stretch of RUN ended (the next fall after its rise) without the emergency
+            completed = sum(1 for i in part_rises for f in falls[falls > i][:1] if not emergency[f])
+            emergencies = int(np.count_nonzero(emergency & ~np.concatenate(([False], emergency[:-1]))))
             lines += [f"  deepest X: {x.max():.4f} mm; cycle ended: {_finished(t, end)}; X at the end {x[-1]:.4f} mm; "
-                      f"return counter X {data[f'{p.feed}.return_counter_x'][-1]:.4f} mm", f"  alarm: {yes}"]
+                      f"return counter X {data[f'{p.feed}.return_counter_x'][-1]:.4f} mm",
+                      f"  cycles: {len(part_rises)} parts started (START1), {completed} completed; "
+                      f"{len(rises) - len(part_rises)} wear compensations (START2); {emergencies} emergency returns",
+                      f"  alarm: {yes}"]
             metrics["deepest_x_mm"] = float(x.max())
             metrics["cycle_time_s"] = end
             finished &= not math.isnan(end)
@@ -221,3 +235,16 @@ def test_any_rows_stream_as_they_summarise_whole(runs, system):
         got_lines, got = streamed(report, data, parameters, rng, largest=50)
         assert got_lines == lines
         assert same(got, metrics)
+
+
+def test_the_soak_summary_counts_its_parts_and_wear_cycles(runs):
+    """Before: a soak's summary said only how its last cycle ended ("not finished"), not how many ran."""
+    from ncfmu.systems import report_of
+    soak = runs("grinder_soak")
+    lines = report_of(soak).summary(soak, run_parameters(soak))
+    # parts start at 5, 45, 85, 125 and 165 s (the last one still grinding at 170 s); wear at 0.1, 80.1, 160.1 s
+    assert ("  cycles: 5 parts started (START1), 4 completed; 3 wear compensations (START2); 0 emergency returns"
+            in lines)
+    emergency = runs("grinder_emergency")
+    assert ("  cycles: 1 parts started (START1), 0 completed; 0 wear compensations (START2); 1 emergency returns"
+            in report_of(emergency).summary(emergency, run_parameters(emergency)))

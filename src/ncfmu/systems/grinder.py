@@ -21,9 +21,9 @@ GRINDER_TABLE = [(200.0, -100.0, 250.0),    # dresser
 ENVELOPE_PROGRAM = ("M0: Y+D1F7; M1: X+D2F7; M2: X+D3F1; M3: T1; M4: X-D4F7; M5: Y-D1F7; M6: END; "
                     "M41: XF7S1; M42: YF7S1; M43: END; M45: X+D5F2S4; M46: END")
 
-FEED_REPORT = Report((FeedCycle(feed="feed", x="x_axis"), Axes(("x_axis",))))
+FEED_REPORT = Report((FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"), Axes(("x_axis",))))
 ENVELOPE_REPORT = Report(
-    (FeedCycle(feed="feed", x="x_axis"),
+    (FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"),
      Envelope(limiter="limiter", ref="y_axis", lim="x_axis", region_names=("dresser", "headstock", "work",
                                                                             "tailstock")),
      Axes(("x_axis", "y_axis"))),

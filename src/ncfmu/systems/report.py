@@ -159,6 +159,9 @@ class Part:
     def draw(self, ax, result, parameters: Parameters) -> None:
         """Add to the machine-plane panel (path, envelope, contour)."""
 
+    def draw_time(self, ax, result) -> None:
+        """Mark on a panel over time what the part did when (a feed hold, an emergency return)."""
+
 
 @dataclass(frozen=True)
 class Axes(Part):
@@ -221,7 +224,27 @@ class LatheCycle(Part):
         return f"{self.seq}.alarm"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
-        return _LatheAccumulator(self)
+        return _LatheAccumulator(self, self.x_written(parameters))
+
+    def x_written(self, parameters: Parameters) -> str | None:
+        """How the run's part program writes X: "diameter", "radius", "diameter and radius" (G7 and G8 both), or
+        None for a run of the registers (radii): its G7/G8 words outside comments, else seq.x_diameter. The axis
+        and the summary's X are radii either way."""
+        import re
+
+        from ..controllers.sequencer import CutSequencer
+        seq = parameters.get(self.seq, {})
+        program = str(seq.get("program") or "")
+        if not program.strip():
+            return None
+        words = re.findall(r"(?i)G0*([78])(?![\d.])", re.sub(r"\([^)]*\)", "", program))
+        if words:
+            modes = {"7": "diameter", "8": "radius"}
+            return " and ".join(dict.fromkeys(modes[w] for w in sorted(words)))
+        diameter = seq.get("x_diameter", CutSequencer.default_parameters().get("x_diameter", False))
+        if isinstance(diameter, str):
+            diameter = diameter.strip().lower() in ("true", "1")
+        return "diameter" if bool(diameter) else "radius"
 
     def draw(self, ax, result, parameters: Parameters) -> None:
         seq = parameters.get(self.seq, {})
@@ -256,8 +279,9 @@ class _LatheAccumulator(PartAccumulator):
 
     part: LatheCycle
 
-    def __init__(self, part: LatheCycle) -> None:
+    def __init__(self, part: LatheCycle, x_written: str | None = None) -> None:
         super().__init__(part)
+        self.x_written = x_written             # how the part program writes X (None: a run of the registers)
         self.sub: int | None = None            # the sub-cycle of the last row seen
         self.cut_starts: list[float] = []      # X at the start of each cut (one value per cut, not per step)
         self.cut = False                       # any row in SC2
@@ -287,6 +311,12 @@ class _LatheAccumulator(PartAccumulator):
         end = "not finished" if math.isnan(self.done.value) else f"{self.done.value:.3f} s"
         lines.append(f"  cycle done: {end}; tool at X {self.x:.4f}, Z {self.z:.4f} mm; "
                      f"alarm: {'yes' if self.alarmed else 'no'}")
+        if self.x_written and "diameter" in self.x_written:
+            smallest = f"smallest during the cuts {2 * self.x_cut:.4f} mm, " if self.cut else ""
+            lines.append(f"  X above is a radius (the axis); the program writes X as a {self.x_written}; as a "
+                         f"diameter: {smallest}tool at the end {2 * self.x:.4f} mm")
+        elif self.x_written == "radius":
+            lines.append("  X above is a radius, as the program writes it")
         return lines
 
     def metrics(self) -> dict[str, float]:
@@ -303,6 +333,7 @@ class FeedCycle(Part):
 
     feed: str
     x: str
+    hold: str = ""      # the variable wired to the feed's feed_hold input (a panel's switch), marked in the plot
 
     def variables(self) -> tuple[str, ...]:
         return (*(f"{self.feed}.{v}" for v in ("pc", "run", "emergency_active", "alarm", "return_counter_x")),
@@ -313,7 +344,29 @@ class FeedCycle(Part):
         return f"{self.feed}.alarm"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
-        return _FeedAccumulator(self)
+        from ..controllers.feed import ProgrammableFeed
+        default = ProgrammableFeed.default_parameters()["wear_address"]
+        return _FeedAccumulator(self, to_int(parameters.get(self.feed, {}).get("wear_address", default)))
+
+    def draw_time(self, ax, result) -> None:
+        """Shade the stretches of feed hold (while a cycle ran: it holds nothing else) and of the emergency
+        return, with how many and how long in the legend; a variable not recorded marks nothing."""
+        t = result.time
+        run = result[f"{self.feed}.run"].astype(bool) if f"{self.feed}.run" in result else np.ones(len(t), bool)
+        spans = []
+        if self.hold and self.hold in result:
+            spans.append(("feed hold", "tab:orange", result[self.hold].astype(bool) & run))
+        if f"{self.feed}.emergency_active" in result:
+            spans.append(("emergency return", "tab:red", result[f"{self.feed}.emergency_active"].astype(bool)))
+        for what, colour, on in spans:
+            if not on.any():
+                continue
+            starts = int(np.count_nonzero(on & ~np.concatenate(([False], on[:-1]))))
+            # a row stands for the time to the next one (the last row for none)
+            held = float(np.sum(np.diff(t)[on[:-1]]))
+            ax.fill_between(t, 0, 1, where=on, step="post", color=colour, alpha=0.2, lw=0,
+                            transform=ax.get_xaxis_transform(),
+                            label=f"{what}: {starts} time{'s' if starts != 1 else ''}, {held:.3g} s")
 
 
 
@@ -323,24 +376,45 @@ class _FeedAccumulator(PartAccumulator):
 
     part: FeedCycle
 
-    def __init__(self, part: FeedCycle) -> None:
+    def __init__(self, part: FeedCycle, wear_address: int) -> None:
         super().__init__(part)
         self.deepest = -math.inf
         self.ended = EndOfActivity()
         self.x = self.counter = math.nan       # the last row's X and return counter
+        # the cycles RUN ran (a soak's panel.repeat_every runs many): a stretch of RUN entered at the wear
+        # address is a wear compensation (START2), any other a part (START1); a part stretch that ends without
+        # the emergency return is a part completed
+        self.wear_address = wear_address
+        self.running = self.emergency = False  # RUN and the emergency return at the last row
+        self.in_part = False                   # the present stretch of RUN is a part's
+        self.parts = self.completed = self.wear_cycles = self.emergencies = 0
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
         p = self.part
         x = rows[f"{p.x}.pos"]
         self.deepest = float(np.maximum(self.deepest, x.max()))
-        self.ended.write(rows["time"], rows[f"{p.feed}.run"] | rows[f"{p.feed}.emergency_active"])
+        run, emergency = rows[f"{p.feed}.run"].astype(bool), rows[f"{p.feed}.emergency_active"].astype(bool)
+        self.ended.write(rows["time"], run | emergency)
         self.x, self.counter = float(x[-1]), float(rows[f"{p.feed}.return_counter_x"][-1])
+        self.emergencies += int(np.count_nonzero(emergency & ~np.concatenate(([self.emergency], emergency[:-1]))))
+        before = np.concatenate(([self.running], run[:-1]))
+        pc = rows[f"{p.feed}.pc"]
+        for i in np.flatnonzero(run != before):          # the edges of RUN: a few per cycle
+            if run[i]:
+                self.in_part = int(pc[i]) != self.wear_address
+                self.parts += self.in_part
+                self.wear_cycles += not self.in_part
+            elif self.in_part and not emergency[i]:
+                self.completed += 1
+        self.running, self.emergency = bool(run[-1]), bool(emergency[-1])
 
     def summary(self) -> list[str]:
         end = "not finished" if math.isnan(self.ended.value) else f"{self.ended.value:.3f} s"
         return [f"  deepest X: {self.deepest:.4f} mm; cycle ended: {end}; "
                 f"X at the end {self.x:.4f} mm; return counter X {self.counter:.4f} mm",
+                f"  cycles: {self.parts} parts started (START1), {self.completed} completed; "
+                f"{self.wear_cycles} wear compensations (START2); {self.emergencies} emergency returns",
                 f"  alarm: {'yes' if self.alarmed else 'no'}"]
 
     def metrics(self) -> dict[str, float]:
@@ -651,6 +725,11 @@ class Report:
 
     def metrics(self, result, parameters: Parameters) -> dict[str, float]:
         return self._fed(result, parameters).metrics(wall_time=result.wall_time)
+
+    def draw_time(self, ax, result) -> None:
+        """Mark on a panel over time what the parts did when (see :meth:`Part.draw_time`)."""
+        for p in self.parts:
+            p.draw_time(ax, result)
 
     def draw_plane(self, ax, result, parameters: Parameters) -> None:
         assert self.plane is not None
