@@ -191,10 +191,8 @@ def sweep_overhead() -> tuple[float, float]:
     """(scheduling overhead, run time) per short variant, s: 48 variants of 2 s of lathe_taper on a started
     1-worker cluster (system already opened on the worker); overhead = elapsed - the variants' own wall time
     (the client's connection and the one scatter of the archive included, spread over the 48)."""
-    from dask.distributed import LocalCluster
-
-    from ncfmu.batch import sweep
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    from ncfmu.batch import local_cluster, sweep
+    with local_cluster(1) as cluster, \
             tempfile.TemporaryDirectory() as tmp:
         address = cluster.scheduler_address
         sweep("lathe_taper", {"seq.block[1].Xd": [0.5]}, Path(tmp) / "warm", scheduler=address, stop_time=2.0,

@@ -70,13 +70,13 @@ SOAK = {"panel.repeat_every": [80.0], "panel.wear_start_at": [0.1], "panel.start
 
 def one(system: str, duration: float, variants: int, workers: int, output_interval: float,
         in_memory: bool = False, soak: bool = False) -> dict:
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
-    from ncfmu.batch import sweep
+    from ncfmu.batch import local_cluster, sweep
     from ncfmu.project import system_archive
     system_archive(system)                       # build what is stale before the clock starts
     values = [round(4.0 - 0.2 * i, 3) for i in range(variants)]
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with local_cluster(workers) as cluster, \
             Client(cluster) as client, tempfile.TemporaryDirectory() as tmp:
         before = {"client": peak_rss_mb(), "workers": list(client.run(peak_rss_mb).values())}
         t0 = time.perf_counter()

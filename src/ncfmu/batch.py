@@ -356,14 +356,25 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     return client
 
 
+def local_cluster(workers: int):
+    """A dask LocalCluster of ``workers`` single-threaded processes on this machine, with no dashboard.
+
+    dask's scheduler serves HTTP (health, metrics) even with the dashboard off, on port 8787 unless told
+    otherwise: a second cluster on the machine (two sweeps, a test run beside a notebook) then warns "Port 8787
+    is already in use". Ours listens on a free port of the loopback instead."""
+    from dask.distributed import LocalCluster
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+
+
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
                  scheduler_file: str | None, connect_timeout: float, record_result: Callable) -> None:
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
     cluster = None
     if scheduler is not None or scheduler_file is not None:
         client = _connect(scheduler, scheduler_file, connect_timeout)
     else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     try:
         shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from .errors import NcfmuError
+from .ports import is_integer_text, parse_integer, parse_real
 
 
 def epilog() -> str:
@@ -42,7 +43,7 @@ def _negative_values(argv: list[str]) -> list[str]:
         previous = out[-1] if out else ""
         if word.startswith("-") and previous.startswith("--") and previous != "--" and "=" not in previous:
             try:
-                float(word)
+                parse_real(word)
             except ValueError:
                 pass
             else:
@@ -85,12 +86,27 @@ def _parse_set(items: list[str]) -> dict[str, object]:
         low = raw.strip().lower()
         if low in ("true", "false"):
             values[name] = low == "true"
-        else:
-            try:
-                values[name] = int(raw) if raw.strip().lstrip("+-").isdigit() else float(raw)
+        else:                             # a number in ASCII decimal, else text (a String's value; a number's
+            try:                          # variable refuses it, naming the rule)
+                values[name] = parse_integer(raw) if is_integer_text(raw) else parse_real(raw)
             except ValueError:
                 values[name] = raw
     return values
+
+
+def _real_option(text: str) -> float:
+    """The value of a numeric option (``--step 1e-3``), by the one parser of numbers written as text."""
+    try:
+        return parse_real(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def _integer_option(text: str) -> int:
+    try:
+        return parse_integer(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _summary(result, report_lines: list[str] | None = None) -> str:
@@ -401,7 +417,8 @@ def cmd_plot(args) -> int:
 
 
 def cmd_vars(args) -> int:
-    """Every parameter and input of a system: kind, type, unit, the system's start value, rule, what drives it."""
+    """Every parameter, input and output of a system: kind, type, unit, the system's start value, rule, what drives
+    an input or what an output feeds."""
     from dataclasses import replace
 
     from .cosim.ssp import read_ssp
@@ -414,7 +431,7 @@ def cmd_vars(args) -> int:
         archive = Path(args.system)
         system = read_ssp(archive)
         described = model_descriptions(archive, system)
-        rows = settable(system, described.__getitem__)
+        rows = settable(system, described.__getitem__, outputs=True)
         # the system opened as a run opens it: what a run refuses, vars refuses; the conversions and warnings
         with OpenSystem(archive) as opened:
             conversions = opened.master.conversions
@@ -424,16 +441,19 @@ def cmd_vars(args) -> int:
                 if (key := tuple(r.name.split(".", 1))) in conversions else r for r in rows]
     else:
         system = get_system(args.system)
-        rows = settable(system)
+        rows = settable(system, outputs=True)
     if args.instance:
         known = [c.name for c in system.components]
         if args.instance not in known:
             raise NcfmuError(f"--instance {args.instance!r}: {system.name} has no such instance "
                              f"(instances: {', '.join(known)})")
         rows = [r for r in rows if r.name.split(".", 1)[0] == args.instance]
-    lines = [f"{system.name}: {len(rows)} parameters and inputs. Set one with --set INSTANCE.VARIABLE=VALUE "
-             "(ncfmu run); tunable parameters and free inputs also with --branch-set, free inputs with --input "
-             "FILE.csv. An input a connection drives cannot be set: set its source. START is the system's value."]
+    n_out = sum(r.kind == "output" for r in rows)
+    lines = [f"{system.name}: {len(rows) - n_out} parameters and inputs, {n_out} outputs. Set one with --set "
+             "INSTANCE.VARIABLE=VALUE (ncfmu run); tunable parameters and free inputs also with --branch-set, free "
+             "inputs with --input FILE.csv. An input a connection drives cannot be set: set its source. START is the "
+             "system's value; a parameter marked unused is one the system's values leave unread (setting it changes "
+             "nothing). Outputs are what --record takes and an OPC UA client reads."]
     header = ("NAME", "KIND", "TYPE", "UNIT", "START", "RULE", "DRIVEN BY", "DESCRIPTION")
     long = 30                        # a longer start value (a program) goes on a line of its own, below
     table = [(r.name, r.kind, r.type, r.unit, r.start if len(r.start) <= long else "(below)", r.rule,
@@ -513,8 +533,8 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
     p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
-    p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
-    p.add_argument("--step", type=float, default=None, help="communication step in s (default 0.001)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--step", type=_real_option, default=None, help="communication step in s (default 0.001)")
     p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
     p.add_argument("--input", type=Path, default=None, help="CSV of input changes (columns time, INSTANCE.VARIABLE)")
@@ -524,11 +544,11 @@ def main(argv: list[str] | None = None) -> int:
                    "a valid CSV of every row up to where it stopped)")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs written to SYSTEM.csv, INSTANCE.VARIABLE (default: every output)")
-    p.add_argument("--output-interval", type=float, default=None, metavar="S",
+    p.add_argument("--output-interval", type=_real_option, default=None, metavar="S",
                    help="write a row every S seconds of simulated time (a whole multiple of the step; default: "
                         "every step)")
     p.add_argument("--plot", action="store_true", help="also write SYSTEM.png (keeps the trajectory in memory)")
-    p.add_argument("--branch-at", type=float, default=None, metavar="T",
+    p.add_argument("--branch-at", type=_real_option, default=None, metavar="T",
                    help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
                    help="tunable parameter or input set at the branch point, one value per branch, "
@@ -552,22 +572,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--vary", action="append", required=True, metavar="INSTANCE.VAR=V1,V2,...",
                    help="values of one parameter (repeat for more: the product is run)")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--workers", type=int, default=2,
+    group.add_argument("--workers", type=_integer_option, default=2,
                        help="worker processes of a local dask cluster (default 2; 0: serial, no dask)")
     group.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="address of a running dask scheduler, e.g. tcp://127.0.0.1:8786")
     group.add_argument("--scheduler-file", default=None, metavar="FILE",
                        help="the scheduler file of a running dask scheduler (dask scheduler --scheduler-file FILE)")
-    p.add_argument("--stop-time", type=float, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
     p.add_argument("--out", required=True, help="folder for summary.csv and variants/")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs kept per variant, INSTANCE.VARIABLE (default: the axes' positions and what the "
                         "summary metrics read)")
-    p.add_argument("--output-interval", type=float, default=None, metavar="S",
+    p.add_argument("--output-interval", type=_real_option, default=None, metavar="S",
                    help="keep every S seconds of the trajectories (a whole multiple of the system's step)")
-    p.add_argument("--timeout", type=float, default=None, metavar="S",
+    p.add_argument("--timeout", type=_real_option, default=None, metavar="S",
                    help="wall-clock seconds a variant may take; over it the variant is recorded as 'timeout'")
-    p.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+    p.add_argument("--connect-timeout", type=_real_option, default=5.0, metavar="S",
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     _replace_options(p)
     p.set_defaults(func=cmd_sweep)
@@ -584,11 +604,13 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser("vars", help="list every parameter and input of a system: unit, start value, rule, "
-                       "description, tunable or fixed, the connection that drives an input",
+                       "description, tunable or fixed, the connection that drives an input; and its outputs",
                        description="Every settable variable of a system (what --set, --branch-set, --vary and "
-                                   "--input take): kind (parameter tunable/fixed, input), type, unit, the start "
-                                   "value the system gives it, its rule, the output a connection drives an input "
-                                   "from, and its description.", epilog=help_epilog)
+                                   "--input take): kind (parameter tunable/fixed, unused where the system's values "
+                                   "leave it unread, input), type, unit, the start value the system gives it, its "
+                                   "rule, the output a connection drives an input from, and its description; then "
+                                   "each instance's outputs (what --record takes) with unit, description and what "
+                                   "they feed.", epilog=help_epilog)
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--instance", default=None, help="only this instance, e.g. panel")
     _replace_options(p)
@@ -605,10 +627,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--endpoint", default="opc.tcp://127.0.0.1:4840/ncfmu",
                    help="where the server listens (default opc.tcp://127.0.0.1:4840/ncfmu; another address than "
                         "the loopback needs --user)")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--speed", type=_real_option, default=1.0,
                    help="simulated seconds per wall-clock second (default 1; 0: as fast as possible)")
-    p.add_argument("--stop-time", type=float, default=None, help="stop at this simulated time (default: never)")
-    p.add_argument("--step", type=float, default=None, help="communication step in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help="stop at this simulated time (default: never)")
+    p.add_argument("--step", type=_real_option, default=None, help="communication step in s (default: the system's)")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs recorded, INSTANCE.VARIABLE (default: every output); needs --out")
     p.add_argument("--out", default=None, help="folder for SYSTEM.csv and session_inputs.csv (the writes, "
@@ -629,7 +651,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cnc", action="store_true",
                    help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
                         "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
-    p.add_argument("--watchdog", type=float, default=None, metavar="S",
+    p.add_argument("--watchdog", type=_real_option, default=None, metavar="S",
                    help="the inputs a client session forced fall back to what drives them when it closes or sends "
                         "nothing for S seconds (logged, and recorded as releases)")
     p.set_defaults(func=cmd_serve)

@@ -8,6 +8,7 @@ modelDescription, the SSP writer uses them for connectors -- nothing else restat
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Literal, SupportsFloat, SupportsIndex, SupportsInt
 
@@ -124,9 +125,9 @@ class Port:
                 return bool(value)
             raise ConfigError(self.name, value, "must be true or false")
         try:
-            x = to_float(value)
+            x = parse_real(value) if isinstance(value, str) else to_float(value)
         except (TypeError, ValueError):
-            raise ConfigError(self.name, value, "must be a number") from None
+            raise ConfigError(self.name, value, NUMBER_RULE if isinstance(value, str) else "must be a number") from None
         if not math.isfinite(x):
             raise ConfigError(self.name, value, "must be finite")
         if self.type == "Integer" and x != int(x):
@@ -144,13 +145,45 @@ class Port:
         return zero[self.type]
 
 
+#: A number as a user writes it, in ASCII only: Python's float() and int() also take any Unicode digit (an
+#: Arabic-Indic five runs as 5), underscores between digits and Unicode spaces around -- none of which a number
+#: on a command line, in an .ssv file or an input CSV is. inf and nan are numbers here: their rule refuses them
+#: with a message naming the variable.
+_REAL = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", re.IGNORECASE)
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+#: The rule of a number written as text, for messages.
+NUMBER_RULE = "must be a number in ASCII decimal (digits 0-9, a '.', an exponent e-3)"
+_ASCII_BLANKS = " \t\r\n"
+
+
+def parse_real(text: str) -> float:
+    """A Real written as text (ASCII decimal, e.g. ``-0.5``, ``1e-3``, ``inf``); ValueError if it is not one."""
+    core = text.strip(_ASCII_BLANKS)
+    if not _REAL.fullmatch(core):
+        raise ValueError(f"{text!r}: {NUMBER_RULE}")
+    return float(core)
+
+
+def parse_integer(text: str) -> int:
+    """An Integer written as text (ASCII digits with an optional sign); ValueError if it is not one."""
+    core = text.strip(_ASCII_BLANKS)
+    if not _INTEGER.fullmatch(core):
+        raise ValueError(f"{text!r}: must be a whole number in ASCII digits 0-9")
+    return int(core)
+
+
+def is_integer_text(text: str) -> bool:
+    """Written as a whole number (``12``, ``-3``), not as a Real (``12.0``, ``1e3``)."""
+    return bool(_INTEGER.fullmatch(text.strip(_ASCII_BLANKS)))
+
+
 def parse_text(fmi_type: str, raw: str) -> Value:
     """An FMI/SSP value written as XML text (a start value, an .ssv parameter) as ``fmi_type``; ValueError if
-    it is not one (Boolean: ``true``/``false``/``1``/``0``; Enumeration as Integer)."""
+    it is not one (numbers in ASCII decimal; Boolean: ``true``/``false``/``1``/``0``; Enumeration as Integer)."""
     if fmi_type == "Real":
-        return float(raw)
+        return parse_real(raw)
     if fmi_type in ("Integer", "Enumeration"):
-        return int(raw)
+        return parse_integer(raw)
     if fmi_type == "Boolean":
         if raw not in ("true", "false", "1", "0"):
             raise ValueError(f"{raw!r} is not a Boolean")

@@ -64,8 +64,8 @@ def test_sweep_with_a_bad_value_then_rerun_does_no_work(project, tmp_path):
 
 
 def test_sweep_on_an_existing_cluster_gives_the_same_summary(project, tmp_path):
-    from dask.distributed import LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    from ncfmu.batch import local_cluster
+    with local_cluster(2) as cluster:
         # a failed variant (D3 = -1) and unfinished ones (3 s of the cycle): exit status 1 both ways
         assert main(["sweep", "grinder_feed", "--vary", "feed.D3=4.0,3.0,-1,3.5", "--stop-time", "3",
                      "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "remote")]) == 1

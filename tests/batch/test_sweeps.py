@@ -43,7 +43,8 @@ def dask_cluster(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("NCFMU")}
     bin_dir = Path(sys.executable).parent
     procs = [subprocess.Popen([str(bin_dir / "dask"), "scheduler", "--scheduler-file", str(scheduler_file),
-                               "--host", "127.0.0.1", "--port", "0", "--no-dashboard"], cwd=sched_dir, env=env,
+                               "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                               "--dashboard-address", "127.0.0.1:0"], cwd=sched_dir, env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     deadline = time.time() + 60
     while not scheduler_file.exists() and time.time() < deadline:
@@ -175,3 +176,29 @@ def test_a_variant_over_its_timeout_is_recorded_and_the_sweep_goes_on(servo_only
     assert not (tmp_path / "out" / "variants" / f"{rows[1]['key']}.csv").exists()
     # the worker was usable after the timeout: the variant after it ran to the end
     assert float(rows[2]["sim_time"]) == pytest.approx(20.0)
+
+
+@pytest.mark.slow
+def test_a_local_cluster_leaves_port_8787_alone():
+    """dask's scheduler serves HTTP even with the dashboard off, on 8787 unless told otherwise: with that port
+    taken (another cluster, a notebook) every sweep warned 'Port 8787 is already in use'. Ours uses a free port
+    of the loopback."""
+    import socket
+    import warnings
+
+    from ncfmu.batch import local_cluster
+    holder = socket.socket()
+    try:
+        holder.bind(("0.0.0.0", 8787))          # taken now, by this test or by someone else already
+        holder.listen()
+    except OSError:
+        pass
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with local_cluster(1) as cluster:
+                http = cluster.scheduler.http_server
+                assert (http.address, http.port != 8787) == ("127.0.0.1", True)
+    finally:
+        holder.close()
+    assert not [w for w in caught if "already in use" in str(w.message)]

@@ -28,14 +28,22 @@ def _listing(capsys, *argv: str) -> dict[str, list[str]]:
 def test_every_parameter_and_input_of_every_instance_is_listed(capsys, name):
     rows = _listing(capsys, name)
     system = get_system(name)
-    expected = [f"{c.name}.{p.name}" for c in system.components for p in MODELS[c.model].PORTS
-                if p.causality in ("parameter", "input")]
+    # each instance's parameters and inputs, then its outputs
+    expected = [f"{c.name}.{p.name}" for c in system.components
+                for causalities in (("parameter", "input"), ("output",))
+                for p in MODELS[c.model].PORTS if p.causality in causalities]
     assert list(rows) == expected
-    # inputs say what drives them, exactly the system's connections
+    # inputs say what drives them, outputs what they feed: exactly the system's connections
     drivers = {f"{c.end_element}.{c.end_connector}": f"{c.start_element}.{c.start_connector}"
                for c in system.connections}
+    feeds: dict[str, list[str]] = {}
+    for c in system.connections:
+        feeds.setdefault(f"{c.start_element}.{c.start_connector}", []).append(f"{c.end_element}.{c.end_connector}")
     for qualified, cells in rows.items():
         kind, driven = cells[1], cells[-2]
+        if kind == "output":
+            assert driven == (f"feeds {', '.join(feeds[qualified])}" if qualified in feeds else "-"), qualified
+            continue
         assert driven == (drivers[qualified] if qualified in drivers else "-"), qualified
         if kind != "input":
             assert qualified not in drivers
@@ -89,6 +97,13 @@ def test_a_model_ncfmu_does_not_define_is_listed_from_its_model_description(proj
            [(r.name, r.kind, r.type, r.unit, r.driven_by) for r in known]
     assert [float(r.start) if r.type == "Real" else r.start for r in read] == \
            [float(r.start) if r.type == "Real" else r.start for r in known]
+    # its outputs too, from the modelDescription: unit, description and what they feed, as from the ports
+    monkeypatch.setattr(mod, "MODELS", MODELS)
+    known_out = [r for r in mod.settable(system, outputs=True) if r.name.startswith("x_axis.") and r.kind == "output"]
+    monkeypatch.setattr(mod, "MODELS", {k: v for k, v in MODELS.items() if k != "ServoAxis"})
+    read_out = [r for r in mod.settable(system, lambda model: md, outputs=True)
+                if r.name.startswith("x_axis.") and r.kind == "output"]
+    assert read_out == known_out and len(known_out) == 6
 
 
 def test_vars_is_found_from_the_top_level_help(capsys):
@@ -132,3 +147,30 @@ def test_an_ssp_whose_foreign_fmu_is_broken_is_one_line(project, fmus, capsys, t
     err = capsys.readouterr().err
     assert err.startswith(f"ncfmu vars: {archive}: resources/Foreign.fmu has no readable modelDescription.xml")
     assert err.count("\n") == 1
+
+
+def test_outputs_are_listed_with_unit_description_and_what_they_feed(capsys):
+    """Outputs are what --record takes and an OPC UA client reads: listed after each instance's parameters and
+    inputs, with unit and description (the CSV header was the only list)."""
+    rows = _listing(capsys, "grinder_feed")
+    assert rows["x_axis.pos"][1:] == ["output", "Real", "mm", "-", "-", "feeds feed.x_pos", "actual position (encoder)"]
+    assert rows["x_axis.torque"][1:] == ["output", "Real", "N.m", "-", "-", "-", "motor torque"]
+    assert rows["feed.m_active"][1] == "output" and rows["feed.m_active"][-2] == "feeds panel.m_active"
+    assert main(["vars", "grinder_feed"]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    n_out = sum(p.causality == "output" for c in get_system("grinder_feed").components for p in MODELS[c.model].PORTS)
+    assert re.match(rf"grinder_feed: \d+ parameters and inputs, {n_out} outputs\.", head), head
+
+
+def test_table_rows_beyond_their_count_are_marked_unused(capsys):
+    """lathe_taper's limiter reads region[1..2] (n_regions = 2): region[3..32] hold padding (1000002, ...) and are
+    marked unused with why; the counted ones are not."""
+    rows = _listing(capsys, "lathe_taper", "--instance", "limiter")
+    assert rows["limiter.region[2].ref_max"][1] == "parameter, fixed"
+    assert rows["limiter.region[3].ref_max"][1] == "parameter, fixed, unused"
+    assert rows["limiter.region[3].ref_max"][-1].startswith("unused: reads region[1..2] only (n_regions = 2); ")
+    unused = [name for name, cells in rows.items() if cells[1].endswith(", unused")]
+    assert len(unused) == 3 * 30 and all(int(re.search(r"\[(\d+)\]", n)[1]) > 2 for n in unused)
+    # the grinder's program names D1..D5, F1, F2, F7, T1: the other settings are unused too
+    feed = _listing(capsys, "grinder_feed", "--instance", "feed")
+    assert feed["feed.D6"][1] == "parameter, fixed, unused" and feed["feed.D3"][1] == "parameter, fixed"

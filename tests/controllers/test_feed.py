@@ -222,3 +222,9 @@ def test_property_emergency_at_any_instant_returns_to_the_feed_origin(phase, fra
     # never a velocity jump to the servo
     for a, b in zip(g.log, g.log[1:]):
         assert abs(b["x_vff"] - a["x_vff"]) <= 500.0 * DT * 1.000001
+
+
+def test_a_program_address_in_other_digits_is_refused():
+    """``M٥:`` was read as address M5 (the regex's \\d takes any Unicode digit): addresses are ASCII digits."""
+    with pytest.raises(ProgramError, match=r"line 1, column 1: expected 'M<address>: <word>'"):
+        ProgrammableFeed(**(ProgrammableFeed.default_parameters() | {"program": "M\u0665: X+D3F7; M6: END"}))

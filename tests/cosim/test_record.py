@@ -199,3 +199,23 @@ def test_a_full_disk_keeps_whole_rows_and_says_where(project, tmp_path):
     data = read_csv(str(partial))
     assert data["time"][-1] == pytest.approx(stopped, abs=5e-4)
     assert csv_bytes(simulate("lathe_taper", stop_time=float(data["time"][-1])).data) == text
+
+
+def test_rows_the_disk_cannot_sync_stay_partial_and_say_so(tmp_path, monkeypatch):
+    """fsync at the end can still fail (a disk that accepted the writes and cannot store them): the file stays
+    ``.partial`` and the error names it -- a run never claims a CSV it could not store."""
+    import errno
+    import os
+
+    from ncfmu.cosim import record
+    sink = CsvSink(tmp_path / "run.csv")
+    sink.open([("time", np.dtype(np.float64)), ("x", np.dtype(np.float64))])
+    sink.write(np.array([(0.0, 1.0), (0.001, 2.0)], dtype=[("time", np.float64), ("x", np.float64)]))
+
+    def no_room(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    monkeypatch.setattr(record.os, "fsync", no_room)
+    with pytest.raises(record.RecordWriteError, match=r"run.csv.partial: No space left on device"):
+        sink.close(complete=True)
+    assert sink.final_path == tmp_path / "run.csv.partial" and not (tmp_path / "run.csv").exists()
+    assert sink.final_path.read_bytes() == b'"time","x"\n0.0,1.0\n0.001,2.0\n'

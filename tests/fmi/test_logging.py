@@ -18,14 +18,31 @@ ALARM_INPUT = {"AreaLimiter": "ref_pos", "ContourInterpolator": "x_pos", "CutSeq
                "OperatorPanel": None, "ProgrammableFeed": "x_pos"}
 
 
+# fmpy's C proxy that formats the variadic message (addLoggerProxy) forwards to ONE logger per process, the
+# last one registered: a logger made per instance dangles once its instance is gone, and the next FMU that logs
+# through fmpy's default callbacks calls freed memory (it crashed a later test). So one logger lives as long as
+# the process and routes each message by the componentEnvironment its host registered.
+_LOGS: dict[int, list[tuple[int, str]]] = {}
+
+
+def _dispatch(env, name, status, category, message) -> None:
+    log = _LOGS.get(env or 0)
+    if log is not None:
+        log.append((status, message.decode()))
+
+
+_LOGGER = fmi2.fmi2CallbackLoggerTYPE(_dispatch)
+
+
 class Host:
     """One instance of an FMU in fmpy's FMU2Slave, its log kept as (status, message)."""
 
     def __init__(self, fmu, debug_logging: bool):
         self.log: list[tuple[int, str]] = []
+        _LOGS[id(self)] = self.log
         self.callbacks = fmi2.fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2.fmi2CallbackLoggerTYPE(
-            lambda env, name, status, category, message: self.log.append((status, message.decode())))
+        self.callbacks.logger = _LOGGER
+        self.callbacks.componentEnvironment = id(self)
         self.callbacks.allocateMemory = fmi2.defaultCallbacks.allocateMemory
         self.callbacks.freeMemory = fmi2.defaultCallbacks.freeMemory
         addLoggerProxy(byref(self.callbacks))          # formats printf-style messages, as fmpy's own logger does

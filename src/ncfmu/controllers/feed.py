@@ -78,7 +78,7 @@ class Word:
     wear: bool = False           # S4
 
 
-_LINE = re.compile(r"^\s*M(?P<addr>\d+)\s*:\s*(?P<word>.*?)\s*$")
+_LINE = re.compile(r"^\s*M(?P<addr>[0-9]+)\s*:\s*(?P<word>.*?)\s*$")
 _FEED = re.compile(r"(?P<axis>[XY])(?P<sign>[+-]?)(?P<rest>.*)$")
 _CODE = re.compile(r"([DFST])([0-9])")
 

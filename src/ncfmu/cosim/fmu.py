@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException, calloc, free
+from fmpy.fmi1 import FMICallException, calloc, free, printLogMessage
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -30,7 +30,7 @@ from fmpy.fmi2 import (
 )
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError, TerminationRequested
-from ..ports import Value, parse_text
+from ..ports import NUMBER_RULE, Value, parse_text
 from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
@@ -48,6 +48,10 @@ def _dispatch(env, instance, status, category, message) -> None:
     sink = _SINKS.get(env or 0)
     if sink is not None:
         sink.append((_STATUS.get(status, str(status)), message.decode("utf-8", "replace")))
+    else:
+        # not one of ours: an FMU the user runs through fmpy's default callbacks in the same process, whose
+        # messages fmpy's proxy now routes here -- print them as fmpy's own default logger would
+        printLogMessage(env, instance, status, category, message)
 
 
 _LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
@@ -67,7 +71,7 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
     """
     if fmi_type == "Real":
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ConfigError(qualified, value, "must be a number")
+            raise ConfigError(qualified, value, NUMBER_RULE if isinstance(value, str) else "must be a number")
         return float(value)
     if fmi_type in ("Integer", "Enumeration"):
         if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
@@ -75,7 +79,8 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
         elif isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
             whole = int(value)
         else:
-            raise ConfigError(qualified, value, "must be a whole number")
+            digits = " in ASCII digits 0-9" if isinstance(value, str) else ""
+            raise ConfigError(qualified, value, f"must be a whole number{digits}")
         if not INT32[0] <= whole <= INT32[1]:
             raise ConfigError(qualified, value, f"must be a whole number in {INT32[0]}..{INT32[1]} (fmi2Integer)")
         return whole
@@ -85,6 +90,22 @@ def typed_value(qualified: str, fmi_type: str, value: object) -> Value:
         raise ConfigError(qualified, value, "must be true or false")
     if not isinstance(value, str):
         raise ConfigError(qualified, value, "must be text")
+    return _utf8_text(qualified, value)
+
+
+def _utf8_text(qualified: str, value: str) -> str:
+    """A String as an FMU takes it: UTF-8 (a command line's undecodable byte arrives as a lone surrogate) without
+    NUL (an fmi2String ends there: the rest would be lost without a word)."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as err:
+        bad = value[err.start]
+        byte = value[err.start:err.start + 1].encode("utf-8", "surrogateescape") if "\udc80" <= bad <= "\udcff" else b""
+        what = f"the byte 0x{byte[0]:02x}" if byte else f"the character U+{ord(bad):04X}"
+        raise ConfigError(qualified, value, f"must be UTF-8 text ({what} at position {err.start} is not)") from None
+    if "\x00" in value:
+        raise ConfigError(qualified, value, f"must be text without NUL (one at position {value.index(chr(0))}: an "
+                          "FMI String ends there)")
     return value
 
 

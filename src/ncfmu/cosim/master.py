@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, SimulationError, SimulationTimeout, SystemDefinitionError, TerminationRequested
+from ..ports import NUMBER_RULE, parse_real
 from .connect import check_units
 from .fmu import check_range, typed_value
 from .native_loop import NativePlan, NativeSlave, library
@@ -125,11 +126,11 @@ class InputTable:
                     kinds[i, j] = RELEASE
                 else:
                     try:
-                        table[i, j] = float(cell)
+                        table[i, j] = parse_real(cell)
                     except ValueError:
                         raise SystemDefinitionError(f"{path}: line {k}: {header[j]} = {raw!r}: not a number"
                                                     + ("" if j == 0 else ", empty (no change) or 'release'")
-                                                    ) from None
+                                                    + ("" if cell.isascii() else f" ({NUMBER_RULE})")) from None
         t = table[:, 0]
         if not np.all(np.isfinite(t)):
             k = rows[int(np.flatnonzero(~np.isfinite(t))[0])][0]

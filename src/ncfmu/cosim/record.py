@@ -179,15 +179,21 @@ class CsvSink:
         if self._file is None:
             return
         f, self._file = self._file, None
+        synced: OSError | None = None
         try:
             os.fsync(f.fileno())
+        except OSError as err:                # the disk could not take what it had accepted (delayed allocation)
+            synced = err
         finally:
             f.close()
-        if complete and self.failed is None:
+        if complete and self.failed is None and synced is None:
             self.partial.replace(self.path)
             self.final_path = self.path
-        else:
-            self.final_path = self.partial
+            return
+        self.final_path = self.partial
+        if synced is not None and self.failed is None:
+            self.failed = synced
+            raise RecordWriteError(self.partial, synced.strerror or str(synced), synced.errno)
 
 
 class SelectColumns:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..ports import NUMBER_RULE, parse_real
+
 
 def csv_header(names) -> bytes:
     """The header line of fmpy's CSV layout: every name quoted."""
@@ -153,14 +155,19 @@ class Result:
                 columns[name] = np.array([c == "true" for c in map(str.lower, cells)])
                 continue
             try:
+                # numpy's conversion, like float(), takes any Unicode digit and '_': only plain ASCII goes through
+                joined = "".join(cells)
+                if not joined.isascii() or "_" in joined:
+                    raise ValueError("not ASCII decimal")
                 columns[name] = np.array(cells).astype(np.float64)
             except ValueError:
                 for (k, _), cell in zip(rows, cells):
                     try:
-                        float(cell)
+                        parse_real(cell)
                     except ValueError:
+                        rule = "" if cell.isascii() else f" ({NUMBER_RULE})"
                         raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
-                                                    "True/False") from None
+                                                    f"True/False{rule}") from None
                 raise
         bad_time = np.flatnonzero(~np.isfinite(columns["time"]))
         if bad_time.size:

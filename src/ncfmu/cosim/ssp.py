@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..errors import SystemDefinitionError
 from ..files import write_if_changed
-from ..ports import UNITS, parse_text
+from ..ports import NUMBER_RULE, UNITS, parse_real, parse_text
 from .units import BASE, Unit
 
 #: The most an archive may unpack to (its FMUs are a few MB): more is a zip bomb, not a system.
@@ -227,7 +227,8 @@ def _parse_value(el: ET.Element, where: str) -> object:
     try:
         return parse_text(tag, raw)
     except ValueError:
-        raise SystemDefinitionError(f"{where}: {raw!r} is not a valid {tag}") from None
+        rule = "" if raw.isascii() else f" ({NUMBER_RULE})"
+        raise SystemDefinitionError(f"{where}: {raw!r} is not a valid {tag}{rule}") from None
 
 
 def _attribute(element: ET.Element, name: str, where: object) -> str:
@@ -251,7 +252,7 @@ def _parameter_set(root: ET.Element, where: str) -> dict[str, object]:
 def _time_attribute(path: Path, element: ET.Element, name: str) -> float:
     raw = element.get(name)
     try:
-        value = float(raw if raw is not None else "")     # a missing attribute is refused as an empty one
+        value = parse_real(raw if raw is not None else "")     # a missing attribute is refused as an empty one
     except ValueError:
         raise SystemDefinitionError(f"{path}: {name}={raw!r}: must be a time in seconds") from None
     if not math.isfinite(value) or value < 0:

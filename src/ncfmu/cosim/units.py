@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ..errors import SystemDefinitionError
+from ..ports import parse_integer, parse_real
 
 #: The SI base units of SSP 1.0 / FMI 2.0 ``BaseUnit``, in order.
 BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -33,9 +34,11 @@ class Unit:
     @classmethod
     def of(cls, name: str, exponents: Mapping[str, object], factor: object = 1.0, offset: object = 0.0) -> Unit:
         try:
-            exps = tuple(int(exponents.get(b, 0) or 0) for b in BASE)   # type: ignore[call-overload]
-            f = float(factor if factor is not None else 1.0)   # type: ignore[arg-type]
-            o = float(offset if offset is not None else 0.0)   # type: ignore[arg-type]
+            # an SSD's attributes are text: read by the one parser of numbers (ASCII decimal)
+            exps = tuple(parse_integer(e) if isinstance(e := exponents.get(b, 0) or 0, str) else int(e)  # type: ignore[call-overload]
+                         for b in BASE)
+            f = _real(factor if factor is not None else 1.0)
+            o = _real(offset if offset is not None else 0.0)
         except (TypeError, ValueError):
             raise SystemDefinitionError(f"unit {name!r}: BaseUnit exponents must be whole numbers and factor/offset "
                                         "numbers") from None
@@ -49,6 +52,10 @@ class Unit:
             return "?"
         parts = [b if e == 1 else f"{b}{e}" for b, e in zip(BASE, self.exponents) if e]
         return ".".join(parts) or "1"
+
+
+def _real(value: object) -> float:
+    return parse_real(value) if isinstance(value, str) else float(value)  # type: ignore[arg-type]
 
 
 def unit_from_fmpy(name: str, definitions) -> Unit:
