@@ -221,51 +221,81 @@ class AreaLimiter(Controller):
         nearest boundary that the other axis, anywhere within its stopping reach, makes forbidden."""
         m, n = self.margin, self.n_regions
         ref, lim = self.pos
-        lim_lo, lim_hi = self._reach(1, dt)
-        ref_lo, ref_hi = self._reach(0, dt)
+        bounds, lows, highs = self.ref_max, self.lim_min, self.lim_max
+        # each axis's reach (_reach written out: min(0.0, d) and max(0.0, d) as the same choices)
+        two_decel = 2.0 * self.decel
+        v = self.vel[1]
+        d = v * dt + v * abs(v) / two_decel
+        lim_lo, lim_hi = lim + (d if d < 0.0 else 0.0), lim + (d if d > 0.0 else 0.0)
+        v = self.vel[0]
+        d = v * dt + v * abs(v) / two_decel
+        ref_lo, ref_hi = ref + (d if d < 0.0 else 0.0), ref + (d if d > 0.0 else 0.0)
         inf = math.inf
-        # limited axis: the tightest range over the regions the reference axis may be in
-        r1, r2 = find_region(self.ref_max, ref_lo), find_region(self.ref_max, ref_hi)
-        if r1 == 0:                      # off the table: the reference axis must back out; X is no worse
+        # limited axis: the tightest range over the regions the reference axis may be in (find_region written
+        # out: bisect, 0 above the table)
+        r1 = bisect.bisect_left(bounds, ref_lo) + 1
+        if r1 > n:                       # off the table: the reference axis must back out; X is no worse
             lim_plus = lim_minus = inf
         else:
-            last = r2 if r2 else n
-            lim_plus = min(self.lim_max[r1 - 1:last]) - m - lim
-            lim_minus = lim - (max(self.lim_min[r1 - 1:last]) + m)
+            last = bisect.bisect_left(bounds, ref_hi, r1 - 1) + 1
+            if last > n:
+                last = n
+            if last == r1:               # one region (the common case): its range, no slice
+                lim_plus = highs[r1 - 1] - m - lim
+                lim_minus = lim - (lows[r1 - 1] + m)
+            else:
+                lim_plus = min(highs[r1 - 1:last]) - m - lim
+                lim_minus = lim - (max(lows[r1 - 1:last]) + m)
 
         # region j forbids the limited axis's reach: lim_lo < lim_min[j - 1] or lim_hi > lim_max[j - 1]
         # (written out in both loops: a closure made every step costs more than the test)
-        lows, highs = self.lim_min, self.lim_max
-        r = find_region(self.ref_max, ref) or n + 1
-        ref_plus = self.ref_max[n - 1] - m - ref            # the end of the table
+        r = bisect.bisect_left(bounds, ref) + 1     # n + 1 above the table
+        ref_plus = bounds[n - 1] - m - ref          # the end of the table
         for j in range(r + 1, n + 1):
             if lim_lo < lows[j - 1] or lim_hi > highs[j - 1]:
-                ref_plus = self.ref_max[j - 2] - m - ref    # region j starts just above ref_max[j-2]
+                ref_plus = bounds[j - 2] - m - ref  # region j starts just above ref_max[j-2]
                 break
         ref_minus = inf
-        for j in range(min(r, n + 1) - 1, 0, -1):
+        for j in range(r - 1, 0, -1):
             if lim_lo < lows[j - 1] or lim_hi > highs[j - 1]:
-                ref_minus = ref - self.ref_max[j - 1] - m   # region j ends at ref_max[j-1], inclusive
+                ref_minus = ref - bounds[j - 1] - m  # region j ends at ref_max[j-1], inclusive
                 break
         return ref_plus, ref_minus, lim_plus, lim_minus
 
-    def _windows(self, dt: float) -> list[list[float]]:
-        """Velocity window [lo, hi] of each axis for this step."""
-        w = [[-self.max_speed, self.max_speed], [-self.max_speed, self.max_speed]]
-        if self.hard:
-            for axis, plus, minus in ((0, REF_PLUS, REF_MINUS), (1, LIM_PLUS, LIM_MINUS)):
-                if self.hard & plus:
-                    w[axis][1] = 0.0
-                if self.hard & minus:
-                    w[axis][0] = 0.0
+    def _windows(self, dt: float) -> tuple[float, float, float, float]:
+        """Velocity window of each axis for this step: (ref lo, ref hi, lim lo, lim hi)."""
+        s = self.max_speed
+        lo0, hi0, lo1, hi1 = -s, s, -s, s
+        hard = self.hard
+        if hard:
+            if hard & REF_PLUS:
+                hi0 = 0.0
+            if hard & REF_MINUS:
+                lo0 = 0.0
+            if hard & LIM_PLUS:
+                hi1 = 0.0
+            if hard & LIM_MINUS:
+                lo1 = 0.0
         if self.predictive:
             rp, rm, lp, lm = self._rooms(dt)
             a = self.decel
-            w[0][1] = min(w[0][1], stop_speed(rp, self.vel[0], a, dt))
-            w[0][0] = max(w[0][0], -stop_speed(rm, -self.vel[0], a, dt))
-            w[1][1] = min(w[1][1], stop_speed(lp, self.vel[1], a, dt))
-            w[1][0] = max(w[1][0], -stop_speed(lm, -self.vel[1], a, dt))
-        return w
+            v0, v1 = self.vel
+            # stop_speed grows with its room: past ``far`` (the rest of room that the root's equation needs at
+            # max_speed, with a relative margin of 1e-6 -- far beyond the root's rounding) the speed is above
+            # max_speed and min/max below would keep the window as it is: the same window, without the root
+            far = (s * s / (2.0 * a) + 0.5 * s * dt) * (1.0 + 1e-6) + 1e-9
+            # (the test's own rounding is far inside that margin; a room of inf, off the table, gives a NaN
+            # speed that min/max ignore -- skipped just as well)
+            half_dt = 0.5 * dt
+            if rp - half_dt * (v0 if v0 > 0.0 else 0.0) < far:
+                hi0 = min(hi0, stop_speed(rp, v0, a, dt))
+            if rm - half_dt * (-v0 if v0 < 0.0 else 0.0) < far:
+                lo0 = max(lo0, -stop_speed(rm, -v0, a, dt))
+            if lp - half_dt * (v1 if v1 > 0.0 else 0.0) < far:
+                hi1 = min(hi1, stop_speed(lp, v1, a, dt))
+            if lm - half_dt * (-v1 if v1 < 0.0 else 0.0) < far:
+                lo1 = max(lo1, -stop_speed(lm, -v1, a, dt))
+        return lo0, hi0, lo1, hi1
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
@@ -289,9 +319,9 @@ class AreaLimiter(Controller):
 
         if self.hard:
             self._release(t, c, v_in)
-        window = self._windows(dt)
-        for axis in (0, 1):
-            self._follow(axis, c[axis], v_in[axis], window[axis], dt)
+        lo0, hi0, lo1, hi1 = self._windows(dt)
+        self._follow(0, c[0], v_in[0], lo0, hi0, dt)
+        self._follow(1, c[1], v_in[1], lo1, hi1, dt)
 
         self.clock += dt
         if self.clock >= self.monitor_period - 1e-12:
@@ -302,20 +332,29 @@ class AreaLimiter(Controller):
     def _absurd(self, cmd: tuple[float, float], vff: tuple[float, float], inputs: Mapping[str, object],
                 dt: float) -> str | None:
         names = _INPUT_NAMES
-        for axis in (0, 1):
-            if not math.isfinite(cmd[axis]):
-                return f"input {names[axis][0]} = {cmd[axis]!r}: must be finite"
-            if not math.isfinite(vff[axis]):
-                return f"input {names[axis][1]} = {vff[axis]!r}: must be finite"
-            if abs(cmd[axis]) > POSITION_LIMIT:
-                return f"input {names[axis][0]} = {cmd[axis]!r}: beyond {POSITION_LIMIT:g} mm, no axis is that long"
-            if abs(vff[axis]) > self.max_speed * (1 + 1e-9):
-                return f"input {names[axis][1]} = {vff[axis]!r}: faster than max_speed = {self.max_speed:g} mm/s"
+        fastest = self.max_speed * (1 + 1e-9)
+        # the common case in one test (false for NaN and infinities too); the first offender named below
+        if not (abs(cmd[0]) <= POSITION_LIMIT and abs(cmd[1]) <= POSITION_LIMIT and abs(vff[0]) <= fastest
+                and abs(vff[1]) <= fastest):
+            for axis in (0, 1):
+                if not math.isfinite(cmd[axis]):
+                    return f"input {names[axis][0]} = {cmd[axis]!r}: must be finite"
+                if not math.isfinite(vff[axis]):
+                    return f"input {names[axis][1]} = {vff[axis]!r}: must be finite"
+                if abs(cmd[axis]) > POSITION_LIMIT:
+                    return (f"input {names[axis][0]} = {cmd[axis]!r}: beyond {POSITION_LIMIT:g} mm, no axis is "
+                            "that long")
+                if abs(vff[axis]) > fastest:
+                    return f"input {names[axis][1]} = {vff[axis]!r}: faster than max_speed = {self.max_speed:g} mm/s"
         bad = self._feedback.check(inputs, dt)
         if bad:
             return bad
         reach = self.max_speed * dt + 1e-9
         prev, self._prev_in = self._prev_in, (float(cmd[0]), float(cmd[1]))
+        jump = self._jump
+        if not (jump[0] or jump[1]) and (prev is None or (abs(cmd[0] - prev[0]) <= reach
+                                                          and abs(cmd[1] - prev[1]) <= reach)):
+            return None        # no jump latched, none new: the common case, without the loops below
         for axis in (0, 1):
             # A jump latches until the input is back within one step of the gated output.
             if self._jump[axis] and abs(cmd[axis] - self.pos[axis]) <= reach:
@@ -339,15 +378,15 @@ class AreaLimiter(Controller):
         self.vel[axis] = v_new
         self.passing[axis] = False
 
-    def _follow(self, axis: int, c: float, v_in: float, window: list[float], dt: float) -> None:
+    def _follow(self, axis: int, c: float, v_in: float, lo: float, hi: float, dt: float) -> None:
         """Pass the input at once, or govern: rejoin it without a jump, never leaving the velocity window."""
-        lo, hi = window
         p, v = self.pos[axis], self.vel[axis]
         a_dt = self.decel * dt
         gap = c - p
         # An interpolator's step may exceed vff*dt by half an acceleration step, and its last step before
         # it stops carries vff 0: that is motion, pass it.
-        consistent = abs(gap) <= (max(abs(v_in), abs(v)) + a_dt) * dt + 1e-9
+        speed, speed_in = abs(v), abs(v_in)
+        consistent = abs(gap) <= ((speed if speed > speed_in else speed_in) + a_dt) * dt + 1e-9  # max(), inline
         allowed = lo - 1e-9 <= v_in <= hi + 1e-9 and lo * dt - 1e-9 <= gap <= hi * dt + 1e-9
         # Pass: while passing, or from rest when the input starts from where the output stands (a
         # back-out after a block: the input's own motion, which it accelerates itself).
