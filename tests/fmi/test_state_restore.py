@@ -56,11 +56,11 @@ def collect_states(system: str, start_values: dict, times, step: float | None = 
     times = sorted(times)
     with OpenSystem(system_archive(system), mode=mode) as opened:
         master = opened.master
-        run = master._prepare(times[-1] + 0.01, step, start_values, None, 0.0)
+        run = master.prepare(times[-1] + 0.01, step, start_values, None, 0.0)
         done = 0
         for t in times:
             k = int(round(t / run.h))
-            master._loop(run, done, k)
+            run.steps(done, k)
             done = k
             for slave in opened.slaves:
                 handle = slave.get_state()
@@ -512,22 +512,22 @@ def _continue_identically(system: str, start_values: dict, times) -> int:
     restored = 0
     with OpenSystem(system_archive(system)) as opened:
         master = opened.master
-        run = master._prepare(max(times) + 0.5, None, start_values, None, 0.0)
+        run = master.prepare(max(times) + 0.5, None, start_values, None, 0.0)
         done = 0
         for t in sorted(times):
             k = max(int(round(t / run.h)), done)          # the FMUs step on from where they are
-            master._loop(run, done, k)
+            run.steps(done, k)
             handles = [s.get_state() for s in opened.slaves]
             blobs = [s.serialize_state(h) for s, h in zip(opened.slaves, handles)]
             for s, h in zip(opened.slaves, handles):
                 s.free_state(h)
-            master._loop(run, k, k + 300)
+            run.steps(k, k + 300)
             once = {name: v[k:k + 300].copy() for name, v in run.rec.items()}
             for s, blob in zip(opened.slaves, blobs):
                 s.set_state(s.deserialize_state(blob))
             for s in opened.slaves:
                 s.read_outputs()
-            master._loop(run, k, k + 300)
+            run.steps(k, k + 300)
             for name in once:
                 assert (run.rec[name][k:k + 300] == once[name]).all(), (system, t, name)
             restored += len(blobs)
