@@ -29,7 +29,7 @@ from .fmi.builder import build_all
 from .fmi.fmi3 import build_all_fmi3
 from .systems import SYSTEMS, get_system, report_for
 from .systems.report import Report, ReportAccumulator, start_parameters
-from .systems.roles import Identity, identify
+from .systems.roles import identify
 
 
 def shipped(system: System, models: Mapping[str, str] | None = None) -> bool:
@@ -37,31 +37,9 @@ def shipped(system: System, models: Mapping[str, str] | None = None) -> bool:
     meant to be free (a servo's enable, a single-axis grinder's second axis)."""
     if system.name not in SYSTEMS:
         return False
-    own_models, own_connections = _shipped_shape(system.name)
-    return (own_models == dict(models or {c.name: c.model for c in system.components})
-            and own_connections == {str(c) for c in system.connections})
-
-
-_SHAPES: dict[str, tuple[dict[str, str], set[str]]] = {}
-
-
-def _shipped_shape(name: str) -> tuple[dict[str, str], set[str]]:
-    """A shipped system's instances -> models and its connections, built once per process."""
-    if name not in _SHAPES:
-        own = get_system(name)
-        _SHAPES[name] = ({c.name: c.model for c in own.components}, {str(c) for c in own.connections})
-    return _SHAPES[name]
-
-
-_IDENTITIES: dict[Path, Identity] = {}
-
-
-def _identity(unpacked: UnpackedFmu, where: str) -> Identity:
-    """An unpacked FMU's identity, read from its modelDescription once per process (as the FMU is unpacked once)."""
-    key = unpacked.directory
-    if key not in _IDENTITIES:
-        _IDENTITIES[key] = identify((key / "modelDescription.xml").read_bytes(), where)
-    return _IDENTITIES[key]
+    own = get_system(system.name)
+    return ({c.name: c.model for c in own.components} == dict(models or {c.name: c.model for c in system.components})
+            and {str(c) for c in own.connections} == {str(c) for c in system.connections})
 
 
 def models_dir(root: Path) -> Path:
@@ -213,7 +191,8 @@ class OpenSystem:
             self.slaves = [make_slave(self.unpacked[c.model], c.name) for c in self.system.components]
             self.master = Master(self.system, self.slaves, mode)
             #: instance -> what its FMU is, from its modelDescription (never the file name)
-            self.identities = {c.name: _identity(self.unpacked[c.model], f"{self.archive}: {c.source}")
+            self.identities = {c.name: identify((self.unpacked[c.model].directory / "modelDescription.xml")
+                                                .read_bytes(), f"{self.archive}: {c.source}")
                                for c in self.system.components}
         except Exception:
             shutil.rmtree(self._tmp, ignore_errors=True)
