@@ -444,7 +444,11 @@ def test_the_cnc_companion_model_shows_each_axis_position_and_the_channel(ncfmu_
             assert await (await read("ActProgramBlock")).read_value() == str(await p.read("seq.line"))
             assert await (await read("ActOverride")).read_value() == 100.0
             assert await (await read("ActOperationMode")).read_value() == 2          # Automatic
-            assert await (await iface.get_child([f"{cnc}:CncSpindleList"])).get_children() == []
+            # the lathe's spindle drive (a register cycle commands no speed: the spindle stands)
+            spindles = await (await iface.get_child([f"{cnc}:CncSpindleList"])).get_children()
+            assert [(await sp.read_browse_name()).Name for sp in spindles] == ["spindle"]
+            act_speed = await (await spindles[0].get_child([f"{cnc}:ActSpeed"])).read_value()
+            assert act_speed == await p.read("spindle.speed")
             # the second stack reads the same typed nodes (paused: nothing moves meanwhile)
             loop = asyncio.get_running_loop()
             ids = [(await axis.get_child([f"{cnc}:PosDirect", f"{cnc}:ActPos"])).nodeid.to_string() for axis in axes]
