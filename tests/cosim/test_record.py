@@ -105,7 +105,7 @@ def test_a_deadline_leaves_a_valid_prefix_under_partial(project, tmp_path, monke
                                                   (signal.SIGINT, 130, "interrupted")])
 def test_ctrl_c_and_sigterm_leave_a_valid_prefix_and_say_where(project, tmp_path, signum, status, says):
     ncfmu = Path(sys.executable).with_name("ncfmu")
-    proc = subprocess.Popen([str(ncfmu), "run", "lathe_taper", "--stop-time", "100000", "--out", str(tmp_path)],
+    proc = subprocess.Popen([str(ncfmu), "run", "lathe_taper", "--stop-time", "10000", "--out", str(tmp_path)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     partial = tmp_path / "lathe_taper.csv.partial"
     deadline = time.time() + 120
