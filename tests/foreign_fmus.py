@@ -8,10 +8,12 @@ into an FMU (binaries/linux64 plus its sources) with the system C compiler. They
 - ``PlantAxisMetre``: the same axis in metres (m, m/s);
 - ``PlantAxisBare``: the same axis in mm without any unit declared;
 - ``Countdown``: counts seconds, ends the experiment at ``end_at`` (fmi2Discard + fmi2Terminated), an output in min;
+- ``Stairs``: the Countdown as the Reference-FMUs' Stair ends: the step that reaches ``end_at`` is made whole, then
+  fmi2Discard + fmi2Terminated (fmi2LastSuccessfulTime at the step's end);
 - ``Feedthrough``: inputs to outputs per type (Real with a declaredType in s and one in mm, Integer, Boolean),
   a gain with min/max, a String parameter;
-- ``PlantAxis3``, ``Countdown3``, ``Feedthrough3``: the same models as FMI 3.0 co-simulation FMUs (``frame3.c``;
-  Float64, Int32, Boolean, String).
+- ``PlantAxis3``, ``Countdown3``, ``Stairs3``, ``Feedthrough3``: the same models as FMI 3.0 co-simulation FMUs
+  (``frame3.c``; Float64, Int32, Boolean, String).
 """
 
 from __future__ import annotations
@@ -54,6 +56,10 @@ def _plant(name: str, scale: float, length: str | None) -> Foreign:
                     "@VEL_MAX@": repr(500.0 * scale), "@BAND@": repr(0.005 * scale)})
 
 
+# the Countdown made whole at its last step (-DWHOLE_STEP), under a name and GUID of its own
+_STAIRS = {'Countdown"': 'Stairs"', 'Countdown3"': 'Stairs3"', "countdown001": "stairs000001",
+           "countdown3fm": "stairs3fmu00"}
+
 FOREIGN = {f.name: f for f in (
     _plant("PlantAxis", 1.0, "mm"),
     _plant("PlantAxisMetre", 1e-3, "m"),
@@ -62,6 +68,8 @@ FOREIGN = {f.name: f for f in (
     Foreign("Feedthrough", "feedthrough.c", "feedthrough.xml", {}, {}),
     Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {}, 3),
     Foreign("Countdown3", "countdown.c", "countdown3.xml", {}, {}, 3),
+    Foreign("Stairs", "countdown.c", "countdown.xml", {"WHOLE_STEP": "1"}, _STAIRS),
+    Foreign("Stairs3", "countdown.c", "countdown3.xml", {"WHOLE_STEP": "1"}, _STAIRS, 3),
     Foreign("Feedthrough3", "feedthrough.c", "feedthrough3.xml", {}, {}, 3),
 )}
 

@@ -51,13 +51,21 @@ class SimulationError(NcfmuError, RuntimeError):
 
 
 class TerminationRequested(SimulationError):
-    """An FMU asked to end the simulation (fmi2Discard with fmi2Terminated, FMI 3.0's terminateSimulation): the
-    run ends cleanly at the start of the step it refused. ``instance`` names the FMU, ``time`` that point."""
+    """An FMU asked to end the simulation (fmi2Discard with fmi2Terminated, FMI 3.0's terminateSimulation).
 
-    def __init__(self, instance: str, time: float, detail: str = ""):
-        self.instance, self.time = instance, time
+    ``instance`` names the FMU, ``time`` where the run ends, ``last_time`` how far the FMU got (its
+    fmi2LastSuccessfulTime, FMI 3.0's lastSuccessfulTime; None: it cannot say). The run ends at the start of the
+    step the FMU refused, or -- when the FMU made that step whole before it asked, as the Reference-FMUs' Stair
+    does -- at the step's end, the step done for every FMU (:meth:`at`)."""
+
+    def __init__(self, instance: str, time: float, detail: str = "", last_time: float | None = None):
+        self.instance, self.time, self.detail, self.last_time = instance, time, detail, last_time
         super().__init__(f"{instance} asked to end the simulation at t = {time:.6g} s (fmi2Discard with "
                          f"terminateSimulation){': ' + detail if detail else ''}")
+
+    def at(self, time: float) -> TerminationRequested:
+        """The same request, the run ending at ``time``."""
+        return TerminationRequested(self.instance, time, self.detail, self.last_time)
 
 
 class SimulationTimeout(SimulationError):

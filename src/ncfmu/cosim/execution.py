@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import SimulationError, SimulationTimeout
+from ..errors import SimulationError, SimulationTimeout, TerminationRequested
 from .algorithm import Algorithm
 from .interrupts import raise_pending
 from .native_loop import NativePlan
@@ -29,6 +29,10 @@ __all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution"]
 
 #: Steps run before the loop hands back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper in C).
 NATIVE_CHUNK = 10_000
+
+#: How near an FMU's last successful time must be to a step's end for the step to count as whole, s (the FMI
+#: layer's rule for a step that continues from the last one's end).
+STEP_END_SLACK = 0.5e-9
 
 #: The dtype of a recorded column of each kind (Booleans as bool, as fmpy's results)
 COLUMN_DTYPES: dict[str, np.dtype] = {"Real": np.dtype(np.float64), "Integer": np.dtype(np.int32),
@@ -177,12 +181,61 @@ class Execution:
                     stop = f" of {self.time_of(self.n_steps):.3f} s" if self.n_steps is not None else ""
                     raise SimulationTimeout(f"stopped at t = {self.time_of(end):.3f} s{stop}: over the time allowed "
                                             f"({_time.perf_counter() - wall0:.1f} s of wall time)")
-        except SimulationError:
+        except SimulationError as err:
             failed = getattr(self.native, "failed_step", None)
             if failed is not None and i <= failed:
                 self.step = failed          # the C loop says how far it got: those rows are whole
+            if isinstance(err, TerminationRequested):
+                raise self._end_where_asked(err) from None
             raise
         return _time.perf_counter() - wall0
+
+    def _end_where_asked(self, ended: TerminationRequested) -> TerminationRequested:
+        """Where the run ends when an FMU asks in step ``self.step``: at the step's start, or -- when the FMU made
+        the step whole before it asked (its last successful time is the step's end, as the Reference-FMUs' Stair
+        and fmpy's and fmusim's record of it have it) -- at its end, the step done for the FMUs after it and
+        recorded."""
+        i = self.step
+        end = self.time_of(i + 1)
+        if ended.last_time is None or not abs(ended.last_time - end) <= STEP_END_SLACK:
+            return ended.at(self.time_of(i))
+        self._finish_step(i, ended.instance)
+        return ended.at(end)
+
+    def _finish_step(self, i: int, asked: str) -> None:
+        """The rest of step ``i`` after the slave ``asked`` made it whole and asked to end, by the master's
+        algorithm (the same calls its loops make), then its row."""
+        t, h, plan = self.time_of(i), self.h, self.plan
+        if self.native is not None:             # the C loop set the inputs: Python sends every one again
+            for s, _gathers in plan:
+                s.forget_sent_inputs()
+        k = next(n for n, (s, _gathers) in enumerate(plan) if s.name == asked)
+        if self.algorithm.jacobi:               # every input was gathered before any slave stepped
+            for s, gathers in plan[k + 1:]:
+                for buf, take, idx in gathers:
+                    take(idx, out=buf)
+                s.write_inputs()
+                s.do_step(t, h)
+            for s, _gathers in plan:
+                s.read_outputs()
+        else:
+            plan[k][0].read_outputs()
+            for s, gathers in plan[k + 1:]:
+                for buf, take, idx in gathers:
+                    take(idx, out=buf)
+                s.write_inputs()
+                s.do_step(t, h)
+                s.read_outputs()
+        done = i + 1
+        if done % self.every == 0:
+            if done // self.every - self.row_base >= self.capacity:
+                assert self.flush is not None, "the record window is full and nothing takes its rows"
+                self.flush()
+            row = done // self.every - self.row_base
+            for kind in KINDS:
+                if self.n_rec[kind]:
+                    self.rec[kind][row] = self.values[kind][:self.n_rec[kind]]
+        self.step = done
 
     def _python_steps(self) -> Callable[[int, int, int], None]:
         """The Python loop: ``advance(first, end, row_base)`` steps ``first`` .. ``end - 1`` and records the rows."""

@@ -292,7 +292,7 @@ class FmuSlave:
         """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
         if status == 2 and time is not None and self._asks_to_terminate():
             detail = [msg for _lvl, msg in self.messages[-3:]]
-            return TerminationRequested(self.name, time, "; ".join(detail))
+            return TerminationRequested(self.name, time, "; ".join(detail), self._last_successful_time())
         if status >= 4:
             self._alive = False   # after fmi2Fatal the FMI standard allows no further call, not even freeing
         recent = self.messages[-5:]
@@ -311,6 +311,13 @@ class FmuSlave:
         except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say, so it does not ask
             return False
 
+    def _last_successful_time(self) -> float | None:
+        """After fmi2Discard: fmi2GetRealStatus(fmi2LastSuccessfulTime), how far the FMU got (None: it cannot say)."""
+        try:
+            return float(self.fmu.getRealStatus(2))        # 2: fmi2LastSuccessfulTime
+        except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say
+            return None
+
     def _call(self, what: str, call: Callable[[], object]) -> object:
         """A call through fmpy's wrappers: fmpy's FMICallException becomes our SimulationError (the contract)."""
         try:
@@ -328,7 +335,7 @@ class FmuSlave:
     def fmi2_functions(self) -> Fmi2Functions:
         """The component and the addresses of the loop's FMI functions, for the C loop
         (:mod:`~ncfmu.cosim.native_loop`), which sets the inputs from now on."""
-        self._sent = [None] * len(self._writes)
+        self.forget_sent_inputs()
 
         def address(name: str) -> int:
             value = ctypes.cast(getattr(self._dll, name), ctypes.c_void_p).value
@@ -338,6 +345,10 @@ class FmuSlave:
         return Fmi2Functions(self._component, address("fmi2DoStep"),
                              {kind: address(f"fmi2Set{kind}") for kind in KINDS},
                              {kind: address(f"fmi2Get{kind}") for kind in KINDS})
+
+    def forget_sent_inputs(self) -> None:
+        """Inputs were set behind this slave's back (the C loop): the next :meth:`write_inputs` sends every one."""
+        self._sent = [None] * len(self._writes)
 
     def _check(self, what: str, status: int) -> None:
         if status > 1:

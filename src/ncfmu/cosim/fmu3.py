@@ -99,7 +99,7 @@ class Fmu3Slave:
         assert isinstance(done, tuple)
         _event, terminate, _early, last = done
         if terminate:
-            raise TerminationRequested(self.name, float(last), "; ".join(m for _l, m in self.messages[-3:]))
+            raise TerminationRequested(self.name, t, "; ".join(m for _l, m in self.messages[-3:]), float(last))
 
     def read_outputs(self) -> None:
         for kind, vrs, buffer in self._reads:

@@ -173,6 +173,7 @@ class Master:
             session.run_to_stop(progress, deadline)
         except TerminationRequested as ended:
             # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
+            # (the execution has made the step whole where the FMU had: Execution._end_where_asked)
             session.failed = None
             result = session.close(reason=str(ended))
             result.ended_by = str(ended)

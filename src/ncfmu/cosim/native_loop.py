@@ -58,6 +58,10 @@ class NativeSlave(Slave, Protocol):
         """The error the slave's own loop calls raise for ``what`` returning ``status``."""
         ...
 
+    def forget_sent_inputs(self) -> None:
+        """The C loop set the inputs: the slave's next ``write_inputs`` (Python calls again) sends every one."""
+        ...
+
 
 class _Transfer(ctypes.Structure):
     _fields_ = [("function", ctypes.c_void_p), ("vrs", ctypes.c_void_p), ("n", ctypes.c_size_t),

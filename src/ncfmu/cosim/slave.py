@@ -19,7 +19,10 @@ parameter during the run) raises :class:`~ncfmu.errors.ConfigError` naming the v
 and the slave is unchanged; a call the slave fails (an FMU's fmi2Error or fmi2Fatal) raises
 :class:`~ncfmu.errors.SimulationError` naming the instance, the call and the time, and the run ends there; nothing
 else escapes. An FMU that asks to end the simulation raises the SimulationError
-:class:`~ncfmu.errors.TerminationRequested` from ``do_step``: the run ends cleanly at the step before. What the
+:class:`~ncfmu.errors.TerminationRequested` from ``do_step`` (with how far it got): the run ends cleanly at the
+step's start, or at its end when the FMU made the step whole before it asked (the step then done for the other
+slaves and recorded, as fmpy and fmusim record that point); ``forget_sent_inputs()`` of a native slave makes its
+next ``write_inputs`` send every input again (the C loop had set them). What the
 slave said (its FMU's log) is in ``messages``, ``(level, text)`` pairs in order, kept until
 :meth:`ResettableSlave.reset`.
 
