@@ -224,22 +224,23 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
 
 def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
-    completed) and the summary computed as the run goes; only ``--plot`` keeps the trajectory in memory.
-    Prints the summary; returns the result, where its CSV is and the system run (its .ssp read once)."""
+    completed) and the summary computed as the run goes; ``--plot`` keeps what a figure can show of it (a
+    :class:`~ncfmu.cosim.record.DecimatingSink`, bounded whatever the run's length). Prints the summary; returns
+    the result, where its CSV is, the system run (its .ssp read once), the summary and the rows to plot (or None)."""
     import math
     import signal
 
     from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
-    from .cosim.record import CsvSink, RecordWriteError
-    from .project import OpenSystem, recording, system_archive
+    from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
+    from .project import OpenSystem, ScaledSink, recording, system_archive
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
-    from .systems.report import columns_of, start_parameters
+    from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
         raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
     settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
                             args.max_depth)
-    csv_sink = None
+    csv_sink = plotted = None
     try:
         with deferred_interrupts():
             inputs = InputTable.from_csv(args.input) if args.input else None
@@ -253,15 +254,17 @@ def _run_streamed(args, start_values: dict[str, object]):
                 _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
-                # the summary reads every step; the CSV gets the --record columns at the --output-interval (with
-                # --plot the run keeps the trajectory, and the summary is made from it)
+                # the summary reads every step; the CSV gets the --record columns at the --output-interval; the
+                # plot, every step decimated to what a figure shows (its axes in mm, as the summary's)
                 report = opened.report()
                 report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
                 how = recording(opened, start_values, csv_sink, args.record, args.output_interval, args.step,
-                                summary=not args.plot, in_mm=True,    # a user's axis in m: the report reads mm
-                                report=report)
+                                in_mm=True, report=report)    # a user's axis in m: the report reads mm
+                if args.plot:
+                    plotted = DecimatingSink(system.name)
+                    how.sinks.append(ScaledSink(plotted, how.scales) if how.scales else plotted)
                 result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
-                                    inputs=inputs, keep=args.plot, **how.run_arguments())
+                                    inputs=inputs, keep=False, **how.run_arguments())
     except KeyboardInterrupt as err:
         terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
         where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
@@ -276,23 +279,17 @@ def _run_streamed(args, start_values: dict[str, object]):
             raise
         raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    if how.summary is None:              # --plot: the kept trajectory, its axes in mm for the summary and the plot
-        for name, gain in how.scales.items():
-            if name in result:
-                result.data[name] *= gain
-        # the summary (and the part check) over the kept trajectory
-        accumulator = how.report.accumulator(result.parameters or start_parameters(system.components, start_values))
-        accumulator.open(columns_of(result.data))
-        if len(result.data):
-            accumulator.write(result.data)
-        accumulator.close(True, float(result.time[-1]) if len(result.data) else None)
-    else:
-        accumulator = how.summary
+    accumulator = how.summary
+    assert accumulator is not None
     print(_summary(result, accumulator.summary()))
+    parameters = result.parameters or start_parameters(system.components, start_values)
     if csv_sink.final_path is not None:
-        _write_run_record(csv_sink.final_path, system.name,
-                          result.parameters or start_parameters(system.components, start_values))
-    return result, csv_sink.final_path, system, accumulator
+        _write_run_record(csv_sink.final_path, system.name, parameters)
+    shown = None
+    if plotted is not None:
+        shown = plotted.result()
+        shown.parameters, shown.models = parameters, result.models
+    return result, csv_sink.final_path, system, accumulator, shown
 
 
 #: what ``ncfmu run`` keeps beside OUT/SYSTEM.csv for ``ncfmu plot``: the parameters the run applied (a part
@@ -373,7 +370,7 @@ def cmd_run(args) -> int:
     start_values = _parse_set(args.set)
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
-    result, csv, system, accumulator = _run_streamed(args, start_values)
+    result, csv, system, accumulator, shown = _run_streamed(args, start_values)
     for line in replace_warnings:
         print(f"  [warning] {line}")
     out = Path(args.out)
@@ -396,7 +393,7 @@ def cmd_run(args) -> int:
             from .plots import plot_part, plot_result
         except ImportError:
             raise NcfmuError("--plot needs matplotlib: pip install -e '.[plot]'") from None
-        print(f"  plot: {plot_result(result, out / f'{result.system}.png')}")
+        print(f"  plot: {plot_result(shown, out / f'{result.system}.png')}")
         if verdict is not None and verdict.made is not None:
             print(f"  plot: {plot_part(verdict, result.system, out / f'{result.system}.part.png')}")
     if verdict is not None and verdict.within_tolerance is False:
@@ -453,7 +450,6 @@ def cmd_sweep(args) -> int:
 
 def cmd_plot(args) -> int:
     from . import plots
-    from .cosim.result import Result
     src = Path(args.file)
     if not src.is_file():
         raise NcfmuError(f"{src}: no such file (give a result CSV from 'ncfmu run' or a sweep's summary.csv)")
@@ -476,7 +472,7 @@ def cmd_plot(args) -> int:
         if args.system is not None and args.system not in SYSTEMS:
             raise NcfmuError(f"--system {args.system!r}: unknown; one of {', '.join(SYSTEMS)} (or leave it out to "
                              "draw the CSV's signals over time)")
-        result = Result.from_csv(src)
+        result = plots.read_plot_csv(src)       # streamed, decimated: a CSV of any length in bounded memory
         name = args.system or src.stem.split("_branch")[0]
         # a known system's plot when the CSV names it (--system, or the file name with that system's axes in it);
         # else, e.g. a single FMU's CSV from fmpy, every recorded signal over time
@@ -627,7 +623,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--output-interval", type=_real_option, default=None, metavar="S",
                    help="write a row every S seconds of simulated time (a whole multiple of the step; default: "
                         "every step)")
-    p.add_argument("--plot", action="store_true", help="also write SYSTEM.png (keeps the trajectory in memory)")
+    p.add_argument("--plot", action="store_true", help="also write SYSTEM.png (drawn from every step, decimated to "
+                   "what the figure shows: every extreme and edge kept, in bounded memory)")
     p.add_argument("--tolerance", type=_real_option, default=None, metavar="MM",
                    help="the part check's tolerance of the part made against the programmed part, mm (default "
                         "0.01); exit status 3 on a crash or a part out of tolerance")

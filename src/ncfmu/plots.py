@@ -7,11 +7,17 @@
 - :func:`bode_figure`: the ServoAxis's open loops over the band that matters, with their margins (for the
   FMU's documentation).
 - :func:`plot_signals`: a result of no known system (a single FMU's, a CSV fmpy wrote): its signals over time.
+- :func:`read_plot_csv`: a result CSV of any length read as a figure can show it (streamed, decimated).
+
+A run of any length is drawn from what :class:`~ncfmu.cosim.record.DecimatingSink` keeps of it (``--plot``
+streams into one; :func:`read_plot_csv` reads a CSV into one): every bucket's extremes and edges, at most
+about 2048 buckets, so the memory and the time to draw stay bounded whatever the run's length.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -296,3 +302,127 @@ def plot_signals(result, path: Path) -> Path:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+# -- a result CSV of any length, read as a figure can show it ------------------------------------------------
+#: rows parsed at a time by :func:`read_plot_csv`
+CSV_CHUNK_ROWS = 16384
+
+
+def read_plot_csv(path: Path, buckets: int | None = None, chunk_rows: int = CSV_CHUNK_ROWS):
+    """A result CSV (fmpy's layout, what :meth:`Result.from_csv <ncfmu.cosim.result.Result.from_csv>` reads, with
+    its checks and messages) read ``chunk_rows`` lines at a time into a
+    :class:`~ncfmu.cosim.record.DecimatingSink`: a :class:`~ncfmu.cosim.result.Result` of the rows it keeps, in
+    memory bounded by its buckets whatever the file's length (a CSV shorter than the buckets is kept whole)."""
+    from .cosim.record import PLOT_BUCKETS, DecimatingSink
+    from .errors import SystemDefinitionError
+    path = Path(path)
+    sink = DecimatingSink(buckets=PLOT_BUCKETS if buckets is None else buckets)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:    # a BOM (Excel's "CSV UTF-8") is not a name
+            first = next(csv.reader([f.readline()]), None)
+            if first is None or not any(cell.strip() for cell in first):
+                raise SystemDefinitionError(f"{path}: the result CSV is empty (expected a header time,NAME,...)")
+            header = [h.strip() for h in first]
+            if header[0] != "time":
+                raise SystemDefinitionError(f"{path}: a result CSV needs a first column 'time', not {header[0]!r}")
+            for j, name in enumerate(header):
+                if name in header[:j]:
+                    raise SystemDefinitionError(f"{path}: line 1: column {name!r} twice")
+            booleans: list[bool] | None = None             # per column, from the first chunk
+            dtype = np.dtype([])
+            line = 2                                       # the file's line number of the chunk's first line
+            while True:
+                lines = list(itertools.islice(f, chunk_rows))
+                if not lines:
+                    break
+                columns = _plain_columns(lines, len(header), booleans)
+                if columns is None:                        # anything but plain numbers: read as from_csv reads
+                    rows = [(k, row) for k, row in enumerate(csv.reader(lines), start=line)
+                            if any(cell.strip() for cell in row)]
+                    columns = _csv_columns(path, header, rows, booleans) if rows else None
+                line += len(lines)
+                if columns is None:
+                    continue
+                if booleans is None:
+                    booleans = [c.dtype == np.bool_ for c in columns]
+                    dtype = np.dtype([(name, c.dtype) for name, c in zip(header, columns)])
+                    sink.open([(name, dtype[name]) for name in header])
+                data = np.empty(len(columns[0]), dtype=dtype)
+                for name, c in zip(header, columns):
+                    data[name] = c
+                sink.write(data)
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise SystemDefinitionError(f"{path}: cannot read the result CSV: {err}") from None
+    if booleans is None:
+        raise SystemDefinitionError(f"{path}: the result CSV has a header and no rows")
+    sink.close(True)
+    return sink.result()
+
+
+#: what a chunk of plain numbers holds (the CSV ncfmu writes): digits, signs, points, exponents, nan and inf
+_PLAIN = b"0123456789+-.eE,naifNAIF \t\r\n"
+
+
+def _plain_columns(lines: list[str], width: int, booleans: list[bool] | None) -> list[np.ndarray] | None:
+    """The columns of a chunk of plain numbers, parsed by numpy at C speed; None when it is anything else (a
+    True/False, a quote, a blank row, a mistake): then the careful reading says what, where."""
+    if booleans is not None and any(booleans):
+        return None
+    try:
+        if "".join(lines).encode("ascii").translate(None, _PLAIN):
+            return None                                    # a character no plain number has
+    except UnicodeEncodeError:
+        return None
+    try:
+        table = np.loadtxt(lines, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        return None
+    if table.shape[1] != width or len(table) != sum(1 for text in lines if text.strip()) \
+            or not np.isfinite(table[:, 0]).all():
+        return None
+    return [table[:, j].copy() for j in range(width)]
+
+
+def _csv_columns(path: Path, header: list[str], rows: list[tuple[int, list[str]]],
+                 booleans: list[bool] | None) -> list[np.ndarray]:
+    """The columns of a chunk of a result CSV's rows (file line, cells), each checked as ``Result.from_csv``
+    checks the whole file; ``booleans``: which columns the chunks before found True/False (None: the first)."""
+    from .errors import SystemDefinitionError
+    from .ports import NUMBER_RULE, parse_real
+    for k, row in rows:
+        if len(row) != len(header):
+            raise SystemDefinitionError(f"{path}: line {k}: {len(row)} values for {len(header)} columns")
+    columns = []
+    for j, (name, raw) in enumerate(zip(header, zip(*(row for _, row in rows)))):
+        cells = [c.strip() for c in raw]
+        words = {c.lower() for c in cells}
+        boolean = j > 0 and words <= {"true", "false"}
+        if booleans is not None and boolean != booleans[j]:
+            # a column is Booleans or numbers in the whole file: say where this chunk breaks the rule
+            k, cell = next(((k, c) for (k, _), c in zip(rows, cells)
+                            if (c.lower() in ("true", "false")) != booleans[j]))
+            kind = "True/False" if booleans[j] else "a number"
+            raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not {kind} as in the lines before")
+        if boolean:
+            columns.append(np.array([c == "true" for c in map(str.lower, cells)]))
+            continue
+        try:
+            # numpy's conversion, like float(), takes any Unicode digit and '_': only plain ASCII goes through
+            joined = "".join(cells)
+            if not joined.isascii() or "_" in joined:
+                raise ValueError("not ASCII decimal")
+            columns.append(np.array(cells).astype(np.float64))
+        except ValueError:
+            for (k, _), cell in zip(rows, cells):
+                try:
+                    parse_real(cell)
+                except ValueError:
+                    rule = "" if cell.isascii() else f" ({NUMBER_RULE})"
+                    raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
+                                                f"True/False{rule}") from None
+            raise
+    bad_time = np.flatnonzero(~np.isfinite(columns[0]))
+    if bad_time.size:
+        raise SystemDefinitionError(f"{path}: line {rows[int(bad_time[0])][0]}: time must be finite")
+    return columns

@@ -242,3 +242,142 @@ class EveryKth:
 
     def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
         self.sink.close(complete, stopped_at, reason)
+
+
+#: Time buckets a :class:`DecimatingSink` keeps at most: about two per pixel of a 10-inch figure at 100 dpi.
+PLOT_BUCKETS = 2048
+
+
+def peak_rows(index: np.ndarray, rows: np.ndarray, width: int) -> np.ndarray:
+    """The positions in ``rows`` of the rows a peak-detect decimation keeps (ascending), in buckets of ``width``
+    consecutive rows of the run (``index``: each row's index in the run, ascending; row ``i`` is in bucket
+    ``i // width``): a bucket's first and last row and, per column, the first row of its smallest and of its
+    largest value (an oscilloscope's peak detect: a one-step spike stays), its first NaN, the first row that differs
+    from the bucket's first value and the row that starts its last constant stretch (a column that changes at most
+    twice in a bucket, an alarm's edge or a hold's start and end, is exact as a step curve).
+
+    Choosing again from rows chosen so (with the same or a doubled width) keeps every bucket's extremes: the
+    smallest of a union is the smallest of one of its parts."""
+    n = len(index)
+    bucket = np.asarray(index) // width
+    starts_mask = np.empty(n, bool)
+    starts_mask[:1] = True
+    np.not_equal(bucket[1:], bucket[:-1], out=starts_mask[1:])
+    starts = np.flatnonzero(starts_mask)
+    if len(starts) == n:                     # every row a bucket of its own: all are kept
+        return np.arange(n)
+    ends = np.append(starts[1:], n)          # exclusive
+    seg = np.cumsum(starts_mask) - 1         # the bucket (counted in this call) of each row
+    keep = np.zeros(n, bool)
+    keep[starts] = True
+    keep[ends - 1] = True
+
+    def first_of_each(hit: np.ndarray) -> None:
+        pos = np.flatnonzero(hit)
+        if len(pos):
+            s = seg[pos]
+            keep[pos[np.concatenate(([True], s[1:] != s[:-1]))]] = True
+
+    names = rows.dtype.names
+    assert names is not None, "rows are a structured array"
+    for name in names[1:]:                   # after time (ascending: its first and last row are kept)
+        col = rows[name]
+        if not _differs(col, col[:1]).any():
+            continue                         # constant here: the first row has it all
+        if col.dtype == np.bool_:
+            col = col.view(np.uint8)
+        if col.dtype.kind == "f":
+            nan = np.isnan(col)
+            if nan.any():
+                first_of_each(nan)
+            low, high = np.fmin.reduceat(col, starts), np.fmax.reduceat(col, starts)
+        else:
+            low, high = np.minimum.reduceat(col, starts), np.maximum.reduceat(col, starts)
+        first_of_each(col == low[seg])
+        first_of_each(col == high[seg])
+        first_of_each(_differs(col, col[starts][seg]))
+        # the last row that differs from the bucket's last value: the row after it starts the last stretch
+        pos = np.flatnonzero(_differs(col, col[ends - 1][seg]))
+        if len(pos):
+            s = seg[pos]
+            keep[pos[np.concatenate((s[1:] != s[:-1], [True]))] + 1] = True
+    return np.flatnonzero(keep)
+
+
+def _differs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a != b`` where a NaN equals a NaN (a stretch of NaN is constant)."""
+    out = a != b
+    if a.dtype.kind == "f":
+        out &= ~(np.isnan(a) & np.isnan(b))
+    return out
+
+
+class DecimatingSink:
+    """What a figure can show of a run of any length, in memory bounded by ``buckets``: the rows
+    :func:`peak_rows` keeps of buckets of ``width`` rows. ``width`` starts at 1 (a run of up to ``buckets`` rows is
+    kept whole) and doubles whenever the run outgrows the buckets, choosing again from the rows kept (two adjacent
+    buckets become one). Every row kept is a row of the run (its time and all its columns), so a path drawn in a
+    machine plane goes through points the machine was at. :meth:`result` is a :class:`Result` of them."""
+
+    def __init__(self, system: str = "", buckets: int = PLOT_BUCKETS) -> None:
+        if buckets < 1:
+            raise ValueError(f"buckets = {buckets}: must be >= 1")
+        self.system, self.buckets = system, int(buckets)
+        self.width = 1
+        self.rows = 0                        # rows of the run seen
+        self._parts: list[tuple[np.ndarray, np.ndarray]] = []     # (run index, rows) kept, in time order
+        self._dtype: np.dtype | None = None
+        self.complete: bool | None = None
+        self.stopped_at: float | None = None
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self._dtype = np.dtype([(name, dtype) for name, dtype in columns])
+        self._parts.clear()
+        self.width, self.rows = 1, 0
+
+    def write(self, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        index = np.arange(self.rows, self.rows + len(rows), dtype=np.int64)
+        self.rows += len(rows)
+        wider = False
+        while (self.rows - 1) // self.width >= self.buckets:
+            self.width *= 2
+            wider = True
+        if wider and self._parts:            # the kept rows into the wider buckets
+            self._parts = [self._choose(*self._joined())]
+        # the chunk's first bucket may have begun in the rows kept before: choose its rows again with the chunk's
+        tail_index, tail_rows = np.empty(0, np.int64), rows[:0]
+        if self._parts:
+            last_index, last_rows = self._parts[-1]
+            cut = int(np.searchsorted(last_index, index[0] // self.width * self.width))
+            tail_index, tail_rows = last_index[cut:], last_rows[cut:]
+            self._parts[-1] = (last_index[:cut], last_rows[:cut])
+        self._parts.append(self._choose(np.concatenate((tail_index, index)), np.concatenate((tail_rows, rows))))
+
+    def _choose(self, index: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        keep = peak_rows(index, rows, self.width)
+        return index[keep], rows[keep]       # copies: nothing of the run's record window is held
+
+    def _joined(self) -> tuple[np.ndarray, np.ndarray]:
+        assert self._dtype is not None, "the sink was never opened"
+        parts = [p for p in self._parts if len(p[0])]
+        if not parts:
+            return np.empty(0, np.int64), np.empty(0, self._dtype)
+        return np.concatenate([i for i, _ in parts]), np.concatenate([r for _, r in parts])
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.complete, self.stopped_at = complete, stopped_at
+
+    @property
+    def index(self) -> np.ndarray:
+        """The run index of each row kept."""
+        return self._joined()[0]
+
+    @property
+    def data(self) -> np.ndarray:
+        """The rows kept, in time order."""
+        return self._joined()[1]
+
+    def result(self) -> Result:
+        return Result(self.data, self.system)
