@@ -568,6 +568,16 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
             if (await c.read_browse_name()).Name.startswith("<"):
                 await server.delete_nodes([c], recursive=True)
         return obj
+
+    async def not_known(parent, prefix: str) -> None:
+        # mandatory positions the served system does not know, the structure and its parts: Bad_NotConnected
+        # ("should receive its value from another variable, but has never been configured to do so"; the value
+        # Null), never the type's 0 that a client would take for a position
+        unknown = ua.DataValue(ua.Variant(), StatusCode=ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotConnected)))
+        for c in await parent.get_children():
+            if (await c.read_browse_name()).Name.startswith(prefix):
+                for node in (c, *await c.get_children(refs=ua.ObjectIds.HasComponent)):
+                    await server.write_attribute_value(node.nodeid, unknown)
     iface = await add(server.nodes.objects, "CncInterface", "Cnc", 1007)
     for name, value in (("VendorName", "ncfmu"), ("VendorRevision", __version__), ("Version", "1.00"),
                         ("CncTypeName", f"ncfmu {system}")):
@@ -619,6 +629,7 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
             await (await axis.get_child([f"{cnc}:IsReferenced"])).write_value(True)
         elif model in CNC_SPINDLE_MODELS:
             spindle = await add(spindle_list, inst, f"Cnc.{inst}", 1005)
+            await not_known(spindle, "AnglePos")        # a spindle drive has a speed, no angle
             speed, cmd = f"{inst}.speed", f"{inst}.speed_cmd"
             await mirror(spindle, "ActSpeed", D, real(speed))
             await mirror(spindle, "CmdSpeed", D, real(cmd))
@@ -630,6 +641,7 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
         elif model in logic and issubclass(logic[model], CycleController):
             channel_id += 1
             channel = await add(channel_list, inst, f"Cnc.{inst}", 1002)
+            await not_known(channel, "PosTcp")          # the tool centre point's, in each coordinate system
             block = next((f"{inst}.{b}" for b in ("line", "block_no", "pc", "segment") if f"{inst}.{b}" in points),
                          None)
 

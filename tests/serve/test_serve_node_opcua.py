@@ -119,7 +119,7 @@ def test_node_opcua_reads_the_cnc_companion_model_typed(ncfmu_serve, node_opcua)
     """Browsed by the CNC types' names from node-opcua's own copy of the NodeSet: each axis's ActPos -- alone and
     in its CncPositionDataType structure -- is the axis's position output as asyncua reads it at the same paused
     time; every variable's value has its DataType's built-in type; no placeholder (``<CncAxis>``) is shown as if
-    it were an axis."""
+    it were an axis, no position that is not known as if it were 0."""
     served = ncfmu_serve("lathe_roughing", "--speed", "2", "--cnc")
 
     async def paused():
@@ -164,6 +164,21 @@ def test_node_opcua_reads_the_cnc_companion_model_typed(ncfmu_serve, node_opcua)
     assert len(variables) > 100
     placeholders = sorted({v["path"].split(">")[0] + ">" for v in variables if "<" in v["path"]})
     assert placeholders == [], placeholders
+    # a position has a value only where it is known: the axes' (checked above); the channel's tool centre point
+    # (12 coordinates) and the spindle's angle, the structures and their parts, say Bad_NotConnected -- they read
+    # 0 as if known
+    positions = {v["path"]: v for v in variables if v["dataType"] == "CncPositionDataType"}
+    known = {f"CncInterface/CncAxisList/{a}/{p}" for a in ("x_axis", "z_axis") for p in ("PosDirect", "PosIndirect")}
+    assert {p for p, v in positions.items() if v["status"] == "Good"} == known
+    assert len(positions) == len(known) + 12 + 1, sorted(positions)
+    unknown = [v for v in variables if v["path"] in set(positions) - known
+               or v["path"].rsplit("/", 1)[0] in set(positions) - known
+               and v["path"].rsplit("/", 1)[1] in ("ActPos", "CmdPos", "RemDist")]
+    assert len(unknown) == 4 * 13
+    assert {(v["status"], v["variant"]) for v in unknown} == {("BadNotConnected", "Null")}, unknown
+    variables = [v for v in variables if v not in unknown]
+    # a Null value is "not known" (an optional variable the system has nothing for, OPC UA Part 3 allows it);
+    # every value there is of its DataType's built-in type
     mistyped = [v for v in variables if v["status"] != "Good" or v["variant"] not in ("Null", v["builtIn"])]
     assert mistyped == [], mistyped
     assert served.stop() == 0, served.output
