@@ -19,6 +19,10 @@ compares instead, side by side in one run: ``ncfmu serve`` of the commit REV (it
 bench/compare.py, built once and cached) with no options against this checkout's with ``--options``,
 interleaved (old, new, old, new, ...), each at --speed 1 with the subscribed client, the load average beside
 every trial. Claim nothing from the first mode's numbers about a change; claim from this one.
+
+    python bench/serve_lag.py --on-off --options "--watchdog 5 --cnc" [--repeats 5] [--seconds 30]
+
+the same, but this checkout against itself: without the options ("off") and with them ("on"), interleaved.
 """
 
 from __future__ import annotations
@@ -126,22 +130,30 @@ def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str], p
 
 
 def compare(args, axes: list[str]) -> dict:
-    """Old (REV, no options) and new (this checkout, ``--options``) interleaved, at --speed 1."""
+    """Old (REV, no options) and new (this checkout, ``--options``) interleaved, at --speed 1; with ``--on-off``
+    this checkout without the options ("off") and with them ("on")."""
     import shlex
     sys.path.insert(0, str(Path(__file__).parent))
-    # bench/compare.py: a revision's worktree and venv
-    from compare import REPO, prepare, resolve
-    sha = resolve(args.against)
-    src, python = prepare(sha, args.work, REPO / ".ci" / "constraints.txt")
     options = tuple(shlex.split(args.options))
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} (1 min) at the start")
-    rows: dict[str, list[dict]] = {"old": [], "new": []}
+    if args.on_off:
+        sha, python, src = "this checkout", Path(sys.executable), None
+    else:
+        # bench/compare.py: a revision's worktree and venv
+        from compare import REPO, prepare, resolve
+        sha = resolve(args.against)
+        src, python = prepare(sha, args.work, REPO / ".ci" / "constraints.txt")
+    names = ("off", "on") if args.on_off else ("old", "new")
+    load_start = os.getloadavg()
+    print(f"machine: {os.cpu_count()} cores, load average {load_start[0]:.2f} (1 min) at the start")
+    rows: dict[str, list[dict]] = {names[0]: [], names[1]: []}
     for k in range(args.repeats):
-        for which in ("old", "new"):
-            r = (serve_once(args.system, 1.0, args.seconds, axes, str(python), str(src)) if which == "old"
-                 else serve_once(args.system, 1.0, args.seconds, axes, options=options))
+        for which in names:
+            r = (serve_once(args.system, 1.0, args.seconds, axes, str(python), src and str(src))
+                 if which == names[0] else serve_once(args.system, 1.0, args.seconds, axes, options=options))
             rows[which].append(r)
-            print(f"  {k + 1} {which} ({sha[:10] if which == 'old' else 'this checkout ' + args.options}): "
+            label = ("this checkout, no options" if args.on_off else sha[:10]) if which == names[0] else \
+                f"this checkout {args.options}"
+            print(f"  {k + 1} {which} ({label}): "
                   f"lag p50 {r['lag_p50_ms']:.2f} ms, p99 {r['lag_p99_ms']:.2f} ms, max {r['lag_max_ms']:.2f} ms; "
                   f"overruns {r['overruns']}; {r['data_changes']} data changes; load average "
                   f"{r['load_average']:.2f}", flush=True)
@@ -150,8 +162,8 @@ def compare(args, axes: list[str]) -> dict:
         print(f"{which}: lag p99 median {p99[len(p99) // 2]:.2f} ms (of {', '.join(f'{x:.2f}' for x in p99)}); "
               f"overruns {sum(r['overruns'] for r in rs)} in {len(rs)} runs of {args.seconds:g} s")
     print(f"machine: load average {os.getloadavg()[0]:.2f} (1 min) at the end")
-    return {"system": args.system, "against": sha, "options": list(options), "old": rows["old"], "new": rows["new"],
-            "cores": os.cpu_count()}
+    return {"system": args.system, "against": sha, "options": list(options), **rows, "cores": os.cpu_count(),
+            "load_average_start": load_start, "load_average_end": os.getloadavg()}
 
 
 def main() -> dict:
@@ -164,13 +176,16 @@ def main() -> dict:
     parser.add_argument("--json", default=None)
     parser.add_argument("--against", default=None, metavar="REV",
                         help="compare with ncfmu serve of this commit, side by side (see the docstring)")
-    parser.add_argument("--options", default="", help="ncfmu serve options of this checkout's runs (with --against)")
-    parser.add_argument("--repeats", type=int, default=3, help="old/new pairs (with --against)")
+    parser.add_argument("--on-off", action="store_true",
+                        help="compare this checkout without --options and with them, side by side")
+    parser.add_argument("--options", default="",
+                        help="ncfmu serve options of this checkout's runs (with --against or --on-off)")
+    parser.add_argument("--repeats", type=int, default=3, help="old/new (off/on) pairs (with --against, --on-off)")
     parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
                         help="where bench/compare.py keeps the revisions' worktrees and venvs")
     args = parser.parse_args()
     axes = ["x_axis", "z_axis"] if args.system.startswith("lathe") else ["x_axis"]
-    if args.against is not None:
+    if args.against is not None or args.on_off:
         result = compare(args, axes)
         if args.json:
             with open(args.json, "w") as f:

@@ -560,8 +560,25 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
 
     def t(number: int):
         return ua.NodeId(ua.Int32(number), ua.Int16(cnc))
-    iface = await server.nodes.objects.add_object(nid("Cnc"), ua.QualifiedName("CncInterface", idx),
-                                                  objecttype=t(1007))
+    async def add(parent, name: str, node_id: str, type_number: int):
+        # asyncua instantiates a type's optional placeholders too (CncChannelType's <CncAxis>, <CncSpindle>):
+        # a client would browse them as members, zero-filled; a placeholder is the type's, not an instance's
+        obj = await parent.add_object(nid(node_id), ua.QualifiedName(name, idx), objecttype=t(type_number))
+        for c in await obj.get_children():
+            if (await c.read_browse_name()).Name.startswith("<"):
+                await server.delete_nodes([c], recursive=True)
+        return obj
+
+    async def not_known(parent, prefix: str) -> None:
+        # mandatory positions the served system does not know, the structure and its parts: Bad_NotConnected
+        # ("should receive its value from another variable, but has never been configured to do so"; the value
+        # Null), never the type's 0 that a client would take for a position
+        unknown = ua.DataValue(ua.Variant(), StatusCode=ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotConnected)))
+        for c in await parent.get_children():
+            if (await c.read_browse_name()).Name.startswith(prefix):
+                for node in (c, *await c.get_children(refs=ua.ObjectIds.HasComponent)):
+                    await server.write_attribute_value(node.nodeid, unknown)
+    iface = await add(server.nodes.objects, "CncInterface", "Cnc", 1007)
     for name, value in (("VendorName", "ncfmu"), ("VendorRevision", __version__), ("Version", "1.00"),
                         ("CncTypeName", f"ncfmu {system}")):
         try:
@@ -580,13 +597,15 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
     def real(name: str) -> Callable[[Mapping[str, object]], float]:
         return lambda v: float(v.get(name) or 0.0)          # type: ignore[arg-type]
     logic = models()
+    # CncPositionDataType: the class import_xml made from the NodeSet's definition
+    position = ua.CncPositionDataType         # type: ignore[attr-defined]
     axis_list = await iface.get_child([f"{cnc}:CncAxisList"])
     spindle_list = await iface.get_child([f"{cnc}:CncSpindleList"])
     channel_list = await iface.get_child([f"{cnc}:CncChannelList"])
     channel_id = 0
     for inst, model in components.items():
         if model in CNC_AXIS_MODELS:
-            axis = await axis_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx), objecttype=t(1004))
+            axis = await add(axis_list, inst, f"Cnc.{inst}", 1004)
             pos, cmd = f"{inst}.pos", f"{inst}.pos_cmd"
             low = points[cmd].minimum if cmd in points else None
             high = points[cmd].maximum if cmd in points else None
@@ -596,6 +615,9 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
             for which in ("PosDirect", "PosIndirect"):
                 await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EngineeringUnits"])).write_value(eu)
                 await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EURange"])).write_value(span)
+                # the position variable's own value, the structure of the three (what a client reads whole)
+                await mirror(axis, which, ua.VariantType.ExtensionObject, lambda v, pos=pos, cmd=cmd: position(
+                    ActPos=real(pos)(v), CmdPos=real(cmd)(v), RemDist=real(cmd)(v) - real(pos)(v)))
                 await mirror(axis, f"{which}/ActPos", D, real(pos))
                 await mirror(axis, f"{which}/CmdPos", D, real(cmd))
                 await mirror(axis, f"{which}/RemDist", D,
@@ -606,8 +628,8 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
             await mirror(axis, "IsInactive", B, lambda v, inst=inst: not v.get(f"{inst}.enable", True))
             await (await axis.get_child([f"{cnc}:IsReferenced"])).write_value(True)
         elif model in CNC_SPINDLE_MODELS:
-            spindle = await spindle_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
-                                                    objecttype=t(1005))
+            spindle = await add(spindle_list, inst, f"Cnc.{inst}", 1005)
+            await not_known(spindle, "AnglePos")        # a spindle drive has a speed, no angle
             speed, cmd = f"{inst}.speed", f"{inst}.speed_cmd"
             await mirror(spindle, "ActSpeed", D, real(speed))
             await mirror(spindle, "CmdSpeed", D, real(cmd))
@@ -618,8 +640,8 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
                          if abs(real(speed)(v)) < 1e-9 else TURN_CW if real(speed)(v) > 0 else TURN_CCW)
         elif model in logic and issubclass(logic[model], CycleController):
             channel_id += 1
-            channel = await channel_list.add_object(nid(f"Cnc.{inst}"), ua.QualifiedName(inst, idx),
-                                                    objecttype=t(1002))
+            channel = await add(channel_list, inst, f"Cnc.{inst}", 1002)
+            await not_known(channel, "PosTcp")          # the tool centre point's, in each coordinate system
             block = next((f"{inst}.{b}" for b in ("line", "block_no", "pc", "segment") if f"{inst}.{b}" in points),
                          None)
 
