@@ -38,6 +38,15 @@ CRASH_LINES = 5
 FAR = 1e4
 #: Spacing of the points along a programmed profile's arcs (mm): chords within 0.1 um of an arc of 1 mm radius.
 ARC_SPACING = 0.02
+#: The spindle stands (a cut then is a crash) below the larger of these: an absolute speed (rev/min) and a
+#: fraction of the commanded speed. Why: 1 rev/min is a revolution a minute -- at the slowest feed a program
+#: writes (F 1 mm/min, G98) a chip of 1 mm a revolution, ten times what a finishing insert takes (0.05-0.3 mm/rev):
+#: below it the tool pushes into a bar that does not turn. 1 % of the command is a spindle that has not started
+#: or has stalled -- the sequencer begins a cut only within its speed-arrival band (``seq.spindle_band`` 5 %),
+#: so a cut at speed is never flagged; after M05 the command is 0 and 1 rev/min decides (a spindle still running
+#: down from M05 turns, and cuts, until then).
+STANDSTILL_RPM = 1.0
+STANDSTILL_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -152,6 +161,7 @@ class Setup:
     lines: list[tuple[Any, int]]          # (shapely geometry of a programmed element, its program line)
     why_not: str = ""                     # why the part cannot be judged at all
     rapid_lines: tuple[int, ...] | None = None     # the program lines at rapid, when no output says so
+    spindle_checked: bool = False         # a cut while the spindle stands is a crash (the program drives it)
 
 
 class _PartCheckAccumulator(PartAccumulator):
@@ -172,7 +182,8 @@ class _PartCheckAccumulator(PartAccumulator):
         line = rows[p.line_column()]
         rapid = (rows[p.rapid_column()] if self.setup.rapid_lines is None
                  else np.isin(line, np.array(self.setup.rapid_lines, dtype=np.int64)))
-        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line)
+        standing = p.standing(rows) if self.setup.spindle_checked else None
+        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing)
         self.done.write(rows["time"], rows[p.done_column()])
         self._verdict = None
 
@@ -209,6 +220,10 @@ class MachinedPart(Part):
 
     def setup(self, parameters: Parameters) -> Setup:
         raise NotImplementedError
+
+    def standing(self, rows: np.ndarray) -> np.ndarray | None:
+        """Per row: the work stands (a cut is a crash); None: nothing turns the work."""
+        return None
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _PartCheckAccumulator(self, parameters)
@@ -256,9 +271,19 @@ class LathePart(MachinedPart):
     limiter: str | None = None
     settings: PartSettings = PartSettings()
     axes: tuple[str, str] = ("Z", "X")
+    spindle: str | None = None            # the spindle drive whose actual speed turns the bar
 
     def variables(self) -> tuple[str, ...]:
-        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos")
+        spindle = (f"{self.spindle}.speed", f"{self.seq}.s_cmd", f"{self.seq}.spindle_dir") if self.spindle else ()
+        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos", *spindle)
+
+    def standing(self, rows: np.ndarray) -> np.ndarray | None:
+        """The spindle stands: |actual speed| below STANDSTILL_RPM and below STANDSTILL_FRACTION of the speed
+        commanded (the sequencer's S output while its direction is not M05)."""
+        if self.spindle is None:
+            return None
+        commanded = np.abs(rows[f"{self.seq}.s_cmd"]) * (rows[f"{self.seq}.spindle_dir"] != 0)
+        return np.abs(rows[f"{self.spindle}.speed"]) < np.maximum(STANDSTILL_RPM, STANDSTILL_FRACTION * commanded)
 
     def plane_columns(self) -> tuple[str, str]:
         return f"{self.z}.pos", f"{self.x}.pos"
@@ -313,7 +338,8 @@ class LathePart(MachinedPart):
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])))
             profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
             if not profiles:
-                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against")
+                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
+                             spindle_checked=self._drives_spindle(program))
             for profile in profiles.values():
                 outline = _elements_polyline(profile.elements)
                 (za, _), (ze, _) = outline[0], outline[-1]
@@ -331,7 +357,17 @@ class LathePart(MachinedPart):
                 # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
                 removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
         programmed = stock.difference(shapely.union_all(removed))
-        return Setup(removal, programmed, anchor, lines)
+        return Setup(removal, programmed, anchor, lines, spindle_checked=self._drives_spindle(program))
+
+    def _drives_spindle(self, program: str) -> bool:
+        """The program starts the spindle (M03 or M04): then a cut while it stands is a crash. The registers'
+        cycles and a program without M03/M04 leave the spindle to the operator (the sequencer commands none):
+        what turns the bar then is not in the run, and no cut is judged by the spindle."""
+        if self.spindle is None or not program.strip():
+            return False
+        from ..controllers.gcode import read
+        from ..controllers.lathe_program import LATHE
+        return any(code in (3, 4) for b in read(program, LATHE) for code, _ in b.m)
 
 
 @dataclass(frozen=True)
