@@ -991,7 +991,7 @@ class LiveServer:
             idx, "CrashEventType", ua.ObjectIds.BaseEventType,
             [("SimulationTime", ua.VariantType.Double), ("Line", ua.VariantType.Int32),
              ("What", ua.VariantType.String), ("DepthMm", ua.VariantType.Double)])
-        self._crash_events = await server.get_event_generator(crash_type, simobj)
+        self._crash_events = await server.get_event_generator(crash_type, simobj.nodeid)
         self._crashes_published = 0
         for method in ("Pause", "Resume", "Stop", "Reset"):
             await simobj.add_method(self._nid(f"Simulation.{method}"), ua.QualifiedName(method, idx),
