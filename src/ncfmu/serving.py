@@ -22,6 +22,14 @@ variable's name, DataType Double/Int32/Boolean/String, its description, its unit
 ``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs) and the
 methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a watchdog, the inputs a client
 session forced are released when it closes or is silent the watchdog's time.
+
+A crash is published as it happens (a system with a part check: the lathes, the mill): the simulation thread
+hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; at the first crash
+the simulation halts, as a machine's collision monitor stops it -- ``Simulation.state`` ``crashed``,
+``Simulation.reason`` and ``Simulation.crash`` the crash (time, program line, what, how deep),
+``Simulation.crashes`` how many -- and the ``Simulation`` object emits a ``CrashEventType`` event (Message the
+same text, Severity 900, and the fields ``SimulationTime``, ``Line``, ``What``, ``DepthMm``). Reset starts
+again; Resume is refused.
 """
 
 from __future__ import annotations
@@ -60,6 +68,10 @@ MAX_CHUNK_WALL = 0.020
 MIN_CHUNK_WALL = 0.001
 #: Steps per chunk at ``speed`` 0 (as fast as possible, still handing back between chunks).
 FAST_CHUNK = 50
+#: How often (simulated s) a served run's part check is handed the rows so far: how late a crash is seen at most.
+CRASH_CHECK = 0.05
+#: The OPC UA Severity of a crash event (1..1000; 801-1000 is "high" in Part 5).
+CRASH_SEVERITY = 900
 #: How long a client's write waits for the simulation thread to take it (the thread takes writes between
 #: chunks, every few ms; longer means the simulation is stopped or failed).
 WRITE_TIMEOUT = 2.0
@@ -230,6 +242,36 @@ class Snapshot:
     reason: str = ""
     lag: float = 0.0
     overruns: int = 0
+    crashes: tuple = ()              # the part check's crash records so far (ncfmu.machining.Crash)
+
+
+def crash_text(c) -> str:
+    """One crash as ``Simulation.crash`` and the event's Message say it."""
+    return f"crash at t = {c.t:.3f} s, line {c.line}: {c.what}, {c.depth_mm:.3g} mm deep"
+
+
+class CrashWatch:
+    """A served run's part check: its accumulator is one of the session's sinks (a new one after each Reset),
+    and the crashes it saw so far are read after each hand-over of rows."""
+
+    def __init__(self, report, parameters, record: Sequence[str] | None = None) -> None:
+        self.report, self.parameters = report, parameters
+        self.record = list(record) if record else None       # --record: what the recording's sinks keep
+        self.accumulator = self.new()
+
+    def sinks(self, recording: Sequence) -> list:
+        """A segment's sinks: the recording's (kept to ``--record``) and a new part check."""
+        from .cosim.record import SelectColumns
+        kept = list(recording) if self.record is None else [SelectColumns(k, self.record) for k in recording]
+        return [*kept, self.new()]
+
+    def new(self):
+        self.accumulator = self.report.accumulator(self.parameters)
+        return self.accumulator
+
+    def crashes(self) -> list:
+        from .systems.part import crashes_so_far
+        return crashes_so_far(self.accumulator)
 
 
 class PaceStats:
@@ -266,7 +308,8 @@ class Runner:
 
     def __init__(self, session, points: Sequence[Point], speed: float = 1.0, recorder: Recorder | None = None,
                  on_state: Callable[[], None] | None = None,
-                 check_parameter: Callable[[str, object], None] | None = None) -> None:
+                 check_parameter: Callable[[str, object], None] | None = None,
+                 watch: CrashWatch | None = None) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ConfigError("--speed", speed, "must be a number >= 0 (0: as fast as possible)")
         self.session, self.speed, self.recorder = session, float(speed), recorder
@@ -278,6 +321,10 @@ class Runner:
         #: the writes of the segments before the last Reset (the session's own log restarts at a Reset)
         self.earlier_writes: list[tuple[float, str, object]] = []
         self.state, self.reason = "running", ""
+        #: the part check (None: the system has none), the crashes it saw and when it was last handed rows
+        self.watch = watch
+        self.crashes: tuple = ()
+        self._checked = float(session.time)
         self.stats = PaceStats()
         self.lag = 0.0
         self.started, self.wall = 0.0, 0.0      # perf_counter at the thread's start; its wall time to the end
@@ -325,7 +372,7 @@ class Runner:
         values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
             self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
-                                      self.stats.overruns)
+                                      self.stats.overruns, self.crashes)
         self._want_snapshot = False
 
     def _apply(self, c: _Command) -> bool:
@@ -356,10 +403,14 @@ class Runner:
                 else:
                     writes = list(s.writes)
                     rec = self.recorder
-                    s.reset(rec.sinks() if rec is not None else ())
+                    recording = rec.sinks() if rec is not None else []
+                    s.reset(self.watch.sinks(recording) if self.watch is not None else recording)
                     self.earlier_writes += writes
                     if rec is not None:
                         rec.end_segment(writes, final=False, start=self.start_time)
+                    if self.state == "crashed":      # a new run: no crash yet
+                        self.state, self.reason = "running", ""
+                    self.crashes, self._checked = (), float(s.time)
                     rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
@@ -374,6 +425,21 @@ class Runner:
         else:
             self._want_snapshot = True
         return rebase
+
+    def _check_crashes(self) -> None:
+        """Hand the rows so far to the part check; at its first crash the simulation halts ("crashed")."""
+        s = self.session
+        self._checked = float(s.time)
+        s.flush()
+        assert self.watch is not None
+        crashes = self.watch.crashes()
+        if len(crashes) > len(self.crashes):
+            first = crashes[len(self.crashes)]
+            self.crashes = tuple(crashes)
+            if self.state == "running":
+                self.state, self.reason = "crashed", crash_text(first)
+                log.error("ncfmu serve: %s; the simulation halts (Reset starts again)", self.reason)
+            self._take_snapshot()
 
     def _main(self) -> None:
         s, h = self.session, self.session.step_size
@@ -427,6 +493,8 @@ class Runner:
                 else:
                     n = min(FAST_CHUNK, remaining)
                 s.advance(n)
+                if self.watch is not None and s.time - self._checked >= CRASH_CHECK - 1e-9:
+                    self._check_crashes()
                 if self.speed > 0:
                     lag = _time.perf_counter() - (wall0 + (s.time - sim0) / self.speed)
                     self.lag = lag
@@ -930,14 +998,23 @@ class LiveServer:
                  "simulated seconds per wall-clock second (0: as fast as possible)"),
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
                 ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
-                ("state", "running", ua.VariantType.String, "running, paused, stopped or failed"),
+                ("state", "running", ua.VariantType.String, "running, paused, crashed, stopped or failed"),
                 ("reason", "", ua.VariantType.String, "why the simulation stopped or failed"),
                 ("forced", [], ua.VariantType.String,
-                 "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order")):
+                 "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order"),
+                ("crashes", 0, ua.VariantType.Int32, "crashes the part check saw since the start (or the last Reset)"),
+                ("crash", "", ua.VariantType.String,
+                 "the last crash: time, program line, what and how deep (empty: none)")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
                                              ua.Variant(value, vt), varianttype=vt)
             await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(desc))))
             self.sim_nodes[name] = (node, vt)
+        crash_type = await server.create_custom_event_type(
+            idx, "CrashEventType", ua.ObjectIds.BaseEventType,
+            [("SimulationTime", ua.VariantType.Double), ("Line", ua.VariantType.Int32),
+             ("What", ua.VariantType.String), ("DepthMm", ua.VariantType.Double)])
+        self._crash_events = await server.get_event_generator(crash_type, simobj.nodeid)
+        self._crashes_published = 0
         for method in ("Pause", "Resume", "Stop", "Reset"):
             await simobj.add_method(self._nid(f"Simulation.{method}"), ua.QualifiedName(method, idx),
                                     self._method(method.lower()), [], [])
@@ -1206,6 +1283,7 @@ class LiveServer:
             await self._sim_value("state", snap.state)
             await self._sim_value("reason", snap.reason)
             await self._sim_value("forced", [name for name in self.points if name in snap.forced])
+            await self._publish_crashes(snap.crashes)
             if self._mirrors:
                 values = {**self._last, **snap.values}
                 for k, m in enumerate(self._mirrors):
@@ -1214,6 +1292,22 @@ class LiveServer:
                         self._mirrored[k] = value
                         await self.server.write_attribute_value(m.node.nodeid,      # type: ignore[attr-defined]
                                                                 ua.DataValue(ua.Variant(value, m.vtype)))
+
+    async def _publish_crashes(self, crashes: Sequence) -> None:
+        """The crashes not yet published: each an event; then the count and the last one's text."""
+        ua = self.ua
+        if len(crashes) < self._crashes_published:           # a Reset: a new run
+            self._crashes_published = 0
+        for c in crashes[self._crashes_published:]:
+            event = self._crash_events.event
+            event.Message = ua.LocalizedText(crash_text(c))
+            event.Severity = CRASH_SEVERITY
+            event.SimulationTime, event.Line, event.What = float(c.t), int(c.line), c.what
+            event.DepthMm = float(c.depth_mm)
+            await self._crash_events.trigger()
+        self._crashes_published = len(crashes)
+        await self._sim_value("crashes", len(crashes))
+        await self._sim_value("crash", crash_text(crashes[-1]) if crashes else "")
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -1289,6 +1383,23 @@ def _quiet_asyncua() -> None:
             logger.addFilter(_SaidByUs())
 
 
+def _crash_watch(opened, start_values: Mapping[str, object], recorder: Recorder | None,
+                 record: Sequence[str] | None) -> tuple[CrashWatch | None, list, list[str] | None]:
+    """The served run's part check (None: the system has none), the session's sinks and what it records: with
+    ``--record``, also what the part check reads (the CSV keeps to ``--record``)."""
+    from .systems.part import part_check_only
+    from .systems.report import start_parameters
+    report = part_check_only(opened.report())
+    recording = list(recorder.sinks()) if recorder is not None else []
+    columns = list(record) if record else None
+    if report is None:
+        return None, recording, columns
+    watch = CrashWatch(report, start_parameters(opened.system.components, start_values), columns)
+    if columns is not None:
+        columns = list(dict.fromkeys([*columns, *report.record()]))
+    return watch, watch.sinks(recording), columns
+
+
 def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, speed: float = 1.0,
           start_values: Mapping[str, object] | None = None, stop_time: float | None = None,
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
@@ -1314,13 +1425,13 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     files: list[Path] = []
     with OpenSystem(archive) as opened:
         recorder = Recorder(opened.system.name, Path(out)) if out is not None else None
+        watch, sinks, columns = _crash_watch(opened, start_values or {}, recorder, record)
         session = opened.open_session(
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
-            start_values=dict(start_values or {}), record=list(record) if record else None,
-            sinks=recorder.sinks() if recorder else ())
+            start_values=dict(start_values or {}), record=columns, sinks=sinks)
         components = {c.name: c.model for c in opened.system.components}
         runner = Runner(session, points_of(opened.slaves), speed, recorder,
-                        check_parameter=parameter_check(components, session))
+                        check_parameter=parameter_check(components, session), watch=watch)
         server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
                             cnc_components=components if cnc else None)
         try:

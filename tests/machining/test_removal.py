@@ -166,3 +166,28 @@ def test_a_live_server_reads_the_crashes_as_they_happen():
     assert crashes_so_far(acc) == []
     acc.write(rows[1:])
     assert [c.what for c in crashes_so_far(acc)] == ["rapid into the stock"]
+
+
+@pytest.mark.parametrize("chunk", [None, 37, 1000])
+def test_a_cut_where_the_work_stands_is_a_crash_from_the_first_standing_row_inside(chunk):
+    # a pass at X 28.5 from Z 2 to -40; the spindle stops (standing) from Z -20 on: what is cut from there on is
+    # the crash, 0.5 mm deep, entered where the pass was at Z -20; before it the same pass cut at speed
+    from ncfmu.machining.removal import STANDING
+    m = MaterialRemoval(box(-80, 0, 0, 29), lathe_tool(0.0))
+    xy = np.column_stack((np.linspace(2.0, -40.0, 4201), np.full(4201, 28.5)))
+    t = 1e-3 * np.arange(len(xy))
+    standing = xy[:, 0] <= -20.0
+    step = chunk or len(xy)
+    for k in range(0, len(xy), step):
+        s = slice(k, k + step)
+        m.write(t[s], xy[s, 0], xy[s, 1], np.zeros(len(xy[s]), bool), np.full(len(xy[s]), 5), standing[s])
+    assert [(c.line, c.what) for c in m.crashes] == [(5, STANDING)]
+    c = m.crashes[0]
+    assert c.depth_mm == pytest.approx(0.5, abs=RESOLUTION)
+    assert c.at[0] == pytest.approx(-20.0, abs=0.011)
+    assert c.t == pytest.approx(float(t[np.argmax(standing)]), abs=0.0011)
+    assert m.removed_area == pytest.approx(40 * 0.5, rel=1e-6)     # it still cut (the bar was pushed)
+    # the same pass with the work turning throughout: no crash
+    m = MaterialRemoval(box(-80, 0, 0, 29), lathe_tool(0.0))
+    m.write(t, xy[:, 0], xy[:, 1], np.zeros(len(xy), bool), np.full(len(xy), 5), np.zeros(len(xy), bool))
+    assert m.crashes == []

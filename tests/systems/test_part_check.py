@@ -125,25 +125,47 @@ def test_the_examples_are_within_a_hundredth(ncfmu_run, name, stop, values):
     assert p.within_tolerance is True
 
 
-def gouge_oracle(r, values) -> float:
+def gouge_oracle(r, values, fine: bool = False) -> float:
     """How deep the cutter went into the part, from the trajectory and the program alone: the points of the
     cutter's circle (every 2 degrees, at every 10th row) that lie inside the part (the closed compensated chain
     of the program; matplotlib's point-in-polygon, not GEOS), at their largest distance from the contour (the
-    controllers' own geometry), over every row where the cutter reaches the contour."""
+    controllers' own geometry), over every row where the cutter reaches the contour. ``fine``: then around each
+    of those points within 10 um of the deepest, every row within 10 rows and every 0.1 degree within 15 degrees
+    of it (where a lagging cutter cuts a corner off, the deepest point is on the corner's bisector, which the
+    coarse samples straddle by a few um)."""
     from matplotlib.path import Path as PolygonPath
 
     from ncfmu.controllers.geometry import sample
     moves = rs274.parse(values["contour.program"], (0.0, -10.0))
     contour = [m.element for m in moves if m.comp_before and m.comp_after]
     radius = values["contour.diameter_delta"] / 2
-    part = PolygonPath(np.array(sample(contour, 0.01)))
-    x, y = r["x_axis.pos"][::10], r["y_axis.pos"][::10]
-    near = path_distance(x, y, contour) < radius
-    angles = np.radians(np.arange(0.0, 360.0, 2.0))
-    qx = (x[near][:, None] + radius * np.cos(angles)).ravel()
-    qy = (y[near][:, None] + radius * np.sin(angles)).ravel()
-    inside = part.contains_points(np.column_stack((qx, qy)))
-    return float(path_distance(qx[inside], qy[inside], contour).max()) if inside.any() else 0.0
+    part = PolygonPath(np.array(sample(contour, 0.002 if fine else 0.01)))
+    xs, ys = r["x_axis.pos"], r["y_axis.pos"]
+
+    def deepest(rows: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per sample inside the part: its depth, its row and its angle (rows, angles: (n,) and (n, m))."""
+        qx = (xs[rows][:, None] + radius * np.cos(angles)).ravel()
+        qy = (ys[rows][:, None] + radius * np.sin(angles)).ravel()
+        inside = part.contains_points(np.column_stack((qx, qy)))
+        which = np.repeat(rows, angles.shape[1])[inside]
+        return path_distance(qx[inside], qy[inside], contour), which, np.broadcast_to(angles, (len(rows),
+                                                                                               angles.shape[1])).ravel()[inside]
+
+    rows = np.arange(0, len(xs), 10)
+    rows = rows[path_distance(xs[rows], ys[rows], contour) < radius]
+    d, which, angle = deepest(rows, np.radians(np.arange(0.0, 360.0, 2.0))[None, :].repeat(len(rows), 0))
+    if not len(d):
+        return 0.0
+    best = float(d.max())
+    if not fine:
+        return best
+    for k in np.flatnonzero(d >= best - 0.01):
+        around = np.arange(max(which[k] - 10, 0), min(which[k] + 11, len(xs)))
+        spread = angle[k] + np.radians(np.arange(-15.0, 15.0, 0.1))
+        fd, _, _ = deepest(around, spread[None, :].repeat(len(around), 0))
+        if len(fd):
+            best = max(best, float(fd.max()))
+    return best
 
 
 def test_the_compensation_on_the_wrong_side_gouges_a_cutter_diameter(ncfmu_run):
@@ -163,11 +185,14 @@ def test_a_detuned_servo_spoils_the_part_by_what_its_following_error_predicts(nc
     r = ncfmu_run("mill_contour", stop_time=120.0, start_values=values)
     p = r.part
     assert r["contour.done"].any() and not r["contour.alarm"].any()
-    predicted = gouge_oracle(r, values)
+    predicted = gouge_oracle(r, values, fine=True)
     assert predicted > 0.01                                              # the following error says: out
-    # within 3 um: the engine's polygons are exact to about 1 um; the oracle samples every 10th row (measured:
-    # 0.1640 against 0.1663 -- a 2.3 um difference not yet explained)
-    assert p.max_gouge_mm == pytest.approx(predicted, abs=0.003)
+    # within 1.5 um: the engine's polygons are exact to about 1 um (circles and path within 0.5 um each), the
+    # fine oracle samples every row and 0.1 degree. The deepest point is on the bisector of the corner at X 40
+    # Y 60 that the lag cut off -- inside a long edge of the swept envelope, where the engine's probes every 50 um
+    # had read 0.1640 (and the coarse oracle 0.1663) before the deviation refined its deepest probes: 0.1686
+    assert p.max_gouge_mm == pytest.approx(predicted, abs=0.0015)
+    assert p.max_gouge_mm >= gouge_oracle(r, values) - 0.0005           # never shallower than the coarse samples
     assert p.within_tolerance is False
     # the tuned servo on the same program: within (the examples' test)
     assert gouge_oracle(ncfmu_run("mill_contour", stop_time=75.0, start_values={

@@ -72,6 +72,13 @@ class Session:
                 sink.write(rows)
         run.row_base += count
 
+    def flush(self) -> None:
+        """Hand the rows recorded so far to the sinks now, not when the record window fills (a live server's part
+        check reads them as they come); a session that keeps its rows hands them over when it closes."""
+        self._usable()
+        if not self.keep:
+            self._flush()
+
     @property
     def time(self) -> float:
         return self.run.time_of(self.run.step)

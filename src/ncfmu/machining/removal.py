@@ -15,6 +15,8 @@ Crashes, each with the time and program line of the first row where the tool ent
 
 - a rapid move whose chip is deeper than :data:`TOUCH` ("rapid into the stock");
 - a cutting move whose chip is deeper than the tool's ``max_depth`` (plus :data:`TOUCH`);
+- a cutting move whose chip is deeper than :data:`TOUCH` taken while the work stands (``standing`` rows: a lathe's
+  spindle stopped -- the tool pushed into a bar that does not turn breaks);
 - the swept region entering a forbidden region (:class:`Forbidden`: chuck jaws, the far side of the spindle axis,
   a mill part's finished contour) deeper than the region's own threshold.
 
@@ -45,10 +47,14 @@ TOUCH = 0.005
 MIN_AREA = 1e-6
 #: Walls of the stock thinner than twice this are no part of the part made (mm): see MaterialRemoval.part.
 SLIVER = 0.002
+#: What a cut taken while the work stands is called (a lathe's spindle stopped).
+STANDING = "cut with the spindle stopped"
 #: How many crash records are kept (the count goes on).
 MAX_CRASHES = 100
 #: Spacing of the points at which a region's depth is measured (mm).
 PROBE = 0.05
+#: How many of the deepest probes a part's deviation refines (see depth_in).
+REFINE = 16
 
 #: The lathe tool's blade above its nose (the insert and its holder in the half-section), mm high.
 BLADE = 100.0
@@ -125,11 +131,19 @@ class Move:
     stop: int
     rapid: bool
     line: int
+    standing: bool = False
 
 
-def depth_in(piece: BaseGeometry, outline: BaseGeometry) -> tuple[float, tuple[float, float]]:
+def depth_in(piece: BaseGeometry, outline: BaseGeometry, refine: bool = False) -> tuple[float, tuple[float, float]]:
     """The largest distance of ``piece`` from ``outline`` (a boundary), probed at its vertices and every
-    :data:`PROBE` mm along its edges; and where."""
+    :data:`PROBE` mm along its edges; and where.
+
+    ``refine``: then also every :data:`RESOLUTION` mm along the piece's boundary within PROBE of the
+    :data:`REFINE` deepest probes (apart from each other). Why: the deepest point of a piece need not be a
+    vertex -- where a straight edge of it crosses the ridge of the distance over a convex corner of the outline (a
+    lagging cutter cutting a corner off: the deepest point is on the corner's bisector, inside a long edge of
+    the swept envelope) the distance peaks with a kink between probes, and PROBE spacing missed up to 6 um there
+    (the detuned-servo case: 0.1624 probed against 0.1681 on the bisector)."""
     if piece.is_empty:
         return 0.0, (math.nan, math.nan)
     points = shapely.get_coordinates(shapely.segmentize(piece, PROBE))
@@ -137,7 +151,25 @@ def depth_in(piece: BaseGeometry, outline: BaseGeometry) -> tuple[float, tuple[f
         return 0.0, (math.nan, math.nan)
     d = shapely.distance(shapely.points(points), outline)
     i = int(np.argmax(d))
-    return float(d[i]), (float(points[i, 0]), float(points[i, 1]))
+    best, at = float(d[i]), (float(points[i, 0]), float(points[i, 1]))
+    if not refine:
+        return best, at
+    picked: list[np.ndarray] = []
+    for k in np.argsort(d)[::-1][:50 * REFINE]:
+        if all(np.hypot(*(points[k] - q)) > PROBE for q in picked):
+            picked.append(points[k])
+            if len(picked) == REFINE:
+                break
+    boundary = piece.boundary
+    for q in picked:
+        near = boundary.intersection(ShapelyPoint(q).buffer(1.01 * PROBE, quad_segs=4))
+        fine = shapely.get_coordinates(shapely.segmentize(near, RESOLUTION))
+        if len(fine):
+            dd = shapely.distance(shapely.points(fine), outline)
+            j = int(np.argmax(dd))
+            if dd[j] > best:
+                best, at = float(dd[j]), (float(fine[j, 0]), float(fine[j, 1]))
+    return best, at
 
 
 def _areal(geometry: BaseGeometry) -> BaseGeometry:
@@ -178,18 +210,21 @@ class MaterialRemoval:
         self._last: tuple[float, float, float] | None = None         # (t, u, v) of the last row fed
         # the move that ended the last chunk, and the stock's outline where it began: a move that goes on into the
         # next chunk measures its chip's depth from that outline, not from the face its first part just cut
-        self._open: tuple[bool, int] | None = None
+        self._open: tuple[bool, int, bool] | None = None
         self._outline_before: BaseGeometry = stock.boundary
         # the crashes the open move has been reported for (once per move): what -> its index in crashes
         self._reported: dict[str, int | None] = {}
 
     # -- feeding ---------------------------------------------------------------------------------------
-    def write(self, t: np.ndarray, u: np.ndarray, v: np.ndarray, rapid: np.ndarray, line: np.ndarray) -> None:
+    def write(self, t: np.ndarray, u: np.ndarray, v: np.ndarray, rapid: np.ndarray, line: np.ndarray,
+              standing: np.ndarray | None = None) -> None:
         """One chunk of rows in time order: time, the tool's two coordinates, whether the move is at rapid, the
-        program line. Rows with a position that is not finite are left out."""
+        program line, and (optional) whether the work stands still (a lathe's spindle stopped: a cut then is a
+        crash). Rows with a position that is not finite are left out."""
+        stand = np.zeros(len(t), dtype=bool) if standing is None else np.asarray(standing, dtype=bool)
         ok = np.isfinite(u) & np.isfinite(v)
         if not ok.all():
-            t, u, v, rapid, line = t[ok], u[ok], v[ok], rapid[ok], line[ok]
+            t, u, v, rapid, line, stand = t[ok], u[ok], v[ok], rapid[ok], line[ok], stand[ok]
         if not len(t):
             return
         rapid = np.asarray(rapid, dtype=bool)
@@ -201,21 +236,24 @@ class MaterialRemoval:
             v = np.concatenate(([v0], v))
             rapid = np.concatenate((rapid[:1], rapid))
             line = np.concatenate((line[:1], line))
+            stand = np.concatenate((stand[:1], stand))
             first = 1
         else:
             first = 0
         self._last = (float(t[-1]), float(u[-1]), float(v[-1]))
         xy = np.column_stack((u, v))
-        change = np.flatnonzero((rapid[first + 1:] != rapid[first:-1]) | (line[first + 1:] != line[first:-1]))
+        change = np.flatnonzero((rapid[first + 1:] != rapid[first:-1]) | (line[first + 1:] != line[first:-1])
+                                | (stand[first + 1:] != stand[first:-1]))
         bounds = [first, *(change + first + 1).tolist(), len(t)]
         for a, b in zip(bounds, bounds[1:]):
             if b > a:
-                move = Move(a, b, bool(rapid[a]), int(line[a]))
-                if not (a == first == 1 and self._open == (move.rapid, move.line)):
+                move = Move(a, b, bool(rapid[a]), int(line[a]), bool(stand[a]))
+                key = (move.rapid, move.line, move.standing)
+                if not (a == first == 1 and self._open == key):
                     self._outline_before = self.stock.boundary
                     self._reported = {}
                 self._move(t, xy, move)
-                self._open = (move.rapid, move.line)
+                self._open = key
 
     def _swept(self, path: np.ndarray) -> BaseGeometry:
         """The tool swept along ``path`` ((n, 2) positions)."""
@@ -281,6 +319,8 @@ class MaterialRemoval:
             if depth > self.max_depth + TOUCH:
                 self._crash(t, xy, move, f"cut deeper than the tool's max_depth {self.max_depth:g} mm", inside,
                             depth)
+            if move.standing and depth > TOUCH:
+                self._crash(t, xy, move, STANDING, inside, depth)
         chip = _areal(inside)
         if chip.is_empty:
             return
@@ -316,6 +356,6 @@ class Deviation:
 def deviation(made: BaseGeometry, programmed: BaseGeometry) -> Deviation:
     """How far the part ``made`` departs from the ``programmed`` part, both polygons of the same plane."""
     outline = programmed.boundary
-    left, left_at = depth_in(_areal(made.difference(programmed)), outline)
-    gouge, gouge_at = depth_in(_areal(programmed.difference(made)), outline)
+    left, left_at = depth_in(_areal(made.difference(programmed)), outline, refine=True)
+    gouge, gouge_at = depth_in(_areal(programmed.difference(made)), outline, refine=True)
     return Deviation(left, left_at if left > 0 else None, gouge, gouge_at if gouge > 0 else None)

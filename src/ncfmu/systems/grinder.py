@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..cosim.ssp import System
 from .compose import component, table, wire
+from .part import GrindPart
 from .report import Axes, Envelope, FeedCycle, Plane, Report
 
 #: The seed's Table 1 (programmable-feed-JPS6043522.txt): rapid approach, rough, fine, spark-out, return;
@@ -21,12 +22,14 @@ GRINDER_TABLE = [(200.0, -100.0, 250.0),    # dresser
 ENVELOPE_PROGRAM = ("M0: Y+D1F7; M1: X+D2F7; M2: X+D3F1; M3: T1; M4: X-D4F7; M5: Y-D1F7; M6: END; "
                     "M41: XF7S1; M42: YF7S1; M43: END; M45: X+D5F2S4; M46: END")
 
-FEED_REPORT = Report((FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"), Axes(("x_axis",))))
+FEED_REPORT = Report((FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"), Axes(("x_axis",)),
+                      GrindPart(feed="feed", x="x_axis")))
 ENVELOPE_REPORT = Report(
     (FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"),
      Envelope(limiter="limiter", ref="y_axis", lim="x_axis", region_names=("dresser", "headstock", "work",
                                                                             "tailstock")),
-     Axes(("x_axis", "y_axis"))),
+     Axes(("x_axis", "y_axis")),
+     GrindPart(feed="feed", x="x_axis")),
     Plane(horizontal="y_axis", vertical="x_axis", title="wheel path in the Y-X plane with the limit envelope",
           xlabel="Y (table) [mm]", ylabel="X (infeed) [mm]", path_label="wheel (actual)"))
 

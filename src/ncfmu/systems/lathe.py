@@ -20,7 +20,7 @@ REPORT = Report(
     (LatheCycle(seq="seq", x="x_axis", z="z_axis"),
      Envelope(limiter="limiter", ref="z_axis", lim="x_axis", region_names=("chuck",)),
      Axes(("x_axis", "z_axis")),
-     LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter")),
+     LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter", spindle="spindle")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
           ylabel="X (radius) [mm]"))
 

@@ -38,6 +38,15 @@ CRASH_LINES = 5
 FAR = 1e4
 #: Spacing of the points along a programmed profile's arcs (mm): chords within 0.1 um of an arc of 1 mm radius.
 ARC_SPACING = 0.02
+#: The spindle stands (a cut then is a crash) below the larger of these: an absolute speed (rev/min) and a
+#: fraction of the commanded speed. Why: 1 rev/min is a revolution a minute -- at the slowest feed a program
+#: writes (F 1 mm/min, G98) a chip of 1 mm a revolution, ten times what a finishing insert takes (0.05-0.3 mm/rev):
+#: below it the tool pushes into a bar that does not turn. 1 % of the command is a spindle that has not started
+#: or has stalled -- the sequencer begins a cut only within its speed-arrival band (``seq.spindle_band`` 5 %),
+#: so a cut at speed is never flagged; after M05 the command is 0 and 1 rev/min decides (a spindle still running
+#: down from M05 turns, and cuts, until then).
+STANDSTILL_RPM = 1.0
+STANDSTILL_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -152,9 +161,29 @@ class Setup:
     lines: list[tuple[Any, int]]          # (shapely geometry of a programmed element, its program line)
     why_not: str = ""                     # why the part cannot be judged at all
     rapid_lines: tuple[int, ...] | None = None     # the program lines at rapid, when no output says so
+    spindle_checked: bool = False         # a cut while the spindle stands is a crash (the program drives it)
 
 
-class _PartCheckAccumulator(PartAccumulator):
+class PartCheck(Part):
+    """A report part that judges the part a run made (the lathe's, the mill's, the grinder's)."""
+
+    settings: PartSettings
+
+
+class _Judging(PartAccumulator):
+    """An accumulator whose run ends in a verdict on the part."""
+
+    def verdict(self) -> PartVerdict:
+        raise NotImplementedError
+
+    def summary(self) -> list[str]:
+        return self.verdict().summary()
+
+    def metrics(self) -> dict[str, float]:
+        return self.verdict().metrics()
+
+
+class _PartCheckAccumulator(_Judging):
     """Feeds the engine chunk by chunk; judges the part when asked (and again only after more rows)."""
 
     part: MachinedPart
@@ -172,7 +201,8 @@ class _PartCheckAccumulator(PartAccumulator):
         line = rows[p.line_column()]
         rapid = (rows[p.rapid_column()] if self.setup.rapid_lines is None
                  else np.isin(line, np.array(self.setup.rapid_lines, dtype=np.int64)))
-        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line)
+        standing = p.standing(rows) if self.setup.spindle_checked else None
+        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing)
         self.done.write(rows["time"], rows[p.done_column()])
         self._verdict = None
 
@@ -181,14 +211,8 @@ class _PartCheckAccumulator(PartAccumulator):
             self._verdict = self.part.judge(self.setup, finished=not math.isnan(self.done.value))
         return self._verdict
 
-    def summary(self) -> list[str]:
-        return self.verdict().summary()
 
-    def metrics(self) -> dict[str, float]:
-        return self.verdict().metrics()
-
-
-class MachinedPart(Part):
+class MachinedPart(PartCheck):
     """The part check's share of a report (the lathe's and the mill's are below)."""
 
     settings: PartSettings
@@ -209,6 +233,10 @@ class MachinedPart(Part):
 
     def setup(self, parameters: Parameters) -> Setup:
         raise NotImplementedError
+
+    def standing(self, rows: np.ndarray) -> np.ndarray | None:
+        """Per row: the work stands (a cut is a crash); None: nothing turns the work."""
+        return None
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _PartCheckAccumulator(self, parameters)
@@ -256,9 +284,19 @@ class LathePart(MachinedPart):
     limiter: str | None = None
     settings: PartSettings = PartSettings()
     axes: tuple[str, str] = ("Z", "X")
+    spindle: str | None = None            # the spindle drive whose actual speed turns the bar
 
     def variables(self) -> tuple[str, ...]:
-        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos")
+        spindle = (f"{self.spindle}.speed", f"{self.seq}.s_cmd", f"{self.seq}.spindle_dir") if self.spindle else ()
+        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos", *spindle)
+
+    def standing(self, rows: np.ndarray) -> np.ndarray | None:
+        """The spindle stands: |actual speed| below STANDSTILL_RPM and below STANDSTILL_FRACTION of the speed
+        commanded (the sequencer's S output while its direction is not M05)."""
+        if self.spindle is None:
+            return None
+        commanded = np.abs(rows[f"{self.seq}.s_cmd"]) * (rows[f"{self.seq}.spindle_dir"] != 0)
+        return np.abs(rows[f"{self.spindle}.speed"]) < np.maximum(STANDSTILL_RPM, STANDSTILL_FRACTION * commanded)
 
     def plane_columns(self) -> tuple[str, str]:
         return f"{self.z}.pos", f"{self.x}.pos"
@@ -313,7 +351,8 @@ class LathePart(MachinedPart):
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])))
             profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
             if not profiles:
-                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against")
+                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
+                             spindle_checked=self._drives_spindle(program))
             for profile in profiles.values():
                 outline = _elements_polyline(profile.elements)
                 (za, _), (ze, _) = outline[0], outline[-1]
@@ -331,7 +370,17 @@ class LathePart(MachinedPart):
                 # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
                 removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
         programmed = stock.difference(shapely.union_all(removed))
-        return Setup(removal, programmed, anchor, lines)
+        return Setup(removal, programmed, anchor, lines, spindle_checked=self._drives_spindle(program))
+
+    def _drives_spindle(self, program: str) -> bool:
+        """The program starts the spindle (M03 or M04): then a cut while it stands is a crash. The registers'
+        cycles and a program without M03/M04 leave the spindle to the operator (the sequencer commands none):
+        what turns the bar then is not in the run, and no cut is judged by the spindle."""
+        if self.spindle is None or not program.strip():
+            return False
+        from ..controllers.gcode import read
+        from ..controllers.lathe_program import LATHE
+        return any(code in (3, 4) for b in read(program, LATHE) for code, _ in b.m)
 
 
 @dataclass(frozen=True)
@@ -394,19 +443,26 @@ class MillPart(MachinedPart):
 
 def with_part_settings(report: Report, settings: PartSettings) -> Report:
     """``report`` with its part check judging by ``settings``."""
-    parts = tuple(replace(p, settings=settings) if isinstance(p, (LathePart, MillPart)) else p for p in report.parts)
+    parts = tuple(replace(p, settings=settings) if isinstance(p, (LathePart, MillPart, GrindPart)) else p
+                  for p in report.parts)
     return replace(report, parts=parts)
 
 
 def without_part_check(report: Report) -> Report:
     """``report`` without its part check (``--no-part-check``; the benchmark's other side)."""
-    return replace(report, parts=tuple(p for p in report.parts if not isinstance(p, MachinedPart)))
+    return replace(report, parts=tuple(p for p in report.parts if not isinstance(p, PartCheck)))
+
+
+def part_check_only(report: Report) -> Report | None:
+    """``report`` with its part check alone (what a live server feeds to publish crashes); None: it has none."""
+    parts = tuple(p for p in report.parts if isinstance(p, PartCheck))
+    return replace(report, parts=parts) if parts else None
 
 
 def verdict_of(accumulator: ReportAccumulator) -> PartVerdict | None:
     """The part check's verdict of a run summarised as it went (None: the report has no part check)."""
     for acc in accumulator.parts:
-        if isinstance(acc, _PartCheckAccumulator):
+        if isinstance(acc, _Judging):
             return acc.verdict()
     return None
 
@@ -423,10 +479,213 @@ def crashes_so_far(accumulator: ReportAccumulator) -> list[Crash]:
 
 def verdict_of_result(report: Report, result, parameters: Parameters) -> PartVerdict | None:
     """The part check's verdict of a whole in-memory run."""
-    if not any(isinstance(p, MachinedPart) for p in report.parts) or not len(result.data):
+    if not any(isinstance(p, PartCheck) for p in report.parts) or not len(result.data):
         return None
     acc = report.accumulator(parameters)
     acc.open(columns_of(result.data))
     acc.write(result.data)
     acc.close(True, float(result.time[-1]))
     return verdict_of(acc)
+
+
+# -- the grinder ---------------------------------------------------------------------------------------------
+#: How many cycles' records a grinder's verdict keeps (the count, the worst and the verdict go on).
+MAX_CYCLES = 1000
+
+
+@dataclass(frozen=True)
+class Spark:
+    """Where a grinding program's size is made: the normal cycle's spark-out (the dwell at its deepest
+    infeed), its address, the X it is programmed at (the feed origin plus the counted infeed) and the infeed's
+    direction (+1: X grows into the work, as the seed's)."""
+
+    address: int
+    x: float
+    sign: int
+
+
+def spark_of(values: Parameters | dict) -> Spark | str:
+    """The spark-out of a ProgrammableFeed's normal cycle (from ``start_address``), or why there is none: the
+    program's words walked with the return counter (feeds counted, S4 wear feeds not, S1 back to 0); the first
+    dwell where |counter| is at its largest is the spark-out."""
+    from ..controllers.feed import ProgrammableFeed, parse_program
+    v = {**ProgrammableFeed.default_parameters(), **values}
+    try:
+        program = parse_program(str(v["program"]))
+    except Exception as err:          # the run refuses it, naming the line; nothing to judge here
+        return f"the program does not read: {err}"
+    d = [to_float(v[f"D{k}"]) for k in range(1, 8)]
+    pc, counter, best = to_int(v["start_address"]), 0.0, None
+    for _ in range(len(program) + 1):
+        word = program.get(pc)
+        if word is None or word.kind == "end":
+            break
+        if word.axis == "x" and word.kind == "feed" and not word.wear:
+            counter += word.sign * d[word.d - 1]
+        elif word.axis == "x" and word.kind == "return":
+            counter = 0.0
+        elif word.kind == "dwell" and (best is None or abs(counter) > abs(best[1]) + 1e-12):
+            best = (pc, counter)
+        pc += 1
+    if best is None or best[1] == 0.0:
+        return "the normal cycle has no spark-out (a dwell T after an infeed of X) to measure the size at"
+    return Spark(best[0], to_float(v["x_origin"]) + best[1], 1 if best[1] > 0 else -1)
+
+
+@dataclass
+class GrindVerdict(PartVerdict):
+    """A grinder's parts, one a cycle: each cycle's size against the programmed X of its spark-out.
+
+    A cycle's **size** is the deepest actual X the wheel reached from the cycle's START to the end of its
+    spark-out, less the wheel-wear compensation made so far: grinding only removes, so the work is as small as
+    the wheel's deepest reach left it (an overshoot of the fine feed grinds deeper than where the axis settles;
+    a wheel still short of its command when the spark-out ends leaves that much on); a wear compensation
+    (START2's S4 feed) moves the feed origin by what the wheel wore, so the wheel's face -- the part's size --
+    stands that much short of the axis. The error is along the infeed: > 0 too deep (``max_gouge_mm``, the part
+    undersize on the radius), < 0 short (``max_left_mm``, stock left). A cycle that ends before its spark-out
+    does (EMB, an alarm) made no part and is counted as aborted."""
+
+    programmed_x_mm: float = math.nan
+    cycles: list[dict[str, float]] = field(default_factory=list)
+    cycle_count: int = 0
+    aborted: int = 0
+    worst_error_mm: float = math.nan
+    worst_cycle: int = 0
+
+    def as_json(self) -> dict[str, object]:
+        out = super().as_json()
+        for key in ("left_at", "gouge_at"):
+            out.pop(key, None)
+        out.update({"programmed_x_mm": self.programmed_x_mm, "cycles_judged": self.cycle_count,
+                    "cycles_aborted": self.aborted,
+                    "worst_error_mm": None if math.isnan(self.worst_error_mm) else self.worst_error_mm,
+                    "worst_cycle": self.worst_cycle or None, "cycles": self.cycles,
+                    "cycles_kept": len(self.cycles)})
+        return out
+
+    def summary(self) -> list[str]:
+        tol = f"{self.tolerance_mm:.4f} mm"
+        if self.judged:
+            return [f"  part: not judged: {self.judged}"]
+        head = (f"  part: {self.cycle_count} cycle{'s' if self.cycle_count != 1 else ''} judged"
+                + (f" ({self.aborted} aborted)" if self.aborted else "")
+                + f", size vs the programmed X {self.programmed_x_mm:.4f} mm: worst {self.worst_error_mm:+.4f} mm "
+                  f"(cycle {self.worst_cycle})")
+        if self.within_tolerance:
+            return [f"{head}, within {tol}"]
+        out = [c for c in self.cycles if abs(c["error_mm"]) > self.tolerance_mm]
+        lines = [f"{head}: OUT OF TOLERANCE {tol} in {sum(1 for _ in out)} of the cycles kept"]
+        lines += [f"  part: cycle {c['cycle']:.0f} at t = {c['t']:.3f} s: size {c['size_mm']:.4f} mm, error "
+                  f"{c['error_mm']:+.4f} mm" for c in out[:CRASH_LINES]]
+        return lines
+
+    def metrics(self) -> dict[str, float]:
+        return {**super().metrics(), "worst_size_error_mm": self.worst_error_mm}
+
+
+@dataclass(frozen=True)
+class GrindPart(PartCheck):
+    """A ProgrammableFeed grinding with its infeed axis ``x``: each cycle's size (:class:`GrindVerdict`)."""
+
+    feed: str
+    x: str
+    settings: PartSettings = PartSettings()
+
+    def variables(self) -> tuple[str, ...]:
+        return (*(f"{self.feed}.{v}" for v in ("pc", "run", "x_cmd", "return_counter_x")), f"{self.x}.pos")
+
+    def accumulator(self, parameters: Parameters) -> PartAccumulator:
+        return _GrindAccumulator(self, parameters)
+
+
+class _GrindAccumulator(_Judging):
+    """Follows the cycles as the rows come: a part starts at RUN's rising edge (not at the wear address); its
+    deepest actual X is kept until the program counter leaves the spark-out for the word after it -- the size
+    is taken there, with the wear so far (the feed origin's shift: X command less return counter less
+    x_origin)."""
+
+    part: GrindPart
+
+    def __init__(self, part: GrindPart, parameters: Parameters) -> None:
+        super().__init__(part)
+        from ..controllers.feed import ProgrammableFeed
+        values = {**ProgrammableFeed.default_parameters(), **parameters.get(part.feed, {})}
+        self.spark = spark_of(values)
+        self.wear_address = to_int(values["wear_address"])
+        self.origin = to_float(values["x_origin"])
+        self.tol = part.settings.tolerance
+        self.in_part = False
+        self.deepest = -math.inf             # sign * X, the deepest of the present part
+        self._prev: tuple[int, bool] | None = None       # the last row's pc and RUN
+        self._last_row = (math.nan, math.nan, math.nan)   # and its time, X command, return counter
+        self.cycles: list[dict[str, float]] = []
+        self.count = self.aborted = 0
+        self.worst, self.worst_cycle = math.nan, 0
+        self.max_left = self.max_gouge = 0.0
+
+    def write(self, rows: np.ndarray) -> None:
+        super().write(rows)
+        if not isinstance(self.spark, Spark):
+            return
+        p, sp = self.part, self.spark
+        pc = rows[f"{p.feed}.pc"].astype(np.int64)
+        run = rows[f"{p.feed}.run"].astype(bool)
+        depth = sp.sign * rows[f"{p.x}.pos"]
+        t, cmd, counter = rows["time"], rows[f"{p.feed}.x_cmd"], rows[f"{p.feed}.return_counter_x"]
+        prev_pc, prev_run = self._prev if self._prev is not None else (int(pc[0]), False)
+        before_pc = np.concatenate(([prev_pc], pc[:-1]))
+        before_run = np.concatenate(([prev_run], run[:-1]))
+        starts = np.flatnonzero(run & ~before_run)
+        stops = np.flatnonzero(~run & before_run)
+        ends = np.flatnonzero((before_pc == sp.address) & (pc != sp.address))
+        events = sorted([(int(i), 0) for i in starts] + [(int(i), 1) for i in ends] + [(int(i), 2) for i in stops])
+        a = 0
+        for i, kind in events:
+            if self.in_part and i > a:
+                self.deepest = max(self.deepest, float(depth[a:i].max()))
+            a = i
+            if kind == 0:
+                self.in_part = int(pc[i]) != self.wear_address
+                self.deepest = -math.inf
+            elif kind == 1 and self.in_part:
+                # the spark-out's last row: the row before (the chunk before's last, at a chunk's first row)
+                at = self._last_row if i == 0 else (float(t[i - 1]), float(cmd[i - 1]), float(counter[i - 1]))
+                self._measure(*at, normal=bool(run[i]) and int(pc[i]) == sp.address + 1)
+            elif kind == 2 and self.in_part:
+                self.aborted += 1               # RUN ended before the spark-out did (EMB, an alarm)
+                self.in_part = False
+        if self.in_part and a < len(rows):
+            self.deepest = max(self.deepest, float(depth[a:].max()))
+        self._prev = (int(pc[-1]), bool(run[-1]))
+        self._last_row = (float(t[-1]), float(cmd[-1]), float(counter[-1]))
+
+    def _measure(self, t: float, cmd: float, counter: float, normal: bool) -> None:
+        """The part of the cycle whose spark-out ended at the row at ``t`` with the X command ``cmd`` and return
+        counter ``counter`` (the word after the spark-out follows when ``normal``)."""
+        self.in_part = False
+        if not normal:
+            self.aborted += 1
+            return
+        sp = self.spark
+        assert isinstance(sp, Spark)
+        wear = cmd - counter - self.origin
+        reached = sp.sign * self.deepest
+        size = reached - wear
+        error = sp.sign * (size - sp.x)
+        self.count += 1
+        if math.isnan(self.worst) or abs(error) > abs(self.worst):
+            self.worst, self.worst_cycle = error, self.count
+        self.max_left, self.max_gouge = max(self.max_left, -error), max(self.max_gouge, error)
+        if len(self.cycles) < MAX_CYCLES:
+            self.cycles.append({"cycle": self.count, "t": t, "x_deepest_mm": reached,
+                                "wear_mm": wear, "size_mm": size, "error_mm": error})
+
+    def verdict(self) -> PartVerdict:
+        why = self.spark if isinstance(self.spark, str) else ""
+        if not why and not self.count:
+            why = "no grinding cycle finished its spark-out" + (f" ({self.aborted} aborted)" if self.aborted else "")
+        x = self.spark.x if isinstance(self.spark, Spark) else math.nan
+        return GrindVerdict([], 0, self.tol, why, max_left_mm=self.max_left if self.count else math.nan,
+                            max_gouge_mm=self.max_gouge if self.count else math.nan, axes=("X", "X"),
+                            programmed_x_mm=x, cycles=list(self.cycles), cycle_count=self.count,
+                            aborted=self.aborted, worst_error_mm=self.worst, worst_cycle=self.worst_cycle)
