@@ -106,7 +106,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
     Instance *i = checked(c, "fmi2SetDebugLogging", P_ANY);
     if (!i) return fmi2Error;
     unsigned mask;
-    if (!fmi2_categories_ok(&i->log, n, categories, &mask)) return fmi2Error;
+    if (!fmi2_categories_ok(&i->log, "fmi2SetDebugLogging", n, categories, &mask)) return fmi2Error;
     i->log.debug = on != fmi2False;
     i->log.categories = mask;
     return fmi2OK;
@@ -117,7 +117,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Rea
                                fmi2Boolean stop_defined, fmi2Real stop)
 {
     Instance *i = checked(c, "fmi2SetupExperiment", P_SETUP);
-    if (!i || !fmi2_experiment_ok(&i->log, start, stop_defined, stop)) return fmi2Error;
+    if (!i || !fmi2_experiment_ok(&i->log, "fmi2SetupExperiment", start, stop_defined, stop)) return fmi2Error;
     fmi2Status st = fmu_model_setup_experiment(i->model, tol_defined != fmi2False, tol, start,
                                                stop_defined != fmi2False, stop);
     if (st <= fmi2Warning) i->next_time = start;
@@ -167,8 +167,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_se
 {
     (void)no_set_prior_state;
     Instance *i = checked(c, "fmi2DoStep", P_STEP);
-    if (!i || !fmi2_step_ok(&i->log, t, h) || !fmi2_step_ns_ok(&i->log, h)
-        || !fmi2_continues_ok(&i->log, i->next_time, t)) return fmi2Error;
+    if (!i || !fmi2_step_ok(&i->log, "fmi2DoStep", t, h) || !fmi2_step_ns_ok(&i->log, "fmi2DoStep", h)
+        || !fmi2_continues_ok(&i->log, "fmi2DoStep", i->next_time, t)) return fmi2Error;
     fmi2Status st = fmu_model_do_step(i->model, t, h);
     if (st <= fmi2Warning) i->next_time = t + h;   /* the host's own arithmetic: its next step starts there */
     return st;

@@ -174,7 +174,7 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean on, size_t n, const f
     Instance *i = checked(c, "fmi3SetDebugLogging", P_ANY);
     if (!i) return fmi3Error;
     unsigned mask;
-    if (!fmi2_categories_ok(&i->log, n, categories, &mask)) return fmi3Error;
+    if (!fmi2_categories_ok(&i->log, "fmi3SetDebugLogging", n, categories, &mask)) return fmi3Error;
     i->log.debug = on;
     i->log.categories = mask;
     return fmi3OK;
@@ -185,7 +185,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean tol_defined, 
                                        fmi3Boolean stop_defined, fmi3Float64 stop)
 {
     Instance *i = checked(c, "fmi3EnterInitializationMode", P_SETUP);
-    if (!i || !fmi2_experiment_ok(&i->log, start, stop_defined, stop)) return fmi3Error;
+    if (!i || !fmi2_experiment_ok(&i->log, "fmi3EnterInitializationMode", start, stop_defined, stop)) return fmi3Error;
     fmi3Status st = (fmi3Status)fmu_model_setup_experiment(i->model, tol_defined, tol, start, stop_defined, stop);
     if (st > fmi3Warning) return st;
     i->next_time = start;
@@ -233,8 +233,8 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
 {
     (void)no_set_prior_state;
     Instance *i = checked(c, "fmi3DoStep", P_STEP);
-    if (!i || !fmi2_step_ok(&i->log, t, h) || !fmi2_step_ns_ok(&i->log, h)
-        || !fmi2_continues_ok(&i->log, i->next_time, t)) return fmi3Error;
+    if (!i || !fmi2_step_ok(&i->log, "fmi3DoStep", t, h) || !fmi2_step_ns_ok(&i->log, "fmi3DoStep", h)
+        || !fmi2_continues_ok(&i->log, "fmi3DoStep", i->next_time, t)) return fmi3Error;
     fmi3Status st = (fmi3Status)fmu_model_do_step(i->model, t, h);
     if (st <= fmi3Warning) i->next_time = t + h;
     if (event_handling_needed) *event_handling_needed = fmi3False;
