@@ -261,8 +261,10 @@ class FmuSlave:
         self.variables = unpacked.variables
         self.messages: list[tuple[str, str]] = []
         md = unpacked.model_description
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._alive = False
+        self.fmu = self._call("fmi2Instantiate", lambda: FMU2Slave(
+            guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName=instance_name))                    # (loads the binary: fmpy raises when it cannot)
         self._env = next(_IDS)
         _SINKS[self._env] = self.messages
         self._callbacks = fmi2CallbackFunctions()
@@ -275,7 +277,11 @@ class FmuSlave:
             addLoggerProxy(ctypes.byref(self._callbacks))
         except Exception:  # pragma: no cover - older fmpy without the proxy: messages stay unformatted
             pass
-        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        try:
+            self._call("fmi2Instantiate", lambda: self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True))
+        except SimulationError:
+            _SINKS.pop(self._env, None)
+            raise
         self._component = self.fmu.component
         self._dll = self.fmu.dll
         self._reads: list[tuple] = []
@@ -288,8 +294,13 @@ class FmuSlave:
         self._alive = True
         self._initialized = False      # set by initialize (even when it fails part-way), cleared by reset
 
-    def _fail(self, what: str, status: int, time: float | None = None) -> SimulationError:
-        """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
+    def _fail(self, what: str, status: int, time: float | None = None, reason: str | None = None) -> SimulationError:
+        """The one place a failed call's status becomes our exception (every route to the FMU comes here);
+        ``reason``: what fmpy said when a call failed without a status (an instantiation that returned NULL, a
+        binary that cannot be loaded)."""
+        if reason is not None:
+            errors = [msg for lvl, msg in self.messages[-5:] if lvl == "error"]
+            return SimulationError(f"{self.name}: {what} failed: {reason}" + "".join(f"; {m}" for m in errors))
         if status == 2 and time is not None and self._asks_to_terminate():
             detail = [msg for _lvl, msg in self.messages[-3:]]
             return TerminationRequested(self.name, time, "; ".join(detail))
@@ -317,6 +328,10 @@ class FmuSlave:
             return call()
         except FMICallException as err:
             raise self._fail(what, int(getattr(err, "status", 3))) from None
+        except Exception as err:
+            if type(err) is not Exception:     # ours or Python's (a bug): not fmpy's plain Exception
+                raise
+            raise self._fail(what, 3, reason=str(err)) from None
 
     def fmi2_failure(self, what: str, status: int) -> SimulationError:
         """The error for ``what`` returning ``status`` (for the C loop, which calls the functions directly)."""

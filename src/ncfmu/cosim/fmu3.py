@@ -34,9 +34,10 @@ class Fmu3Slave:
         self.variables: dict[str, Variable] = unpacked.variables
         self.messages: list[tuple[str, str]] = []
         md = unpacked.model_description
-        self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
         self._alive = False
+        self.fmu = self._call("fmi3InstantiateCoSimulation", lambda: FMU3Slave(
+            guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName=instance_name))                    # (loads the binary: fmpy raises when it cannot)
         self._call("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(loggingOn=True, logMessage=self._log))
         self._alive = True
         self._initialized = False
