@@ -34,6 +34,7 @@ from ctypes import (
 from pathlib import Path
 
 from fmpy import extract, read_model_description
+from misuse_report import announce, case, frees_do_nothing, refused_everywhere, summary, time_line
 
 OK, ERROR, FATAL = 0, 3, 4
 PLATFORM = "x86_64-linux"
@@ -106,18 +107,6 @@ class Binary:
 
 dut, foreign_binary = Binary(sys.argv[1]), Binary(sys.argv[2])
 md, lib, st = dut.md, dut.lib, dut.st
-results: list[bool] = []
-
-
-def case(name: str, held: bool, what: str) -> None:
-    results.append(held)
-    print("CASE", name, "HELD" if held else "BROKEN", what, flush=True)
-
-
-def announce(name: str) -> None:
-    print("TRY", name, flush=True)
-
-
 def refused(name: str, call, says: str | None = None) -> None:
     """``call()`` returns fmi3Error (not Fatal), with a log line saying ``says`` when given."""
     announce(name)
@@ -263,7 +252,7 @@ CALLS = {
     "fmi3CompletedIntegratorStep": lambda c: st("fmi3CompletedIntegratorStep", c, c_bool(True), byref(b1),
                                                 byref(b2)),
     "fmi3SetTime": lambda c: st("fmi3SetTime", c, c_double(0.0)),
-    **{fn: (lambda fn: lambda c: st(fn, c, f64, N1))(fn) for fn in (
+    **{fn: (lambda name: lambda c: st(name, c, f64, N1))(fn) for fn in (
         "fmi3SetContinuousStates", "fmi3GetContinuousStateDerivatives", "fmi3GetEventIndicators",
         "fmi3GetContinuousStates", "fmi3GetNominalsOfContinuousStates")},
     "fmi3GetNumberOfEventIndicators": lambda c: st("fmi3GetNumberOfEventIndicators", c, byref(size)),
@@ -277,18 +266,9 @@ other = dut.ready(b"bystander")                 # another instance: it must not 
 freed = dut.make(b"freed")
 dut.free(c_void_p(freed))
 foreign = foreign_binary.ready(b"foreign")      # an instance of another FMU's binary
-for label, handle in (("null", None), ("freed", c_void_p(freed)), ("made_up", c_void_p(0x4E43100000000007)),
-                      ("foreign", foreign)):
-    for fn, call in CALLS.items():
-        announce(f"{label}_{fn}")
-        result = call(handle)
-        case(f"{label}_instance_{fn}", result == ERROR, f"returned {result}")
-announce("free_null")
-dut.free(None)
-case("free_null_instance", True, "returned")
-announce("double_free")
-dut.free(c_void_p(freed))                       # a second free of the same handle: nothing happens
-case("double_free_instance", True, "returned")
+refused_everywhere(CALLS, (("null", None), ("freed", c_void_p(freed)), ("made_up", c_void_p(0x4E43100000000007)),
+                           ("foreign", foreign)), "instance", ERROR)
+frees_do_nothing(dut.free, c_void_p(freed))     # a second free of the same handle: nothing happens
 announce("free_foreign")
 dut.free(foreign)                               # not this binary's: nothing happens, the other FMU's lives on
 case("free_foreign_instance", foreign_binary.st("fmi3DoStep", foreign, c_double(0.0), c_double(1e-3), c_bool(True),
@@ -430,24 +410,12 @@ dut.free(c)
 
 # -- 6. doStep: no going back in time, no step below 1 ns; a restored state's time is where steps go on ---------
 c = dut.ready(b"time")
-first = [step(c, 0.0), step(c, 1e-3)]
-checks = {
-    "step_back_in_time": (lambda: step(c, 0.0), ERROR, "expected"),
-    "step_skipping_ahead": (lambda: step(c, 5e-3), ERROR, "expected"),
-    "step_of_1e-12_s": (lambda: step(c, 2e-3, 1e-12), ERROR, "below 1 ns"),
+time_line(lambda t, h=1e-3: step(c, t, h), lambda says: any(says in m for _, _, m in LOG), LOG.clear, OK, ERROR, {
     "step_of_0_s": (lambda: step(c, 2e-3, 0.0), ERROR, "> 0"),
     "step_negative": (lambda: step(c, 2e-3, -1e-3), ERROR, "> 0"),
     "step_of_nan_s": (lambda: step(c, 2e-3, float("nan")), ERROR, "finite"),
     "step_of_inf_s": (lambda: step(c, 2e-3, float("inf")), ERROR, "finite"),
-    "step_at_nan_time": (lambda: step(c, float("nan")), ERROR, "finite"),
-    "step_continuing": (lambda: step(c, 2e-3), OK, None),
-}
-for name, (call, expected, says) in checks.items():
-    announce(name)
-    LOG.clear()
-    result = call()
-    case(name, first == [OK, OK] and result == expected and (says is None or any(says in m for _, _, m in LOG)),
-         f"returned {result} {LOG}")
+    "step_at_nan_time": (lambda: step(c, float("nan")), ERROR, "finite")})
 announce("step_reports_its_end")
 last, flags3 = c_double(-1.0), [c_bool(True), c_bool(True), c_bool(True)]
 got = st("fmi3DoStep", c, c_double(3e-3), c_double(1e-3), c_bool(True), *(byref(f) for f in flags3), byref(last))
@@ -542,4 +510,4 @@ dut.free(other)
 
 case("no_message_was_fatal", not FATAL_LOGGED, repr(FATAL_LOGGED[:3]))
 case("no_message_names_fmi2", not FMI2_NAMED, f"{len(FMI2_NAMED)}: {sorted(set(FMI2_NAMED))}")
-print("CASES", len(results), "HELD", sum(results), flush=True)
+summary()

@@ -17,6 +17,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from fmpy import read_model_description
@@ -35,6 +36,8 @@ from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
 from .units import unit_from_fmpy, variable_unit
+
+_T = TypeVar("_T")
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -322,7 +325,7 @@ class FmuSlave:
         except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say, so it does not ask
             return False
 
-    def _call(self, what: str, call: Callable[[], object]) -> object:
+    def _call(self, what: str, call: Callable[[], _T]) -> _T:
         """A call through fmpy's wrappers: fmpy's FMICallException becomes our SimulationError (the contract)."""
         try:
             return call()
@@ -477,7 +480,7 @@ class FmuSlave:
         self._call("fmi2FreeFMUstate", lambda: self.fmu.freeFMUstate(state))
 
     def serialize_state(self, state) -> bytes:
-        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))  # type: ignore[call-overload]
+        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))
 
     def deserialize_state(self, data: bytes):
         return self._call("fmi2DeSerializeFMUstate", lambda: self.fmu.deSerializeFMUstate(bytes(data)))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from fmpy.fmi1 import FMICallException
@@ -20,6 +21,7 @@ from ..errors import SimulationError, SystemDefinitionError, TerminationRequeste
 from .fmu import UnpackedFmu, check_range, typed_value
 from .slave import Variable
 
+_T = TypeVar("_T")
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal"}
 _SET = {"Real": "setFloat64", "Integer": "setInt32", "Boolean": "setBoolean", "String": "setString"}
 _GET = {"Real": "getFloat64", "Integer": "getInt32", "Boolean": "getBoolean", "String": "getString"}
@@ -56,7 +58,7 @@ class Fmu3Slave:
         return SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {'; '.join(errors)}" if errors else ""))
 
-    def _call(self, what: str, call: Callable[..., object], *args: object) -> object:
+    def _call(self, what: str, call: Callable[..., _T], *args: object) -> _T:
         try:
             return call(*args)
         except FMICallException as err:
