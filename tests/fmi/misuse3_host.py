@@ -34,7 +34,7 @@ from ctypes import (
 from pathlib import Path
 
 from fmpy import extract, read_model_description
-from misuse_report import announce, case, frees_do_nothing, refused_everywhere, summary, time_line
+from misuse_report import announce, bad_instantiations, case, frees_do_nothing, refused_everywhere, summary, time_line
 
 OK, ERROR, FATAL = 0, 3, 4
 PLATFORM = "x86_64-linux"
@@ -134,7 +134,7 @@ def enter(c, start: float = 0.0, stop_defined: bool = False, stop: float = 0.0) 
 
 
 # -- 1. instantiation with bad arguments: NULL, one error line (when the host gave a logger), no crash -------
-bad_instantiations = {
+BAD_INSTANTIATIONS = {
     "null_instance_name": dict(name=None),
     "non_utf8_instance_name": dict(name=b"\xff\xfe"),
     "null_resource_path": dict(res=None),
@@ -152,14 +152,7 @@ announce("instantiate_long_name")
 c = dut.make(name=b"n" * 5000, logging=True)
 case("instantiate_long_name_and_debug_logging", bool(c) and st("fmi3Terminate", c_void_p(c)) == ERROR, "")
 dut.free(c_void_p(c))
-for name, kwargs in bad_instantiations.items():
-    announce(f"instantiate_{name}")
-    LOG.clear()
-    c = dut.make(**kwargs)
-    case(f"instantiate_{name}", not c and len(LOG) == 1 and LOG[0][0] == ERROR, f"{c!r} {LOG}")
-    announce(f"instantiate_{name}_no_logger")
-    c = dut.make(log=None, **kwargs)
-    case(f"instantiate_{name}_no_logger", not c, repr(c))
+bad_instantiations(BAD_INSTANTIATIONS, dut.make, {"log": None}, LOG, ERROR)
 announce("instantiate_model_exchange")
 LOG.clear()
 c = lib.fmi3InstantiateModelExchange(b"dut", dut.token, dut.resources, False, False, None, logger)

@@ -27,7 +27,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 from fmpy.logging import addLoggerProxy
-from misuse_report import announce, case, frees_do_nothing, refused_everywhere, summary, time_line
+from misuse_report import announce, bad_instantiations, case, frees_do_nothing, refused_everywhere, summary, time_line
 
 OK, ERROR = 0, 3
 fmu_path = sys.argv[1]
@@ -84,7 +84,7 @@ def ready(name: bytes = b"dut"):
 
 
 # -- 1. fmi2Instantiate with bad arguments: NULL, one log line (when the host gave a logger), no crash -----
-bad_instantiations = {
+BAD_INSTANTIATIONS = {
     "null_instance_name": dict(name=None),
     "non_utf8_instance_name": dict(name=b"\xff\xfe"),
     "null_resource_location": dict(res=None),
@@ -94,14 +94,7 @@ bad_instantiations = {
     "null_guid": dict(guid=None),
     "model_exchange": dict(kind=0),
 }
-for name, kwargs in bad_instantiations.items():
-    announce(f"instantiate_{name}")
-    LOG.clear()
-    c = make(**kwargs)
-    case(f"instantiate_{name}", not c and len(LOG) == 1 and LOG[0][0] == ERROR, f"{c!r} {LOG}")
-    announce(f"instantiate_{name}_no_logger")
-    c = make(cb=silent, **kwargs)
-    case(f"instantiate_{name}_no_logger", not c, repr(c))
+bad_instantiations(BAD_INSTANTIATIONS, make, {"cb": silent}, LOG, ERROR)
 announce("instantiate_null_callbacks")
 c = make(name=None, cb=None)
 case("instantiate_null_callbacks", not c, repr(c))

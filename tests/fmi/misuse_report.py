@@ -5,7 +5,12 @@ nothing, and the time line of doStep."""
 
 from __future__ import annotations
 
+import re
+import subprocess
+import tempfile
+import zipfile
 from collections.abc import Callable, Iterable
+from pathlib import Path
 
 results: list[bool] = []
 
@@ -21,6 +26,20 @@ def announce(name: str) -> None:
 
 def summary() -> None:
     print("CASES", len(results), "HELD", sum(results), flush=True)
+
+
+def bad_instantiations(cases: dict[str, dict], make: Callable[..., object], silent: dict,
+                       log: list, error: int) -> None:
+    """Each instantiation ``make(**kwargs)`` returns NULL with one error line to the host's logger; made
+    again with ``silent`` (no logger), NULL too."""
+    for name, kwargs in cases.items():
+        announce(f"instantiate_{name}")
+        log.clear()
+        c = make(**kwargs)
+        case(f"instantiate_{name}", not c and len(log) == 1 and log[0][0] == error, f"{c!r} {log}")
+        announce(f"instantiate_{name}_no_logger")
+        c = make(**silent, **kwargs)
+        case(f"instantiate_{name}_no_logger", not c, repr(c))
 
 
 def refused_everywhere(calls: dict[str, Callable[[object], int]], handles: Iterable[tuple[str, object]],
@@ -61,3 +80,27 @@ def time_line(step: Callable[..., int], said: Callable[[str], bool], clear: Call
         clear()
         result = call()
         case(name, first == [ok, ok] and result == expected and (says is None or said(says)), f"returned {result}")
+
+
+# -- for the tests that run a host ------------------------------------------------------------------------
+def exported_functions(fmu: Path, platform: str, prefix: str) -> set[str]:
+    """The functions named ``prefix``* that the FMU's binary exports (nm -D)."""
+    with zipfile.ZipFile(fmu) as z, tempfile.TemporaryDirectory() as tmp:
+        binary = z.extract(f"binaries/{platform}/{fmu.stem}.so", tmp)
+        out = subprocess.run(["nm", "-D", "--defined-only", binary], capture_output=True, text=True, check=True)
+    return {line.split()[-1] for line in out.stdout.splitlines() if line.split()[-1].startswith(prefix)}
+
+
+def run_host(host: Path, *args: str) -> tuple[int, int, set[str]]:
+    """Runs ``host`` on ``args`` in a process of its own: it did not die and no case broke; the number of cases,
+    of those that held, and the functions its bad-handle cases covered."""
+    import sys
+    proc = subprocess.run([sys.executable, str(host), *args], capture_output=True, text=True, timeout=300)
+    tried = re.findall(r"^TRY (\S+)", proc.stdout, re.MULTILINE)
+    assert proc.returncode == 0, f"died in case {tried[-1] if tried else '?'}: {proc.stderr[-2000:]}"
+    broken = [line for line in proc.stdout.splitlines() if line.startswith("CASE") and " BROKEN " in line]
+    assert broken == []
+    counts = re.search(r"^CASES (\d+) HELD (\d+)$", proc.stdout, re.MULTILINE)
+    calls = re.search(r"^CALLS (.*)$", proc.stdout, re.MULTILINE)
+    assert counts and calls, proc.stdout[-500:]
+    return int(counts.group(1)), int(counts.group(2)), set(calls.group(1).split())

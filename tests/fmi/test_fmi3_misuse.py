@@ -8,15 +8,11 @@ in one process of their own (tests/fmi/misuse3_host.py): a crash is a failure th
 
 from __future__ import annotations
 
-import re
-import subprocess
-import sys
-import tempfile
-import zipfile
 from pathlib import Path
 
 import pytest
 from fmpy import read_model_description
+from misuse_report import exported_functions, run_host
 
 from ncfmu.catalogue import models
 from ncfmu.fmi.fmi3 import PLATFORM
@@ -30,13 +26,6 @@ NO_INSTANCE = {"fmi3GetVersion", "fmi3InstantiateCoSimulation", "fmi3Instantiate
 CASES, STRING_CASES = 508, 4
 
 
-def exported_fmi3_functions(fmu: Path) -> set[str]:
-    with zipfile.ZipFile(fmu) as z, tempfile.TemporaryDirectory() as tmp:
-        binary = z.extract(f"binaries/{PLATFORM}/{fmu.stem}.so", tmp)
-        out = subprocess.run(["nm", "-D", "--defined-only", binary], capture_output=True, text=True, check=True)
-    return {line.split()[-1] for line in out.stdout.splitlines() if line.split()[-1].startswith("fmi3")}
-
-
 @pytest.fixture(scope="module")
 def fmus3(project):
     return {p.stem: p for p in project["fmi3"]}
@@ -45,16 +34,9 @@ def fmus3(project):
 @pytest.mark.parametrize("model", MODELS)
 def test_every_fmi3_misuse_is_refused_and_nothing_crashes(fmus3, model):
     foreign = "ServoAxis" if model == "AreaLimiter" else "AreaLimiter"     # its instance: the foreign handle
-    proc = subprocess.run([sys.executable, str(HOST), str(fmus3[model]), str(fmus3[foreign])], capture_output=True,
-                          text=True, timeout=300)
-    tried = re.findall(r"^TRY (\S+)", proc.stdout, re.MULTILINE)
-    assert proc.returncode == 0, f"died in case {tried[-1] if tried else '?'}: {proc.stderr[-2000:]}"
-    broken = [line for line in proc.stdout.splitlines() if line.startswith("CASE") and " BROKEN " in line]
-    assert broken == []
-    n, held = map(int, re.search(r"^CASES (\d+) HELD (\d+)$", proc.stdout, re.MULTILINE).groups())
+    n, held, covered = run_host(HOST, str(fmus3[model]), str(fmus3[foreign]))
     print(f"{model}: {n} FMI 3.0 misuse cases tried, {held} held")
     has_strings = any(v.type == "String" for v in read_model_description(str(fmus3[model])).modelVariables)
     assert n == held == CASES + (STRING_CASES if has_strings else 0)
     # the NULL/freed/made-up/foreign instance cases cover every function the binary exports
-    covered = set(re.search(r"^CALLS (.*)$", proc.stdout, re.MULTILINE).group(1).split())
-    assert covered == exported_fmi3_functions(fmus3[model]) - NO_INSTANCE
+    assert covered == exported_functions(fmus3[model], PLATFORM, "fmi3") - NO_INSTANCE
