@@ -255,6 +255,14 @@ class UnpackedFmu:
             shutil.rmtree(self._tmp, ignore_errors=True)
 
 
+def fmpy_slave(cls: Callable[..., _T], unpacked: UnpackedFmu, instance_name: str) -> _T:
+    """fmpy's slave of class ``cls`` (FMU2Slave, FMU3Slave) for ``unpacked``: it loads the binary, and fmpy
+    raises a plain Exception when it cannot (the caller's _call makes that a SimulationError)."""
+    md = unpacked.model_description
+    return cls(guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
+               instanceName=instance_name)
+
+
 class FmuSlave:
     """One FMU instance driven through fmpy's :class:`fmpy.fmi2.FMU2Slave`."""
 
@@ -263,11 +271,8 @@ class FmuSlave:
         self.unpacked = unpacked
         self.variables = unpacked.variables
         self.messages: list[tuple[str, str]] = []
-        md = unpacked.model_description
         self._alive = False
-        self.fmu = self._call("fmi2Instantiate", lambda: FMU2Slave(
-            guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=instance_name))                    # (loads the binary: fmpy raises when it cannot)
+        self.fmu = self._call("fmi2Instantiate", lambda: fmpy_slave(FMU2Slave, unpacked, instance_name))
         self._env = next(_IDS)
         _SINKS[self._env] = self.messages
         self._callbacks = fmi2CallbackFunctions()

@@ -18,7 +18,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 
 from ..errors import SimulationError, SystemDefinitionError, TerminationRequested
-from .fmu import UnpackedFmu, check_range, typed_value
+from .fmu import UnpackedFmu, check_range, fmpy_slave, typed_value
 from .slave import Variable
 
 _T = TypeVar("_T")
@@ -35,11 +35,8 @@ class Fmu3Slave:
         self.unpacked = unpacked
         self.variables: dict[str, Variable] = unpacked.variables
         self.messages: list[tuple[str, str]] = []
-        md = unpacked.model_description
         self._alive = False
-        self.fmu = self._call("fmi3InstantiateCoSimulation", lambda: FMU3Slave(
-            guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=instance_name))                    # (loads the binary: fmpy raises when it cannot)
+        self.fmu = self._call("fmi3InstantiateCoSimulation", lambda: fmpy_slave(FMU3Slave, unpacked, instance_name))
         self._call("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(loggingOn=True, logMessage=self._log))
         self._alive = True
         self._initialized = False
