@@ -27,6 +27,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 from fmpy.logging import addLoggerProxy
+from misuse_report import announce, bad_instantiations, case, frees_do_nothing, refused_everywhere, summary, time_line
 
 OK, ERROR = 0, 3
 fmu_path = sys.argv[1]
@@ -63,18 +64,6 @@ for fn in ("fmi2FreeInstance",):
     getattr(lib, fn).argtypes = [c_void_p]
     getattr(lib, fn).restype = None
 
-results: list[bool] = []
-
-
-def case(name: str, held: bool, what: str) -> None:
-    results.append(held)
-    print("CASE", name, "HELD" if held else "BROKEN", what, flush=True)
-
-
-def announce(name: str) -> None:
-    print("TRY", name, flush=True)
-
-
 def make(name: bytes = b"dut", cb=callbacks, guid=GUID, res=RESOURCES, kind: int = 1):
     return Instantiate(name, kind, guid, res, byref(cb) if cb is not None else None, 0, 0)
 
@@ -95,7 +84,7 @@ def ready(name: bytes = b"dut"):
 
 
 # -- 1. fmi2Instantiate with bad arguments: NULL, one log line (when the host gave a logger), no crash -----
-bad_instantiations = {
+BAD_INSTANTIATIONS = {
     "null_instance_name": dict(name=None),
     "non_utf8_instance_name": dict(name=b"\xff\xfe"),
     "null_resource_location": dict(res=None),
@@ -105,14 +94,7 @@ bad_instantiations = {
     "null_guid": dict(guid=None),
     "model_exchange": dict(kind=0),
 }
-for name, kwargs in bad_instantiations.items():
-    announce(f"instantiate_{name}")
-    LOG.clear()
-    c = make(**kwargs)
-    case(f"instantiate_{name}", not c and len(LOG) == 1 and LOG[0][0] == ERROR, f"{c!r} {LOG}")
-    announce(f"instantiate_{name}_no_logger")
-    c = make(cb=silent, **kwargs)
-    case(f"instantiate_{name}_no_logger", not c, repr(c))
+bad_instantiations(BAD_INSTANTIATIONS, make, {"cb": silent}, LOG, ERROR)
 announce("instantiate_null_callbacks")
 c = make(name=None, cb=None)
 case("instantiate_null_callbacks", not c, repr(c))
@@ -166,17 +148,9 @@ print("CALLS", " ".join(sorted(CALLS)), flush=True)     # the test checks these 
 other = ready(b"bystander")                     # another instance: it must not be disturbed
 freed = make(b"freed")
 lib.fmi2FreeInstance(c_void_p(freed))
-for label, handle in (("null", None), ("freed", c_void_p(freed)), ("made_up", c_void_p(0xDEADBEE0))):
-    for fn, call in CALLS.items():
-        announce(f"{label}_{fn}")
-        result = call(handle)
-        case(f"{label}_component_{fn}", result == ERROR, f"returned {result}")
-announce("free_null")
-lib.fmi2FreeInstance(None)
-case("free_null_instance", True, "returned")
-announce("double_free")
-lib.fmi2FreeInstance(c_void_p(freed))           # a second free of the same handle: nothing happens
-case("double_free_instance", True, "returned")
+refused_everywhere(CALLS, (("null", None), ("freed", c_void_p(freed)), ("made_up", c_void_p(0xDEADBEE0))),
+                   "component", ERROR)
+frees_do_nothing(lib.fmi2FreeInstance, c_void_p(freed))      # a second free of the same handle: nothing happens
 announce("bystander_after_misuse")
 out = (c_double * 1)()
 real_outputs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
@@ -204,19 +178,7 @@ def step(c, t: float, h: float = 1e-3) -> int:
 
 
 c = ready(b"time")
-first = [step(c, 0.0), step(c, 1e-3)]
-checks = {
-    "step_back_in_time": (lambda: step(c, 0.0), ERROR, "expected"),
-    "step_skipping_ahead": (lambda: step(c, 5e-3), ERROR, "expected"),
-    "step_of_1e-12_s": (lambda: step(c, 2e-3, 1e-12), ERROR, "below 1 ns"),
-    "step_continuing": (lambda: step(c, 2e-3), OK, None),
-}
-for name, (call, expected, says) in checks.items():
-    announce(name)
-    LOG.clear()
-    result = call()
-    case(name, first == [OK, OK] and result == expected and (says is None or any(says in m for _, m in LOG)),
-         f"returned {result} {LOG}")
+time_line(lambda t, h=1e-3: step(c, t, h), lambda says: any(says in m for _, m in LOG), LOG.clear, OK, ERROR)
 announce("restore_then_continue")
 saved = c_void_p()
 took = st("fmi2GetFMUstate", c_void_p(c), byref(saved))           # at t = 3 ms
@@ -241,4 +203,4 @@ lib.fmi2FreeInstance(c_void_p(other_instance))
 lib.fmi2FreeInstance(c_void_p(c))
 lib.fmi2FreeInstance(c_void_p(other))
 
-print("CASES", len(results), "HELD", sum(results), flush=True)
+summary()

@@ -17,6 +17,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from fmpy import read_model_description
@@ -35,6 +36,8 @@ from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
 from .units import unit_from_fmpy, variable_unit
+
+_T = TypeVar("_T")
 
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -252,6 +255,14 @@ class UnpackedFmu:
             shutil.rmtree(self._tmp, ignore_errors=True)
 
 
+def fmpy_slave(cls: Callable[..., _T], unpacked: UnpackedFmu, instance_name: str) -> _T:
+    """fmpy's slave of class ``cls`` (FMU2Slave, FMU3Slave) for ``unpacked``: it loads the binary, and fmpy
+    raises a plain Exception when it cannot (the caller's _call makes that a SimulationError)."""
+    md = unpacked.model_description
+    return cls(guid=md.guid, unzipDirectory=str(unpacked.directory), modelIdentifier=md.coSimulation.modelIdentifier,
+               instanceName=instance_name)
+
+
 class FmuSlave:
     """One FMU instance driven through fmpy's :class:`fmpy.fmi2.FMU2Slave`."""
 
@@ -260,9 +271,8 @@ class FmuSlave:
         self.unpacked = unpacked
         self.variables = unpacked.variables
         self.messages: list[tuple[str, str]] = []
-        md = unpacked.model_description
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._alive = False
+        self.fmu = self._call("fmi2Instantiate", lambda: fmpy_slave(FMU2Slave, unpacked, instance_name))
         self._env = next(_IDS)
         _SINKS[self._env] = self.messages
         self._callbacks = fmi2CallbackFunctions()
@@ -275,7 +285,11 @@ class FmuSlave:
             addLoggerProxy(ctypes.byref(self._callbacks))
         except Exception:  # pragma: no cover - older fmpy without the proxy: messages stay unformatted
             pass
-        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        try:
+            self._call("fmi2Instantiate", lambda: self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True))
+        except SimulationError:
+            _SINKS.pop(self._env, None)
+            raise
         self._component = self.fmu.component
         self._dll = self.fmu.dll
         self._reads: list[tuple] = []
@@ -288,8 +302,13 @@ class FmuSlave:
         self._alive = True
         self._initialized = False      # set by initialize (even when it fails part-way), cleared by reset
 
-    def _fail(self, what: str, status: int, time: float | None = None) -> SimulationError:
-        """The one place a failed call's status becomes our exception (every route to the FMU comes here)."""
+    def _fail(self, what: str, status: int, time: float | None = None, reason: str | None = None) -> SimulationError:
+        """The one place a failed call's status becomes our exception (every route to the FMU comes here);
+        ``reason``: what fmpy said when a call failed without a status (an instantiation that returned NULL, a
+        binary that cannot be loaded)."""
+        if reason is not None:
+            errors = [msg for lvl, msg in self.messages[-5:] if lvl == "error"]
+            return SimulationError(f"{self.name}: {what} failed: {reason}" + "".join(f"; {m}" for m in errors))
         if status == 2 and time is not None and self._asks_to_terminate():
             detail = [msg for _lvl, msg in self.messages[-3:]]
             return TerminationRequested(self.name, time, "; ".join(detail), self._last_successful_time())
@@ -318,12 +337,16 @@ class FmuSlave:
         except Exception:          # fmi2Discard or fmi2Error: the FMU cannot say
             return None
 
-    def _call(self, what: str, call: Callable[[], object]) -> object:
+    def _call(self, what: str, call: Callable[[], _T]) -> _T:
         """A call through fmpy's wrappers: fmpy's FMICallException becomes our SimulationError (the contract)."""
         try:
             return call()
         except FMICallException as err:
             raise self._fail(what, int(getattr(err, "status", 3))) from None
+        except Exception as err:
+            if type(err) is not Exception:     # ours or Python's (a bug): not fmpy's plain Exception
+                raise
+            raise self._fail(what, 3, reason=str(err)) from None
 
     def fmi2_failure(self, what: str, status: int) -> SimulationError:
         """The error for ``what`` returning ``status`` (for the C loop, which calls the functions directly)."""
@@ -473,7 +496,7 @@ class FmuSlave:
         self._call("fmi2FreeFMUstate", lambda: self.fmu.freeFMUstate(state))
 
     def serialize_state(self, state) -> bytes:
-        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))  # type: ignore[call-overload]
+        return bytes(self._call("fmi2SerializeFMUstate", lambda: self.fmu.serializeFMUstate(state)))
 
     def deserialize_state(self, data: bytes):
         return self._call("fmi2DeSerializeFMUstate", lambda: self.fmu.deSerializeFMUstate(bytes(data)))

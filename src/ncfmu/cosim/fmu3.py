@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 
 from ..errors import SimulationError, SystemDefinitionError, TerminationRequested
-from .fmu import UnpackedFmu, check_range, typed_value
+from .fmu import UnpackedFmu, check_range, fmpy_slave, typed_value
 from .slave import Variable
 
+_T = TypeVar("_T")
 _STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal"}
 _SET = {"Real": "setFloat64", "Integer": "setInt32", "Boolean": "setBoolean", "String": "setString"}
 _GET = {"Real": "getFloat64", "Integer": "getInt32", "Boolean": "getBoolean", "String": "getString"}
@@ -33,10 +35,8 @@ class Fmu3Slave:
         self.unpacked = unpacked
         self.variables: dict[str, Variable] = unpacked.variables
         self.messages: list[tuple[str, str]] = []
-        md = unpacked.model_description
-        self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=str(unpacked.directory),
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
         self._alive = False
+        self.fmu = self._call("fmi3InstantiateCoSimulation", lambda: fmpy_slave(FMU3Slave, unpacked, instance_name))
         self._call("fmi3InstantiateCoSimulation", lambda: self.fmu.instantiate(loggingOn=True, logMessage=self._log))
         self._alive = True
         self._initialized = False
@@ -55,7 +55,7 @@ class Fmu3Slave:
         return SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
                                + (f": {'; '.join(errors)}" if errors else ""))
 
-    def _call(self, what: str, call: Callable[..., object], *args: object) -> object:
+    def _call(self, what: str, call: Callable[..., _T], *args: object) -> _T:
         try:
             return call(*args)
         except FMICallException as err:

@@ -73,7 +73,8 @@ PYTHON_MODEL = C_LAYER / "python_model.c"
 SHIM_LINK = ("-ldl", "-lm", "-lpthread")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
 #: What a Python FMU's binaries are compiled from (the FMI 2.0 one and its FMI 3.0 twin's, fmi3.py).
-PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "fmi2_model.h", C_LAYER / "fmi2_machine.h", CONTRACT_HEADER,
+PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "fmi2_model.h", C_LAYER / "fmi2_machine.h",
+                      C_LAYER / "fmu_instance.h", CONTRACT_HEADER,
                       C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
 
 

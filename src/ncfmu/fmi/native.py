@@ -46,7 +46,7 @@ C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: What a native FMU carries of the FMI layer (its sources/), beside the model's C file and model_vars.h.
 LAYER_SOURCES = ("fmi2_functions.c", "native_model.c")
-LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h")
+LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h", "fmu_instance.h")
 
 
 @dataclass(frozen=True)
@@ -218,37 +218,18 @@ def _design_html(m: NativeModel, stage: Path) -> str:
             ("position loop: gain margin", position.gain_margin_text().removeprefix("GM ")),
             ("position loop: closed-loop bandwidth (-3 dB)", f"{d.position_bandwidth:.1f} rad/s"),
             ("current loop: corner 1/tau_current", f"{1.0 / p.tau_current:.0f} rad/s")]
-    table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
     figure = ""
-    try:
-        from ..servo.bode import bode_figure
-        fig, _ = bode_figure(p)
-        out = io.BytesIO()
-        fig.savefig(out, format="png", dpi=80)
-        import matplotlib.pyplot as plt
-        plt.close(fig)
-        (stage / "documentation").mkdir(exist_ok=True)
-        (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
+    if _bode_png(stage, "bode_figure", p) is not None:
         figure = (f'<p><img src="bode.png" alt="Bode plot of the open velocity and position loops from '
                   f'{bode.band[0]:.1f} to {bode.band[1]:.0f} rad/s, with their margins"></p>\n'
                   f"<p>The band that matters: from a decade below the position loop's closed-loop bandwidth "
                   f"({bode.band[0]:.1f} rad/s) to a decade above the current loop's corner ({bode.band[1]:.0f} "
                   "rad/s). Dotted: each loop's gain crossover, its phase margin the bar up from -180 deg; dashed: "
                   "the phase crossover, the gain margin the bar up to 0 dB.</p>")
-    except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
-        pass
-    return f"""<h2>Design (python-control, default parameters)</h2>
-<p>At fmi2ExitInitializationMode the FMU computes the phase margins of both loops from the parameters
-(the continuous models of ncfmu.servo.model) and refuses, with fmi2Error naming the parameter, a closed loop
-that is unstable or has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
-<table>{table}</table>
-{figure}
-<h2>Runtime requirements</h2>
-<p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> (fmi2_functions.c, native_model.c, {m.model_c.name}; C99, link with
--lm -lpthread -ldl), so
-<code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
-platform.</p>"""
+    return _design_section(m, (
+        "At fmi2ExitInitializationMode the FMU computes the phase margins of both loops from the parameters\n"
+        "(the continuous models of ncfmu.servo.model) and refuses, with fmi2Error naming the parameter, a closed loop\n"
+        f"that is unstable or has less than {MIN_PHASE_MARGIN:g} deg phase margin."), rows, figure)
 
 
 def _spindle_design_html(m: NativeModel, logic, stage: Path) -> str:
@@ -266,28 +247,42 @@ def _spindle_design_html(m: NativeModel, logic, stage: Path) -> str:
             ("acceleration at the torque limit, (torque_max - tau_coulomb) / J",
              f"{accel * 60.0 / (2.0 * math.pi):.0f} rev/min/s"),
             ("base speed power_max / torque_max (constant power above it)", f"{base:.0f} rev/min")]
-    table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
-    c_files = ", ".join(sorted(name for name in m.sources() if name.endswith(".c")))
     figure = ""
-    try:
-        from ..servo.bode import spindle_bode_figure
-        fig, bode = spindle_bode_figure(p)
-        out = io.BytesIO()
-        fig.savefig(out, format="png", dpi=80)
-        import matplotlib.pyplot as plt
-        plt.close(fig)
-        (stage / "documentation").mkdir(exist_ok=True)
-        (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
+    bode = _bode_png(stage, "spindle_bode_figure", p)
+    if bode is not None:
         figure = (f'<p><img src="bode.png" alt="Bode plot of the open speed loop from {bode.band[0]:.1f} to '
                   f'{bode.band[1]:.0f} rad/s, with its phase margin"></p>\n'
                   f"<p>From a decade below the PI zero ({bode.band[0] * 10:.0f} rad/s) to a decade above the current "
                   "loop's corner. Dotted: the gain crossover, the phase margin the bar up from -180 deg.</p>")
-    except ImportError:      # matplotlib is optional: the figures stay, the plot is left out
-        pass
+    return _design_section(m, (
+        "At fmi2ExitInitializationMode the FMU computes the speed loop's phase margin from the parameters (the "
+        "continuous\nmodels of ncfmu.servo.spindle_model) and refuses, with fmi2Error naming speed_bandwidth, a loop "
+        f"that is unstable or\nhas less than {MIN_PHASE_MARGIN:g} deg phase margin."), rows, figure)
+
+
+def _bode_png(stage: Path, figure_of: str, p):
+    """documentation/bode.png of the FMU being staged, drawn by ``servo.bode.<figure_of>(p)``; the Bode data it
+    was drawn from, or None without matplotlib (optional: the figures stay, the plot is left out)."""
+    try:
+        from ..servo import bode as plots
+        fig, bode = getattr(plots, figure_of)(p)
+        out = io.BytesIO()
+        fig.savefig(out, format="png", dpi=80)
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+    except ImportError:
+        return None
+    (stage / "documentation").mkdir(exist_ok=True)
+    (stage / "documentation" / "bode.png").write_bytes(out.getvalue())
+    return bode
+
+
+def _design_section(m: NativeModel, design: str, rows: list[tuple[str, str]], figure: str) -> str:
+    """A native FMU's design section (what it refuses, its figures, its plot) and its runtime requirements."""
+    table = "\n".join(f"<tr><td>{a}</td><td>{html.escape(b)}</td></tr>" for a, b in rows)
+    c_files = ", ".join(sorted(name for name in m.sources() if name.endswith(".c")))
     return f"""<h2>Design (python-control, default parameters)</h2>
-<p>At fmi2ExitInitializationMode the FMU computes the speed loop's phase margin from the parameters (the continuous
-models of ncfmu.servo.spindle_model) and refuses, with fmi2Error naming speed_bandwidth, a loop that is unstable or
-has less than {MIN_PHASE_MARGIN:g} deg phase margin.</p>
+<p>{design}</p>
 <table>{table}</table>
 {figure}
 <h2>Runtime requirements</h2>

@@ -110,44 +110,44 @@ static inline FMI2_PRINTF(4, 5) void fmi2_say(const Fmi2Log *log, int status, co
 static inline int fmi2_allowed(const Fmi2Log *log, int phase, const char *call, int phases)
 {
     if (phase & phases) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: not allowed in the %s state (FMI 2.0 state machine)",
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: not allowed in the %s state (the FMI co-simulation state machine)",
              call, fmi2_phase_name(phase));
     return 0;
 }
 
-static inline int fmi2_experiment_ok(const Fmi2Log *log, double start, int stop_defined, double stop)
+/* (``call``: the function the host called, named in the message -- fmi2SetupExperiment, fmi3DoStep, ...) */
+static inline int fmi2_experiment_ok(const Fmi2Log *log, const char *call, double start, int stop_defined, double stop)
 {
     if (isfinite(start) && (!stop_defined || (isfinite(stop) && stop >= start))) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetupExperiment: startTime = %g, stopTime = %g: "
-             "times must be finite and stopTime >= startTime", start, stop);
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: startTime = %g, stopTime = %g: "
+             "times must be finite and stopTime >= startTime", call, start, stop);
     return 0;
 }
 
-static inline int fmi2_step_ok(const Fmi2Log *log, double t, double h)
+static inline int fmi2_step_ok(const Fmi2Log *log, const char *call, double t, double h)
 {
     if (isfinite(t) && isfinite(h) && h > 0.0) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint = %g, communicationStepSize = %g: "
-             "the step size must be finite and > 0, the time finite", t, h);
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: currentCommunicationPoint = %g, communicationStepSize = %g: "
+             "the step size must be finite and > 0, the time finite", call, t, h);
     return 0;
 }
 
 /* 1 when the step, counted in whole nanoseconds as ncfmu's FMUs count it, is at least 1 ns. */
-static inline int fmi2_step_ns_ok(const Fmi2Log *log, double h)
+static inline int fmi2_step_ns_ok(const Fmi2Log *log, const char *call, double h)
 {
     if (nearbyint(h * 1e9) > 0.0) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: communicationStepSize = %g s: below 1 ns", h);
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: communicationStepSize = %g s: below 1 ns", call, h);
     return 0;
 }
 
 /* 1 when a step at ``t`` continues from ``next`` (where the last successful step ended, or the start time,
  * or the time of a restored state), as the Reference-FMUs require; within half a nanosecond (steps are
  * whole nanoseconds) and the rounding of the host's own time arithmetic. */
-static inline int fmi2_continues_ok(const Fmi2Log *log, double next, double t)
+static inline int fmi2_continues_ok(const Fmi2Log *log, const char *call, double next, double t)
 {
     if (fabs(t - next) <= 0.5e-9 + 1e-12 * fabs(next)) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
-             "last step ended): an FMU steps on from where it is, or from a state restored with fmi2SetFMUstate",
-             t, next);
+    FMI2_SAY(log, fmi2Error, "logStatusError", "%s: currentCommunicationPoint = %.16g s, expected %.16g s (where the "
+             "last step ended): an FMU steps on from where it is, or from a restored FMU state", call, t, next);
     return 0;
 }
 
@@ -349,19 +349,20 @@ static inline int fmi2_instantiate_ok(const fmi2CallbackFunctions *cb, fmi2Strin
 
 /* ---- fmi2SetDebugLogging ---------------------------------------------------------------------------- */
 /* The categories named, as bits (bit k: FMI2_CATEGORIES[k]) in ``mask``; 0 (logged) for an unknown one. */
-static inline int fmi2_categories_ok(const Fmi2Log *log, size_t n, const fmi2String categories[], unsigned *mask)
+static inline int fmi2_categories_ok(const Fmi2Log *log, const char *call, size_t n, const fmi2String categories[],
+                                     unsigned *mask)
 {
     *mask = 0;
     if (n > 0 && !categories) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %zu categories, but the array is NULL", n);
+        FMI2_SAY(log, fmi2Error, "logStatusError", "%s: %zu categories, but the array is NULL", call, n);
         return 0;
     }
     for (size_t k = 0; k < n; k++) {
         unsigned b = 0;
         while (b < FMI2_N_CATEGORIES && !(categories[k] && !strcmp(categories[k], FMI2_CATEGORIES[b]))) b++;
         if (b == FMI2_N_CATEGORIES) {
-            FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2SetDebugLogging: %s is not a log category of this "
-                     "FMU (logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll)",
+            FMI2_SAY(log, fmi2Error, "logStatusError", "%s: %s is not a log category of this "
+                     "FMU (logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll)", call,
                      categories[k] && fmi2_utf8_ok((const unsigned char *)categories[k]) ? categories[k] : "(not text)");
             return 0;
         }

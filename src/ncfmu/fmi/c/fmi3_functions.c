@@ -18,42 +18,21 @@
 #include "fmi3Functions.h"
 #include "fmi2_machine.h"
 #include "fmi2_model.h"
+#include "fmu_instance.h"
+
+_Static_assert((int)fmi3OK == FMU_OK && (int)fmi3Warning == FMU_WARNING && (int)fmi3Error == FMU_ERROR
+               && (int)fmi3Discard == 2 && (int)fmi3Fatal == 4,
+               "FMI 3.0's statuses are FMI 2.0's numbers (fmu_instance.h returns them)");
+_Static_assert(sizeof(fmi3Int32) == sizeof(int) && sizeof(fmi3Boolean) == 1
+               && sizeof(fmi3ValueReference) == sizeof(unsigned), "the model interface carries Integers as int");
+
+static const char *const TYPE_NAMES[4] = {"Float64", "Int32", "Boolean", "String"};
 
 /* ---- instances ----------------------------------------------------------------------------------- */
-typedef struct {
-    uintptr_t handle;
-    void *model;
-    int phase;                          /* the instance's phase when it was taken; -1: unknown (kept at restore) */
-    double time;
-} State;
-
-typedef struct {
-    int phase;
-    double next_time;
-    char name[128];
-    Fmi2Log log;                        /* say: the host's logMessage */
-    fmi3LogMessageCallback log_message;
-    Model *model;                       /* NULL after a failed fmi3Reset: the instance can only be freed */
-    State *states;
-    size_t n_states, cap_states;
-} Instance;
-
 static void say3(const Fmi2Log *log, int status, const char *category, const char *text)
 {
-    const Instance *i = (const Instance *)((const char *)log - offsetof(Instance, log));
-    i->log_message((fmi3InstanceEnvironment)log->env, (fmi3Status)status, category, text);
-}
-
-static Instance *checked(fmi3Instance c, const char *call, int phases)
-{
-    Instance *i = fmi2_instance_find((fmi2Component)c, 0);
-    if (!i || !fmi2_allowed(&i->log, i->phase, call, phases)) return NULL;
-    if (!i->model) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: the instance has no model (its reset failed): free it",
-                 call);
-        return NULL;
-    }
-    return i;
+    const FmuInstance *i = (const FmuInstance *)((const char *)log - offsetof(FmuInstance, log));
+    ((fmi3LogMessageCallback)i->host_log)((fmi3InstanceEnvironment)log->env, (fmi3Status)status, category, text);
 }
 
 const char *fmi3GetVersion(void) { return fmi3Version; }
@@ -97,9 +76,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
                                          fmi3IntermediateUpdateCallback intermediate_update)
 {
     (void)early_return; (void)required; (void)n_required; (void)intermediate_update;
-    Instance *i = calloc(1, sizeof *i);
+    FmuInstance *i = calloc(1, sizeof *i);
     if (!i) return NULL;
-    i->log_message = log_message;
+    i->host_log = (void (*)(void))log_message;
     i->log = (Fmi2Log){.env = env, .say = log_message ? say3 : NULL,
                        .name = name && fmi2_utf8_ok((const unsigned char *)name) ? name : ""};
     char dir[4096];
@@ -113,16 +92,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     snprintf(i->name, sizeof i->name, "%s", name);
     i->log.name = i->name;
     i->log.debug = logging;
-    i->phase = P_INSTANTIATED;
-    i->model = fmu_model_new(i->name, dir, visible, &i->log);
-    fmi2Component handle = i->model ? fmi2_instance_add(i) : NULL;
-    if (i->model && !handle) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: no new instance handle can be "
-                 "made");
-        fmu_model_free(i->model);
-    }
-    if (!handle) free(i);
-    return (fmi3Instance)handle;
+    return (fmi3Instance)fmu_instance_start(i, "fmi3InstantiateCoSimulation", dir, visible);
 }
 
 fmi3Instance fmi3InstantiateModelExchange(fmi3String name, fmi3String token, fmi3String resources,
@@ -148,95 +118,48 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token
     return NULL;
 }
 
-static void states_drop(Instance *i)
-{
-    for (size_t k = 0; k < i->n_states; k++) fmu_model_state_free(i->model, i->states[k].model);
-    free(i->states);
-    i->states = NULL;
-    i->n_states = i->cap_states = 0;
-}
-
 void fmi3FreeInstance(fmi3Instance c)
 {
-    Instance *i = fmi2_instance_find((fmi2Component)c, 1);
-    if (!i) return;
-    if (i->model) {
-        states_drop(i);
-        fmu_model_free(i->model);
-    }
-    free(i);
-    void *self = fmi2_library_release();
+    void *self = fmu_instance_free(c);
     if (self) dlclose(self);            /* the last thing done (a tail call): it may unmap this library */
 }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean on, size_t n, const fmi3String categories[])
 {
-    Instance *i = checked(c, "fmi3SetDebugLogging", P_ANY);
-    if (!i) return fmi3Error;
-    unsigned mask;
-    if (!fmi2_categories_ok(&i->log, n, categories, &mask)) return fmi3Error;
-    i->log.debug = on;
-    i->log.categories = mask;
-    return fmi3OK;
+    return (fmi3Status)fmu_set_debug_logging(c, "fmi3SetDebugLogging", on, n, categories);
 }
 
 /* ---- the state machine --------------------------------------------------------------------------- */
+/* FMI 3.0's fmi3EnterInitializationMode is FMI 2.0's fmi2SetupExperiment and fmi2EnterInitializationMode. */
 fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean tol_defined, fmi3Float64 tol, fmi3Float64 start,
                                        fmi3Boolean stop_defined, fmi3Float64 stop)
 {
-    Instance *i = checked(c, "fmi3EnterInitializationMode", P_SETUP);
-    if (!i || !fmi2_experiment_ok(&i->log, start, stop_defined, stop)) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_setup_experiment(i->model, tol_defined, tol, start, stop_defined, stop);
-    if (st > fmi3Warning) return st;
-    i->next_time = start;
-    st = (fmi3Status)fmu_model_enter_initialization(i->model);
-    if (st <= fmi3Warning) i->phase = P_INIT;
-    return st;
+    FmuInstance *i = fmu_checked(c, "fmi3EnterInitializationMode", P_SETUP);
+    int st = fmu_setup_experiment(i, "fmi3EnterInitializationMode", tol_defined, tol, start, stop_defined, stop);
+    return (fmi3Status)(st > FMU_WARNING ? st : fmu_transition(c, "fmi3EnterInitializationMode", P_SETUP, P_INIT,
+                                                               fmu_model_enter_initialization));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
 {
-    Instance *i = checked(c, "fmi3ExitInitializationMode", P_INIT);
-    if (!i) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_exit_initialization(i->model);
-    if (st <= fmi3Warning) i->phase = P_STEP;
-    return st;
+    return (fmi3Status)fmu_transition(c, "fmi3ExitInitializationMode", P_INIT, P_STEP, fmu_model_exit_initialization);
 }
 
 fmi3Status fmi3Terminate(fmi3Instance c)
 {
-    Instance *i = checked(c, "fmi3Terminate", P_STEP);
-    if (!i) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_terminate(i->model);
-    if (st <= fmi3Warning) i->phase = P_TERMINATED;
-    return st;
+    return (fmi3Status)fmu_transition(c, "fmi3Terminate", P_STEP, P_TERMINATED, fmu_model_terminate);
 }
 
-fmi3Status fmi3Reset(fmi3Instance c)
-{
-    Instance *i = checked(c, "fmi3Reset", P_ANY);
-    if (!i) return fmi3Error;
-    if (fmu_model_reset(i->model) != 0) {
-        states_drop(i);
-        fmu_model_free(i->model);
-        i->model = NULL;
-        return fmi3Error;
-    }
-    i->phase = P_INSTANTIATED;
-    i->next_time = 0.0;
-    return fmi3OK;
-}
+fmi3Status fmi3Reset(fmi3Instance c) { return (fmi3Status)fmu_reset(c, "fmi3Reset"); }
 
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean no_set_prior_state,
                       fmi3Boolean *event_handling_needed, fmi3Boolean *terminate_simulation, fmi3Boolean *early_return,
                       fmi3Float64 *last_successful_time)
 {
     (void)no_set_prior_state;
-    Instance *i = checked(c, "fmi3DoStep", P_STEP);
-    if (!i || !fmi2_step_ok(&i->log, t, h) || !fmi2_step_ns_ok(&i->log, h)
-        || !fmi2_continues_ok(&i->log, i->next_time, t)) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_do_step(i->model, t, h);
-    if (st <= fmi3Warning) i->next_time = t + h;
+    FmuInstance *i;
+    fmi3Status st = (fmi3Status)fmu_do_step(c, "fmi3DoStep", t, h, &i);
+    if (!i) return st;
     if (event_handling_needed) *event_handling_needed = fmi3False;
     if (terminate_simulation) *terminate_simulation = fmi3False;
     if (early_return) *early_return = fmi3False;
@@ -244,99 +167,28 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     return st;
 }
 
-/* ---- variables ----------------------------------------------------------------------------------- */
-static const char *type_name(VarType t)
+/* ---- variables (fmu_instance.h); FMI 3.0 counts the values too: one per reference (every variable is a scalar) */
+static int counts_ok(fmi3Instance c, const char *call, size_t n, size_t n_values, int phases)
 {
-    return t == V_REAL ? "Float64" : t == V_INTEGER ? "Int32" : t == V_BOOLEAN ? "Boolean" : "String";
+    if (n_values == n) return 1;
+    FmuInstance *i = fmu_checked(c, call, phases);
+    if (i) FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: %zu values for %zu value references (every variable "
+                    "of this FMU is a scalar)", call, n_values, n);
+    return 0;
 }
-
-/* As fmi2_functions.c: every reference a variable of ``type`` (settable now, its value within the rule, a String
- * UTF-8 text); one value per reference (every variable is a scalar). */
-static int refs_ok(Instance *i, const char *call, const fmi3ValueReference vr[], size_t n, VarType type, int set,
-                   const void *values, size_t n_values)
-{
-    if (n > 0 && (!vr || !values)) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: %zu values asked, but the %s array is NULL", call, n,
-                 !vr ? "value reference" : "value");
-        return 0;
-    }
-    if (n_values != n) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: %zu values for %zu value references (every variable of "
-                 "this FMU is a scalar)", call, n_values, n);
-        return 0;
-    }
-    unsigned count;
-    const VarInfo *vars = fmu_model_variables(i->model, &count);
-    for (size_t k = 0; k < n; k++) {
-        const char *why = NULL;
-        unsigned r = vr[k];
-        const VarInfo *v = r < count && vars[r].name ? &vars[r] : NULL;
-        if (!v) why = "is not a variable of this FMU";
-        else if (v->type != type) why = "is not of this call's type";
-        else if (set && v->causality == V_OUTPUT) why = "is an output: it cannot be set";
-        else if (set && v->causality == V_PARAMETER && !v->tunable && i->phase == P_STEP)
-            why = "is a fixed parameter: it cannot be set after initialisation";
-        if (why) {
-            FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: value reference %u%s%s%s %s (a %s call)", call, r,
-                     v ? " (" : "", v ? v->name : "", v ? ")" : "", why, type_name(type));
-            return 0;
-        }
-    }
-    for (size_t k = 0; set && k < n; k++) {
-        const VarInfo *v = &vars[vr[k]];
-        if (type == V_STRING) {
-            fmi3String s = ((const fmi3String *)values)[k];
-            if (!s || !fmi2_utf8_ok((const unsigned char *)s)) {
-                FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: value reference %u (%s): %s", call, vr[k],
-                         v->name, s ? "not valid UTF-8 text" : "a NULL string");
-                return 0;
-            }
-        } else if (type == V_REAL ? !fmi2_value_ok(&i->log, v, ((const fmi3Float64 *)values)[k])
-                   : type == V_INTEGER ? !fmi2_value_ok(&i->log, v, (double)((const fmi3Int32 *)values)[k]) : 0) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
-static fmi3Status get_values(fmi3Instance c, const char *call, const fmi3ValueReference vr[], size_t n,
-                             void *values, size_t n_values, VarType type)
-{
-    Instance *i = checked(c, call, P_GETTABLE);
-    if (!i || !refs_ok(i, call, vr, n, type, 0, values, n_values)) return fmi3Error;
-    if (n == 0) return fmi3OK;
-    if (type != V_BOOLEAN) return (fmi3Status)fmu_model_get(i->model, vr, n, type, values);
-    int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's gets) */
-    if (!flags) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_get(i->model, vr, n, type, flags);
-    for (size_t k = 0; st <= fmi3Warning && k < n; k++) ((fmi3Boolean *)values)[k] = flags[k] != 0;
-    if (flags != small) free(flags);
-    return st;
-}
-
-static fmi3Status set_values(fmi3Instance c, const char *call, const fmi3ValueReference vr[], size_t n,
-                             const void *values, size_t n_values, VarType type)
-{
-    Instance *i = checked(c, call, P_SETTABLE);
-    if (!i || !refs_ok(i, call, vr, n, type, 1, values, n_values)) return fmi3Error;
-    if (n == 0) return fmi3OK;
-    if (type != V_BOOLEAN) return (fmi3Status)fmu_model_set(i->model, vr, n, type, values);
-    int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);
-    if (!flags) return fmi3Error;
-    for (size_t k = 0; k < n; k++) flags[k] = ((const fmi3Boolean *)values)[k] ? 1 : 0;
-    fmi3Status st = (fmi3Status)fmu_model_set(i->model, vr, n, type, flags);
-    if (flags != small) free(flags);
-    return st;
-}
-
-_Static_assert(sizeof(fmi3Int32) == sizeof(int), "the model interface carries Integers as int");
 
 #define GETTER(name, ctype, type) \
     fmi3Status name(fmi3Instance c, const fmi3ValueReference vr[], size_t n, ctype v[], size_t nv) \
-    { return get_values(c, #name, vr, n, v, nv, type); }
+    { \
+        if (!counts_ok(c, #name, n, nv, P_GETTABLE)) return fmi3Error; \
+        return (fmi3Status)fmu_get_values(c, #name, vr, n, v, type, sizeof(fmi3Boolean), TYPE_NAMES); \
+    }
 #define SETTER(name, ctype, type) \
     fmi3Status name(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const ctype v[], size_t nv) \
-    { return set_values(c, #name, vr, n, v, nv, type); }
+    { \
+        if (!counts_ok(c, #name, n, nv, P_SETTABLE)) return fmi3Error; \
+        return (fmi3Status)fmu_set_values(c, #name, vr, n, v, type, sizeof(fmi3Boolean), TYPE_NAMES); \
+    }
 GETTER(fmi3GetFloat64, fmi3Float64, V_REAL)
 GETTER(fmi3GetInt32, fmi3Int32, V_INTEGER)
 GETTER(fmi3GetBoolean, fmi3Boolean, V_BOOLEAN)
@@ -349,7 +201,7 @@ SETTER(fmi3SetString, fmi3String, V_STRING)
 /* The types no variable of this FMU has: a call with value references names the first; none is fine. */
 static fmi3Status no_such_type(fmi3Instance c, const char *call, const fmi3ValueReference vr[], size_t n, int phases)
 {
-    Instance *i = checked(c, call, phases);
+    FmuInstance *i = fmu_checked(c, call, phases);
     if (!i) return fmi3Error;
     if (n == 0) return fmi3OK;
     FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: value reference %u is not a variable of this call's type "
@@ -406,137 +258,39 @@ fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n,
     return no_such_type(c, "fmi3SetClock", vr, n, P_ANY);
 }
 
-/* ---- FMU states (as fmi2_functions.c) ------------------------------------------------------------- */
-static State *state_find(Instance *i, const char *call, fmi3FMUState s)
-{
-    for (size_t k = 0; s && k < i->n_states; k++)
-        if (i->states[k].handle == (uintptr_t)s) return &i->states[k];
-    FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: %p is not a live FMU state of this instance (freed, of "
-             "another instance or FMU, or never made)", call, s);
-    return NULL;
-}
-
-static fmi3FMUState state_add(Instance *i, const char *call, void *model, int phase, double time)
-{
-    if (i->n_states == i->cap_states) {
-        size_t cap = i->cap_states ? 2 * i->cap_states : 8;
-        State *grown = realloc(i->states, cap * sizeof *grown);
-        if (!grown) { fmu_model_state_free(i->model, model); return NULL; }
-        i->states = grown;
-        i->cap_states = cap;
-    }
-    uintptr_t handle = fmi2_state_handle();
-    if (!handle) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: no new FMU-state handle can be made", call);
-        fmu_model_state_free(i->model, model);
-        return NULL;
-    }
-    i->states[i->n_states++] = (State){handle, model, phase, time};
-    return (fmi3FMUState)handle;
-}
-
+/* ---- FMU states (fmu_instance.h) ---------------------------------------------------------------- */
 fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *s)
 {
-    Instance *i = checked(c, "fmi3GetFMUState", P_ANY);
-    if (!i) return fmi3Error;
-    if (!s) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "fmi3GetFMUState: the FMUState pointer is NULL");
-        return fmi3Error;
-    }
-    State *old = *s ? state_find(i, "fmi3GetFMUState", *s) : NULL;
-    if (*s && !old) return fmi3Error;
-    void *model = fmu_model_state_take(i->model);
-    if (!model) return fmi3Error;
-    if (old) {
-        fmu_model_state_free(i->model, old->model);
-        *old = (State){old->handle, model, i->phase, i->next_time};
-        return fmi3OK;
-    }
-    *s = state_add(i, "fmi3GetFMUState", model, i->phase, i->next_time);
-    return *s ? fmi3OK : fmi3Error;
+    return (fmi3Status)fmu_get_state(c, "fmi3GetFMUState", s);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState s)
 {
-    Instance *i = checked(c, "fmi3SetFMUState", P_ANY);
-    State *state = i ? state_find(i, "fmi3SetFMUState", s) : NULL;
-    if (!state) return fmi3Error;
-    fmi3Status st = (fmi3Status)fmu_model_state_restore(i->model, state->model,
-                                                        i->phase == P_STEP || i->phase == P_TERMINATED);
-    if (st > fmi3Warning) return st;
-    if (state->phase >= 0) i->phase = state->phase;
-    i->next_time = state->time;
-    return st;
+    return (fmi3Status)fmu_set_state(c, "fmi3SetFMUState", s);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *s)
 {
-    Instance *i = checked(c, "fmi3FreeFMUState", P_ANY);
-    if (!i) return fmi3Error;
-    if (!s || !*s) return fmi3OK;
-    State *state = state_find(i, "fmi3FreeFMUState", *s);
-    if (!state) return fmi3Error;
-    fmu_model_state_free(i->model, state->model);
-    *state = i->states[--i->n_states];
-    *s = NULL;
-    return fmi3OK;
+    return (fmi3Status)fmu_free_state(c, "fmi3FreeFMUState", s);
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState s, size_t *size)
 {
-    Instance *i = checked(c, "fmi3SerializedFMUStateSize", P_ANY);
-    State *state = i ? state_find(i, "fmi3SerializedFMUStateSize", s) : NULL;
-    if (!state) return fmi3Error;
-    if (!size) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "fmi3SerializedFMUStateSize: the size pointer is NULL");
-        return fmi3Error;
-    }
-    return fmu_model_serialize(i->model, state->model, state->phase, state->time, size) ? fmi3OK : fmi3Error;
+    return (fmi3Status)fmu_state_size(c, "fmi3SerializedFMUStateSize", s, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState s, fmi3Byte b[], size_t size)
 {
-    Instance *i = checked(c, "fmi3SerializeFMUState", P_ANY);
-    State *state = i ? state_find(i, "fmi3SerializeFMUState", s) : NULL;
-    if (!state) return fmi3Error;
-    size_t needed = 0;
-    const unsigned char *bytes = fmu_model_serialize(i->model, state->model, state->phase, state->time, &needed);
-    if (!bytes) return fmi3Error;
-    if (!b || size < needed) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "fmi3SerializeFMUState: %s (%zu bytes given, %zu needed)",
-                 !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
-        return fmi3Error;
-    }
-    memcpy(b, bytes, needed);
-    return fmi3OK;
+    return (fmi3Status)fmu_serialize(c, "fmi3SerializeFMUState", s, b, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte b[], size_t size, fmi3FMUState *s)
 {
-    Instance *i = checked(c, "fmi3DeserializeFMUState", P_ANY);
-    if (!i) return fmi3Error;
-    if (!s || (size && !b)) {
-        FMI2_SAY(&i->log, fmi3Error, "logStatusError", "fmi3DeserializeFMUState: the %s is NULL",
-                 !s ? "FMUState pointer" : "byte array");
-        return fmi3Error;
-    }
-    int phase = -1;
-    double time = 0.0;
-    void *model = fmu_model_deserialize(i->model, (const unsigned char *)b, size, &phase, &time);
-    if (!model) { *s = NULL; return fmi3Error; }
-    *s = state_add(i, "fmi3DeserializeFMUState", model, phase, time);
-    return *s ? fmi3OK : fmi3Error;
+    return (fmi3Status)fmu_deserialize(c, "fmi3DeserializeFMUState", b, size, s);
 }
 
-/* ---- what this FMU does not offer: refused with a reason, never Fatal ----------------------------- */
-static fmi3Status not_provided(fmi3Instance c, const char *call, const char *why)
-{
-    Instance *i = checked(c, call, P_ANY);
-    if (!i) return fmi3Error;
-    FMI2_SAY(&i->log, fmi3Error, "logStatusError", "%s: %s", call, why);
-    return fmi3Error;
-}
-
+/* ---- what this FMU does not offer: refused with a reason, never Fatal (fmu_instance.h) ---------- */
+#define not_provided(c, call, why) ((fmi3Status)fmu_not_provided((c), (call), (why)))
 #define CS_ONLY "not provided (a co-simulation FMU without event mode)"
 #define NO_CLOCKS "not provided (this FMU has no clocks)"
 

@@ -2,13 +2,18 @@
  * ncfmu: the numerics the native drive models share -- exact zero-order-hold discretisation (matrix
  * exponential by balancing, scaling and squaring of a Pade approximant, as scipy's expm does) and the
  * phase margin of a PI velocity/speed loop, and of a position loop around it (as control.margin gives
- * them). Static inline functions, included by each drive's C file (servo_model.c, spindle_model.c).
+ * them) -- and the steps of a drive's digital loop, written once: sub-steps of a communication step, the
+ * encoder, the torque limit with conditional integration, one sub-step of the current loop + mechanics
+ * with Coulomb friction. Static inline functions, included by each drive's C file (servo_model.c,
+ * spindle_model.c); each drive keeps the order of its Python stepper, operation for operation.
  */
 #ifndef NCFMU_DRIVE_MATH_H
 #define NCFMU_DRIVE_MATH_H
 
 #include <math.h>
 #include <string.h>
+
+#include "fmi2_model.h"                 /* Fmi2Log, FMI2_SAY: the drives' refusals (below) */
 
 #ifndef PI
 #define PI 3.14159265358979323846
@@ -202,6 +207,99 @@ static inline double phase_margin(const Loop *l)
         wa = wb; ga = gb;
     }
     return best;
+}
+
+/* ---- the digital loop's steps (ServoAxis._digital, SpindleDrive._digital) ------------------------ */
+/* Sub-steps of ``substep`` s per communication step ``dt``; 0 when there would be more than DRIVE_MAX_SUBSTEPS
+ * (the model refuses the step). */
+#define DRIVE_MAX_SUBSTEPS 10000000
+static inline int drive_substeps(double substep, double dt)
+{
+    double n = ceil(dt / substep - 1e-9);
+    return n < 1.0 ? 1 : n > DRIVE_MAX_SUBSTEPS ? 0 : (int)n;
+}
+
+/* The encoder: ``x`` to whole counts of ``quantum``. */
+static inline double drive_encoder(double x, double quantum) { return nearbyint(x / quantum) * quantum; }
+
+/* The torque command ``t_cmd`` limited to +-``t_lim``, with conditional integration (no windup): the
+ * integral ``*xi`` of the speed error ``e`` grows over ``h`` only while nothing limits -- neither the torque
+ * nor (``held``) a limit before it, such as the commanded speed's; ``*limited`` is set when one did. */
+static inline double drive_torque_limit(double t_cmd, double t_lim, int held, double e, double h, double *xi,
+                                        int *limited)
+{
+    int torque_limited = fabs(t_cmd) > t_lim;
+    if (torque_limited) t_cmd = copysign(t_lim, t_cmd);
+    if (held || torque_limited) *limited = 1;
+    else *xi += e * h;
+    return t_cmd;
+}
+
+/* The ZOH map of the plant (3 states: torque, position, speed; 2 inputs: torque command, friction) for a
+ * sub-step ``h``, kept in ``Ad``/``Bd`` while ``*cached_h`` is ``h``. 0 when fine. */
+static inline int drive_plant_map(const double Ap[3][3], const double Bp[3][2], double h, double *cached_h,
+                                  double Ad[3][3], double Bd[3][2])
+{
+    if (*cached_h == h) return 0;
+    if (zoh(3, 2, &Ap[0][0], &Bp[0][0], h, &Ad[0][0], &Bd[0][0]) != 0) return -1;
+    *cached_h = h;
+    return 0;
+}
+
+/* One sub-step ``h`` of the plant under ``t_cmd`` with Coulomb friction ``tc`` (0: none): the friction
+ * opposes the motion, or holds the load while the drive's torque is below it (stick); it only brakes --
+ * where the speed would change sign, the axis stops where uniform deceleration takes it. */
+static inline void drive_plant_step(const double ad[3][3], const double bd[3][2], double tc, double t_cmd, double h,
+                                    double *torque, double *pos, double *vel)
+{
+    double tq = *torque, x = *pos, v = *vel, t_fr;
+    if (tc == 0.0) t_fr = 0.0;
+    else if (v != 0.0) t_fr = copysign(tc, v);
+    else t_fr = fmin(fmax(tq, -tc), tc);
+    double torque_n = ad[0][0] * tq + ad[0][1] * x + ad[0][2] * v + bd[0][0] * t_cmd + bd[0][1] * t_fr;
+    double pos_n = ad[1][0] * tq + ad[1][1] * x + ad[1][2] * v + bd[1][0] * t_cmd + bd[1][1] * t_fr;
+    double vel_n = ad[2][0] * tq + ad[2][1] * x + ad[2][2] * v + bd[2][0] * t_cmd + bd[2][1] * t_fr;
+    if (t_fr != 0.0) {
+        if (v == 0.0 && fabs(torque_n) <= tc) {
+            pos_n = x; vel_n = 0.0;                                 /* stick */
+        } else if (v * vel_n < 0.0) {
+            double s_stop = v / (v - vel_n);
+            pos_n = x + 0.5 * v * s_stop * h;
+            vel_n = 0.0;
+        }
+    }
+    *torque = torque_n; *pos = pos_n; *vel = vel_n;
+}
+
+/* ---- the drives' refusals, in the same words ------------------------------------------------------ */
+/* 1 when a communication step ``dt`` takes at most DRIVE_MAX_SUBSTEPS sub-steps; else logs and returns 0. */
+static inline int drive_substeps_ok(const Fmi2Log *log, double substep, double dt)
+{
+    if (drive_substeps(substep, dt) != 0) return 1;
+    FMI2_SAY(log, fmi2Error, "logStatusError", "communicationStepSize = %g s: more than %d sub-steps of "
+             "substep = %g s in one step; take shorter steps", dt, DRIVE_MAX_SUBSTEPS, substep);
+    return 0;
+}
+
+/* 1 when the ``n`` dynamic values of a state record are finite and within 1e12; else logs the first other one
+ * (``what``: the drive, "axis" or "spindle") and returns 0. */
+static inline int drive_state_finite(const Fmi2Log *log, const char *what, const double *v, size_t n)
+{
+    for (size_t k = 0; k < n; k++)
+        if (!isfinite(v[k]) || fabs(v[k]) > 1e12) {
+            FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the %s state holds %g, not a finite %s value", what,
+                     v[k], what);
+            return 0;
+        }
+    return 1;
+}
+
+/* 1 when a state record's flags are 0 or 1; else logs and returns 0. */
+static inline int drive_state_flags(const Fmi2Log *log, const char *what, int limited, int fault)
+{
+    if ((limited == 0 || limited == 1) && (fault == 0 || fault == 1)) return 1;
+    FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: a flag of the %s state is neither 0 nor 1", what);
+    return 0;
 }
 
 #endif

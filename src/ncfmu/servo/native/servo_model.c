@@ -121,16 +121,11 @@ static int parameters_ok(const double *values, const Fmi2Log *log)
 /* ---- stepping (ServoAxis.step / _digital, operation for operation) ----------------------------- */
 static double quantise(const double *values, const struct ModelState *m, double pos)
 {
-    return P(VR_ideal) != 0.0 ? pos : nearbyint(pos / m->quantum) * m->quantum;
+    return P(VR_ideal) != 0.0 ? pos : drive_encoder(pos, m->quantum);
 }
 
-/* Sub-steps per communication step; 0 when there would be more than MAX_SUBSTEPS (refused by model_step). */
-#define MAX_SUBSTEPS 10000000
-static int substeps(const double *values, double dt)
-{
-    double n = ceil(dt / P(VR_substep) - 1e-9);
-    return n < 1.0 ? 1 : n > MAX_SUBSTEPS ? 0 : (int)n;
-}
+/* Sub-steps per communication step; 0 when there would be too many (refused by model_step). */
+static int substeps(const double *values, double dt) { return drive_substeps(P(VR_substep), dt); }
 
 static void publish(double *values, const struct ModelState *m, double pos, double vel, double torque)
 {
@@ -168,19 +163,10 @@ static int ideal_matrices(const double *values, struct ModelState *m, double dt)
     return 0;
 }
 
-static int plant_matrices(struct ModelState *m, double h)
-{
-    if (m->plant_h == h) return 0;
-    if (zoh(3, 2, &m->Ap[0][0], &m->Bp[0][0], h, &m->Ad[0][0], &m->Bd[0][0]) != 0) return -1;
-    m->plant_h = h;
-    return 0;
-}
-
 static void digital(const double *values, struct ModelState *m, double dt, int enabled)
 {
     int n = substeps(values, dt), ideal = P(VR_ideal) != 0.0;
     double h = dt / n;
-    double (*ad)[3] = m->Ad, (*bd)[2] = m->Bd;
     double xi = m->x[0], torque = m->x[1], pos = m->x[2], vel = m->x[3];
     double kv = P(VR_Kv), kff = P(VR_kff), kp = m->kp, ki = m->ki;
     double v_max = m->v_max, t_max = P(VR_torque_max), tc = P(VR_tau_coulomb), q = m->quantum;
@@ -192,45 +178,24 @@ static void digital(const double *values, struct ModelState *m, double dt, int e
     for (int i = 0; i < n; i++) {
         double pos_cmd = cmd0 + d_cmd * (i + 1), vel_ff = vff0 + d_vff * (i + 1), t_cmd;
         double p_prev = p_meas;
-        p_meas = ideal ? pos : nearbyint(pos / q) * q;
+        p_meas = ideal ? pos : drive_encoder(pos, q);
         if (enabled) {
             double v_meas = ideal ? vel : (p_meas - p_prev) / h;
             double v_cmd = kv * (pos_cmd - p_meas) + kff * vel_ff;
             int speed_limited = !ideal && fabs(v_cmd) > v_max;
             if (speed_limited) v_cmd = copysign(v_max, v_cmd);
             double e = v_cmd - v_meas;
-            t_cmd = kp * e + ki * xi + t_ff;
-            int torque_limited = !ideal && fabs(t_cmd) > t_max;
-            if (torque_limited) t_cmd = copysign(t_max, t_cmd);
-            if (speed_limited || torque_limited) limited = 1;   /* conditional integration: no windup */
-            else xi += e * h;
+            t_cmd = drive_torque_limit(kp * e + ki * xi + t_ff, ideal ? INFINITY : t_max, speed_limited, e, h, &xi,
+                                       &limited);
         } else {
             t_cmd = 0.0;
             xi = 0.0;
         }
-        double t_fr;
-        if (ideal || tc == 0.0) t_fr = 0.0;
-        else if (vel != 0.0) t_fr = copysign(tc, vel);
-        else t_fr = fmin(fmax(torque, -tc), tc);
-        double torque_n = ad[0][0] * torque + ad[0][1] * pos + ad[0][2] * vel + bd[0][0] * t_cmd + bd[0][1] * t_fr;
-        double pos_n = ad[1][0] * torque + ad[1][1] * pos + ad[1][2] * vel + bd[1][0] * t_cmd + bd[1][1] * t_fr;
-        double vel_n = ad[2][0] * torque + ad[2][1] * pos + ad[2][2] * vel + bd[2][0] * t_cmd + bd[2][1] * t_fr;
-        torque = torque_n;
-        if (t_fr != 0.0) {
-            if (vel == 0.0 && fabs(torque) <= tc) {
-                pos_n = pos; vel_n = 0.0;                          /* stick */
-            } else if (vel * vel_n < 0.0) {
-                /* friction only brakes: stop where uniform deceleration from vel takes the axis */
-                double s_stop = vel / (vel - vel_n);
-                pos_n = pos + 0.5 * vel * s_stop * h;
-                vel_n = 0.0;
-            }
-        }
-        pos = pos_n; vel = vel_n;
+        drive_plant_step(m->Ad, m->Bd, ideal ? 0.0 : tc, t_cmd, h, &torque, &pos, &vel);   /* ideal: no friction */
     }
     m->x[0] = xi; m->x[1] = torque; m->x[2] = pos; m->x[3] = vel;
     m->p_last = p_meas;
-    m->p_meas = ideal ? pos : nearbyint(pos / q) * q;
+    m->p_meas = ideal ? pos : drive_encoder(pos, q);
     m->limited = limited;
 }
 
@@ -250,11 +215,7 @@ int model_init(double *values, ModelState *m, const Fmi2Log *log)
 
 int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log *log)
 {
-    if (substeps(values, dt) == 0) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: communicationStepSize = %g s: more than %d sub-steps of "
-                 "substep = %g s in one step; take shorter steps", dt, MAX_SUBSTEPS, P(VR_substep));
-        return -1;
-    }
+    if (!drive_substeps_ok(log, P(VR_substep), dt)) return -1;
     double cmd = P(VR_pos_cmd), vff = P(VR_vel_ff);
     int bad = !isfinite(cmd) || !isfinite(vff);
     if (bad && !m->fault)   /* never act on a NaN: hold the last good command, say why once */
@@ -279,7 +240,7 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
         m->p_meas = m->x[2];
         m->limited = 0;
     } else {
-        if (plant_matrices(m, dt / substeps(values, dt)) != 0) goto numeric;
+        if (drive_plant_map(m->Ap, m->Bp, dt / substeps(values, dt), &m->plant_h, m->Ad, m->Bd) != 0) goto numeric;
         digital(values, m, dt, enabled);
     }
     double vel = ideal ? m->x[3] : (m->p_meas - p0) / dt;
@@ -297,14 +258,7 @@ int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log)
     derive(values, m);                       /* never trust derived data from a state record */
     double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->p_meas, m->p_last, m->pos_cmd, m->cmd_prev,
                     m->vel_ff, m->vff_prev};
-    for (size_t k = 0; k < sizeof dyn / sizeof dyn[0]; k++)
-        if (!isfinite(dyn[k]) || fabs(dyn[k]) > 1e12) {
-            FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the axis state holds %g, not a finite axis value", dyn[k]);
-            return -1;
-        }
-    if ((m->limited != 0 && m->limited != 1) || (m->fault != 0 && m->fault != 1)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: a flag of the axis state is neither 0 nor 1");
-        return -1;
-    }
+    if (!drive_state_finite(log, "axis", dyn, sizeof dyn / sizeof dyn[0])) return -1;
+    if (!drive_state_flags(log, "axis", m->limited, m->fault)) return -1;
     return 0;
 }

@@ -83,13 +83,8 @@ static int parameters_ok(const double *values, const Fmi2Log *log)
 }
 
 /* ---- stepping (SpindleDrive.step / _digital, operation for operation) ---------------------------- */
-/* Sub-steps per communication step; 0 when there would be more than MAX_SUBSTEPS (refused by model_step). */
-#define MAX_SUBSTEPS 10000000
-static int substeps(const double *values, double dt)
-{
-    double n = ceil(dt / P(VR_substep) - 1e-9);
-    return n < 1.0 ? 1 : n > MAX_SUBSTEPS ? 0 : (int)n;
-}
+/* Sub-steps per communication step; 0 when there would be too many (refused by model_step). */
+static int substeps(const double *values, double dt) { return drive_substeps(P(VR_substep), dt); }
 
 /* The commanded speed as the drive takes it (rev/min, limited to speed_max); *limited: it was. */
 static double setpoint(const double *values, const struct ModelState *m, int *limited)
@@ -112,19 +107,10 @@ static void publish(double *values, const struct ModelState *m, double w_mean, d
     values[VR_revolutions] = m->a_meas / (2.0 * PI);
 }
 
-static int plant_matrices(struct ModelState *m, double h)
-{
-    if (m->plant_h == h) return 0;
-    if (zoh(3, 2, &m->Ap[0][0], &m->Bp[0][0], h, &m->Ad[0][0], &m->Bd[0][0]) != 0) return -1;
-    m->plant_h = h;
-    return 0;
-}
-
 static void digital(const double *values, struct ModelState *m, double dt, int enabled)
 {
     int n = substeps(values, dt), limited;
     double h = dt / n;
-    double (*ad)[3] = m->Ad, (*bd)[2] = m->Bd;
     double xi = m->x[0], torque = m->x[1], angle = m->x[2], speed = m->x[3];
     double kp = m->kp, ki = m->ki, t_max = P(VR_torque_max), p_max = m->power_max;
     double tc = P(VR_tau_coulomb) + m->load;   /* the load opposes the rotation as Coulomb friction does */
@@ -133,45 +119,21 @@ static void digital(const double *values, struct ModelState *m, double dt, int e
     double a_meas = m->a_last;
     for (int i = 0; i < n; i++) {
         double a_prev = a_meas, t_cmd;
-        a_meas = nearbyint(angle / q) * q;
+        a_meas = drive_encoder(angle, q);
         if (enabled) {
             double w_meas = (a_meas - a_prev) / h;
             double e = w_set - w_meas;
-            t_cmd = kp * e + ki * xi;
-            double t_lim = w_meas == 0.0 ? t_max : fmin(t_max, p_max / fabs(w_meas));
-            if (fabs(t_cmd) > t_lim) {            /* conditional integration: no windup */
-                t_cmd = copysign(t_lim, t_cmd);
-                limited = 1;
-            } else {
-                xi += e * h;
-            }
+            double t_lim = w_meas == 0.0 ? t_max : fmin(t_max, p_max / fabs(w_meas));   /* torque and power */
+            t_cmd = drive_torque_limit(kp * e + ki * xi, t_lim, 0, e, h, &xi, &limited);
         } else {
             t_cmd = 0.0;
             xi = 0.0;
         }
-        double t_fr;
-        if (tc == 0.0) t_fr = 0.0;
-        else if (speed != 0.0) t_fr = copysign(tc, speed);
-        else t_fr = fmin(fmax(torque, -tc), tc);
-        double torque_n = ad[0][0] * torque + ad[0][1] * angle + ad[0][2] * speed + bd[0][0] * t_cmd + bd[0][1] * t_fr;
-        double angle_n = ad[1][0] * torque + ad[1][1] * angle + ad[1][2] * speed + bd[1][0] * t_cmd + bd[1][1] * t_fr;
-        double speed_n = ad[2][0] * torque + ad[2][1] * angle + ad[2][2] * speed + bd[2][0] * t_cmd + bd[2][1] * t_fr;
-        torque = torque_n;
-        if (t_fr != 0.0) {
-            if (speed == 0.0 && fabs(torque) <= tc) {
-                angle_n = angle; speed_n = 0.0;                     /* stick */
-            } else if (speed * speed_n < 0.0) {
-                /* friction only brakes: stop where uniform deceleration from the speed takes the spindle */
-                double s_stop = speed / (speed - speed_n);
-                angle_n = angle + 0.5 * speed * s_stop * h;
-                speed_n = 0.0;
-            }
-        }
-        angle = angle_n; speed = speed_n;
+        drive_plant_step(m->Ad, m->Bd, tc, t_cmd, h, &torque, &angle, &speed);
     }
     m->x[0] = xi; m->x[1] = torque; m->x[2] = angle; m->x[3] = speed;
     m->a_last = a_meas;
-    m->a_meas = nearbyint(angle / q) * q;
+    m->a_meas = drive_encoder(angle, q);
     m->limited = limited;
 }
 
@@ -187,11 +149,7 @@ int model_init(double *values, ModelState *m, const Fmi2Log *log)
 
 int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log *log)
 {
-    if (substeps(values, dt) == 0) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2DoStep: communicationStepSize = %g s: more than %d sub-steps of "
-                 "substep = %g s in one step; take shorter steps", dt, MAX_SUBSTEPS, P(VR_substep));
-        return -1;
-    }
+    if (!drive_substeps_ok(log, P(VR_substep), dt)) return -1;
     double cmd = P(VR_speed_cmd), dir = P(VR_direction), load = P(VR_load_torque);
     int bad_cmd = !isfinite(cmd), bad_dir = dir != -1.0 && dir != 0.0 && dir != 1.0;
     int bad_load = !(load >= 0.0 && isfinite(load)), bad = bad_cmd || bad_dir || bad_load;
@@ -209,7 +167,7 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
     m->fault = bad;
     if (!bad) { m->command = dir * cmd; m->load = load; }
     double a0 = m->a_meas;
-    if (plant_matrices(m, dt / substeps(values, dt)) != 0) goto numeric;
+    if (drive_plant_map(m->Ap, m->Bp, dt / substeps(values, dt), &m->plant_h, m->Ad, m->Bd) != 0) goto numeric;
     digital(values, m, dt, P(VR_enable) != 0.0);
     double w_mean = (m->a_meas - a0) / dt;
     if (!isfinite(m->a_meas) || !isfinite(w_mean) || !isfinite(m->x[1])) goto numeric;
@@ -225,19 +183,11 @@ int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log)
     if (!judged && !parameters_ok(values, log)) return -1;
     derive(values, m);                       /* never trust derived data from a state record */
     double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->a_meas, m->a_last, m->command, m->load};
-    for (size_t k = 0; k < sizeof dyn / sizeof dyn[0]; k++)
-        if (!isfinite(dyn[k]) || fabs(dyn[k]) > 1e12) {
-            FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the spindle state holds %g, not a finite spindle value",
-                     dyn[k]);
-            return -1;
-        }
+    if (!drive_state_finite(log, "spindle", dyn, sizeof dyn / sizeof dyn[0])) return -1;
     if (!(m->load >= 0.0)) {
         FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the spindle state holds a load torque of %g, not >= 0", m->load);
         return -1;
     }
-    if ((m->limited != 0 && m->limited != 1) || (m->fault != 0 && m->fault != 1)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: a flag of the spindle state is neither 0 nor 1");
-        return -1;
-    }
+    if (!drive_state_flags(log, "spindle", m->limited, m->fault)) return -1;
     return 0;
 }
