@@ -212,7 +212,7 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     ("G00 X30 Z2\nG71 P10 Q20 F300\n" + PROFILE + "M30\n", 2, 1, "needs G71's first block"),
     ("G17\nM30\n", 1, 1, "XZ plane"),
     ("G01 X10 Y2 F100\nM30\n", 1, 9, "no Y axis"),
-    ("G00 X30 Z2\nG41 G01 X10 F100\nM30\n", 2, 1, "G41/G42 tool-nose radius compensation is not built yet"),
+    ("G41 G00 X30 Z2\nG01 X10 F100 T0101\nM30\n", 2, 14, "with G41 in force: cancel the tool-nose radius"),
     ("G01 G00 X10\nM30\n", 1, 5, "modal group motion"),
     ("G7 G8 X10\nM30\n", 1, 4, "modal group X mode"),
     ("G01 X10 Z1\nM30\n", 1, 1, "no feed"),

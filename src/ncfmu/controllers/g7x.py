@@ -34,7 +34,9 @@ from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
 from .gcode import Move
-from .geometry import Arc, Element, Line, Point
+from .geometry import Arc, CornerError, Element, Line, Point
+from .nose import Nose
+from .nose import translated as shifted
 
 #: More planned moves than this are refused: one part, a few hundred passes at most.
 MAX_SEGMENTS = 20_000
@@ -138,12 +140,14 @@ class Rough:
 
 @dataclass(frozen=True)
 class Finish:
-    """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none)."""
+    """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none),
+    with the tool-nose radius compensation ``nose`` (G41/G42) or none (G40)."""
 
     line: int
     start: Point
     profile: Profile
     feed: float
+    nose: Nose | None = None
 
 
 
@@ -229,12 +233,6 @@ def check_profile(profile: Profile, start: Point) -> int:
         last = profile.blocks[-1]
         raise ProgramError(last.line, 1, last.raw, "the profile ends in front of the start point's Z: nothing to cut")
     return pocket
-
-
-def shifted(e: Element, dz: float, dx: float) -> Element:
-    if isinstance(e, Line):
-        return Line((e.start[0] + dz, e.start[1] + dx), (e.end[0] + dz, e.end[1] + dx))
-    return Arc((e.center[0] + dz, e.center[1] + dx), e.radius, e.a0, e.sweep)
 
 
 def _solve(e: Element, f, target: float) -> float:
@@ -506,7 +504,70 @@ def _lines_of(op: Rough, bound: list[Element]) -> list[int]:
     return lines[len(lines) - len(bound):]
 
 
+def finish_chain(op: Finish) -> list[Element]:
+    """What G70 runs along under G41/G42: the profile, then up the wall it ends at (SC3) to the start point's X
+    (the wall is part's too: the nose must not gouge it)."""
+    chain = [pb.element for pb in op.profile.blocks]
+    bz, bx = chain[-1].end
+    if op.start[1] > bx + EPS:
+        chain.append(Line((bz, bx), (bz, op.start[1])))
+    return chain
+
+
+def finish_path(op: Finish) -> list[tuple[Element, int]]:
+    """The commanded pieces of G70 under G41/G42 (:meth:`.nose.Nose.path` of :func:`finish_chain`): (piece, index
+    of its profile block; ``len(profile.blocks)``: the wall up at the end).
+
+    Raises
+    ------
+    ProgramError
+        naming the profile's block where the nose cannot follow the profile.
+    """
+    assert op.nose is not None
+    blocks = op.profile.blocks
+    try:
+        return op.nose.path(finish_chain(op))
+    except CornerError as err:
+        names = [f"the block on line {pb.line}" for pb in blocks] + [f"G70's retract up the end wall (line {op.line})"]
+        at = blocks[err.index] if err.index < len(blocks) else None
+        raise ProgramError(at.line if at else op.line, 1, at.raw if at else f"line {op.line}",
+                           f"tool-nose radius compensation ({op.nose.code}, nose radius {op.nose.radius:g} mm): "
+                           f"{err.describe(names)}") from None
+
+
+def _plan_finish_nose(op: Finish, rapid: float) -> list[Segment]:
+    """G70 under G41/G42: SC1 from the start point to the nose's first point (type A start-up), SC2 the
+    compensated profile, SC3 the compensated wall up, SC4 back to the start point's Z at its X (the cancel)."""
+    out: list[Segment] = []
+    z0, x0 = op.start
+    lead, blocks = op.profile.lead, op.profile.blocks
+    up = op.feed or blocks[-1].feed
+    assert op.nose is not None
+
+    def rate(pb: Move) -> tuple[float, bool]:
+        return (rapid, False) if pb.rapid else (op.feed or pb.feed, True)
+
+    pieces = finish_path(op)
+    r, f = rate(lead)
+    out.append(Segment(Line(op.start, pieces[0][0].start), r, f, 1, 1, 0.0, lead.line, 70))
+    for e, k in pieces:
+        if k < len(blocks):
+            r, f = rate(blocks[k])
+            out.append(Segment(e, r, f, 2, 1, 0.0, blocks[k].line, 70))
+        else:
+            out.append(Segment(e, up or rapid, up > 0, 3, 1, 0.0, op.line, 70))
+    # SC4: straight up until the nose circle is clear of the stock's X (its centre r above it), along Z to the
+    # start point's Z, down to the start point
+    last = pieces[-1][0].end
+    high = max(last[1], x0 + op.nose.radius + op.nose.vector[1])
+    for a, b, sub in ((last, (last[0], high), 4), ((last[0], high), (z0, high), 4), ((z0, high), op.start, 0)):
+        out.append(Segment(Line(a, b), rapid, False, sub, 1 if sub else 0, 0.0, op.line, 70))
+    return [g for g in out if g.element.length > EPS]
+
+
 def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
+    if op.nose is not None:
+        return _plan_finish_nose(op, rapid)
     out: list[Segment] = []
     z0, x0 = op.start
     a = op.profile.lead.element.end
