@@ -522,15 +522,15 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
                 run.append(j)
             j += 1
         after = ops[j] if j < len(ops) else None
-        cancel = j if isinstance(after, Move) else run.pop() if isinstance(after, (Rough, Finish)) and len(run) > 1 \
-            else None
+        cancel = (j if isinstance(after, Move) else
+                  run.pop() if isinstance(after, (Rough, Finish)) and len(run) > 1 else None)
         first = ops[run[0]]
         assert isinstance(first, Move)
         for k in (run[0], cancel):
             m = ops[k] if k is not None else None
             if isinstance(m, Move) and isinstance(m.element, Arc):
-                what = "start-up (the first move after G41/G42)" if k == run[0] else "cancel (the G40 move, or the move " \
-                                                                                    "to a canned cycle's start point)"
+                what = ("start-up (the first move after G41/G42)" if k == run[0] else
+                        "cancel (the G40 move, or the move to a canned cycle's start point)")
                 raise ProgramError(m.line, 1, m.raw, f"G02/G03 as the tool-nose radius compensation's {what}: give a "
                                                      "straight move (G00/G01) there")
         for k in run:
@@ -539,21 +539,19 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
             if noses[k] != nose:
                 raise ProgramError(m.line, 1, m.raw, f"{noses[k].code} while {nose.code} is in force: change sides "
                                                      "through G40 (cancel, then start up again)")
-        chain = [ops[k] for k in run[1:]]
+        chain = [m for k in run[1:] if isinstance(m := ops[k], Move)]
         new: dict[int, list[Move]] = {}
         if chain:
             try:
-                pieces = nose.path([m.element for m in chain])  # type: ignore[union-attr]
+                pieces = nose.path([m.element for m in chain])
             except CornerError as err:
                 bad = chain[err.index]
-                assert isinstance(bad, Move)
-                reason = err.describe([f"the block on line {m.line}" for m in chain])  # type: ignore[union-attr]
+                reason = err.describe([f"the block on line {m.line}" for m in chain])
                 raise ProgramError(bad.line, 1, bad.raw, f"tool-nose radius compensation ({nose.code}, nose radius "
                                                          f"{nose.radius:g} mm): {reason}") from None
             entry, exit_ = pieces[0][0].start, pieces[-1][0].end
             for e, k in pieces:
                 m = chain[k]
-                assert isinstance(m, Move)
                 new.setdefault(run[k + 1], []).append(replace(m, element=e))
         else:
             entry = exit_ = first.element.end
