@@ -57,7 +57,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     plan_ops,
     rough_boundary,
 )
-from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move, arc, read
+from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move, arc, program_lines, read
 from .geometry import Arc, CornerError, Element, Line, Point
 from .nose import Nose
 
@@ -82,6 +82,7 @@ LATHE = Dialect(
                      "D": "tool nose radius compensation is not in the subset"},
     letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
     unique_numbers=True,
+    block_delete=True,
 )
 
 
@@ -93,6 +94,7 @@ class Setup:
     feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
     tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
+    block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
 
 
 @dataclass
@@ -376,7 +378,7 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         the first error of conversion.
     """
     setup = setup or Setup()
-    blocks = read(text, LATHE)
+    blocks = read(text, LATHE, setup.block_delete)
     modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
     here: Point = (start[1], start[0])
     ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
@@ -568,6 +570,11 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
                 out.append(ops[k])
         i = last + 1
     return out
+
+
+def has_block_delete(text: str) -> bool:
+    """Whether a block of the program starts with '/' (the block-delete switch matters)."""
+    return any(line.lstrip().startswith("/") for line in program_lines(text))
 
 
 def plan(text: str, start: tuple[float, float], rapid: float, setup: Setup | None = None) -> list[Segment]:
