@@ -245,3 +245,25 @@ def test_the_offset_is_at_the_nose_radius_from_a_monotone_profile_everywhere(spe
     # the path is continuous (nearly tangent junctions are joined within geometry.JOIN) in the profile's order
     for (a, i), (b, j) in zip(pieces, pieces[1:]):
         assert math.dist(a.end, b.start) <= JOIN and i <= j
+
+
+def test_g70_under_g41_on_a_bore_finishes_with_the_nose_on_the_profile():
+    """Inside work: the bore of the Fanuc suite (roughed outward with U-0.4), finished under G41 by a boring bar
+    (tip 2, nose 0.4): the nose circle on the bore's profile (3 um), never into the wall; G42 there is refused."""
+    from test_fanuc_suite import SUITE, fanuc
+
+    part, options = SUITE["bore (ID)"]
+    text = fanuc(part, 2004, **options).replace("N5 G00", "N5 G41 G00").replace("N22 G28", "N215 G40 G00 X10. Z5.\n"
+                                                                                           "N22 G28")
+    x0 = part.x0
+    bore = [Piece((p.start[0], 2 * x0 - p.start[1]), (p.end[0], 2 * x0 - p.end[1]),
+                  None if p.centre is None else (p.centre[0], 2 * x0 - p.centre[1]), not p.convex)
+            for p in part.pieces]
+    segs = plan(text, (x0, part.z0), 100.0, setup(0.4, 2))
+    g70 = [p for g in segs if g.cycle == 70 and g.subcycle == 2 for p in sample([g.element], 0.005)]
+    assert len(g70) > 500 and np.abs(gap(g70, bore, 0.4, 2)).max() <= 0.003
+    whole = [p for g in segs if g.cycle == 70 for p in sample([g.element], 0.005)]
+    assert gap(whole, bore, 0.4, 2).min() >= -0.003
+    with pytest.raises(ProgramError) as err:
+        parse(text.replace("G41", "G42"), (x0, part.z0), setup(0.4, 2))
+    assert "G70 with G42 on an inside profile" in str(err.value)

@@ -112,6 +112,7 @@ class Profile:
     blocks: tuple[Move, ...]
     pocket: int = 0                 # the line where X first falls along -Z (type II), 0: monotone (type I)
     front: Element | None = None    # a first block moving in Z too: the profile's X from the start point's Z on
+    inside: bool = False            # an inside (bore) profile: X rises from the start point (planned mirrored)
 
     @property
     def elements(self) -> list[Element]:
@@ -190,10 +191,20 @@ def _extreme(arc: Arc, angle: float) -> Point | None:
     return p if EPS < arc.param(p) < arc.length - EPS else None
 
 
-def check_profile(profile: Profile, start: Point) -> int:
+def check_profile(profile: Profile, start: Point, inside: bool = False) -> int:
     """Toward -Z all along, inside the stock (below the start point's X, above the axis); returns the line where X
-    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I)."""
+    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I).
+
+    ``inside``: ``profile`` is an inside profile mirrored about the start point's X (:func:`mirror_profile`):
+    inside the stock is then above the bore's start X (the messages say so, in the program's X), and the axis
+    is no limit."""
     pocket = 0
+    x0 = start[1]
+
+    def real(x: float) -> float:
+        return 2.0 * x0 - x if inside else x
+
+    above = "below" if inside else "above"
     a = profile.lead.element.end
     if a[1] > start[1] + TOL:
         raise ProgramError(profile.lead.line, 1, profile.lead.raw,
@@ -224,15 +235,47 @@ def check_profile(profile: Profile, start: Point) -> int:
         # an arc's highest and lowest points between its ends count as its ends do
         top = max(s[1], t[1], x_hi[1] if x_hi else -math.inf)
         if top > start[1] + TOL:
-            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:.6g} above the start "
-                                                        f"point's X {start[1]:g}")
+            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {real(top):.6g} {above} the start "
+                                             f"point's X {start[1]:g}" + (" (an inside profile stays above the "
+                                                                          "bore's start X)" if inside else ""))
         bottom = min(s[1], t[1], x_lo[1] if x_lo else math.inf)
-        if bottom < -TOL:
+        if bottom < -TOL and not inside:
             raise ProgramError(line, 1, raw, f"the profile crosses the spindle axis: X {bottom:.6g} < 0")
     if profile.blocks[-1].element.end[0] >= start[0] - TOL:
         last = profile.blocks[-1]
         raise ProgramError(last.line, 1, last.raw, "the profile ends in front of the start point's Z: nothing to cut")
     return pocket
+
+
+#: Fanuc's imaginary tool-nose numbers mirrored in X (about a line of constant X).
+_TIP_MIRRORED = {0: 0, 1: 4, 2: 3, 3: 2, 4: 1, 5: 5, 6: 8, 7: 7, 8: 6, 9: 9}
+
+
+def mirrored(e: Element, x0: float) -> Element:
+    """The element mirrored about X = ``x0`` (an arc's sense turns round)."""
+    if isinstance(e, Line):
+        return Line((e.start[0], 2.0 * x0 - e.start[1]), (e.end[0], 2.0 * x0 - e.end[1]))
+    return Arc((e.center[0], 2.0 * x0 - e.center[1]), e.radius, -e.a0, -e.sweep)
+
+
+def mirror_profile(profile: Profile, x0: float) -> Profile:
+    """An inside profile mirrored about its start point's X = ``x0``: an outside profile below it, planned as one
+    (the stock between the bore's start X and the profile, the roughing passes outward, the retract inward)."""
+    def flip(m: Move) -> Move:
+        return replace(m, element=mirrored(m.element, x0))
+
+    return replace(profile, lead=flip(profile.lead), blocks=tuple(flip(m) for m in profile.blocks),
+                   front=mirrored(profile.front, x0) if profile.front is not None else None, inside=False)
+
+
+def mirror_op(op: Rough | Finish) -> Rough | Finish:
+    """An inside G71/G70 as the outside one it mirrors (U's sign turns round: Fanuc's U < 0 of a bore)."""
+    x0 = op.start[1]
+    profile = mirror_profile(op.profile, x0)
+    if isinstance(op, Rough):
+        return replace(op, profile=profile, u=-op.u)
+    nose = op.nose and Nose(-op.nose.side, op.nose.radius, _TIP_MIRRORED[op.nose.tip])
+    return replace(op, profile=profile, nose=nose)
 
 
 def _solve(e: Element, f, target: float) -> float:
@@ -524,6 +567,8 @@ def finish_path(op: Finish) -> list[tuple[Element, int]]:
         naming the profile's block where the nose cannot follow the profile.
     """
     assert op.nose is not None
+    if op.profile.inside:
+        return [(mirrored(e, op.start[1]), k) for e, k in finish_path(mirror_op(op))]   # type: ignore[arg-type]
     blocks = op.profile.blocks
     try:
         return op.nose.path(finish_chain(op))
@@ -592,6 +637,14 @@ def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
     return out
 
 
+def plan_cycle(op: Rough | Finish, rapid: float) -> list[Segment]:
+    """The moves of a G71 or G70; an inside one planned as the outside one it mirrors, and mirrored back."""
+    if op.profile.inside:
+        x0 = op.start[1]
+        return [replace(g, element=mirrored(g.element, x0)) for g in plan_cycle(mirror_op(op), rapid)]
+    return _plan_rough(op, rapid) if isinstance(op, Rough) else _plan_finish(op, rapid)
+
+
 def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Segment]:
     """The planned moves of a program's operations, the tool at ``start`` ((z, x), programmed = axes: no tool
     offset yet; the first operation's start when None). Each move in the axes' coordinates (the programmed
@@ -615,7 +668,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
             out.append(Segment(e, rapid if op.rapid else op.feed, not op.rapid, 0, 0, 0.0, op.line, 0, modal=modal))
             here = op.element.end
         elif isinstance(op, (Rough, Finish)):
-            segs = _plan_rough(op, rapid) if isinstance(op, Rough) else _plan_finish(op, rapid)
+            segs = plan_cycle(op, rapid)
             if (dz, dx) != (0.0, 0.0) or modal != NO_MODAL:
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs

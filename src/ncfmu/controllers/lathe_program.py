@@ -53,6 +53,8 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Tool,
     check_profile,
     finish_path,
+    mirror_op,
+    mirror_profile,
     monotone_pieces,
     plan_ops,
     rough_boundary,
@@ -364,6 +366,9 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
     profile = Profile(p, q, lead, tuple(pieces), front=front)
+    if lead.element.end[1] > start[1] + TOL:     # X rises to the profile: a bore, checked as the outside it mirrors
+        pocket = check_profile(mirror_profile(profile, start[1]), start, inside=True)
+        return replace(profile, pocket=pocket, inside=True), j
     return replace(profile, pocket=check_profile(profile, start)), j
 
 
@@ -465,9 +470,12 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             nose = Nose(modes.comp, modes.row.nose_radius, modes.row.tip) if modes.comp else None
             finish = Finish(b.line, here, profile, feed, nose)
             if nose is not None:
-                if nose.side > 0:
+                if nose.side > 0 and not profile.inside:
                     raise b.err(b.col("G"), "G70 with G41 on an outside profile puts the nose on the part's side "
                                             "(below the profile): turning toward the chuck takes G42")
+                if nose.side < 0 and profile.inside:
+                    raise b.err(b.col("G"), "G70 with G42 on an inside profile puts the nose on the part's side "
+                                            "(above the bore's profile): boring toward the chuck takes G41")
                 finish_path(finish)                  # raises where the nose cannot follow the profile
             ops.append(finish)
             continue
@@ -475,9 +483,14 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             raise b.err(1, "G71 P Q needs G71's first block (G71 U<depth> R<retract>) before it")
         u = v.get("U", 0.0) * (0.5 if modes.diameter else 1.0)
         w = v.get("W", 0.0)
-        if u < 0 or w < 0:
+        if profile.inside and u > 0:
+            raise b.err(b.col("U"), f"U{v['U']:g}: an inside profile (boring: X rises from the start point's X "
+                                    f"{here[1]:g}) takes U <= 0, the allowance toward the axis (Fanuc's U-0.4): a "
+                                    "positive one would cut into the part")
+        if (u < 0 and not profile.inside) or w < 0:
             k = "U" if u < 0 else "W"
-            raise b.err(b.col(k), f"{k}{v[k]:g}: a negative allowance would cut into the part (outside roughing only)")
+            raise b.err(b.col(k), f"{k}{v[k]:g}: a negative allowance would cut into the part (on an outside "
+                                  "profile; a negative U is a bore's, whose profile rises from the start point)")
         if profile.pocket and w > 0:
             raise b.err(b.col("W"), f"W{w:g}: the profile has a pocket (X falls along -Z on line {profile.pocket}): "
                                     "a Z allowance would shift its near wall into the part; give W0 (type II is "
@@ -489,11 +502,13 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         if feed == 0.0:
             raise b.err(1, "G71 with no feed: give F (mm/min) here or before")
         rough = Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed)
-        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(rough)))
+        outside = mirror_op(rough) if profile.inside else rough          # an inside one as the outside it mirrors
+        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(outside)))  # type: ignore[arg-type]
         if low >= here[1] - TOL:
-            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere below "
-                                    f"the start point's X {here[1]:g} (its lowest X {low:g}): nothing to rough, and "
-                                    "G70 would take the whole depth in one pass")
+            low, where = (2 * here[1] - low, "above") if profile.inside else (low, "below")
+            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere {where} "
+                                    f"the start point's X {here[1]:g} (its {'highest' if profile.inside else 'lowest'}"
+                                    f" X {low:g}): nothing to rough, and G70 would take the whole depth in one pass")
         ops.append(rough)
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
