@@ -7,12 +7,15 @@ Words (one block per line, letters in either case; the README has the table)::
     G00 rapid   G01 line   G02 clockwise arc   G03 counter-clockwise arc        (motion, modal)
     X Z end point (X a diameter: Setup.diameter, seq.x_diameter)   U W incremental X (diameter) / Z
     I K arc centre relative to the arc's start (radius values)   R arc radius
-    G7 X is a diameter   G8 X is a radius   G18 XZ plane   G21 mm   G40   G90/G91     (modal)
+    G7 X is a diameter   G8 X is a radius   G18 XZ plane   G21 mm   G90/G91     (modal)
+    G40 / G41 / G42 tool-nose radius compensation off / left / right (:mod:`.nose`; G71 roughs uncompensated)
+    /  block delete at a block's start (skipped with Setup.block_delete, seq.block_delete at START)
     G04 P<ms> | X/U<s> dwell   G28 X/U Z/W reference return via the intermediate point   G50 S<max rev/min>
     G96 S<m/min> | G97 S<rev/min>   G98 F mm/min | G99 F mm/rev (Setup.feed_per_rev)   T<tool><offset>
     M03/M04/M05 spindle   M08/M09 coolant   M00/M01 stops   M02/M30 program end
     G71 U<depth of cut> R<retract>                first block: radius values
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
+                                                (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
 
 Positions are the programmed tool tip; the axes carry the active tool offset (:func:`.g7x.plan_ops`). The
