@@ -19,7 +19,7 @@ N1 G21 G98 G8
 N2 G00 X20. Z2.
 /N3 G01 X15. F600.      (SKIPPED WITH THE SWITCH ON)
 N4 G01 Z-5. F600.
-  / N5 G00 X25.
+(RETURN)  / N5 G00 X25.
 N6 G00 X30. Z2.
 M30
 %
@@ -62,6 +62,13 @@ def lowest_x(switch_at_start: bool, flip_at: int | None = None) -> float:
     run = run_ideal(seq, events=events)
     assert run["done"][-1] and not run["alarm"].any()
     return float(run["x_cmd"].min())
+
+
+def test_a_slash_after_a_comment_counts():
+    from ncfmu.controllers.lathe_program import has_block_delete
+
+    assert has_block_delete(PROGRAM) and has_block_delete("(A)/G00 X1.\nM30\n")
+    assert not has_block_delete("G00 X1. (A/B)\nM30\n")
 
 
 def test_the_sequencer_reads_the_switch_at_start():

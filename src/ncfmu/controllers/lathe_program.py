@@ -62,7 +62,17 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     plan_ops,
     rough_boundary,
 )
-from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move, arc, program_lines, read
+from .gcode import (
+    ARC_RADIUS_TOLERANCE,
+    COORDINATE_LIMIT,
+    Block,
+    Dialect,
+    Move,
+    arc,
+    program_lines,
+    read,
+    strip_comments,
+)
 from .geometry import Arc, CornerError, Element, Line, Point
 from .nose import Nose
 
@@ -592,7 +602,7 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
 
 def has_block_delete(text: str) -> bool:
     """Whether a block of the program starts with '/' (the block-delete switch matters)."""
-    return any(line.lstrip().startswith("/") for line in program_lines(text))
+    return any(strip_comments(line, n).lstrip().startswith("/") for n, line in enumerate(program_lines(text), 1))
 
 
 def plan(text: str, start: tuple[float, float], rapid: float, setup: Setup | None = None) -> list[Segment]:
