@@ -141,7 +141,7 @@ def test_g28_returns_through_the_intermediate_point_to_the_reference():
     ("G99\nG01 X10. F0.2\nM30\n", 2, 1, "a feed per revolution (G99) with the spindle stopped"),
     ("T0909\nM30\n", 1, 1, "T<tool><offset>"),
     ("G50 X100. S2000\nM30\n", 1, 5, "setting the coordinate system is not in the subset"),
-    ("/G00 X10.\nM30\n", 1, 1, "block delete '/' is not in the subset"),
+    ("G00 X10. / Z2.\nM30\n", 1, 10, "block delete '/' stands at the start of a block"),
 ])
 def test_fanuc_refusals(text, line, column, words):
     with pytest.raises(ProgramError) as err:

@@ -4,7 +4,8 @@ each run by the CutSequencer with ideal axes and a plain-Python spindle, judged 
 geometry (tests/lathe_oracle.py): roughing never below the profile + allowance, G70 on the profile (3 um), feed =
 F x actual rev/min / 60 (2 %), rev/min = min(G50 S, 1000 v / (pi D)) (the command exactly, the spindle 1 %).
 
-Outside diameters only: G71 roughs below the start point's X (inside work, boring, is not built)."""
+Outside work, and one bore (inside work: G71 with U negative roughs outward from the drilled hole), judged as the
+outside part it mirrors about the start point's X."""
 
 from __future__ import annotations
 
@@ -25,25 +26,35 @@ def num(v: float) -> str:
 
 def fanuc(part: Part, o: int, *, depth: float = 1.5, retract: float = 0.5, u: float = 0.2, w: float = 0.1,
           f_rough: float = 0.25, f_finish: float = 0.1, v: float = 180.0, s_max: float = 2500.0, arcs: str = "R",
-          incremental: bool = False, type2: bool = False) -> str:
-    """The program of ``part`` in Fanuc's form, X on the diameter; ``incremental``: the profile in U/W."""
+          incremental: bool = False, type2: bool = False, inside: bool = False) -> str:
+    """The program of ``part`` in Fanuc's form, X on the diameter; ``incremental``: the profile in U/W.
+    ``inside``: ``part`` is a bore mirrored about the start point's X (an outside profile below it): the program
+    is the bore's -- X mirrored back, G02 and G03 swapped, U negative (Fanuc's sign of an inside allowance)."""
+    sign = -1.0 if inside else 1.0
+
+    def x(v: float) -> str:                     # a radius of the (mirrored) part as the program's diameter
+        return num(2 * (2 * part.x0 - v if inside else v))
+
+    def g(convex: bool) -> str:
+        return "G03" if convex != inside else "G02"
+
     lines = ["%", f"O{o:04d} (PART {o})", "N1 G21 G40 G99", "N2 T0101", f"N3 G50 S{num(s_max)}",
-             f"N4 G96 S{num(v)} M03", f"N5 G00 X{num(2 * part.x0)} Z{num(part.z0)} M08",
+             f"N4 G96 S{num(v)} M03", f"N5 G00 X{x(part.x0)} Z{num(part.z0)} M08",
              f"N6 G71 U{num(depth)} R{num(retract)}",
-             f"N7 G71 P10 Q20 U{num(2 * u)} W{num(w)} F{num(f_rough)}",
-             f"N10 G00 X{num(2 * part.a_x)}" + (" W0" if type2 else "")]
+             f"N7 G71 P10 Q20 U{num(sign * 2 * u)} W{num(w)} F{num(f_rough)}",
+             f"N10 G00 X{x(part.a_x)}" + (" W0" if type2 else "")]
     for i, p in enumerate(part.pieces):
         n = "N20 " if i == len(part.pieces) - 1 else ""
         if incremental:
-            end = f"U{num(2 * (p.end[1] - p.start[1]))} W{num(p.end[0] - p.start[0])}"
+            end = f"U{num(sign * 2 * (p.end[1] - p.start[1]))} W{num(p.end[0] - p.start[0])}"
         else:
-            end = f"X{num(2 * p.end[1])} Z{num(p.end[0])}"
+            end = f"X{x(p.end[1])} Z{num(p.end[0])}"
         if p.centre is None:
             lines.append(f"{n}G01 {end}")
         elif arcs == "R":
-            lines.append(f"{n}G0{3 if p.convex else 2} {end} R{num(p.radius)}")
+            lines.append(f"{n}{g(p.convex)} {end} R{num(p.radius)}")
         else:
-            lines.append(f"{n}G0{3 if p.convex else 2} {end} I{num(p.centre[1] - p.start[1])} "
+            lines.append(f"{n}{g(p.convex)} {end} I{num(sign * (p.centre[1] - p.start[1]))} "
                          f"K{num(p.centre[0] - p.start[0])}")
     lines += [f"N21 G70 P10 Q20 F{num(f_finish)}", "N22 G28 U0 W0 M09", "N23 M05", "N24 M30", "%"]
     return "\n".join(lines) + "\n"
@@ -68,6 +79,12 @@ SUITE = {
                                              ("convex", 2.0, 0.0, HALF_PI), ("z", 6.0), ("face", 7.0)]),
                 {"arcs": "IK", "u": 0.25, "w": 0.05}),
     "slow surface speed": (SHAFT, {"v": 90.0, "s_max": 1200.0, "f_rough": 0.3, "f_finish": 0.08}),
+    # a bore from a drilled hole of 20 mm (X20.) to 38 mm at its mouth: a chamfer, a convex corner (a concave arc
+    # of the mirrored part), a step, a taper, a face down to the hole -- roughed outward with U-0.4
+    "bore (ID)": (build_part(10.0, 2.0, 1.0, [("z", 2.0), ("taper", 1.0, 1.0), ("z", 8.0),
+                                             ("concave", 2.0, -HALF_PI, -math.pi), ("face", 1.0), ("z", 6.0),
+                                             ("taper", 6.0, 2.0), ("z", 5.0), ("face", 3.0)]),
+                  {"inside": True, "depth": 1.0, "u": 0.2, "w": 0.1, "arcs": "IK", "incremental": True}),
 }
 
 
@@ -82,9 +99,15 @@ def test_a_fanuc_program_against_its_geometry(name):
     assert run["done"][-1] and not run["alarm"].any(), name
     u, w = options.get("u", 0.2), options.get("w", 0.1)
     g71 = run["canned_cycle"] == 71
-    assert below_shifted_profile(part, u, w, run["z_cmd"][g71], run["x_cmd"][g71], tol=0.002) <= 0.002
+    # a bore is judged as the outside part it mirrors (the oracle's geometry): X mirrored about the start point's
+    x_part = 2 * part.x0 - run["x_cmd"] if options.get("inside") else run["x_cmd"]
+    if options.get("inside"):       # the cuts go outward from the hole (above its X less U), the retracts
+        cuts = g71 & (run["subcycle"] == 2)        # into it (air)
+        assert run["x_cmd"][cuts].min() >= part.x0 - u - 1e-9 and run["x_cmd"][cuts].max() > part.x0 + 8.0
+        assert run["x_cmd"][g71].min() < part.x0
+    assert below_shifted_profile(part, u, w, run["z_cmd"][g71], x_part[g71], tol=0.002) <= 0.002
     g70 = (run["canned_cycle"] == 70) & (run["subcycle"] == 2)
-    path, profile = np.column_stack([run["z_cmd"][g70], run["x_cmd"][g70]]), part.points(0.01)
+    path, profile = np.column_stack([run["z_cmd"][g70], x_part[g70]]), part.points(0.01)
     assert distances(path, profile).max() <= 0.003 and distances(profile, path).max() <= 0.005
     # feed per revolution from the actual speed; the constant surface speed at the tool's diameter
     v = np.hypot(run["x_vff"], run["z_vff"])

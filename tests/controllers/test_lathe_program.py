@@ -198,7 +198,8 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     (HEAD + "G71 P10 Q21 U0.2 W0.1 F300\n" + PROFILE + "M30\n", 4, 9, "Q21: the profile's last block N21"),
     ("G00 X30 Z2\nG71 U0 R0.5\nM30\n", 2, 5, "U0: the depth of cut must be > 0"),
     ("G00 X30 Z2\nG71 U1 R-0.5\nM30\n", 2, 8, "R-0.5: the retract must be >= 0"),
-    (HEAD + "G71 P10 Q20 F300\nN10 G00 X31\nG01 Z-10\nN20 X30\nM30\n", 5, 1, "starts above the start point"),
+    # a profile rising from the start point is a bore: with a positive U (an outside allowance) it is refused
+    (HEAD + "G71 P10 Q20 U0.4 F300\nN10 G00 X31\nG01 Z-10\nN20 X30\nM30\n", 4, 13, "an inside profile (boring"),
     (HEAD + "G71 P10 Q20 F300\nN10 G00 X20\nG01 Z-10\nN20 X31\nM30\n", 7, 1, "leaves the stock"),
     (HEAD + "G71 P10 Q20 W0.1 F300\nN10 G00 X20\nG01 Z-10\nX15 Z-15\nN20 X30\nM30\n", 4, 13,
      "W0.1: the profile has a pocket (X falls along -Z on line 7)"),
@@ -212,7 +213,7 @@ PROFILE = "N10 G00 X20\nG01 Z-10\nN20 X30\n"
     ("G00 X30 Z2\nG71 P10 Q20 F300\n" + PROFILE + "M30\n", 2, 1, "needs G71's first block"),
     ("G17\nM30\n", 1, 1, "XZ plane"),
     ("G01 X10 Y2 F100\nM30\n", 1, 9, "no Y axis"),
-    ("G00 X30 Z2\nG41 G01 X10 F100\nM30\n", 2, 1, "G41/G42 tool-nose radius compensation is not built yet"),
+    ("G41 G00 X30 Z2\nG01 X10 F100 T0101\nM30\n", 2, 14, "with G41 in force: cancel the tool-nose radius"),
     ("G01 G00 X10\nM30\n", 1, 5, "modal group motion"),
     ("G7 G8 X10\nM30\n", 1, 4, "modal group X mode"),
     ("G01 X10 Z1\nM30\n", 1, 1, "no feed"),

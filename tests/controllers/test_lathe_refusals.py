@@ -83,3 +83,40 @@ def test_fifty_v_pockets_are_refused_by_the_move_count():
     with pytest.raises(ProgramError, match=rf"line 4, column 1: more than {MAX_SEGMENTS} moves: \d+ passes of U0.01"):
         plan(v_pockets(50, 0.01), (30.0, 2.0), 50.0)
     assert len(v_pockets(50, 0.01)) <= 1024
+
+
+# -- inside work (boring): the profile rises from the start point's X, U is negative ------------------------
+BORE = "G18 G21 G90 G8\nG00 X10 Z2\nG71 U1 R0.5\nG71 P10 Q20 U{u} F300\nN10 G00 X18\nG01 Z-10\n{mid}N20 G01 X10\nM30\n"
+
+
+def test_an_inside_profile_roughs_outward_with_a_negative_u():
+    from ncfmu.controllers.g7x import Rough
+
+    (rough,) = parse(BORE.format(u=-0.2, mid="X14 Z-14\nZ-20\n"), (10.0, 2.0))
+    assert isinstance(rough, Rough) and rough.profile.inside and rough.u == -0.2
+    cuts = [g for g in plan(BORE.format(u=-0.2, mid="X14 Z-14\nZ-20\n"), (10.0, 2.0), 100.0) if g.subcycle == 2]
+    levels = [g.element.start[1] for g in cuts if g.pass_no < cuts[-1].pass_no]
+    assert levels == [11.0, 12.0, 13.0, 14.0, 15.0, 16.0, 17.0]     # outward from X 10 by U1, below 18 - 0.2
+
+
+def test_an_inside_profile_with_a_positive_u_is_refused():
+    err = refused_at(BORE.format(u=0.2, mid=""), (10.0, 2.0))
+    assert (err.line_no, err.column) == (4, 13) and "an inside profile" in str(err) and "U <= 0" in str(err)
+
+
+def test_an_inside_profile_below_the_bore_s_start_x_is_refused():
+    # the bore's profile dips to X 8 under the drilled hole's X 10: it leaves the stock
+    err = refused_at(BORE.format(u=-0.2, mid="X8 Z-12\nZ-20\n"), (10.0, 2.0))
+    assert (err.line_no, err.column) == (7, 1)
+    assert "leaves the stock: X 8 below the start point's X 10" in str(err) and "above the bore's start X" in str(err)
+
+
+def test_an_inside_allowance_that_leaves_nothing_to_rough_is_refused():
+    err = refused_at(BORE.format(u=-20, mid=""), (10.0, 2.0))
+    assert err.line_no == 4 and "nowhere above the start point's X 10" in str(err)
+
+
+def refused_at(text: str, start: tuple[float, float]) -> ProgramError:
+    with pytest.raises(ProgramError) as err:
+        parse(text, start)
+    return err.value

@@ -197,3 +197,11 @@ def test_a_detuned_servo_spoils_the_part_by_what_its_following_error_predicts(nc
     # the tuned servo on the same program: within (the examples' test)
     assert gouge_oracle(ncfmu_run("mill_contour", stop_time=75.0, start_values={
         "contour.program": ARC_PART, "contour.diameter_delta": 4.0}), values) < 0.01
+
+
+def test_a_fanuc_program_with_g28_is_judged(ncfmu_run):
+    """The part check reads the program as the sequencer does (its machine reference, X mode, tool table): the
+    Fanuc example with G28 was refused by the part check alone ('G28 needs the machine reference')."""
+    program = (EXAMPLES / "lathe_fanuc.nc").read_text()
+    r = ncfmu_run("lathe_roughing", stop_time=0.5, start_values={"seq.program": program})
+    assert r.part is not None and not r.part.crashes

@@ -34,7 +34,9 @@ from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
 from .gcode import Move
-from .geometry import Arc, Element, Line, Point
+from .geometry import Arc, CornerError, Element, Line, Point
+from .nose import Nose
+from .nose import translated as shifted
 
 #: More planned moves than this are refused: one part, a few hundred passes at most.
 MAX_SEGMENTS = 20_000
@@ -110,6 +112,7 @@ class Profile:
     blocks: tuple[Move, ...]
     pocket: int = 0                 # the line where X first falls along -Z (type II), 0: monotone (type I)
     front: Element | None = None    # a first block moving in Z too: the profile's X from the start point's Z on
+    inside: bool = False            # an inside (bore) profile: X rises from the start point (planned mirrored)
 
     @property
     def elements(self) -> list[Element]:
@@ -138,12 +141,14 @@ class Rough:
 
 @dataclass(frozen=True)
 class Finish:
-    """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none)."""
+    """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none),
+    with the tool-nose radius compensation ``nose`` (G41/G42) or none (G40)."""
 
     line: int
     start: Point
     profile: Profile
     feed: float
+    nose: Nose | None = None
 
 
 
@@ -186,10 +191,20 @@ def _extreme(arc: Arc, angle: float) -> Point | None:
     return p if EPS < arc.param(p) < arc.length - EPS else None
 
 
-def check_profile(profile: Profile, start: Point) -> int:
+def check_profile(profile: Profile, start: Point, inside: bool = False) -> int:
     """Toward -Z all along, inside the stock (below the start point's X, above the axis); returns the line where X
-    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I)."""
+    first falls along -Z (a pocket or undercut: type II), 0 if it never does (type I).
+
+    ``inside``: ``profile`` is an inside profile mirrored about the start point's X (:func:`mirror_profile`):
+    inside the stock is then above the bore's start X (the messages say so, in the program's X), and the axis
+    is no limit."""
     pocket = 0
+    x0 = start[1]
+
+    def real(x: float) -> float:
+        return 2.0 * x0 - x if inside else x
+
+    above = "below" if inside else "above"
     a = profile.lead.element.end
     if a[1] > start[1] + TOL:
         raise ProgramError(profile.lead.line, 1, profile.lead.raw,
@@ -220,10 +235,11 @@ def check_profile(profile: Profile, start: Point) -> int:
         # an arc's highest and lowest points between its ends count as its ends do
         top = max(s[1], t[1], x_hi[1] if x_hi else -math.inf)
         if top > start[1] + TOL:
-            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {top:.6g} above the start "
-                                                        f"point's X {start[1]:g}")
+            raise ProgramError(line, 1, raw, f"the profile leaves the stock: X {real(top):.6g} {above} the start "
+                                             f"point's X {start[1]:g}" + (" (an inside profile stays above the "
+                                                                          "bore's start X)" if inside else ""))
         bottom = min(s[1], t[1], x_lo[1] if x_lo else math.inf)
-        if bottom < -TOL:
+        if bottom < -TOL and not inside:
             raise ProgramError(line, 1, raw, f"the profile crosses the spindle axis: X {bottom:.6g} < 0")
     if profile.blocks[-1].element.end[0] >= start[0] - TOL:
         last = profile.blocks[-1]
@@ -231,10 +247,35 @@ def check_profile(profile: Profile, start: Point) -> int:
     return pocket
 
 
-def shifted(e: Element, dz: float, dx: float) -> Element:
+#: Fanuc's imaginary tool-nose numbers mirrored in X (about a line of constant X).
+_TIP_MIRRORED = {0: 0, 1: 4, 2: 3, 3: 2, 4: 1, 5: 5, 6: 8, 7: 7, 8: 6, 9: 9}
+
+
+def mirrored(e: Element, x0: float) -> Element:
+    """The element mirrored about X = ``x0`` (an arc's sense turns round)."""
     if isinstance(e, Line):
-        return Line((e.start[0] + dz, e.start[1] + dx), (e.end[0] + dz, e.end[1] + dx))
-    return Arc((e.center[0] + dz, e.center[1] + dx), e.radius, e.a0, e.sweep)
+        return Line((e.start[0], 2.0 * x0 - e.start[1]), (e.end[0], 2.0 * x0 - e.end[1]))
+    return Arc((e.center[0], 2.0 * x0 - e.center[1]), e.radius, -e.a0, -e.sweep)
+
+
+def mirror_profile(profile: Profile, x0: float) -> Profile:
+    """An inside profile mirrored about its start point's X = ``x0``: an outside profile below it, planned as one
+    (the stock between the bore's start X and the profile, the roughing passes outward, the retract inward)."""
+    def flip(m: Move) -> Move:
+        return replace(m, element=mirrored(m.element, x0))
+
+    return replace(profile, lead=flip(profile.lead), blocks=tuple(flip(m) for m in profile.blocks),
+                   front=mirrored(profile.front, x0) if profile.front is not None else None, inside=False)
+
+
+def mirror_op(op: Rough | Finish) -> Rough | Finish:
+    """An inside G71/G70 as the outside one it mirrors (U's sign turns round: Fanuc's U < 0 of a bore)."""
+    x0 = op.start[1]
+    profile = mirror_profile(op.profile, x0)
+    if isinstance(op, Rough):
+        return replace(op, profile=profile, u=-op.u)
+    nose = op.nose and Nose(-op.nose.side, op.nose.radius, _TIP_MIRRORED[op.nose.tip])
+    return replace(op, profile=profile, nose=nose)
 
 
 def _solve(e: Element, f, target: float) -> float:
@@ -506,7 +547,72 @@ def _lines_of(op: Rough, bound: list[Element]) -> list[int]:
     return lines[len(lines) - len(bound):]
 
 
+def finish_chain(op: Finish) -> list[Element]:
+    """What G70 runs along under G41/G42: the profile, then up the wall it ends at (SC3) to the start point's X
+    (the wall is part's too: the nose must not gouge it)."""
+    chain = [pb.element for pb in op.profile.blocks]
+    bz, bx = chain[-1].end
+    if op.start[1] > bx + EPS:
+        chain.append(Line((bz, bx), (bz, op.start[1])))
+    return chain
+
+
+def finish_path(op: Finish) -> list[tuple[Element, int]]:
+    """The commanded pieces of G70 under G41/G42 (:meth:`.nose.Nose.path` of :func:`finish_chain`): (piece, index
+    of its profile block; ``len(profile.blocks)``: the wall up at the end).
+
+    Raises
+    ------
+    ProgramError
+        naming the profile's block where the nose cannot follow the profile.
+    """
+    assert op.nose is not None
+    if op.profile.inside:
+        return [(mirrored(e, op.start[1]), k) for e, k in finish_path(mirror_op(op))]   # type: ignore[arg-type]
+    blocks = op.profile.blocks
+    try:
+        return op.nose.path(finish_chain(op))
+    except CornerError as err:
+        names = [f"the block on line {pb.line}" for pb in blocks] + [f"G70's retract up the end wall (line {op.line})"]
+        at = blocks[err.index] if err.index < len(blocks) else None
+        raise ProgramError(at.line if at else op.line, 1, at.raw if at else f"line {op.line}",
+                           f"tool-nose radius compensation ({op.nose.code}, nose radius {op.nose.radius:g} mm): "
+                           f"{err.describe(names)}") from None
+
+
+def _plan_finish_nose(op: Finish, rapid: float) -> list[Segment]:
+    """G70 under G41/G42: SC1 from the start point to the nose's first point (type A start-up), SC2 the
+    compensated profile, SC3 the compensated wall up, SC4 back to the start point's Z at its X (the cancel)."""
+    out: list[Segment] = []
+    z0, x0 = op.start
+    lead, blocks = op.profile.lead, op.profile.blocks
+    up = op.feed or blocks[-1].feed
+    assert op.nose is not None
+
+    def rate(pb: Move) -> tuple[float, bool]:
+        return (rapid, False) if pb.rapid else (op.feed or pb.feed, True)
+
+    pieces = finish_path(op)
+    r, f = rate(lead)
+    out.append(Segment(Line(op.start, pieces[0][0].start), r, f, 1, 1, 0.0, lead.line, 70))
+    for e, k in pieces:
+        if k < len(blocks):
+            r, f = rate(blocks[k])
+            out.append(Segment(e, r, f, 2, 1, 0.0, blocks[k].line, 70))
+        else:
+            out.append(Segment(e, up or rapid, up > 0, 3, 1, 0.0, op.line, 70))
+    # SC4: straight up until the nose circle is clear of the stock's X (its centre r above it), along Z to the
+    # start point's Z, down to the start point
+    last = pieces[-1][0].end
+    high = max(last[1], x0 + op.nose.radius + op.nose.vector[1])
+    for a, b, sub in ((last, (last[0], high), 4), ((last[0], high), (z0, high), 4), ((z0, high), op.start, 0)):
+        out.append(Segment(Line(a, b), rapid, False, sub, 1 if sub else 0, 0.0, op.line, 70))
+    return [g for g in out if g.element.length > EPS]
+
+
 def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
+    if op.nose is not None:
+        return _plan_finish_nose(op, rapid)
     out: list[Segment] = []
     z0, x0 = op.start
     a = op.profile.lead.element.end
@@ -529,6 +635,14 @@ def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
     if clear > x0:
         out.append(Segment(Line((z0, clear), op.start), rapid, False, 0, 0, 0.0, op.line, 70))
     return out
+
+
+def plan_cycle(op: Rough | Finish, rapid: float) -> list[Segment]:
+    """The moves of a G71 or G70; an inside one planned as the outside one it mirrors, and mirrored back."""
+    if op.profile.inside:
+        x0 = op.start[1]
+        return [replace(g, element=mirrored(g.element, x0)) for g in plan_cycle(mirror_op(op), rapid)]
+    return _plan_rough(op, rapid) if isinstance(op, Rough) else _plan_finish(op, rapid)
 
 
 def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Segment]:
@@ -554,7 +668,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
             out.append(Segment(e, rapid if op.rapid else op.feed, not op.rapid, 0, 0, 0.0, op.line, 0, modal=modal))
             here = op.element.end
         elif isinstance(op, (Rough, Finish)):
-            segs = _plan_rough(op, rapid) if isinstance(op, Rough) else _plan_finish(op, rapid)
+            segs = plan_cycle(op, rapid)
             if (dz, dx) != (0.0, 0.0) or modal != NO_MODAL:
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs

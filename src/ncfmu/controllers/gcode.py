@@ -55,6 +55,7 @@ class Dialect:
     refused_letters: Mapping[str, str]   # letter -> why it is refused
     letter_list: str                     # the letters taken, for messages
     unique_numbers: bool = False         # N numbers name blocks (G70/G71 P and Q): each at most once
+    block_delete: bool = False           # a block may start with '/' (block delete, skipped with the switch on)
 
 
 @dataclass(frozen=True)
@@ -207,8 +208,22 @@ def check(b: Block, dialect: Dialect) -> None:
             raise b.err(col, f"{word}: {reason}")
 
 
-def read(text: str, dialect: Dialect) -> list[Block]:
-    """The checked blocks of a program (empty lines, comment-only lines and ``%`` lines left out).
+def _slash(clean: str, n: int, raw: str) -> tuple[str, bool]:
+    """A comment-free line without its block-delete slash, and whether it had one (at its start only)."""
+    lead = len(clean) - len(clean.lstrip())
+    deleted = clean[lead:lead + 1] == "/"
+    if deleted:
+        clean = clean[:lead] + " " + clean[lead + 1:]
+    if "/" in clean:
+        raise ProgramError(n, clean.index("/") + 1, raw.strip(), "block delete '/' stands at the start of a block "
+                                                                "(/N10 G01 ...), once")
+    return clean, deleted
+
+
+def read(text: str, dialect: Dialect, block_delete: bool = False) -> list[Block]:
+    """The checked blocks of a program (empty lines, comment-only lines and ``%`` lines left out); with
+    ``block_delete`` (the switch on) also the blocks that start with ``/`` (a dialect's with block delete: they are
+    checked either way, so a program reads the same with the switch on or off).
 
     Raises
     ------
@@ -231,6 +246,9 @@ def read(text: str, dialect: Dialect) -> list[Block]:
                     raise ProgramError(n, len(clean) - len(clean.lstrip()) + 1, raw.strip(),
                                        f"text after the program end (line {ended_at})")
                 continue
+            deleted = False
+            if dialect.block_delete:
+                clean, deleted = _slash(clean, n, raw)
             found = words(clean, n)
             if not found:
                 continue
@@ -238,6 +256,8 @@ def read(text: str, dialect: Dialect) -> list[Block]:
             check(b, dialect)
         except ProgramError as err:
             errors.append(err)
+            continue
+        if deleted and block_delete:
             continue
         if dialect.unique_numbers and b.n is not None:
             if b.n in numbered:

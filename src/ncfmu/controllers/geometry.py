@@ -325,8 +325,12 @@ def closest_approach(pieces: list[tuple[Element, int]], contour: list[Element],
 
 
 # -- cutter compensation -------------------------------------------------------------------------------
-def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[Element, int]]:
+def compensate(elements: list[Element], d: float, closed: bool,
+               round_corners: bool = False) -> list[tuple[Element, int]]:
     """The cutter-centre path of ``elements`` offset by ``d`` (+ left of travel), with its corners joined.
+
+    ``round_corners``: every outside corner gets the arc of radius ``|d|`` (a lathe's tool nose: its circle
+    touches the programmed corner all the way round, where the extended lines would leave it off the contour).
 
     Returns ``(element, index)`` pairs: ``index`` is the programmed element the piece belongs to (an
     inserted corner arc belongs to the element after the corner; the closing corner of a ``closed``
@@ -364,7 +368,8 @@ def compensate(elements: list[Element], d: float, closed: bool) -> list[tuple[El
         if abs(turn) >= math.pi - TANGENT:
             turn = -math.copysign(math.pi, d)        # a reversal: around the tip, whichever side
         if turn * d < 0:                             # outside corner
-            if isinstance(a, Line) and isinstance(b, Line) and abs(turn) <= math.pi / 2 + 1e-12:
+            if (not round_corners and isinstance(a, Line) and isinstance(b, Line)
+                    and abs(turn) <= math.pi / 2 + 1e-12):
                 (p,) = _line_line(oa, ob)            # type: ignore[arg-type]
                 trim[k][1], trim[j][0] = oa.param(p), ob.param(p)
             else:

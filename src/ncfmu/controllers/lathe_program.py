@@ -7,12 +7,15 @@ Words (one block per line, letters in either case; the README has the table)::
     G00 rapid   G01 line   G02 clockwise arc   G03 counter-clockwise arc        (motion, modal)
     X Z end point (X a diameter: Setup.diameter, seq.x_diameter)   U W incremental X (diameter) / Z
     I K arc centre relative to the arc's start (radius values)   R arc radius
-    G7 X is a diameter   G8 X is a radius   G18 XZ plane   G21 mm   G40   G90/G91     (modal)
+    G7 X is a diameter   G8 X is a radius   G18 XZ plane   G21 mm   G90/G91     (modal)
+    G40 / G41 / G42 tool-nose radius compensation off / left / right (:mod:`.nose`; G71 roughs uncompensated)
+    /  block delete at a block's start (skipped with Setup.block_delete, seq.block_delete at START)
     G04 P<ms> | X/U<s> dwell   G28 X/U Z/W reference return via the intermediate point   G50 S<max rev/min>
     G96 S<m/min> | G97 S<rev/min>   G98 F mm/min | G99 F mm/rev (Setup.feed_per_rev)   T<tool><offset>
     M03/M04/M05 spindle   M08/M09 coolant   M00/M01 stops   M02/M30 program end
     G71 U<depth of cut> R<retract>                first block: radius values
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
+                                                (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
 
 Positions are the programmed tool tip; the axes carry the active tool offset (:func:`.g7x.plan_ops`). The
@@ -52,16 +55,28 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Stop,
     Tool,
     check_profile,
+    finish_path,
+    mirror_op,
+    mirror_profile,
     monotone_pieces,
     plan_ops,
     rough_boundary,
 )
-from .gcode import ARC_RADIUS_TOLERANCE, COORDINATE_LIMIT, Block, Dialect, Move, arc, read
-from .geometry import Arc, Element, Line, Point
+from .gcode import (
+    ARC_RADIUS_TOLERANCE,
+    COORDINATE_LIMIT,
+    Block,
+    Dialect,
+    Move,
+    arc,
+    program_lines,
+    read,
+    strip_comments,
+)
+from .geometry import Arc, CornerError, Element, Line, Point
+from .nose import Nose
 
 _MOTION = {0, 1, 2, 3}
-_NOSE_RADIUS = ("G41/G42 tool-nose radius compensation is not built yet: program the tool tip (the nose radius "
-                "of seq.tool[k] is not applied)")
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 LATHE = Dialect(
     name="lathe",
@@ -69,20 +84,20 @@ LATHE = Dialect(
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
             70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)",
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
-            40: "tool-nose radius compensation (G40)", 96: "spindle speed mode (G96/G97)",
+            **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
             97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
-               41: _NOSE_RADIUS, 42: _NOSE_RADIUS,
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
                73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G40, G50, G70, G71, G90, G91, G96-G99",
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G40-G42, G50, G70, G71, G90, G91, G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
     coordinates="XZIKRUWPQSTO",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
                      "D": "tool nose radius compensation is not in the subset"},
     letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
     unique_numbers=True,
+    block_delete=True,
 )
 
 
@@ -94,6 +109,7 @@ class Setup:
     feed_per_rev: bool = False            # G99 until G98/G99 (seq.feed_per_rev)
     tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
+    block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
 
 
 @dataclass
@@ -103,6 +119,8 @@ class _Modes:
     diameter: bool = False
     feed: float = 0.0       # mm/s (under G99: mm/s per rev/min)
     machine: Modal = field(default_factory=Modal)
+    comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
+    row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
 
 
 def _r_centre(b: Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
@@ -191,6 +209,8 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             modes.diameter = g == 7
         elif g in (70, 71):
             cycle = g
+        elif g in (40, 41, 42) and not profile:
+            modes.comp = {40: 0, 41: 1, 42: -1}[g]
     if "F" in values:
         modes.feed = values["F"] / 60.0                # modal, a cycle's F too (RS274)
     if cycle is not None:
@@ -242,6 +262,9 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
     if 98 in codes or 99 in codes:
         m = replace(m, per_rev=99 in codes)
     if "T" in v:
+        if modes.comp:
+            raise b.err(b.col("T"), f"T{v['T']:g} with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose "
+                                    "radius compensation (G40) before changing the tool or its offset")
         t = v["T"]
         tool, row = divmod(int(t), 100)
         if t != int(t) or t < 0 or not 0 <= tool <= len(setup.tools) or not 0 <= row <= len(setup.tools):
@@ -249,6 +272,7 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
                                     "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
         row_tool = setup.tools[row - 1] if row else Tool()
         m = replace(m, tool=tool, offset=(row_tool.z_offset, row_tool.x_offset))
+        modes.row = row_tool
     for code, _ in b.m:
         if code in _BEFORE_MOVE:
             m = replace(m, spindle=_BEFORE_MOVE[code])
@@ -329,7 +353,7 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
         machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
-        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 50, 96, 97, 98, 99)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, 96, 97, 98, 99)]
         if machine:
             raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
                                                   "part's outline (moves, F), give it before G71/G70")
@@ -355,6 +379,9 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
     profile = Profile(p, q, lead, tuple(pieces), front=front)
+    if lead.element.end[1] > start[1] + TOL:     # X rises to the profile: a bore, checked as the outside it mirrors
+        pocket = check_profile(mirror_profile(profile, start[1]), start, inside=True)
+        return replace(profile, pocket=pocket, inside=True), j
     return replace(profile, pocket=check_profile(profile, start)), j
 
 
@@ -369,11 +396,12 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         the first error of conversion.
     """
     setup = setup or Setup()
-    blocks = read(text, LATHE)
+    blocks = read(text, LATHE, setup.block_delete)
     modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
     here: Point = (start[1], start[0])
     ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
     profiles: dict[tuple[int, int], Profile] = {}
+    noses: dict[int, Nose] = {}             # index of a move under G41/G42 in ops -> its nose
     g71_first: tuple[float, float] | None = None
     i = 0
     while i < len(blocks):
@@ -389,6 +417,11 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             for g, col in b.g:
                 if g not in (4, 28, 50, 40):
                     raise b.err(col, f"G{g:02d} in a G04/G28/G50 block: give it a block of its own")
+            if 40 in codes:
+                modes.comp = 0
+            if 28 in codes and modes.comp:
+                raise b.err(b.col("G"), f"G28 with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose "
+                                        "radius compensation (G40) on the way out first")
             if 4 in codes:
                 ops.append(_dwell(b))
             elif 28 in codes:
@@ -398,9 +431,12 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
                         home.home[1] - dx if home.home[1] is not None else home.via[1])
         else:
+            comp_before = modes.comp
             element, end, rapid, cycle = _interpret(b, modes, here)
             if element is not None:
-                ops.append(Move(element, rapid, modes.feed, b.line))
+                ops.append(Move(element, rapid, modes.feed, b.line, comp_before, modes.comp, raw=b.raw.strip()))
+                if modes.comp:
+                    noses[len(ops) - 1] = Nose(modes.comp, modes.row.nose_radius, modes.row.tip)
             here = end
         after = _after_move(b, modes)
         if after is not None:
@@ -444,15 +480,30 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 for pb in (profile.lead, *profile.blocks):
                     if not pb.rapid and pb.feed == 0.0:
                         raise b.err(1, f"G70: the profile's block on line {pb.line} has no feed: give F")
-            ops.append(Finish(b.line, here, profile, feed))
+            nose = Nose(modes.comp, modes.row.nose_radius, modes.row.tip) if modes.comp else None
+            finish = Finish(b.line, here, profile, feed, nose)
+            if nose is not None:
+                if nose.side > 0 and not profile.inside:
+                    raise b.err(b.col("G"), "G70 with G41 on an outside profile puts the nose on the part's side "
+                                            "(below the profile): turning toward the chuck takes G42")
+                if nose.side < 0 and profile.inside:
+                    raise b.err(b.col("G"), "G70 with G42 on an inside profile puts the nose on the part's side "
+                                            "(above the bore's profile): boring toward the chuck takes G41")
+                finish_path(finish)                  # raises where the nose cannot follow the profile
+            ops.append(finish)
             continue
         if g71_first is None:
             raise b.err(1, "G71 P Q needs G71's first block (G71 U<depth> R<retract>) before it")
         u = v.get("U", 0.0) * (0.5 if modes.diameter else 1.0)
         w = v.get("W", 0.0)
-        if u < 0 or w < 0:
+        if profile.inside and u > 0:
+            raise b.err(b.col("U"), f"U{v['U']:g}: an inside profile (boring: X rises from the start point's X "
+                                    f"{here[1]:g}) takes U <= 0, the allowance toward the axis (Fanuc's U-0.4): a "
+                                    "positive one would cut into the part")
+        if (u < 0 and not profile.inside) or w < 0:
             k = "U" if u < 0 else "W"
-            raise b.err(b.col(k), f"{k}{v[k]:g}: a negative allowance would cut into the part (outside roughing only)")
+            raise b.err(b.col(k), f"{k}{v[k]:g}: a negative allowance would cut into the part (on an outside "
+                                  "profile; a negative U is a bore's, whose profile rises from the start point)")
         if profile.pocket and w > 0:
             raise b.err(b.col("W"), f"W{w:g}: the profile has a pocket (X falls along -Z on line {profile.pocket}): "
                                     "a Z allowance would shift its near wall into the part; give W0 (type II is "
@@ -464,15 +515,94 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         if feed == 0.0:
             raise b.err(1, "G71 with no feed: give F (mm/min) here or before")
         rough = Rough(b.line, here, profile, g71_first[0], g71_first[1], u, w, feed)
-        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(rough)))
+        outside = mirror_op(rough) if profile.inside else rough          # an inside one as the outside it mirrors
+        low = min(min(e.start[1], e.end[1]) for e in monotone_pieces(rough_boundary(outside)))  # type: ignore[arg-type]
         if low >= here[1] - TOL:
-            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere below "
-                                    f"the start point's X {here[1]:g} (its lowest X {low:g}): nothing to rough, and "
-                                    "G70 would take the whole depth in one pass")
+            low, where = (2 * here[1] - low, "above") if profile.inside else (low, "below")
+            raise b.err(b.col("U"), f"U{v.get('U', 0.0):g}: the profile shifted by the allowance lies nowhere {where} "
+                                    f"the start point's X {here[1]:g} (its {'highest' if profile.inside else 'lowest'}"
+                                    f" X {low:g}): nothing to rough, and G70 would take the whole depth in one pass")
         ops.append(rough)
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
-    return ops
+    return _compensate(ops, noses) if noses else ops
+
+
+def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
+    """The moves under G41/G42 (``noses``: index of the move -> its nose) as the tool's imaginary tip commands them.
+
+    A run of compensated moves (the machine's state, dwells and stops may stand between them) is as the mill's
+    (:func:`.contour.program_path`): the start-up move (the first), the profile (the moves after it), and the
+    cancel move -- the first move after with G40, or, when the run ends at a G70/G71, its last move (to the
+    cycle's start point, which is programmed uncompensated). Type A: the start-up ends with the nose centre
+    normal to the next move's start, the cancel starts normal to the previous move's end; a run of one or two
+    moves has no profile and is not offset. A run at the program's end has no cancel: its last move is offset.
+    """
+    out: list[Op] = []
+    i = 0
+    while i < len(ops):
+        if i not in noses:
+            out.append(ops[i])
+            i += 1
+            continue
+        nose = noses[i]
+        run, j = [], i
+        while j < len(ops) and (j in noses or isinstance(ops[j], (State, Dwell, Stop))):
+            if j in noses:
+                run.append(j)
+            j += 1
+        after = ops[j] if j < len(ops) else None
+        cancel = (j if isinstance(after, Move) else
+                  run.pop() if isinstance(after, (Rough, Finish)) and len(run) > 1 else None)
+        first = ops[run[0]]
+        assert isinstance(first, Move)
+        for k in (run[0], cancel):
+            m = ops[k] if k is not None else None
+            if isinstance(m, Move) and isinstance(m.element, Arc):
+                what = ("start-up (the first move after G41/G42)" if k == run[0] else
+                        "cancel (the G40 move, or the move to a canned cycle's start point)")
+                raise ProgramError(m.line, 1, m.raw, f"G02/G03 as the tool-nose radius compensation's {what}: give a "
+                                                     "straight move (G00/G01) there")
+        for k in run:
+            m = ops[k]
+            assert isinstance(m, Move)
+            if noses[k] != nose:
+                raise ProgramError(m.line, 1, m.raw, f"{noses[k].code} while {nose.code} is in force: change sides "
+                                                     "through G40 (cancel, then start up again)")
+        chain = [m for k in run[1:] if isinstance(m := ops[k], Move)]
+        new: dict[int, list[Move]] = {}
+        if chain:
+            try:
+                pieces = nose.path([m.element for m in chain])
+            except CornerError as err:
+                bad = chain[err.index]
+                reason = err.describe([f"the block on line {m.line}" for m in chain])
+                raise ProgramError(bad.line, 1, bad.raw, f"tool-nose radius compensation ({nose.code}, nose radius "
+                                                         f"{nose.radius:g} mm): {reason}") from None
+            entry, exit_ = pieces[0][0].start, pieces[-1][0].end
+            for e, k in pieces:
+                m = chain[k]
+                new.setdefault(run[k + 1], []).append(replace(m, element=e))
+        else:
+            entry = exit_ = first.element.end
+        new[run[0]] = [replace(first, element=Line(first.element.start, entry))]
+        if cancel is not None:
+            m = ops[cancel]
+            assert isinstance(m, Move)
+            new[cancel] = [replace(m, element=Line(exit_, m.element.end))]
+        last = cancel if cancel is not None and cancel >= j else j - 1
+        for k in range(i, last + 1):
+            if k in new:
+                out += [m for m in new[k] if m.element.length > EPS]
+            else:
+                out.append(ops[k])
+        i = last + 1
+    return out
+
+
+def has_block_delete(text: str) -> bool:
+    """Whether a block of the program starts with '/' (the block-delete switch matters)."""
+    return any(strip_comments(line, n).lstrip().startswith("/") for n, line in enumerate(program_lines(text), 1))
 
 
 def plan(text: str, start: tuple[float, float], rapid: float, setup: Setup | None = None) -> list[Segment]:

@@ -44,7 +44,7 @@ and the restart (from the program's start, after the safe approach) work as for 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..errors import require
@@ -209,6 +209,9 @@ class CutSequencer(CycleController):
              max=POSITION_LIMIT),
         boolean("rapid", "output", None, "the present move runs at rapid (SC1, SC3, SC4 and the approach of the "
                 "registers; G00 and the cycles' rapid moves of a program); false while cutting or idle"),
+        # appended: the block-delete switch
+        boolean("block_delete", "input", False, "block-delete switch: a program's blocks starting with / are "
+                "skipped when it is on at START (the program is read, buffered, whole when it starts)"),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -266,6 +269,10 @@ class CutSequencer(CycleController):
         # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
         self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
                                                        setup) if self.program.strip() else [])
+        # the plan with the block-delete switch on (the same plan when no block starts with '/'): chosen at START
+        deleting = self.plan and lathe_program.has_block_delete(self.program)
+        self.plans = (self.plan, lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
+                                                    replace(setup, block_delete=True)) if deleting else self.plan)
         if self.plan:
             self.stps = [(self.x_start, self.z_start)]
 
@@ -303,6 +310,7 @@ class CutSequencer(CycleController):
         self._outputs: dict[str, object] = {}
         self.rapid = False                   # the present move runs at rapid (kept through a controlled stop)
         self._optional_stop = False
+        self._block_delete = False
         self._pressed = False
         self._publish()
 
@@ -375,6 +383,9 @@ class CutSequencer(CycleController):
 
     def _start_cycle(self) -> None:
         self.busy, self.done = True, False
+        if self.plan:
+            # Fanuc reads the switch as it buffers a block; this controller buffers the whole program at START
+            self.plan = self.plans[self._block_delete]
         self._approach(0)
 
     def _next_phase(self) -> None:
@@ -422,6 +433,7 @@ class CutSequencer(CycleController):
         before (no optional stop, a spindle standing still)."""
         self._pressed = bool(super().read_buttons(inputs))
         self._optional_stop = bool(inputs.get("optional_stop", False))
+        self._block_delete = bool(inputs.get("block_delete", False))
         return self._pressed
 
     def rebase(self, actual: Mapping[str, float]) -> None:
@@ -564,7 +576,7 @@ class CutSequencer(CycleController):
         seg = self.plan[self.segment]
         if not (type(self.dwell_left) is float and 0.0 <= self.dwell_left <= seg.dwell):
             return f"dwell_left = {self.dwell_left!r}: not within the move's dwell 0..{seg.dwell:g} s"
-        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop"):
+        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop", "_block_delete"):
             if type(getattr(self, flag)) is not bool:
                 return f"{flag} = {getattr(self, flag)!r}: not a bool"
         if self.stop_wait and not seg.stop:

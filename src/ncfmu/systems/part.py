@@ -347,8 +347,17 @@ class LathePart(MachinedPart):
         removed: list[Any] = []
         lines: list[tuple[Any, int]] = []
         if program.strip():
+            from ..controllers.g7x import Tool
             from ..controllers.lathe_program import Finish, Rough, parse
-            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])))
+            from ..controllers.lathe_program import Setup as Reading
+            # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
+            tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
+                               z_offset=to_float(seq[f"tool[{k}].z_offset"]),
+                               nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
+                               tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
+            reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
+                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
+            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
             if not profiles:
                 return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",

@@ -256,7 +256,9 @@ class LatheCycle(Part):
             start = (to_float(seq["x_start"]), to_float(seq["z_start"]))
             from ..controllers.g7x import Tool
             tools = tuple(Tool(x_offset=to_float(seq.get(f"tool[{k}].x_offset", 0.0)),
-                               z_offset=to_float(seq.get(f"tool[{k}].z_offset", 0.0))) for k in range(1, 9))
+                               z_offset=to_float(seq.get(f"tool[{k}].z_offset", 0.0)),
+                               nose_radius=to_float(seq.get(f"tool[{k}].nose_radius", 0.0)),
+                               tip=to_int(seq.get(f"tool[{k}].tip", 0))) for k in range(1, 9))
             setup = Setup(diameter=bool(seq.get("x_diameter", True)), feed_per_rev=bool(seq.get("feed_per_rev", False)),
                           tools=tools, home=(to_float(seq.get("z_home", 50.0)), to_float(seq.get("x_home", 50.0))))
             ops = parse(program, start, setup)          # the planned moves in the axes' coordinates
