@@ -63,3 +63,14 @@ def test_constant_surface_speed_clamped_by_g50(run):
     v = np.hypot(run["seq.x_vff"], run["seq.z_vff"])
     steady = cut & (np.abs(np.diff(v, prepend=v[0])) < 1e-6) & (v > 0)
     assert np.abs(np.abs(run["spindle.speed"][steady]) / wanted[steady] - 1.0).max() <= 0.01
+
+
+def test_the_readme_command_runs_it_and_judges_the_part(project, tmp_path, capsys):
+    # the README's example, as a newcomer types it (without --plot): the part check reads the program with the
+    # sequencer's own setup (G28 needs the machine reference the sequencer has), and the shaft is in tolerance
+    from ncfmu.cli import main
+    status = main(["run", "lathe_roughing", "--stop-time", "100", "--set", f"seq.program={EXAMPLE.read_text()}",
+                   "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "part: within 0.0100 mm" in out
