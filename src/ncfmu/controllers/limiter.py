@@ -26,8 +26,8 @@ No deadlock: a command that stays inside is always followed -- passed at once wh
 with its feed-forward and steps its velocity by at most ``decel * dt``, otherwise (after a hold, a braking, a
 start away from the input, or the input's own velocity step) rejoined without a jump, closing the gap at
 ``decel`` and never faster than the input has asked for since the axis stopped passing (behind a moving input
-it trails it until the input slows; an input that has not moved is rejoined at up to ``max_speed``). A blocked direction is
-released once the position is inside and a step in that direction stays inside.
+it trails it until the input slows; an input that has not moved is rejoined at up to ``max_speed``). A
+blocked direction is released once the position is inside and a step in that direction stays inside.
 
 Absurd inputs -- NaN or infinite values, a position beyond any machine, a feed-forward beyond
 ``max_speed``, a command jump beyond what the axis can do in one step -- bring both axes to a
