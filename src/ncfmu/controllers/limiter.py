@@ -15,16 +15,19 @@ Stops are controlled, as in every ncfmu controller: a blocked direction is not a
 output of that axis decelerates at ``decel`` to rest and holds there (velocity feed-forward 0 at rest); the
 command never steps its velocity. Without ``predictive`` the violation is seen after the fact, so the
 gated command may pass the boundary by at most ``v * (monitor_period + dt) + v**2 / (2 * decel)``
-(``v``: its speed; :meth:`AreaLimiter.overshoot_bound`). With ``predictive`` the limiter governs
+(``v``: its speed, never more than the fastest the input asked for -- a rejoin does not outrun the input;
+:meth:`AreaLimiter.overshoot_bound`). With ``predictive`` the limiter governs
 the speed every step: each axis may move toward a boundary only as fast as it can still stop
 ``margin`` before it at ``decel`` (the boundary being the nearest region edge that the other axis,
 within its own stopping reach, makes forbidden), so the command stops at the boundary and the actual
 axis never crosses. Then ``alarm``/``blocked`` say that the *input* asks to go outside.
 
 No deadlock: a command that stays inside is always followed -- passed at once when it is consistent
-with its feed-forward, otherwise (after a hold, a braking, or a start away from the input) rejoined
-without a jump, closing the gap at ``decel`` and at most ``max_speed``. A blocked direction is
-released once the position is inside and a step in that direction stays inside.
+with its feed-forward and steps its velocity by at most ``decel * dt``, otherwise (after a hold, a braking, a
+start away from the input, or the input's own velocity step) rejoined without a jump, closing the gap at
+``decel`` and never faster than the input has asked for since the axis stopped passing (behind a moving input
+it trails it until the input slows; an input that has not moved is rejoined at up to ``max_speed``). A
+blocked direction is released once the position is inside and a step in that direction stays inside.
 
 Absurd inputs -- NaN or infinite values, a position beyond any machine, a feed-forward beyond
 ``max_speed``, a command jump beyond what the axis can do in one step -- bring both axes to a
@@ -154,13 +157,16 @@ class AreaLimiter(Controller):
 
     def overshoot_bound(self, speed: float, dt: float) -> float:
         """Without ``predictive``: how far past a boundary the gated command of an axis moving at ``speed``
-        can get -- one monitor period and one step before the violation is seen, then the stop at ``decel``."""
+        can get -- one monitor period and one step before the violation is seen, then the stop at ``decel``.
+        ``speed`` may be the fastest the input has asked for: the gated command is never faster (a rejoin
+        trails its input rather than outrun it)."""
         return speed * (self.monitor_period + dt) + speed * speed / (2.0 * self.decel) + 1e-9
 
     def reset(self) -> None:
         self.pos = [self.ref_start, self.lim_start]   # gated commands (ref, lim)
         self.vel = [0.0, 0.0]                          # gated velocity feed-forwards
         self.passing = [True, True]                    # the output is the input (else: governed/rejoining)
+        self._rejoin_speed = [0.0, 0.0]   # fastest speed asked for since the axis stopped passing: caps the rejoin
         self.hard = 0          # blocks from a violation of the gated (or actual) position: the axis stops
         self.soft = 0          # predictive: the input asks to leave the envelope (the governor holds it)
         self.blocked = 0
@@ -376,7 +382,9 @@ class AreaLimiter(Controller):
         v_new = max(v - a_dt, 0.0) if v > 0 else min(v + a_dt, 0.0)
         self.pos[axis] += 0.5 * (v + v_new) * dt
         self.vel[axis] = v_new
-        self.passing[axis] = False
+        if self.passing[axis]:
+            self._rejoin_speed[axis] = abs(v)
+            self.passing[axis] = False
 
     def _follow(self, axis: int, c: float, v_in: float, lo: float, hi: float, dt: float) -> None:
         """Pass the input at once, or govern: rejoin it without a jump, never leaving the velocity window."""
@@ -389,18 +397,31 @@ class AreaLimiter(Controller):
         consistent = abs(gap) <= ((speed if speed > speed_in else speed_in) + a_dt) * dt + 1e-9  # max(), inline
         allowed = lo - 1e-9 <= v_in <= hi + 1e-9 and lo * dt - 1e-9 <= gap <= hi * dt + 1e-9
         # Pass: while passing, or from rest when the input starts from where the output stands (a
-        # back-out after a block: the input's own motion, which it accelerates itself).
-        if consistent and allowed and (self.passing[axis] or v == 0.0):
+        # back-out after a block: the input's own motion, which it accelerates itself) -- but never a
+        # velocity step beyond decel * dt: an input's own step (or its rounding) is governed like any other.
+        if consistent and allowed and abs(v_in - v) <= a_dt + 1e-9 and (self.passing[axis] or v == 0.0):
             self.pos[axis], self.vel[axis] = c, v_in
             self.passing[axis] = True
             return
-        self.passing[axis] = False
+        # Governed from here. The rejoin never goes faster than the input has asked for since the axis stopped
+        # passing (nor than the axis was moving then): catching up by outrunning the input would cross the next
+        # boundary faster than the program's feed, beyond overshoot_bound of that feed. Behind a moving input it
+        # therefore trails it, on the side it came from, until the input slows. An input that has not moved
+        # (a start away from it) is rejoined at up to max_speed, as the windows allow.
+        if self.passing[axis]:
+            self._rejoin_speed[axis] = speed
+            self.passing[axis] = False
+        cap = self._rejoin_speed[axis]
+        if speed_in > cap:
+            cap = self._rejoin_speed[axis] = speed_in
         # Rejoin in the input's frame: close the gap as fast as still lets the relative speed reach 0 at it.
         w = v - v_in
         direction = 1.0 if gap > 0 else -1.0
         w_target = direction * stop_speed(abs(gap), direction * w, self.decel, dt)
         v_new = v_in + min(max(w_target, w - a_dt), w + a_dt)
         v_new = min(max(v_new, lo), hi)
+        if cap > 0.0:
+            v_new = min(max(v_new, -cap), cap)
         v_new = min(max(v_new, v - a_dt), v + a_dt)        # never a velocity step, even when braking
         p_new = p + 0.5 * (v + v_new) * dt
         # rejoined when taking the input's (c, v_in) now is itself a step within decel
@@ -506,6 +527,8 @@ class AreaLimiter(Controller):
             return f"blocked = {self.blocked!r}: not hard {self.hard!r} | soft {self.soft!r} (directions 0..15)"
         if not all(0.0 <= v <= self.max_speed for v in self._block_speed.values()):
             return f"_block_speed = {self._block_speed!r}: not speeds within max_speed"
+        if not all(0.0 <= v <= self.max_speed * (1 + 1e-9) for v in self._rejoin_speed):
+            return f"_rejoin_speed = {self._rejoin_speed!r}: not speeds within max_speed"
         if self.region != find_region(self.ref_max, self._tick[0]):
             return f"region = {self.region!r}: not the region of the last tick at ref {self._tick[0]!r}"
         if not 0.0 <= self.clock <= self.monitor_period:
