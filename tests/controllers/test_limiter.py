@@ -220,21 +220,10 @@ def test_bad_table_refused_naming_the_entry(name, value, rule):
 
 
 # -- properties (seeded: the hypothesis profile in conftest.py) ---------------------------------
-@pytest.fixture(scope="module", autouse=True)
-def _examples_independent_of_the_modules_loaded():
-    """Derandomized is not enough: Hypothesis (6.131+) also draws, now and then, constants it collects from every
-    local module loaded so far (not from tests), so the examples of these properties depended on what ran before
-    them -- a full CI run drew the two falsifying cases above, a single-file run drew others. Drawing no such
-    constants for this module's properties (Hypothesis has no setting for it: its provider's pool and its cache
-    of permitted constants, both cleared on the way in and out) makes them the same in any run and any order."""
-    from hypothesis.internal.conjecture import providers
-    from hypothesis.internal.constants_ast import Constants
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(providers, "_get_local_constants", Constants)       # an empty pool
-        providers.CONSTANTS_CACHE.cache.clear()
-        yield
-        providers.CONSTANTS_CACHE.cache.clear()
+# Derandomized (conftest.py), but Hypothesis (6.131+) also draws, now and then, constants it collects from every
+# local module loaded so far, so the examples drawn depend on what ran before (a full run drew the two falsifying
+# cases kept below as @example, a single-file run drew others). Hypothesis has no public setting for it; the
+# found cases are pinned as examples, and any other draw must hold the property as well.
 
 
 @st.composite
