@@ -98,7 +98,7 @@ def count(system: str, stop: float, python: str, cwd: Path) -> dict:
 
 
 def report(r: dict) -> None:
-    print(f"{r['system']}: {r['total'] / 1e3:.1f}k instructions a step in the FMI calls of the C loop ({r['steps']} steps)")
+    print(f"{r['system']}: {r['total'] / 1e3:.1f}k instructions a step in the C loop's FMI calls ({r['steps']} steps)")
     by_fmu: dict[str, float] = collections.Counter()
     for (binary, _), v in r["calls"].items():
         by_fmu[binary] += v
