@@ -128,7 +128,7 @@ class CycleController(Controller):
     :meth:`advance` and ``_publish``."""
 
     #: The axes the controller commands, by letter: inputs ``<a>_pos``, ``<a>_in_position``.
-    AXES: tuple[str, ...] = ()
+    AXES: ClassVar[tuple[str, ...]] = ()
     #: The input by which another device raises the alarm (the area limiter's), or "" for none.
     ALARM_INPUT: ClassVar[str] = "alarm_in"
     #: What a stop after an alarm does, as the alarm's log line says it.

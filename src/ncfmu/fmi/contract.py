@@ -61,9 +61,11 @@ ENTRIES: tuple[Entry, ...] = (
           "what is logged and not yet taken (the same list for the slave's life): the shim calls fmi_take_log "
           "only when it is not empty"),
     Entry("OUT", "out", "slave", "dict", (),
-          "outputs by name, read by the shim's fast fmi2Get* (re-read every call: the adapter may rebind it)"),
+          "outputs by name: the shim copies the Real/Integer/Boolean ones after fmi_do_step (and at a Get after any "
+          "other call: the adapter may rebind it), and its fast fmi2Get* read the copy without Python"),
     Entry("INPUTS", "inputs", "slave", "dict", (),
-          "inputs by name, written by the shim's fast fmi2Set* (the same dict for the slave's life)"),
+          "inputs by name (the same dict for the slave's life): the shim's fast fmi2Set* keep the values in C and "
+          "write them into this dict before its next call into the slave, which reads them only then"),
 )
 
 #: fmi2Status as the ``fmi_*`` calls return it.

@@ -33,9 +33,9 @@
 #define NCFMU_TAKE_LOG "fmi_take_log"
 /* slave.pending_log [list] -> what is logged and not yet taken (the same list for the slave's life): the shim calls fmi_take_log only when it is not empty */
 #define NCFMU_PENDING_LOG "pending_log"
-/* slave.out [dict] -> outputs by name, read by the shim's fast fmi2Get* (re-read every call: the adapter may rebind it) */
+/* slave.out [dict] -> outputs by name: the shim copies the Real/Integer/Boolean ones after fmi_do_step (and at a Get after any other call: the adapter may rebind it), and its fast fmi2Get* read the copy without Python */
 #define NCFMU_OUT "out"
-/* slave.inputs [dict] -> inputs by name, written by the shim's fast fmi2Set* (the same dict for the slave's life) */
+/* slave.inputs [dict] -> inputs by name (the same dict for the slave's life): the shim's fast fmi2Set* keep the values in C and write them into this dict before its next call into the slave, which reads them only then */
 #define NCFMU_INPUTS "inputs"
 
 /* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */

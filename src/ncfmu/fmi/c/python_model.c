@@ -116,6 +116,8 @@ static struct {
     void (*GILRelease)(PyGILState_STATE);
     PyObject *(*DictGetItem)(PyObject *, PyObject *);
     PyObject *(*DictGetItemString)(PyObject *, const char *);
+    int (*DictNext)(PyObject *, Py_ssize_t_ *, PyObject **, PyObject **);
+    int (*RichCompareBool)(PyObject *, PyObject *, int);
     int (*DictSetItem)(PyObject *, PyObject *, PyObject *);
     double (*FloatAs)(PyObject *);
     PyObject *(*FloatFrom)(double);
@@ -156,7 +158,8 @@ static int py_load(void)
     void *h = RTLD_DEFAULT;
 #define L(field, name) if (!(py.field = (__typeof__(py.field))dlsym(h, name))) { ready = -1; return 0; }
     L(GILEnsure, "PyGILState_Ensure") L(GILRelease, "PyGILState_Release") L(DictGetItem, "PyDict_GetItem")
-    L(DictGetItemString, "PyDict_GetItemString")
+    L(DictGetItemString, "PyDict_GetItemString") L(DictNext, "PyDict_Next")
+    L(RichCompareBool, "PyObject_RichCompareBool")
     L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
     L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
     L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
@@ -221,6 +224,22 @@ struct Model {
     PyObject **port_name;                 /* by value reference: the variable's name as a str */
     PyObject *strings;                    /* the last Get's strings, kept alive until the next */
     unsigned char *bytes;                 /* the last serialized state */
+    /* The per-step boundary without Python objects (docs/architecture.md): the outputs as the slave's ``out``
+     * held them after its last call, read by the fast fmi2Get* with no GIL (valid until the next call into
+     * Python: only Python code changes ``out``); the inputs set by the fast fmi2Set*, written into the slave's
+     * ``inputs`` before the next call into Python (only Python code reads them). By value reference. */
+    unsigned *out_vrs, n_out;             /* the Real, Integer and Boolean outputs */
+    /* ``out`` read in its own order (PyDict_Next, no lookups): the key met at each position last time (a
+     * reference held, so the same address is the same string) and the output's vr there (UINT32_MAX: none);
+     * a key not where it was makes the map anew. */
+    PyObject **map_key;
+    unsigned *map_vr, n_map;
+    double *out_real;
+    int *out_int, out_valid;
+    double *in_real;
+    int *in_int;
+    unsigned char *in_pending;            /* set and not yet handed over */
+    unsigned *pending_vrs, n_pending;
 };
 
 /* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
@@ -232,6 +251,7 @@ static void flush_log(Model *m)
     Py_ssize_t_ pending = py.ListSize(m->pending);          /* a C call: nothing logged, nothing called */
     if (pending == 0) return;
     if (pending < 0) py.Clear();                             /* not a list: take the log anyway */
+    m->out_valid = 0;                                        /* Python code runs */
     PyObject *taken = py.CallMethod(m->slave, names[N_TAKE_LOG], NULL);
     Py_ssize_t_ n = taken ? py.SeqSize(taken) : 0;
     for (Py_ssize_t_ k = 0; k < n; k++) {
@@ -249,9 +269,101 @@ static void flush_log(Model *m)
     py_drop(taken);
 }
 
+static PyObject *value_in(VarType type, const void *values, size_t k);
+static void value_out(PyObject *v, VarType type, void *values, size_t k);
+
+/* The inputs set since the last call into Python, written into the slave's inputs dict (in the order first set;
+ * a value set twice is written once, the last); 0 with a Python exception pending if one could not be. */
+static int hand_inputs(Model *m)
+{
+    int ok = 1;
+    for (unsigned k = 0; k < m->n_pending; k++) {
+        unsigned vr = m->pending_vrs[k];
+        m->in_pending[vr] = 0;
+        if (!ok) continue;
+        VarType type = m->vars[vr].type;
+        PyObject *v = type == V_REAL ? value_in(type, m->in_real, vr) : value_in(type, m->in_int, vr);
+        if (!v || py.DictSetItem(m->inputs, m->port_name[vr], v) != 0) ok = 0;
+        py_drop(v);
+    }
+    m->n_pending = 0;
+    return ok;
+}
+
+static void map_drop(Model *m)
+{
+    for (unsigned k = 0; k < m->n_map; k++) py_drop(m->map_key[k]);
+    free(m->map_key); free(m->map_vr);
+    m->map_key = NULL; m->map_vr = NULL; m->n_map = 0;
+}
+
+/* The map of ``out``'s positions to outputs, made anew; 0 if ``out`` lacks an output (or is no dict). */
+static int map_make(Model *m, PyObject *out)
+{
+    map_drop(m);
+    Py_ssize_t_ pos = 0, count = 0;
+    PyObject *key, *value;
+    while (py.DictNext(out, &pos, &key, &value)) count++;
+    if (count == 0 && m->n_out) return 0;
+    m->map_key = calloc(count ? (size_t)count : 1, sizeof *m->map_key);
+    m->map_vr = calloc(count ? (size_t)count : 1, sizeof *m->map_vr);
+    if (!m->map_key || !m->map_vr) { map_drop(m); return 0; }
+    unsigned found = 0;
+    pos = 0;
+    while (py.DictNext(out, &pos, &key, &value) && m->n_map < (unsigned)count) {
+        unsigned at = UINT32_MAX;
+        for (unsigned k = 0; k < m->n_out && at == UINT32_MAX; k++)
+            if (py.RichCompareBool(key, m->port_name[m->out_vrs[k]], 2 /* Py_EQ */) == 1) at = m->out_vrs[k];
+        if (py.Occurred()) py.Clear();
+        if (at != UINT32_MAX) found++;
+        py.IncRef(key);
+        m->map_key[m->n_map] = key;
+        m->map_vr[m->n_map++] = at;
+    }
+    if (found != m->n_out) { map_drop(m); return 0; }
+    return 1;
+}
+
+/* Every Real, Integer and Boolean output from the slave's ``out`` into the model's copy; 0 (the copy invalid, no
+ * exception left pending) if one cannot be read: the Get then reads ``out`` itself and says why. */
+static int take_outputs(Model *m)
+{
+    m->out_valid = 0;
+    PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
+    int ok = out != NULL;
+    for (int attempt = 0; ok && attempt < 2; attempt++) {
+        Py_ssize_t_ pos = 0;
+        PyObject *key, *v;
+        unsigned k = 0;
+        int same = m->n_map > 0 || m->n_out == 0;
+        while (same && py.DictNext(out, &pos, &key, &v)) {
+            if (k >= m->n_map || m->map_key[k] != key) { same = 0; break; }
+            unsigned vr = m->map_vr[k++];
+            if (vr == UINT32_MAX) continue;
+            VarType type = m->vars[vr].type;
+            if (type == V_REAL) value_out(v, type, m->out_real, vr);
+            else value_out(v, type, m->out_int, vr);
+        }
+        if (same && k == m->n_map) break;                  /* every output read */
+        ok = attempt == 0 && map_make(m, out);               /* a new dict, or keys changed: map it, read again */
+    }
+    py_drop(out);
+    if (py.Occurred()) { py.Clear(); ok = 0; }
+    m->out_valid = ok;
+    return ok;
+}
+
 /* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
 static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
+    m->out_valid = 0;                                        /* Python code runs: ``out`` may change */
+    if (m->n_pending && !hand_inputs(m)) {
+        char text[512];
+        py_error_text(text, sizeof text);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the inputs set before could not be handed to the Python "
+                 "slave: %s", fmi_call, text);
+        return NULL;
+    }
     PyObject *r = py.CallMethod(m->slave, names[entry], a, b, c, NULL);
     if (!r) {
         char text[512];
@@ -287,9 +399,15 @@ static void slave_drop(Model *m)
     py_drop(m->slave); py_drop(m->inputs); py_drop(m->pending); py_drop(m->strings);
     for (unsigned k = 0; m->port_name && k < m->n; k++) py_drop(m->port_name[k]);
     free(m->port_name); free(m->vars);
+    free(m->out_vrs); free(m->out_real); free(m->out_int); free(m->in_real); free(m->in_int); free(m->in_pending);
+    free(m->pending_vrs);
+    map_drop(m);
     m->slave = m->inputs = m->pending = m->strings = NULL;
     m->port_name = NULL; m->vars = NULL;
-    m->n = 0;
+    m->out_vrs = m->pending_vrs = NULL; m->out_real = m->in_real = NULL; m->out_int = m->in_int = NULL;
+    m->in_pending = NULL;
+    m->n = m->n_out = m->n_pending = 0;
+    m->out_valid = 0;
 }
 
 /* The slave class: the model script's module, imported once per process from the FMU's resources folder
@@ -383,6 +501,21 @@ static int slave_make(Model *m)
     m->inputs = inputs;
     m->pending = pending;
     if (!m->port_name || !m->vars) { slave_drop(m); return 0; }
+    size_t size = n_vr ? n_vr : 1;
+    m->out_vrs = calloc(size, sizeof *m->out_vrs);
+    m->pending_vrs = calloc(size, sizeof *m->pending_vrs);
+    m->out_real = calloc(size, sizeof *m->out_real);
+    m->in_real = calloc(size, sizeof *m->in_real);
+    m->out_int = calloc(size, sizeof *m->out_int);
+    m->in_int = calloc(size, sizeof *m->in_int);
+    m->in_pending = calloc(size, 1);
+    if (!m->out_vrs || !m->pending_vrs || !m->out_real || !m->in_real || !m->out_int || !m->in_int || !m->in_pending) {
+        slave_drop(m);
+        return 0;
+    }
+    for (unsigned vr = 0; vr < n_vr; vr++)
+        if (m->vars[vr].name && m->vars[vr].causality == V_OUTPUT && m->vars[vr].type != V_STRING)
+            m->out_vrs[m->n_out++] = vr;
     return 1;
 }
 
@@ -480,6 +613,7 @@ fmi2Status fmu_model_do_step(Model *m, double t, double h)
     fmi2Status st = (a && b) ? call_status(m, "fmi2DoStep", N_DO_STEP, a, b, NULL) : fmi2Error;
     py_drop(a); py_drop(b);
     flush_log(m);
+    take_outputs(m);                      /* the step's outputs, for the Gets that follow (no GIL there) */
     py.GILRelease(g);
     return st;
 }
@@ -517,10 +651,24 @@ fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, 
 {
     const char *fmi_call = type == V_REAL ? "fmi2GetReal" : type == V_INTEGER ? "fmi2GetInteger"
                          : type == V_BOOLEAN ? "fmi2GetBoolean" : "fmi2GetString";
+    int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
+    if (outputs && m->out_valid) {
+        /* the master's every-step call: the outputs taken after the step, no Python */
+        for (size_t k = 0; k < n; k++) {
+            if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
+            else ((int *)values)[k] = m->out_int[vr[k]];
+        }
+        return fmi2OK;
+    }
     PyGILState_STATE g = py.GILEnsure();
     fmi2Status st = fmi2OK;
-    if (type != V_STRING && all_of(m, vr, n, V_OUTPUT)) {
-        /* the master's every-step call: straight from the outputs dict */
+    if (outputs && take_outputs(m)) {
+        for (size_t k = 0; k < n; k++) {
+            if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
+            else ((int *)values)[k] = m->out_int[vr[k]];
+        }
+    } else if (outputs) {
+        /* an output that cannot be read as its type: read ``out`` itself, to say which and why */
         PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
         for (size_t k = 0; out && k < n; k++) {
             PyObject *v = py.DictGetItem(out, m->port_name[vr[k]]);         /* borrowed */
@@ -560,16 +708,20 @@ fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, 
 {
     const char *fmi_call = type == V_REAL ? "fmi2SetReal" : type == V_INTEGER ? "fmi2SetInteger"
                          : type == V_BOOLEAN ? "fmi2SetBoolean" : "fmi2SetString";
+    if (type != V_STRING && all_of(m, vr, n, V_INPUT)) {
+        /* the master's every-step call: kept here, handed to the slave's inputs dict before its next call */
+        for (size_t k = 0; k < n; k++) {
+            unsigned r = vr[k];
+            if (type == V_REAL) m->in_real[r] = ((const double *)values)[k];
+            else if (type == V_INTEGER) m->in_int[r] = ((const int *)values)[k];
+            else m->in_int[r] = ((const int *)values)[k] != 0;
+            if (!m->in_pending[r]) { m->in_pending[r] = 1; m->pending_vrs[m->n_pending++] = r; }
+        }
+        return fmi2OK;
+    }
     PyGILState_STATE g = py.GILEnsure();
     fmi2Status st = fmi2OK;
-    if (type != V_STRING && all_of(m, vr, n, V_INPUT)) {
-        /* the master's every-step call: straight into the inputs dict */
-        for (size_t k = 0; k < n && st == fmi2OK; k++) {
-            PyObject *v = value_in(type, values, k);
-            if (!v || py.DictSetItem(m->inputs, m->port_name[vr[k]], v) != 0) st = fmi2Error;
-            py_drop(v);
-        }
-    } else {
+    {
         PyObject *refs = py.ListNew((Py_ssize_t_)n), *vals = py.ListNew((Py_ssize_t_)n);
         for (size_t k = 0; refs && vals && k < n; k++) {
             py.ListSetItem(refs, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
