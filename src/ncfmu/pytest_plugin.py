@@ -91,7 +91,7 @@ class PartView:
             raise AttributeError(name)
         verdict = self.verdict()
         if verdict is None:
-            raise AttributeError(f"{self._result.system}: no part check (a system without a lathe, grinder or mill part)")
+            raise AttributeError(f"{self._result.system}: no part check (not a lathe, grinder or mill)")
         return getattr(verdict, name)
 
 
