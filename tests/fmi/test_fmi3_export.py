@@ -190,3 +190,27 @@ def test_every_system_from_fmi3_fmus_equals_its_fmi2_run(project, fmus3, name, t
     for variable in runs[0].names:
         assert np.array_equal(runs[0][variable], runs[1][variable]), variable
     assert sum(len(np.unique(runs[0][v])) > 1 for v in runs[0].names) >= 5
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_a_host_reads_the_independent_variable(fmus3, model, tmp_path):
+    # found with the Reference-FMUs' fmusim (FMI 3 mode), which records the declared independent variable: every
+    # FMU refused fmi3GetFloat64 of 'time'. Its value is where the instance stands, mixed with other variables too.
+    from fmpy import extract
+    from fmpy.fmi3 import FMU3Slave
+    md = read_model_description(str(fmus3[model]))
+    output = next(v for v in md.modelVariables if v.causality == "output" and v.type == "Float64")
+    fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(fmus3[model]), str(tmp_path / "x")),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="dut")
+    fmu.instantiate()
+    try:
+        fmu.enterInitializationMode(startTime=0.5)
+        assert fmu.getFloat64([TIME_VR]) == [0.5]
+        fmu.exitInitializationMode()
+        for t in (0.5, 0.51):
+            fmu.doStep(t, 0.01, True)
+        both = fmu.getFloat64([output.valueReference, TIME_VR, output.valueReference])
+        assert both[1] == 0.51 + 0.01 and both[0] == both[2] == fmu.getFloat64([output.valueReference])[0]
+        fmu.terminate()
+    finally:
+        fmu.freeInstance()

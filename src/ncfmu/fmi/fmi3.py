@@ -114,6 +114,7 @@ def _compile(sources: list[Path], includes: list[Path], defines: list[str], what
             if shutil.which(cc) is None:
                 continue
             proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-std=gnu11", "-Wall", *defines,
+                                   f"-DNCFMU_TIME_VR={TIME_VR}u",          # the independent variable, one home
                                    f"-I{fmi_headers()}", *(f"-I{d}" for d in includes), "-o", str(out),
                                    *map(str, sources), *SHIM_LINK], capture_output=True, text=True)
             if proc.returncode != 0:

@@ -189,7 +189,34 @@ static int counts_ok(fmi3Instance c, const char *call, size_t n, size_t n_values
         if (!counts_ok(c, #name, n, nv, P_SETTABLE)) return fmi3Error; \
         return (fmi3Status)fmu_set_values(c, #name, vr, n, v, type, sizeof(fmi3Boolean), TYPE_NAMES); \
     }
-GETTER(fmi3GetFloat64, fmi3Float64, V_REAL)
+#ifndef NCFMU_TIME_VR
+#error "NCFMU_TIME_VR: the value reference of the independent variable 'time' (TIME_VR in fmi/fmi3.py)"
+#endif
+
+/* Float64 reads the declared independent variable too: FMI 3.0 lets a host get it (fmusim records it); its
+ * value is where the instance stands (the start time, the last step's end, a restored state's time). */
+fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv)
+{
+    if (!counts_ok(c, "fmi3GetFloat64", n, nv, P_GETTABLE)) return fmi3Error;
+    size_t k = 0;
+    while (vr && v && k < n && vr[k] != NCFMU_TIME_VR) k++;
+    if (!vr || !v || k == n)
+        return (fmi3Status)fmu_get_values(c, "fmi3GetFloat64", vr, n, v, V_REAL, sizeof(fmi3Boolean), TYPE_NAMES);
+    FmuInstance *i = fmu_checked(c, "fmi3GetFloat64", P_GETTABLE);
+    if (!i) return fmi3Error;
+    fmi3Status worst = fmi3OK;
+    for (k = 0; k < n; k++) {
+        if (vr[k] == NCFMU_TIME_VR) {
+            v[k] = i->next_time;
+            continue;
+        }
+        fmi3Status st = (fmi3Status)fmu_get_values(c, "fmi3GetFloat64", &vr[k], 1, &v[k], V_REAL,
+                                                   sizeof(fmi3Boolean), TYPE_NAMES);
+        if (st >= fmi3Error) return st;
+        if (st > worst) worst = st;
+    }
+    return worst;
+}
 GETTER(fmi3GetInt32, fmi3Int32, V_INTEGER)
 GETTER(fmi3GetBoolean, fmi3Boolean, V_BOOLEAN)
 GETTER(fmi3GetString, fmi3String, V_STRING)
