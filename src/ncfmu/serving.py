@@ -55,7 +55,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
-from .errors import ConfigError, NcfmuError, SimulationError
+from .errors import ConfigError, NcfmuError, SimulationError, TerminationRequested
 
 log = logging.getLogger("ncfmu.serve")
 
@@ -513,6 +513,12 @@ class Runner:
                     _time.sleep(0)          # hand the GIL to the server between chunks
                 if self._want_snapshot:
                     self._take_snapshot()
+        except TerminationRequested as ended:
+            # an FMU asked to end (fmi2Discard + terminateSimulation): the run's clean end, as `ncfmu run` has it --
+            # stopped, not failed, and the session closes complete (its CSV renamed, its summary written)
+            s.failed = None
+            self.state, self.reason = "stopped", str(ended)
+            log.info("ncfmu serve: %s", ended)
         except SimulationError as err:
             self.state, self.reason = "failed", str(err)
             log.error("ncfmu serve: the simulation failed at t = %.3f s: %s", s.time, err)

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from ncfmu.errors import ConfigError, SimulationError
+from ncfmu.errors import ConfigError, SimulationError, TerminationRequested
 from ncfmu.serving import PaceStats, Point, Runner, _Command
 
 POINTS = [Point("a.y", "a", "y", "Real", "output", "continuous", None, "", None, None),
@@ -19,9 +19,11 @@ POINTS = [Point("a.y", "a", "y", "Real", "output", "continuous", None, "", None,
 class Session:
     """What the runner uses of ``Master.open_session``: steps cost ``cost`` s of wall each; y integrates u."""
 
-    def __init__(self, cost: float = 0.0, fail_at: float = math.inf, h: float = 0.001) -> None:
+    def __init__(self, cost: float = 0.0, fail_at: float = math.inf, h: float = 0.001,
+                 end_at: float = math.inf) -> None:
         self.time, self.step_size, self.stop_time = 0.0, h, math.inf
-        self.cost, self.fail_at = cost, fail_at
+        self.cost, self.fail_at, self.end_at = cost, fail_at, end_at
+        self.failed: BaseException | None = None
         self.y, self.u, self.forced_u = 0.0, 1.0, None
         self.writes: list = []
 
@@ -29,6 +31,9 @@ class Session:
         for _ in range(n):
             if self.time >= self.fail_at:
                 raise SimulationError(f"a: fmi2DoStep at t = {self.time:.6f} s returned fmi2Error")
+            if self.time >= self.end_at:        # as the master's session: it says it failed, the runner decides
+                self.failed = TerminationRequested("a", self.time)
+                raise self.failed
             if self.cost:
                 end = time.perf_counter() + self.cost
                 while time.perf_counter() < end:
@@ -135,6 +140,21 @@ def test_an_fmu_error_fails_the_simulation_with_its_reason():
     assert runner.state == "failed" and "fmi2DoStep at t = 0.050000 s returned fmi2Error" in runner.reason
     snap = runner.snapshot()
     assert snap is not None and snap.state == "failed" and snap.time == pytest.approx(0.05)
+
+
+def test_an_fmu_that_asks_to_end_stops_the_simulation_cleanly():
+    # fmi2Discard + terminateSimulation is the end of the run, as `ncfmu run` has it: stopped (not failed), the
+    # reason names the FMU, and the session may close complete (its CSV renamed, its summary written)
+    session = Session(end_at=0.05)
+    seen = threading.Event()
+    runner = Runner(session, POINTS, speed=0.0, on_state=seen.set)
+    runner.start()
+    assert seen.wait(5)
+    runner.thread.join(5)
+    assert runner.state == "stopped" and runner.reason.startswith("a asked to end the simulation at t = 0.05 s")
+    assert session.failed is None
+    snap = runner.snapshot()
+    assert snap is not None and snap.state == "stopped" and snap.time == pytest.approx(0.05)
 
 
 def test_speed_must_be_a_number_not_below_zero():
