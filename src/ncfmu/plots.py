@@ -388,8 +388,8 @@ def _csv_columns(path: Path, header: list[str], rows: list[tuple[int, list[str]]
                  booleans: list[bool] | None) -> list[np.ndarray]:
     """The columns of a chunk of a result CSV's rows (file line, cells), each checked as ``Result.from_csv``
     checks the whole file; ``booleans``: which columns the chunks before found True/False (None: the first)."""
+    from .cosim.result import csv_column
     from .errors import SystemDefinitionError
-    from .ports import NUMBER_RULE, parse_real
     for k, row in rows:
         if len(row) != len(header):
             raise SystemDefinitionError(f"{path}: line {k}: {len(row)} values for {len(header)} columns")
@@ -404,24 +404,7 @@ def _csv_columns(path: Path, header: list[str], rows: list[tuple[int, list[str]]
                             if (c.lower() in ("true", "false")) != booleans[j]))
             kind = "True/False" if booleans[j] else "a number"
             raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not {kind} as in the lines before")
-        if boolean:
-            columns.append(np.array([c == "true" for c in map(str.lower, cells)]))
-            continue
-        try:
-            # numpy's conversion, like float(), takes any Unicode digit and '_': only plain ASCII goes through
-            joined = "".join(cells)
-            if not joined.isascii() or "_" in joined:
-                raise ValueError("not ASCII decimal")
-            columns.append(np.array(cells).astype(np.float64))
-        except ValueError:
-            for (k, _), cell in zip(rows, cells):
-                try:
-                    parse_real(cell)
-                except ValueError:
-                    rule = "" if cell.isascii() else f" ({NUMBER_RULE})"
-                    raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
-                                                f"True/False{rule}") from None
-            raise
+        columns.append(csv_column(path, name, rows, cells, boolean))
     bad_time = np.flatnonzero(~np.isfinite(columns[0]))
     if bad_time.size:
         raise SystemDefinitionError(f"{path}: line {rows[int(bad_time[0])][0]}: time must be finite")

@@ -151,24 +151,7 @@ class Result:
         for j, name in enumerate(header):
             cells = [row[j].strip() for _, row in rows]
             words = {c.lower() for c in cells}
-            if j > 0 and words <= {"true", "false"}:
-                columns[name] = np.array([c == "true" for c in map(str.lower, cells)])
-                continue
-            try:
-                # numpy's conversion, like float(), takes any Unicode digit and '_': only plain ASCII goes through
-                joined = "".join(cells)
-                if not joined.isascii() or "_" in joined:
-                    raise ValueError("not ASCII decimal")
-                columns[name] = np.array(cells).astype(np.float64)
-            except ValueError:
-                for (k, _), cell in zip(rows, cells):
-                    try:
-                        parse_real(cell)
-                    except ValueError:
-                        rule = "" if cell.isascii() else f" ({NUMBER_RULE})"
-                        raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
-                                                    f"True/False{rule}") from None
-                raise
+            columns[name] = csv_column(path, name, rows, cells, j > 0 and words <= {"true", "false"})
         bad_time = np.flatnonzero(~np.isfinite(columns["time"]))
         if bad_time.size:
             raise SystemDefinitionError(f"{path}: line {rows[int(bad_time[0])][0]}: time must be finite")
@@ -176,3 +159,26 @@ class Result:
         for name in header:
             data[name] = columns[name]
         return cls(data)
+
+
+def csv_column(path: object, name: str, rows: list, cells: list[str], boolean: bool) -> np.ndarray:
+    """One column of a result CSV from its cells (``rows``: the (line number, row) each came from): True/False
+    as Booleans when ``boolean``, else ASCII decimal numbers -- a cell that is neither named with its line."""
+    from ..errors import SystemDefinitionError
+    if boolean:
+        return np.array([c == "true" for c in map(str.lower, cells)])
+    try:
+        # numpy's conversion, like float(), takes any Unicode digit and '_': only plain ASCII goes through
+        joined = "".join(cells)
+        if not joined.isascii() or "_" in joined:
+            raise ValueError("not ASCII decimal")
+        return np.array(cells).astype(np.float64)
+    except ValueError:
+        for (k, _), cell in zip(rows, cells):
+            try:
+                parse_real(cell)
+            except ValueError:
+                rule = "" if cell.isascii() else f" ({NUMBER_RULE})"
+                raise SystemDefinitionError(f"{path}: line {k}: {name} = {cell!r}: not a number or "
+                                            f"True/False{rule}") from None
+        raise
