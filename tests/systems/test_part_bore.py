@@ -12,12 +12,11 @@ import json
 
 import numpy as np
 import pytest
-from lathe_oracle import BORE, BORE_OPTIONS, fanuc
+from lathe_oracle import BORE, BORE_OPTIONS, SHAFT, fanuc
 
 from ncfmu.cli import main
 from ncfmu.machining.removal import TOUCH
-
-pytestmark = pytest.mark.slow
+from ncfmu.systems.part import LathePart
 
 PROGRAM = fanuc(BORE, 1011, **BORE_OPTIONS)
 #: The drilled hole's radius: the start point's X (the program's X20.) -- the part the oracle mirrors about.
@@ -33,6 +32,7 @@ def bore_run(ncfmu_run, program: str = PROGRAM, stop: float = STOP, **settings):
     return ncfmu_run("lathe_roughing", stop_time=stop, start_values={"seq.program": program}, **settings)
 
 
+@pytest.mark.slow
 def test_the_bore_is_judged_against_its_profile_within_a_hundredth(ncfmu_run):
     assert "U-0.4" in PROGRAM and HOLE == 10.0 and CYLINDERS == [13.0, 15.0, 18.0, 19.0]
     r = bore_run(ncfmu_run)
@@ -56,6 +56,7 @@ def test_the_bore_is_judged_against_its_profile_within_a_hundredth(ncfmu_run):
     assert p.programmed.area == pytest.approx(tube - removed, abs=0.01)
 
 
+@pytest.mark.slow
 def test_a_bore_roughed_by_g71_alone_leaves_the_allowance(ncfmu_run):
     # no G70, W 0: U -0.4 (0.2 on the radius) is left below every one of the bore's cylinders
     text = fanuc(BORE, 1011, **{**BORE_OPTIONS, "w": 0.0}).replace("N21 G70 P10 Q20 F0.1\n", "")
@@ -71,6 +72,7 @@ def test_a_bore_roughed_by_g71_alone_leaves_the_allowance(ncfmu_run):
     assert p.left_line > 0 and p.within_tolerance is False
 
 
+@pytest.mark.slow
 def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp_path, capsys):
     # before the cycle: into the hole at rapid (air), then out to X30. (radius 15): 5 mm into the tube's wall
     text = PROGRAM.replace("N6 G71", "N51 G00 Z-5.\nN52 G00 X30.\nN53 G00 X20.\nN54 G00 Z2.\nN6 G71")
@@ -93,6 +95,7 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
 
 
+@pytest.mark.slow
 def test_the_boring_bar_may_cross_the_axis_only_as_far_as_the_hole(ncfmu_run):
     # the bar (a hole's radius below the tip) in the hole: down to X-2. (tip at radius -1) it reaches 1 mm into
     # the far wall
@@ -105,6 +108,7 @@ def test_the_boring_bar_may_cross_the_axis_only_as_far_as_the_hole(ncfmu_run):
     assert not [c for c in r.part.crashes if c.what == "rapid into the stock"]
 
 
+@pytest.mark.slow
 def test_passes_deeper_than_the_boring_tool_may_take_are_crashes(ncfmu_run):
     # G71 U1.: the roughing passes go outward from the hole 1 mm at a time (X 11, 12, ...); a tool that may take
     # 0.8 mm is overloaded on each full pass, one that may take 1.1 mm never (the same run, judged twice)
@@ -114,3 +118,26 @@ def test_passes_deeper_than_the_boring_tool_may_take_are_crashes(ncfmu_run):
     assert [round(c.at[1], 3) for c in crashes] == [HOLE + k for k in range(1, len(crashes) + 1)]
     assert len(crashes) >= 7                   # up to X 17: the passes below the mouth's chamfer
     assert bore_run(ncfmu_run, max_depth=1.1).part.crashes == []
+
+
+BAR = {"stock_diameter": 58.0, "stock_length": 80.0}
+
+
+def test_the_stock_of_a_bore_is_a_tube_from_its_start_x_and_what_is_not_judged():
+    part = LathePart(seq="seq", x="x_axis", z="z_axis")
+    s = part.setup({"seq": {"program": PROGRAM, **BAR}})
+    assert s.why_not == "" and s.programmed.bounds == pytest.approx((-80.0, HOLE, 0.0, 29.0))
+    assert s.removal.stock.bounds == pytest.approx((-80.0, HOLE, 0.0, 29.0))
+    assert [f.what for f in s.removal.forbidden] == ["boring bar into the far wall of the bore"]
+    # the tool mirrored: the (point) tip on top, the bar a hole's radius below it
+    assert s.removal.tool_xy[:, 1].max() == 0.0 and s.removal.tool_xy[:, 1].min() == pytest.approx(-HOLE)
+    # a bore from X0 has no hole; a program with a bore and an outside profile is not judged (one kind at a time)
+    zero = part.setup({"seq": {"program": PROGRAM.replace("N5 G00 X20.", "N5 G00 X0."), **BAR}})
+    assert zero.programmed is None and zero.why_not.startswith("the bore's cycle starts at X 0 (radius)")
+    shaft = fanuc(SHAFT, 1001).split("N5 ")[1].split("N22 ")[0]
+    for n in ("10", "20", "6", "7", "21"):
+        shaft = shaft.replace(f"N{n} ", f"N1{n} ")
+    mixed = PROGRAM.replace("N22 G28", "N105 " + shaft.replace("P10 Q20", "P110 Q120") + "N22 G28")
+    assert mixed.count("G71 P") == 2
+    both = part.setup({"seq": {"program": mixed, **BAR}})
+    assert both.programmed is None and "both inside and outside" in both.why_not
