@@ -120,6 +120,24 @@ def test_passes_deeper_than_the_boring_tool_may_take_are_crashes(ncfmu_run):
     assert bore_run(ncfmu_run, max_depth=1.1).part.crashes == []
 
 
+@pytest.mark.slow
+def test_a_boring_bar_with_a_nose_under_g41_leaves_only_the_inside_corner_it_cannot_reach(ncfmu_run):
+    # tip 2, nose 0.4 (the mirrored tool: its nose circle's centre at the tip + (r, -r)), G70 under G41: the nose
+    # follows the profile; at the bore's bottom the face meets the cylinder X 13 in a sharp inside corner (Z-28.,
+    # the part's material on three quarters), where a nose of radius r leaves r (1 - 1/sqrt 2) on the bisector
+    r_nose = 0.4
+    text = PROGRAM.replace("N5 G00", "N5 G41 G00").replace("N22 G28", "N215 G40 G00 X10. Z5.\nN22 G28")
+    r = ncfmu_run("lathe_roughing", stop_time=STOP, start_values={
+        "seq.program": text, "seq.tool[1].nose_radius": r_nose, "seq.tool[1].tip": 2})
+    assert r["seq.done"][-1]
+    p = r.part
+    assert p.crashes == [] and p.judged == ""
+    corner = r_nose * (1.0 - 2 ** -0.5)
+    assert p.max_left_mm == pytest.approx(corner, abs=0.005)
+    assert p.left_at == pytest.approx((-28.0 + corner, 13.0 - corner), abs=0.005)
+    assert p.max_gouge_mm < 0.01 and p.within_tolerance is False
+
+
 BAR = {"stock_diameter": 58.0, "stock_length": 80.0}
 
 
