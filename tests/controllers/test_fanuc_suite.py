@@ -13,54 +13,21 @@ import math
 
 import numpy as np
 import pytest
-from lathe_oracle import POCKETS, SHAFT, Part, below_shifted_profile, build_part, distances, spindle_run
+from lathe_oracle import (
+    BORE,
+    BORE_OPTIONS,
+    HALF_PI,
+    POCKETS,
+    SHAFT,
+    below_shifted_profile,
+    build_part,
+    distances,
+    fanuc,
+    spindle_run,
+)
 
 from ncfmu.controllers import CutSequencer
 
-
-def num(v: float) -> str:
-    """A Fanuc number: always with its decimal point (X60. Z-2.5)."""
-    text = f"{v:.6f}".rstrip("0")
-    return text if text != "-0." else "0."
-
-
-def fanuc(part: Part, o: int, *, depth: float = 1.5, retract: float = 0.5, u: float = 0.2, w: float = 0.1,
-          f_rough: float = 0.25, f_finish: float = 0.1, v: float = 180.0, s_max: float = 2500.0, arcs: str = "R",
-          incremental: bool = False, type2: bool = False, inside: bool = False) -> str:
-    """The program of ``part`` in Fanuc's form, X on the diameter; ``incremental``: the profile in U/W.
-    ``inside``: ``part`` is a bore mirrored about the start point's X (an outside profile below it): the program
-    is the bore's -- X mirrored back, G02 and G03 swapped, U negative (Fanuc's sign of an inside allowance)."""
-    sign = -1.0 if inside else 1.0
-
-    def x(v: float) -> str:                     # a radius of the (mirrored) part as the program's diameter
-        return num(2 * (2 * part.x0 - v if inside else v))
-
-    def g(convex: bool) -> str:
-        return "G03" if convex != inside else "G02"
-
-    lines = ["%", f"O{o:04d} (PART {o})", "N1 G21 G40 G99", "N2 T0101", f"N3 G50 S{num(s_max)}",
-             f"N4 G96 S{num(v)} M03", f"N5 G00 X{x(part.x0)} Z{num(part.z0)} M08",
-             f"N6 G71 U{num(depth)} R{num(retract)}",
-             f"N7 G71 P10 Q20 U{num(sign * 2 * u)} W{num(w)} F{num(f_rough)}",
-             f"N10 G00 X{x(part.a_x)}" + (" W0" if type2 else "")]
-    for i, p in enumerate(part.pieces):
-        n = "N20 " if i == len(part.pieces) - 1 else ""
-        if incremental:
-            end = f"U{num(sign * 2 * (p.end[1] - p.start[1]))} W{num(p.end[0] - p.start[0])}"
-        else:
-            end = f"X{x(p.end[1])} Z{num(p.end[0])}"
-        if p.centre is None:
-            lines.append(f"{n}G01 {end}")
-        elif arcs == "R":
-            lines.append(f"{n}{g(p.convex)} {end} R{num(p.radius)}")
-        else:
-            lines.append(f"{n}{g(p.convex)} {end} I{num(sign * (p.centre[1] - p.start[1]))} "
-                         f"K{num(p.centre[0] - p.start[0])}")
-    lines += [f"N21 G70 P10 Q20 F{num(f_finish)}", "N22 G28 U0 W0 M09", "N23 M05", "N24 M30", "%"]
-    return "\n".join(lines) + "\n"
-
-
-HALF_PI = math.pi / 2
 #: (part, options): OD work, type I and II, chamfers, tapers, arcs by R and by I/K, U/W moves.
 SUITE = {
     "shaft R": (SHAFT, {}),
@@ -79,12 +46,8 @@ SUITE = {
                                              ("convex", 2.0, 0.0, HALF_PI), ("z", 6.0), ("face", 7.0)]),
                 {"arcs": "IK", "u": 0.25, "w": 0.05}),
     "slow surface speed": (SHAFT, {"v": 90.0, "s_max": 1200.0, "f_rough": 0.3, "f_finish": 0.08}),
-    # a bore from a drilled hole of 20 mm (X20.) to 38 mm at its mouth: a chamfer, a convex corner (a concave arc
-    # of the mirrored part), a step, a taper, a face down to the hole -- roughed outward with U-0.4
-    "bore (ID)": (build_part(10.0, 2.0, 1.0, [("z", 2.0), ("taper", 1.0, 1.0), ("z", 8.0),
-                                             ("concave", 2.0, -HALF_PI, -math.pi), ("face", 1.0), ("z", 6.0),
-                                             ("taper", 6.0, 2.0), ("z", 5.0), ("face", 3.0)]),
-                  {"inside": True, "depth": 1.0, "u": 0.2, "w": 0.1, "arcs": "IK", "incremental": True}),
+    # a bore from a drilled hole of 20 mm (X20.) to 38 mm at its mouth (lathe_oracle.BORE)
+    "bore (ID)": (BORE, BORE_OPTIONS),
 }
 
 

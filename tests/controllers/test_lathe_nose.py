@@ -250,7 +250,8 @@ def test_the_offset_is_at_the_nose_radius_from_a_monotone_profile_everywhere(spe
 def test_g70_under_g41_on_a_bore_finishes_with_the_nose_on_the_profile():
     """Inside work: the bore of the Fanuc suite (roughed outward with U-0.4), finished under G41 by a boring bar
     (tip 2, nose 0.4): the nose circle on the bore's profile (3 um), never into the wall; G42 there is refused."""
-    from test_fanuc_suite import SUITE, fanuc
+    from lathe_oracle import fanuc
+    from test_fanuc_suite import SUITE
 
     part, options = SUITE["bore (ID)"]
     text = fanuc(part, 2004, **options).replace("N5 G00", "N5 G41 G00").replace("N22 G28", "N215 G40 G00 X10. Z5.\n"

@@ -9,6 +9,12 @@ jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``conto
 contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
 profile or the outline its registers define (the deepest pass of each block), the mill's closed contour.
 
+Inside work: a G71/G70 profile that rises from the start point's X (a bore, :mod:`..controllers.g7x`) is judged
+as a bore -- the stock a tube whose drilled hole's radius is the bore cycle's start point's X (no parameter: the
+boring bar enters at the hole), the part the material above the profile (what lies between the profile and the
+hole is cut away), the tool mirrored (nose on top, the bar below it, a hole's radius high), and instead of the
+spindle axis the bore's far wall (the bar reaching through the hole) is forbidden.
+
 The tool's nose radius and deepest cut come from :class:`PartSettings` (the tool table's, when there is one):
 0 is a sharp point, ``max_depth`` unlimited unless given. The verdict (:class:`PartVerdict`) is judged at the
 end of the run: crashes (time, program line, what, depth), the largest excess and gouge against the programmed
@@ -319,8 +325,46 @@ class LathePart(MachinedPart):
         radius = to_float(seq["stock_diameter"]) / 2.0
         length = to_float(seq["stock_length"])
         face = to_float(seq["stock_face_z"])
-        stock = box(face - length, 0.0, face, radius)
-        forbidden = [Forbidden("tool across the spindle axis", box(-FAR, -FAR, FAR, 0.0))]
+        program = str(seq.get("program") or "")
+        profiles: dict[int, Any] = {}
+        hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
+        if program.strip():
+            from ..controllers.g7x import Tool
+            from ..controllers.lathe_program import Finish, Rough, parse
+            from ..controllers.lathe_program import Setup as Reading
+            # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
+            tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
+                               z_offset=to_float(seq[f"tool[{k}].z_offset"]),
+                               nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
+                               tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
+            reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
+                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
+            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
+            cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
+            profiles = {id(op.profile): op.profile for op in cycles}
+            bores = [op.start[1] for op in cycles if op.profile.inside]
+            if bores:
+                if len(bores) < len(cycles):
+                    return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
+                                 Polygon(), [], "the program has both inside and outside G71/G70 profiles: the "
+                                 "part check judges one kind at a time",
+                                 spindle_checked=self._drives_spindle(program))
+                # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
+                # the boring bar enters the hole at its radius and roughs outward from it)
+                hole = min(bores)
+                if hole <= 0.0:
+                    return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
+                                 Polygon(), [], f"the bore's cycle starts at X {hole:g} (radius): no drilled hole "
+                                 "to bore from (the start point's X is the hole's)",
+                                 spindle_checked=self._drives_spindle(program))
+        inside = hole > 0.0
+        stock = box(face - length, hole, face, radius)
+        if inside:
+            # a boring bar lies in the hole, along the axis: it may reach below the axis; what it must not do is
+            # reach through the hole into the wall on the far side (the tube below -hole in the full section)
+            forbidden = [Forbidden("boring bar into the far wall of the bore", box(face - length, -FAR, face, -hole))]
+        else:
+            forbidden = [Forbidden("tool across the spindle axis", box(-FAR, -FAR, FAR, 0.0))]
         if self.limiter is not None and self.limiter in parameters:
             lower = -FAR
             for ref_max, lim_min, _lim_max in table_of(parameters[self.limiter]):
@@ -328,7 +372,6 @@ class LathePart(MachinedPart):
                 if abs(lim_min) < POSITION_LIMIT and top > lower:
                     forbidden.append(Forbidden("tool into the chuck jaws", box(lower, -1.0, top, lim_min)))
                 lower = top
-        program = str(seq.get("program") or "")
         # the tool: its nose and deepest cut as set, else the tool table's row of the program's first T word; the
         # axes stand at the programmed point plus that row's offsets, so the tool's tip is there less them
         k = first_tool_offset(program) if program.strip() else 0
@@ -342,30 +385,27 @@ class LathePart(MachinedPart):
             depth_limit = to_float(seq[row + "max_depth"]) if has_row else 0.0
             depth_limit = depth_limit if depth_limit > 0 else math.inf
         shift = np.array([to_float(seq[row + "z_offset"]), to_float(seq[row + "x_offset"])]) if has_row else 0.0
-        removal = MaterialRemoval(stock, lathe_tool(nose) - shift, forbidden, depth_limit)
-        anchor = box(face - length, 0.0, face - length + min(1.0, length), radius)
+        if inside:
+            # a boring tool: the lathe tool mirrored (the nose on top, the insert and bar below it, toward the
+            # axis), a hole's radius high: the bar fits the hole, and its lowest point reaches the far wall only
+            # when the tip goes below X = the nose radius (about the axis)
+            tool = lathe_tool(nose, blade=hole) * np.array([1.0, -1.0])
+        else:
+            tool = lathe_tool(nose)
+        removal = MaterialRemoval(stock, tool - shift, forbidden, depth_limit)
+        anchor = box(face - length, hole, face - length + min(1.0, length), radius)
         removed: list[Any] = []
         lines: list[tuple[Any, int]] = []
         if program.strip():
-            from ..controllers.g7x import Tool
-            from ..controllers.lathe_program import Finish, Rough, parse
-            from ..controllers.lathe_program import Setup as Reading
-            # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
-            tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
-                               z_offset=to_float(seq[f"tool[{k}].z_offset"]),
-                               nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
-                               tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
-            reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
-                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
-            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
-            profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
             if not profiles:
                 return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                              spindle_checked=self._drives_spindle(program))
+            # what the profile cuts away: outside, all above it; inside (a bore), all below it down to the hole
+            far = -FAR if inside else FAR
             for profile in profiles.values():
                 outline = _elements_polyline(profile.elements)
                 (za, _), (ze, _) = outline[0], outline[-1]
-                removed.append(Polygon([*outline, (ze, FAR), (za, FAR)]).buffer(0))
+                removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
                 lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
         else:
             stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
