@@ -73,19 +73,23 @@ fmi2Status fmu_model_do_step(Model *m, double t, double h);
 fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, void *values);
 fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, const void *values);
 
-/* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time).
+/* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time; a state
+ * set brings its phase with it, as the Reference-FMUs' setFMUState does, in every phase the instance is in).
+ * ``call``: the name of the call the host made (fmi2SetFMUstate, fmi3SetFMUState, ...), for what is logged.
  * take: a new state of the model (NULL, logged, when none can be taken); restore: ``initialized`` says the
  * instance's parameters were accepted at fmi2ExitInitializationMode (a state with the same ones needs no new
  * judgement); ERROR (logged) when refused, the model unchanged. */
-void *fmu_model_state_take(Model *m);
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized);
+void *fmu_model_state_take(Model *m, const char *call);
+fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized);
 void fmu_model_state_free(Model *m, void *state);
 
-/* Serialized: the model's own format, which carries the state's ``time`` and ``phase`` (or -1 when the format
- * keeps no phase). serialize: the bytes in a buffer of the model's (valid until the next call on the model),
- * NULL (logged) when it cannot; deserialize: a state (checked: bad bytes are refused, logged, NULL). */
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size);
-void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, int *phase, double *time);
+/* Serialized: the model's own format, which carries the state's ``time`` and ``phase`` (one of P_*).
+ * serialize: the bytes in a buffer of the model's (valid until the next call on the model), NULL (logged) when
+ * it cannot; deserialize: a state (checked: bad bytes are refused, logged, NULL). */
+const unsigned char *fmu_model_serialize(Model *m, const char *call, void *state, int phase, double time,
+                                         size_t *size);
+void *fmu_model_deserialize(Model *m, const char *call, const unsigned char *bytes, size_t size, int *phase,
+                            double *time);
 
 /* A parameter's value against its rule (vr ``v``'s table entry); 1 when it holds, else logs and returns 0. */
 static inline int fmi2_value_ok(const Fmi2Log *log, const VarInfo *v, double x)

@@ -23,7 +23,7 @@ enum { FMU_OK = 0, FMU_WARNING = 1, FMU_ERROR = 3 };
 typedef struct {
     uintptr_t handle;
     void *model;                        /* the model's state */
-    int phase;                          /* the instance's phase when it was taken; -1: unknown (kept at restore) */
+    int phase;                          /* the instance's phase when it was taken: it comes back with the state */
     double time;                        /* where steps go on from it */
 } FmuState;
 
@@ -277,7 +277,7 @@ static FMI2_UNUSED int fmu_get_state(void *c, const char *call, void **s)
     }
     FmuState *old = *s ? fmu_state_find(i, call, *s) : NULL;
     if (*s && !old) return FMU_ERROR;
-    void *model = fmu_model_state_take(i->model);
+    void *model = fmu_model_state_take(i->model, call);
     if (!model) return FMU_ERROR;
     if (old) {                          /* FMI: a given state is overwritten */
         fmu_model_state_free(i->model, old->model);
@@ -293,9 +293,9 @@ static FMI2_UNUSED int fmu_set_state(void *c, const char *call, void *s)
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
     if (!state) return FMU_ERROR;
-    int st = fmu_model_state_restore(i->model, state->model, i->phase == P_STEP || i->phase == P_TERMINATED);
+    int st = fmu_model_state_restore(i->model, call, state->model, i->phase == P_STEP || i->phase == P_TERMINATED);
     if (st > FMU_WARNING) return st;
-    if (state->phase >= 0) i->phase = state->phase;
+    i->phase = state->phase;            /* the state's phase comes with it (the Reference-FMUs' setFMUState) */
     i->next_time = state->time;         /* steps go on from the state's time */
     return st;
 }
@@ -322,7 +322,7 @@ static FMI2_UNUSED int fmu_state_size(void *c, const char *call, void *s, size_t
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the size pointer is NULL", call);
         return FMU_ERROR;
     }
-    return fmu_model_serialize(i->model, state->model, state->phase, state->time, size) ? FMU_OK : FMU_ERROR;
+    return fmu_model_serialize(i->model, call, state->model, state->phase, state->time, size) ? FMU_OK : FMU_ERROR;
 }
 
 static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigned char b[], size_t size)
@@ -331,7 +331,8 @@ static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigne
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
     if (!state) return FMU_ERROR;
     size_t needed = 0;
-    const unsigned char *bytes = fmu_model_serialize(i->model, state->model, state->phase, state->time, &needed);
+    const unsigned char *bytes = fmu_model_serialize(i->model, call, state->model, state->phase, state->time,
+                                                     &needed);
     if (!bytes) return FMU_ERROR;
     if (!b || size < needed) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %s (%zu bytes given, %zu needed)", call,
@@ -353,8 +354,15 @@ static FMI2_UNUSED int fmu_deserialize(void *c, const char *call, const unsigned
     }
     int phase = -1;
     double time = 0.0;
-    void *model = fmu_model_deserialize(i->model, b, size, &phase, &time);
+    void *model = fmu_model_deserialize(i->model, call, b, size, &phase, &time);
     if (!model) { *s = NULL; return FMU_ERROR; }   /* refused: the reason is in the log */
+    if (phase != P_INSTANTIATED && phase != P_INIT && phase != P_STEP && phase != P_TERMINATED) {
+        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the state's phase (%d) is not one a state is taken in",
+                 call, phase);            /* the models check it; this keeps a model's slip from the machine */
+        fmu_model_state_free(i->model, model);
+        *s = NULL;
+        return FMU_ERROR;
+    }
     *s = fmu_state_add(i, call, model, phase, time);
     return *s ? FMU_OK : FMU_ERROR;
 }

@@ -153,11 +153,11 @@ fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, 
 /* ---- FMU states -------------------------------------------------------------------------------------- */
 static size_t snapshot_bytes(void) { return sizeof(Snapshot) + model_state_size(); }
 
-void *fmu_model_state_take(Model *m)
+void *fmu_model_state_take(Model *m, const char *call)
 {
     Snapshot *s = calloc(1, snapshot_bytes());
     if (!s) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2GetFMUstate: out of memory");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     memcpy(s->values, m->values, sizeof s->values);
@@ -180,7 +180,7 @@ static int params_equal(const double *a, const double *b)
 }
 
 /* A state record into the model; a record that does not pass model_restore leaves the model as it was. */
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
+fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized)
 {
     const Snapshot *s = state;
     double values[NVARS];
@@ -194,8 +194,7 @@ fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
     if (model_restore(m->values, m->state, judged, m->log) != 0) {
         memcpy(m->values, values, sizeof values);
         memcpy(m->state, m->before, model_state_size());
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2SetFMUstate: the state was refused; the instance is "
-                 "unchanged");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the state was refused; the instance is unchanged", call);
         return fmi2Error;
     }
     m->initializing = s->initializing;
@@ -227,11 +226,12 @@ static void ser_header(SerHeader *h)
     h->model_bytes = (uint32_t)model_state_size();
 }
 
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size)
+const unsigned char *fmu_model_serialize(Model *m, const char *call, void *state, int phase, double time,
+                                         size_t *size)
 {
     const Snapshot *s = state;
     if (!m->bytes && !(m->bytes = malloc(ser_size()))) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2SerializeFMUstate: out of memory");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     SerHeader h;
@@ -245,7 +245,8 @@ const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, doubl
     return m->bytes;
 }
 
-void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, int *phase, double *time)
+void *fmu_model_deserialize(Model *m, const char *call, const unsigned char *bytes, size_t size, int *phase,
+                            double *time)
 {
     const char *why = NULL;
     SerHeader h, want;
@@ -287,7 +288,7 @@ void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, i
     }
     if (why) {
         free(s);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: %zu bytes refused: %s", size, why);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
         return NULL;
     }
     *phase = h.phase;

@@ -737,20 +737,23 @@ fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, 
 }
 
 /* ---- FMU states: the adapter's state objects ------------------------------------------------------- */
-void *fmu_model_state_take(Model *m)
+void *fmu_model_state_take(Model *m, const char *fmi_call)
 {
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *object = call(m, "fmi2GetFMUstate", N_GET_STATE, NULL, NULL, NULL);
+    PyObject *object = call(m, fmi_call, N_GET_STATE, NULL, NULL, NULL);
     flush_log(m);
     py.GILRelease(g);
     return object;
 }
 
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
+fmi2Status fmu_model_state_restore(Model *m, const char *fmi_call, void *state, int initialized)
 {
     (void)initialized;                    /* the adapter judges a state's parameters itself */
     PyGILState_STATE g = py.GILEnsure();
-    fmi2Status st = call_status(m, "fmi2SetFMUstate", N_SET_STATE, state, NULL, NULL);
+    PyObject *name = py.StrFrom(fmi_call);  /* the adapter names the call in what it refuses */
+    fmi2Status st = name ? call_status(m, fmi_call, N_SET_STATE, state, name, NULL) : fmi2Error;
+    py_drop(name);
+    if (py.Occurred()) py.Clear();
     flush_log(m);
     py.GILRelease(g);
     return st;
@@ -764,25 +767,32 @@ void fmu_model_state_free(Model *m, void *state)
     py.GILRelease(g);
 }
 
-/* The serialized state: the Python side's bytes, then STATE_TRAILER and the state's time, so that a state
- * restored from bytes continues from its own time (the phase is not kept: a restored state leaves it). */
+/* The serialized state: the Python side's bytes, then STATE_TRAILER, the state's phase (an int32: the layer's
+ * P_*) and its time (a double), so that a state restored from bytes is where it was taken: in its phase, going
+ * on from its time. */
 #define TRAILER_SIZE NCFMU_STATE_TRAILER_SIZE
 #define STATE_TRAILER NCFMU_STATE_TRAILER
-_Static_assert(sizeof NCFMU_STATE_TRAILER - 1 + sizeof(double) == NCFMU_STATE_TRAILER_SIZE, "trailer: 8 bytes + a double");
+#define MAGIC_SIZE (sizeof STATE_TRAILER - 1)
+_Static_assert(MAGIC_SIZE + sizeof(int32_t) + sizeof(double) == NCFMU_STATE_TRAILER_SIZE,
+               "trailer: 8 bytes, an int32 and a double");
+_Static_assert(NCFMU_PHASE_INSTANTIATED == P_INSTANTIATED && NCFMU_PHASE_INIT == P_INIT && NCFMU_PHASE_STEP == P_STEP
+               && NCFMU_PHASE_TERMINATED == P_TERMINATED, "the contract's phases are the layer's");
 
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size)
+const unsigned char *fmu_model_serialize(Model *m, const char *fmi_call, void *state, int phase, double time,
+                                         size_t *size)
 {
-    (void)phase;
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *bytes = call(m, "fmi2SerializeFMUstate", N_SERIALIZE, state, NULL, NULL);
+    PyObject *bytes = call(m, fmi_call, N_SERIALIZE, state, NULL, NULL);
     char *data = NULL;
     Py_ssize_t_ n = 0;
     unsigned char *out = NULL;
+    int32_t phase32 = phase;
     if (bytes && py.BytesAs(bytes, &data, &n) == 0 && (out = realloc(m->bytes, (size_t)n + TRAILER_SIZE))) {
         m->bytes = out;
         memcpy(out, data, (size_t)n);
-        memcpy(out + n, STATE_TRAILER, sizeof STATE_TRAILER - 1);
-        memcpy(out + n + sizeof STATE_TRAILER - 1, &time, sizeof time);
+        memcpy(out + n, STATE_TRAILER, MAGIC_SIZE);
+        memcpy(out + n + MAGIC_SIZE, &phase32, sizeof phase32);
+        memcpy(out + n + MAGIC_SIZE + sizeof phase32, &time, sizeof time);
         *size = (size_t)n + TRAILER_SIZE;
     }
     if (py.Occurred()) py.Clear();
@@ -792,24 +802,30 @@ const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, doubl
     return out;
 }
 
-void *fmu_model_deserialize(Model *m, const unsigned char *b, size_t size, int *phase, double *time)
+void *fmu_model_deserialize(Model *m, const char *fmi_call, const unsigned char *b, size_t size, int *phase,
+                            double *time)
 {
-    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, sizeof STATE_TRAILER - 1) != 0) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: %zu bytes that are not a "
-                 "state this FMU serialized (no time trailer)", size);
+    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, MAGIC_SIZE) != 0) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: %zu bytes that are not a state this FMU "
+                 "serialized (no " STATE_TRAILER " trailer)", fmi_call, size);
         return NULL;
     }
+    int32_t phase32;
+    memcpy(&phase32, b + size - TRAILER_SIZE + MAGIC_SIZE, sizeof phase32);
     memcpy(time, b + size - sizeof *time, sizeof *time);
-    if (!isfinite(*time)) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: the state's time is %g",
-                 *time);
+    if (!isfinite(*time) || !(phase32 == P_INSTANTIATED || phase32 == P_INIT || phase32 == P_STEP
+                              || phase32 == P_TERMINATED)) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: the state's %s is %g", fmi_call,
+                 isfinite(*time) ? "phase" : "time", isfinite(*time) ? (double)phase32 : *time);
         return NULL;
     }
-    *phase = -1;
+    *phase = phase32;
     PyGILState_STATE g = py.GILEnsure();
     PyObject *bytes = py.BytesFrom((const char *)b, (Py_ssize_t_)(size - TRAILER_SIZE));
-    PyObject *object = bytes ? call(m, "fmi2DeSerializeFMUstate", N_DESERIALIZE, bytes, NULL, NULL) : NULL;
+    PyObject *name = py.StrFrom(fmi_call);
+    PyObject *object = bytes && name ? call(m, fmi_call, N_DESERIALIZE, bytes, name, NULL) : NULL;
     py_drop(bytes);
+    py_drop(name);
     if (object == py.None) { py_drop(object); object = NULL; }    /* refused: the reason is in the log */
     if (py.Occurred()) py.Clear();
     flush_log(m);
