@@ -139,7 +139,7 @@ class ControllerSlave(Fmi2Slave):
             return self._refuse(call, "not a state of this FMU")
         if state[0] is None and self.logic is not None:
             return self._refuse(call, "a state taken before initialisation holds no controller: it "
-                                "cannot be set into an initialised instance, which keeps its state (fmi2Reset "
+                                "cannot be set into an initialised instance, which keeps its state (a reset "
                                 "returns an instance to before initialisation)")
         logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
         # in place: the registered getters and setters hold these very dicts

@@ -57,7 +57,7 @@ static FMI2_UNUSED FmuInstance *fmu_checked(void *c, const char *call, int phase
 static FMI2_UNUSED void *fmu_instance_start(FmuInstance *i, const char *call, const char *dir, int visible)
 {
     i->phase = P_INSTANTIATED;
-    i->model = fmu_model_new(i->name, dir, visible, &i->log);
+    i->model = fmu_model_new(call, i->name, dir, visible, &i->log);
     fmi2Component handle = i->model ? fmi2_instance_add(i) : NULL;
     if (i->model && !handle) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: no new instance handle can be made", call);
@@ -94,7 +94,7 @@ static FMI2_UNUSED int fmu_reset(void *c, const char *call)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     if (!i) return FMU_ERROR;
-    if (fmu_model_reset(i->model) != 0) {
+    if (fmu_model_reset(i->model, call) != 0) {
         fmu_states_drop(i);             /* logged; the instance can only be freed (every call refuses) */
         fmu_model_free(i->model);
         i->model = NULL;
@@ -110,17 +110,17 @@ static FMI2_UNUSED int fmu_setup_experiment(FmuInstance *i, const char *call, in
                                             double start, int stop_defined, double stop)
 {
     if (!i || !fmi2_experiment_ok(&i->log, call, start, stop_defined, stop)) return FMU_ERROR;
-    int st = fmu_model_setup_experiment(i->model, tol_defined, tol, start, stop_defined, stop);
+    int st = fmu_model_setup_experiment(i->model, call, tol_defined, tol, start, stop_defined, stop);
     if (st <= FMU_WARNING) i->next_time = start;
     return st;
 }
 
 /* ``call``, allowed in ``from``: the model does ``how``, and when it did, the instance is in ``to``. */
-static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, fmi2Status (*how)(Model *))
+static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, fmi2Status (*how)(Model *, const char *))
 {
     FmuInstance *i = fmu_checked(c, call, from);
     if (!i) return FMU_ERROR;
-    int st = how(i->model);
+    int st = how(i->model, call);
     if (st <= FMU_WARNING) i->phase = to;
     return st;
 }
@@ -144,7 +144,7 @@ static FMI2_UNUSED int fmu_do_step(void *c, const char *call, double t, double h
     *out = i;
     if (!i || !fmi2_step_ok(&i->log, call, t, h) || !fmi2_step_ns_ok(&i->log, call, h)
         || !fmi2_continues_ok(&i->log, call, i->next_time, t)) return FMU_ERROR;
-    int st = fmu_model_do_step(i->model, t, h);
+    int st = fmu_model_do_step(i->model, call, t, h);
     if (st <= FMU_WARNING) i->next_time = t + h;   /* the host's own arithmetic: its next step starts there */
     return st;
 }
@@ -212,10 +212,10 @@ static FMI2_UNUSED int fmu_get_values(void *c, const char *call, const unsigned 
     FmuInstance *i = fmu_checked(c, call, P_GETTABLE);
     if (!i || !fmu_refs_ok(i, call, vr, n, type, 0, values, type_names)) return FMU_ERROR;
     if (n == 0) return FMU_OK;
-    if (type != V_BOOLEAN || bool_size == sizeof(int)) return fmu_model_get(i->model, vr, n, type, values);
+    if (type != V_BOOLEAN || bool_size == sizeof(int)) return fmu_model_get(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's gets) */
     if (!flags) return FMU_ERROR;
-    int st = fmu_model_get(i->model, vr, n, type, flags);
+    int st = fmu_model_get(i->model, call, vr, n, type, flags);
     for (size_t k = 0; st <= FMU_WARNING && k < n; k++) ((unsigned char *)values)[k] = flags[k] != 0;
     if (flags != small) free(flags);
     return st;
@@ -227,12 +227,12 @@ static FMI2_UNUSED int fmu_set_values(void *c, const char *call, const unsigned 
     FmuInstance *i = fmu_checked(c, call, P_SETTABLE);
     if (!i || !fmu_refs_ok(i, call, vr, n, type, 1, values, type_names)) return FMU_ERROR;
     if (n == 0) return FMU_OK;
-    if (type != V_BOOLEAN) return fmu_model_set(i->model, vr, n, type, values);
+    if (type != V_BOOLEAN) return fmu_model_set(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's sets) */
     if (!flags) return FMU_ERROR;
     for (size_t k = 0; k < n; k++)                  /* 0 or 1 */
         flags[k] = bool_size == sizeof(int) ? ((const int *)values)[k] != 0 : ((const unsigned char *)values)[k] != 0;
-    int st = fmu_model_set(i->model, vr, n, type, flags);
+    int st = fmu_model_set(i->model, call, vr, n, type, flags);
     if (flags != small) free(flags);
     return st;
 }
