@@ -77,7 +77,8 @@ fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t
 fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, const void *values);
 
 /* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time; a state
- * set brings its phase with it, as the Reference-FMUs' setFMUState does, in every phase the instance is in).
+ * set that the model accepts brings its phase with it, as the Reference-FMUs' setFMUState does, in every phase
+ * the instance is in).
  * ``call``: the name of the call the host made (fmi2SetFMUstate, fmi3SetFMUState, ...), for what is logged.
  * take: a new state of the model (NULL, logged, when none can be taken); restore: ``initialized`` says the
  * instance's parameters were accepted at fmi2ExitInitializationMode (a state with the same ones needs no new
