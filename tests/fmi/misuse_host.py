@@ -199,6 +199,15 @@ loaded = st("fmi2DeSerializeFMUstate", c_void_p(other_instance), buffer, size, b
 set_ = st("fmi2SetFMUstate", c_void_p(other_instance), restored)
 case("deserialized_state_continues_from_its_time",
      [serialized, loaded, set_, step(other_instance, 3e-3), step(other_instance, 4e-3)] == [OK] * 5, "")
+announce("state_set_on_a_fresh_instance")
+# FMI 2.0 allows fmi2SetFMUstate in every state, and the state brings its own (the Reference-FMUs' setFMUState):
+# restored, the never-initialised instance is in step mode at the state's time
+fresh, fresh_state = make(b"fresh"), c_void_p()
+got = [st("fmi2DeSerializeFMUstate", c_void_p(fresh), buffer, size, byref(fresh_state)),
+       st("fmi2SetFMUstate", c_void_p(fresh), fresh_state)]
+case("state_set_on_a_fresh_instance_steps_on", got == [OK, OK] and step(fresh, 3e-3) == OK and step(fresh, 4e-3) == OK,
+     f"{got} {LOG[-2:]}")
+lib.fmi2FreeInstance(c_void_p(fresh))
 lib.fmi2FreeInstance(c_void_p(other_instance))
 lib.fmi2FreeInstance(c_void_p(c))
 lib.fmi2FreeInstance(c_void_p(other))

@@ -133,13 +133,13 @@ class ControllerSlave(Fmi2Slave):
     def fmi_get_state(self) -> tuple:
         return copy.deepcopy((self.logic, self.parameters, self.inputs))
 
-    def fmi_set_state(self, state: object) -> int:
+    def fmi_set_state(self, state: object, call: str) -> int:
         if not (isinstance(state, tuple) and len(state) == 3
                 and (state[0] is None or isinstance(state[0], self.logic_class))):
-            return self._refuse("fmi2SetFMUstate", "not a state of this FMU")
+            return self._refuse(call, "not a state of this FMU")
         if state[0] is None and self.logic is not None:
-            return self._refuse("fmi2SetFMUstate", "a state taken before initialisation holds no controller: it "
-                                "cannot be set into an initialised instance, which keeps its state (fmi2Reset "
+            return self._refuse(call, "a state taken before initialisation holds no controller: it "
+                                "cannot be set into an initialised instance, which keeps its state (a reset "
                                 "returns an instance to before initialisation)")
         logic, parameters, inputs = copy.deepcopy(state)      # the same state may be restored again
         # in place: the registered getters and setters hold these very dicts
@@ -157,12 +157,12 @@ class ControllerSlave(Fmi2Slave):
         logic, parameters, inputs = state
         return state_format.dumps(self.logic_class.MODEL_NAME, parameters, inputs, logic)
 
-    def fmi_deserialize(self, data: bytes) -> tuple | None:
+    def fmi_deserialize(self, data: bytes, call: str) -> tuple | None:
         try:
             return state_format.loads(data, self.logic_class, self.logic_class.from_parameters)
         except Exception as err:   # StateError names what is wrong; anything else is bytes no rule foresaw
             text = str(err) if isinstance(err, (state_format.StateError, ConfigError)) else repr(err)
-            self._refuse("fmi2DeSerializeFMUstate", text)
+            self._refuse(call, text)
             return None
 
     def fmi_take_log(self) -> list[tuple[int, str, str]]:

@@ -50,11 +50,11 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("SET", "fmi_set", "slave", "method", ("vrs", "values"),
           "status: ERROR when a value is refused (the old value stays)"),
     Entry("GET_STATE", "fmi_get_state", "slave", "method", (), "an opaque state object the shim holds"),
-    Entry("SET_STATE", "fmi_set_state", "slave", "method", ("state",),
-          "status: ERROR when refused (the instance keeps its state)"),
+    Entry("SET_STATE", "fmi_set_state", "slave", "method", ("state", "call"),
+          "status: ERROR when refused (the instance keeps its state; the refusal names ``call``, the host's call)"),
     Entry("SERIALIZE", "fmi_serialize", "slave", "method", ("state",), "bytes"),
-    Entry("DESERIALIZE", "fmi_deserialize", "slave", "method", ("data",),
-          "a state object, or None when the bytes are refused (the reason is in the log)"),
+    Entry("DESERIALIZE", "fmi_deserialize", "slave", "method", ("data", "call"),
+          "a state object, or None when the bytes are refused (the reason is in the log, naming ``call``)"),
     Entry("TAKE_LOG", "fmi_take_log", "slave", "method", (),
           "list of (status, category, text) logged since the last call; the queue is emptied"),
     Entry("PENDING_LOG", "pending_log", "slave", "list", (),
@@ -75,27 +75,32 @@ TYPE = {"Real": 1, "Integer": 2, "Boolean": 3, "String": 4}
 #: A variable's causality in PORTS (anything else -- local, independent -- is OTHER).
 CAUSALITY = {"OTHER": 0, "INPUT": 1, "OUTPUT": 2, "PARAMETER": 3}
 
-#: What the shim appends to the slave's serialized state: these 8 bytes, then the state's time (a native double),
-#: so that a state restored from bytes continues from its own time. The slave never sees them.
-STATE_TRAILER = b"ncfmu-t1"
-STATE_TRAILER_SIZE = len(STATE_TRAILER) + 8
+#: What the shim appends to the slave's serialized state: these 8 bytes, the state's phase (a native int32, one of
+#: :data:`PHASE`) and its time (a native double), so that a state restored from bytes is in the phase it was taken
+#: in and continues from its own time. The slave never sees them.
+STATE_TRAILER = b"ncfmu-t2"
+STATE_TRAILER_SIZE = len(STATE_TRAILER) + 4 + 8
+#: The FMI layer's phases (fmi2_machine.h's P_*; python_model.c asserts they are the same).
+PHASE = {"INSTANTIATED": 1, "INIT": 2, "STEP": 4, "TERMINATED": 8}
 
 HEADER_NAME = "ncfmu_contract.h"
 
 
-def split_state(serialized: bytes) -> tuple[bytes, float]:
-    """An FMU's serialized state -> (the slave's bytes, the state's time); ValueError without the trailer."""
+def split_state(serialized: bytes) -> tuple[bytes, int, float]:
+    """An FMU's serialized state -> (the slave's bytes, the state's phase, its time); ValueError without the
+    trailer."""
     import struct
     data, trailer = bytes(serialized[:-STATE_TRAILER_SIZE]), bytes(serialized[-STATE_TRAILER_SIZE:])
     if len(serialized) < STATE_TRAILER_SIZE or not trailer.startswith(STATE_TRAILER):
-        raise ValueError("not a state serialized by an ncfmu Python FMU (no time trailer)")
-    return data, struct.unpack("=d", trailer[len(STATE_TRAILER):])[0]
+        raise ValueError("not a state serialized by an ncfmu Python FMU (no trailer)")
+    phase, time = struct.unpack("=id", trailer[len(STATE_TRAILER):])
+    return data, phase, time
 
 
-def join_state(data: bytes, time: float) -> bytes:
+def join_state(data: bytes, time: float, phase: int = PHASE["STEP"]) -> bytes:
     """The inverse of :func:`split_state` (for tests that edit a state's bytes)."""
     import struct
-    return bytes(data) + STATE_TRAILER + struct.pack("=d", time)
+    return bytes(data) + STATE_TRAILER + struct.pack("=id", phase, time)
 
 
 def entry(macro: str) -> Entry:
@@ -115,10 +120,11 @@ def c_header() -> str:
     lines.append("/* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */")
     lines.append("#define NCFMU_CONTRACT_NAMES(X) " + " ".join(f"X({e.macro})" for e in ENTRIES))
     lines.append("")
-    lines.append(f'#define NCFMU_STATE_TRAILER "{STATE_TRAILER.decode()}"  /* then the time, a double */')
+    lines.append(f'#define NCFMU_STATE_TRAILER "{STATE_TRAILER.decode()}"  /* then the phase, an int32, and the time, '
+                 'a double */')
     lines.append(f"#define NCFMU_STATE_TRAILER_SIZE {STATE_TRAILER_SIZE}")
     lines.append("")
-    for group, table in (("STATUS", STATUS), ("TYPE", TYPE), ("CAUSALITY", CAUSALITY)):
+    for group, table in (("STATUS", STATUS), ("TYPE", TYPE), ("CAUSALITY", CAUSALITY), ("PHASE", PHASE)):
         for name, value in table.items():
             lines.append(f"#define NCFMU_{group}_{name.upper()} {value}")
         lines.append("")

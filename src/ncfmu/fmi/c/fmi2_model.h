@@ -46,46 +46,54 @@ typedef struct Model Model;
 /* What a Get/Set carries, by type: double (Real), int (Integer: fmi2Integer, fmi3Int32), int (Boolean, 0 or 1)
  * and const char * (String; a Get's strings stay valid until the next call on the instance). */
 
+/* Every function that may log is given ``call``, the name of the call the host made (fmi2Instantiate,
+ * fmi3InstantiateCoSimulation, fmi3DoStep, ...), and names it in what it logs. */
+
 /* A new model for the instance ``name`` (resources: the FMU's resources folder, a path), logging to ``log``
  * (kept for the instance's life); NULL (logged) when it cannot be made. */
-Model *fmu_model_new(const char *name, const char *resources, int visible, const Fmi2Log *log);
+Model *fmu_model_new(const char *call, const char *name, const char *resources, int visible, const Fmi2Log *log);
 void fmu_model_free(Model *m);
 
 /* The variables, by value reference 0 .. *n - 1 (the table lives as long as the model, until fmu_model_reset). */
 const VarInfo *fmu_model_variables(Model *m, unsigned *n);
 
 /* Back to the state after fmu_model_new; not 0 (logged) when that fails (the instance can only be freed). */
-int fmu_model_reset(Model *m);
+int fmu_model_reset(Model *m, const char *call);
 
-fmi2Status fmu_model_setup_experiment(Model *m, int tolerance_defined, double tolerance, double start,
+fmi2Status fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
                                       int stop_defined, double stop);
-fmi2Status fmu_model_enter_initialization(Model *m);
+fmi2Status fmu_model_enter_initialization(Model *m, const char *call);
 /* ERROR (logged) when the parameters are refused: the instance stays in initialization mode. */
-fmi2Status fmu_model_exit_initialization(Model *m);
-fmi2Status fmu_model_terminate(Model *m);
+fmi2Status fmu_model_exit_initialization(Model *m, const char *call);
+fmi2Status fmu_model_terminate(Model *m, const char *call);
 
 /* One step from ``t`` by ``h`` (checked by the layer: finite, at least 1 ns, continuing); a failed step leaves
  * the model where it was. */
-fmi2Status fmu_model_do_step(Model *m, double t, double h);
+fmi2Status fmu_model_do_step(Model *m, const char *call, double t, double h);
 
 /* Values of variables the layer checked (each vr a variable of ``type``; for a set, settable now; Strings
  * UTF-8 text; a value with a rule within it). A refused set changes nothing. */
-fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, void *values);
-fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, const void *values);
+fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values);
+fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, const void *values);
 
-/* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time).
+/* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time; a state
+ * set that the model accepts brings its phase with it, as the Reference-FMUs' setFMUState does, in every phase
+ * the instance is in).
+ * ``call``: the name of the call the host made (fmi2SetFMUstate, fmi3SetFMUState, ...), for what is logged.
  * take: a new state of the model (NULL, logged, when none can be taken); restore: ``initialized`` says the
  * instance's parameters were accepted at fmi2ExitInitializationMode (a state with the same ones needs no new
  * judgement); ERROR (logged) when refused, the model unchanged. */
-void *fmu_model_state_take(Model *m);
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized);
+void *fmu_model_state_take(Model *m, const char *call);
+fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized);
 void fmu_model_state_free(Model *m, void *state);
 
-/* Serialized: the model's own format, which carries the state's ``time`` and ``phase`` (or -1 when the format
- * keeps no phase). serialize: the bytes in a buffer of the model's (valid until the next call on the model),
- * NULL (logged) when it cannot; deserialize: a state (checked: bad bytes are refused, logged, NULL). */
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size);
-void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, int *phase, double *time);
+/* Serialized: the model's own format, which carries the state's ``time`` and ``phase`` (one of P_*).
+ * serialize: the bytes in a buffer of the model's (valid until the next call on the model), NULL (logged) when
+ * it cannot; deserialize: a state (checked: bad bytes are refused, logged, NULL). */
+const unsigned char *fmu_model_serialize(Model *m, const char *call, void *state, int phase, double time,
+                                         size_t *size);
+void *fmu_model_deserialize(Model *m, const char *call, const unsigned char *bytes, size_t size, int *phase,
+                            double *time);
 
 /* A parameter's value against its rule (vr ``v``'s table entry); 1 when it holds, else logs and returns 0. */
 static inline int fmi2_value_ok(const Fmi2Log *log, const VarInfo *v, double x)

@@ -23,7 +23,7 @@ enum { FMU_OK = 0, FMU_WARNING = 1, FMU_ERROR = 3 };
 typedef struct {
     uintptr_t handle;
     void *model;                        /* the model's state */
-    int phase;                          /* the instance's phase when it was taken; -1: unknown (kept at restore) */
+    int phase;                          /* the instance's phase when it was taken: it comes back with the state */
     double time;                        /* where steps go on from it */
 } FmuState;
 
@@ -57,7 +57,7 @@ static FMI2_UNUSED FmuInstance *fmu_checked(void *c, const char *call, int phase
 static FMI2_UNUSED void *fmu_instance_start(FmuInstance *i, const char *call, const char *dir, int visible)
 {
     i->phase = P_INSTANTIATED;
-    i->model = fmu_model_new(i->name, dir, visible, &i->log);
+    i->model = fmu_model_new(call, i->name, dir, visible, &i->log);
     fmi2Component handle = i->model ? fmi2_instance_add(i) : NULL;
     if (i->model && !handle) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: no new instance handle can be made", call);
@@ -94,7 +94,7 @@ static FMI2_UNUSED int fmu_reset(void *c, const char *call)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     if (!i) return FMU_ERROR;
-    if (fmu_model_reset(i->model) != 0) {
+    if (fmu_model_reset(i->model, call) != 0) {
         fmu_states_drop(i);             /* logged; the instance can only be freed (every call refuses) */
         fmu_model_free(i->model);
         i->model = NULL;
@@ -110,17 +110,17 @@ static FMI2_UNUSED int fmu_setup_experiment(FmuInstance *i, const char *call, in
                                             double start, int stop_defined, double stop)
 {
     if (!i || !fmi2_experiment_ok(&i->log, call, start, stop_defined, stop)) return FMU_ERROR;
-    int st = fmu_model_setup_experiment(i->model, tol_defined, tol, start, stop_defined, stop);
+    int st = fmu_model_setup_experiment(i->model, call, tol_defined, tol, start, stop_defined, stop);
     if (st <= FMU_WARNING) i->next_time = start;
     return st;
 }
 
 /* ``call``, allowed in ``from``: the model does ``how``, and when it did, the instance is in ``to``. */
-static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, fmi2Status (*how)(Model *))
+static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, fmi2Status (*how)(Model *, const char *))
 {
     FmuInstance *i = fmu_checked(c, call, from);
     if (!i) return FMU_ERROR;
-    int st = how(i->model);
+    int st = how(i->model, call);
     if (st <= FMU_WARNING) i->phase = to;
     return st;
 }
@@ -144,7 +144,7 @@ static FMI2_UNUSED int fmu_do_step(void *c, const char *call, double t, double h
     *out = i;
     if (!i || !fmi2_step_ok(&i->log, call, t, h) || !fmi2_step_ns_ok(&i->log, call, h)
         || !fmi2_continues_ok(&i->log, call, i->next_time, t)) return FMU_ERROR;
-    int st = fmu_model_do_step(i->model, t, h);
+    int st = fmu_model_do_step(i->model, call, t, h);
     if (st <= FMU_WARNING) i->next_time = t + h;   /* the host's own arithmetic: its next step starts there */
     return st;
 }
@@ -212,10 +212,10 @@ static FMI2_UNUSED int fmu_get_values(void *c, const char *call, const unsigned 
     FmuInstance *i = fmu_checked(c, call, P_GETTABLE);
     if (!i || !fmu_refs_ok(i, call, vr, n, type, 0, values, type_names)) return FMU_ERROR;
     if (n == 0) return FMU_OK;
-    if (type != V_BOOLEAN || bool_size == sizeof(int)) return fmu_model_get(i->model, vr, n, type, values);
+    if (type != V_BOOLEAN || bool_size == sizeof(int)) return fmu_model_get(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's gets) */
     if (!flags) return FMU_ERROR;
-    int st = fmu_model_get(i->model, vr, n, type, flags);
+    int st = fmu_model_get(i->model, call, vr, n, type, flags);
     for (size_t k = 0; st <= FMU_WARNING && k < n; k++) ((unsigned char *)values)[k] = flags[k] != 0;
     if (flags != small) free(flags);
     return st;
@@ -227,12 +227,12 @@ static FMI2_UNUSED int fmu_set_values(void *c, const char *call, const unsigned 
     FmuInstance *i = fmu_checked(c, call, P_SETTABLE);
     if (!i || !fmu_refs_ok(i, call, vr, n, type, 1, values, type_names)) return FMU_ERROR;
     if (n == 0) return FMU_OK;
-    if (type != V_BOOLEAN) return fmu_model_set(i->model, vr, n, type, values);
+    if (type != V_BOOLEAN) return fmu_model_set(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's sets) */
     if (!flags) return FMU_ERROR;
     for (size_t k = 0; k < n; k++)                  /* 0 or 1 */
         flags[k] = bool_size == sizeof(int) ? ((const int *)values)[k] != 0 : ((const unsigned char *)values)[k] != 0;
-    int st = fmu_model_set(i->model, vr, n, type, flags);
+    int st = fmu_model_set(i->model, call, vr, n, type, flags);
     if (flags != small) free(flags);
     return st;
 }
@@ -277,7 +277,7 @@ static FMI2_UNUSED int fmu_get_state(void *c, const char *call, void **s)
     }
     FmuState *old = *s ? fmu_state_find(i, call, *s) : NULL;
     if (*s && !old) return FMU_ERROR;
-    void *model = fmu_model_state_take(i->model);
+    void *model = fmu_model_state_take(i->model, call);
     if (!model) return FMU_ERROR;
     if (old) {                          /* FMI: a given state is overwritten */
         fmu_model_state_free(i->model, old->model);
@@ -293,9 +293,9 @@ static FMI2_UNUSED int fmu_set_state(void *c, const char *call, void *s)
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
     if (!state) return FMU_ERROR;
-    int st = fmu_model_state_restore(i->model, state->model, i->phase == P_STEP || i->phase == P_TERMINATED);
+    int st = fmu_model_state_restore(i->model, call, state->model, i->phase == P_STEP || i->phase == P_TERMINATED);
     if (st > FMU_WARNING) return st;
-    if (state->phase >= 0) i->phase = state->phase;
+    i->phase = state->phase;            /* the state's phase comes with it (the Reference-FMUs' setFMUState) */
     i->next_time = state->time;         /* steps go on from the state's time */
     return st;
 }
@@ -322,7 +322,7 @@ static FMI2_UNUSED int fmu_state_size(void *c, const char *call, void *s, size_t
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the size pointer is NULL", call);
         return FMU_ERROR;
     }
-    return fmu_model_serialize(i->model, state->model, state->phase, state->time, size) ? FMU_OK : FMU_ERROR;
+    return fmu_model_serialize(i->model, call, state->model, state->phase, state->time, size) ? FMU_OK : FMU_ERROR;
 }
 
 static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigned char b[], size_t size)
@@ -331,7 +331,8 @@ static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigne
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
     if (!state) return FMU_ERROR;
     size_t needed = 0;
-    const unsigned char *bytes = fmu_model_serialize(i->model, state->model, state->phase, state->time, &needed);
+    const unsigned char *bytes = fmu_model_serialize(i->model, call, state->model, state->phase, state->time,
+                                                     &needed);
     if (!bytes) return FMU_ERROR;
     if (!b || size < needed) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %s (%zu bytes given, %zu needed)", call,
@@ -353,8 +354,15 @@ static FMI2_UNUSED int fmu_deserialize(void *c, const char *call, const unsigned
     }
     int phase = -1;
     double time = 0.0;
-    void *model = fmu_model_deserialize(i->model, b, size, &phase, &time);
+    void *model = fmu_model_deserialize(i->model, call, b, size, &phase, &time);
     if (!model) { *s = NULL; return FMU_ERROR; }   /* refused: the reason is in the log */
+    if (phase != P_INSTANTIATED && phase != P_INIT && phase != P_STEP && phase != P_TERMINATED) {
+        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the state's phase (%d) is not one a state is taken in",
+                 call, phase);            /* the models check it; this keeps a model's slip from the machine */
+        fmu_model_state_free(i->model, model);
+        *s = NULL;
+        return FMU_ERROR;
+    }
     *s = fmu_state_add(i, call, model, phase, time);
     return *s ? FMU_OK : FMU_ERROR;
 }

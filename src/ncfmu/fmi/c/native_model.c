@@ -41,7 +41,7 @@ static void set_defaults(Model *m)
     m->initializing = 0;
 }
 
-Model *fmu_model_new(const char *name, const char *resources, int visible, const Fmi2Log *log)
+Model *fmu_model_new(const char *call, const char *name, const char *resources, int visible, const Fmi2Log *log)
 {
     (void)name; (void)resources; (void)visible;    /* the model needs nothing from its resources */
     Model *m = calloc(1, sizeof *m);
@@ -51,7 +51,7 @@ Model *fmu_model_new(const char *name, const char *resources, int visible, const
         m->before = calloc(1, model_state_size());
     }
     if (!m || !m->state || !m->before) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2Instantiate: out of memory");
+        FMI2_SAY(log, fmi2Error, "logStatusError", "%s: out of memory", call);
         if (m) { free(m->state); free(m->before); free(m); }
         return NULL;
     }
@@ -74,21 +74,23 @@ const VarInfo *fmu_model_variables(Model *m, unsigned *n)
     return MODEL_VARS;
 }
 
-int fmu_model_reset(Model *m)
+int fmu_model_reset(Model *m, const char *call)
 {
+    (void)call;
     set_defaults(m);
     return 0;
 }
 
-fmi2Status fmu_model_setup_experiment(Model *m, int tolerance_defined, double tolerance, double start,
+fmi2Status fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
                                       int stop_defined, double stop)
 {
     (void)m; (void)tolerance_defined; (void)tolerance; (void)start; (void)stop_defined; (void)stop;
     return fmi2OK;
 }
 
-fmi2Status fmu_model_enter_initialization(Model *m)
+fmi2Status fmu_model_enter_initialization(Model *m, const char *call)
 {
+    (void)call;
     /* Outputs are initial unknowns: compute them now when the parameters allow (quietly; the parameters may
      * still change, and are judged at fmi2ExitInitializationMode). */
     model_init(m->values, m->state, NULL);
@@ -96,21 +98,24 @@ fmi2Status fmu_model_enter_initialization(Model *m)
     return fmi2OK;
 }
 
-fmi2Status fmu_model_exit_initialization(Model *m)
+fmi2Status fmu_model_exit_initialization(Model *m, const char *call)
 {
+    (void)call;
     if (model_init(m->values, m->state, m->log) != 0) return fmi2Error;     /* stays in init: fix and retry */
     m->initializing = 0;
     return fmi2OK;
 }
 
-fmi2Status fmu_model_terminate(Model *m)
+fmi2Status fmu_model_terminate(Model *m, const char *call)
 {
+    (void)call;
     (void)m;
     return fmi2OK;
 }
 
-fmi2Status fmu_model_do_step(Model *m, double t, double h)
+fmi2Status fmu_model_do_step(Model *m, const char *call, double t, double h)
 {
+    (void)call;
     /* Tools count time in integer nanoseconds (libcosim) and their conversion to seconds differs in the
      * last bit from step to step; whole nanoseconds make every tool's step equal (as the Python FMUs'
      * adapter does), so the same SSP gives the same trajectories in every host. */
@@ -126,8 +131,9 @@ fmi2Status fmu_model_do_step(Model *m, double t, double h)
     return fmi2OK;
 }
 
-fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, void *values)
+fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values)
 {
+    (void)call;
     for (size_t k = 0; k < n; k++) {
         double x = m->values[vr[k]];
         if (type == V_REAL) ((double *)values)[k] = x;
@@ -137,8 +143,10 @@ fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, 
     return fmi2OK;
 }
 
-fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, const void *values)
+fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type,
+                         const void *values)
 {
+    (void)call;
     int parameter = 0;
     for (size_t k = 0; k < n; k++) {
         m->values[vr[k]] = type == V_REAL ? ((const double *)values)[k] : (double)((const int *)values)[k];
@@ -153,11 +161,11 @@ fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, 
 /* ---- FMU states -------------------------------------------------------------------------------------- */
 static size_t snapshot_bytes(void) { return sizeof(Snapshot) + model_state_size(); }
 
-void *fmu_model_state_take(Model *m)
+void *fmu_model_state_take(Model *m, const char *call)
 {
     Snapshot *s = calloc(1, snapshot_bytes());
     if (!s) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2GetFMUstate: out of memory");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     memcpy(s->values, m->values, sizeof s->values);
@@ -180,7 +188,7 @@ static int params_equal(const double *a, const double *b)
 }
 
 /* A state record into the model; a record that does not pass model_restore leaves the model as it was. */
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
+fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized)
 {
     const Snapshot *s = state;
     double values[NVARS];
@@ -194,8 +202,7 @@ fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
     if (model_restore(m->values, m->state, judged, m->log) != 0) {
         memcpy(m->values, values, sizeof values);
         memcpy(m->state, m->before, model_state_size());
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2SetFMUstate: the state was refused; the instance is "
-                 "unchanged");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the state was refused; the instance is unchanged", call);
         return fmi2Error;
     }
     m->initializing = s->initializing;
@@ -227,11 +234,12 @@ static void ser_header(SerHeader *h)
     h->model_bytes = (uint32_t)model_state_size();
 }
 
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size)
+const unsigned char *fmu_model_serialize(Model *m, const char *call, void *state, int phase, double time,
+                                         size_t *size)
 {
     const Snapshot *s = state;
     if (!m->bytes && !(m->bytes = malloc(ser_size()))) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2SerializeFMUstate: out of memory");
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     SerHeader h;
@@ -245,7 +253,8 @@ const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, doubl
     return m->bytes;
 }
 
-void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, int *phase, double *time)
+void *fmu_model_deserialize(Model *m, const char *call, const unsigned char *bytes, size_t size, int *phase,
+                            double *time)
 {
     const char *why = NULL;
     SerHeader h, want;
@@ -287,7 +296,7 @@ void *fmu_model_deserialize(Model *m, const unsigned char *bytes, size_t size, i
     }
     if (why) {
         free(s);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: %zu bytes refused: %s", size, why);
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
         return NULL;
     }
     *phase = h.phase;

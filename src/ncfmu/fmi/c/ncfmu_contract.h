@@ -23,11 +23,11 @@
 #define NCFMU_SET "fmi_set"
 /* slave.fmi_get_state() [method] -> an opaque state object the shim holds */
 #define NCFMU_GET_STATE "fmi_get_state"
-/* slave.fmi_set_state(state) [method] -> status: ERROR when refused (the instance keeps its state) */
+/* slave.fmi_set_state(state, call) [method] -> status: ERROR when refused (the instance keeps its state; the refusal names ``call``, the host's call) */
 #define NCFMU_SET_STATE "fmi_set_state"
 /* slave.fmi_serialize(state) [method] -> bytes */
 #define NCFMU_SERIALIZE "fmi_serialize"
-/* slave.fmi_deserialize(data) [method] -> a state object, or None when the bytes are refused (the reason is in the log) */
+/* slave.fmi_deserialize(data, call) [method] -> a state object, or None when the bytes are refused (the reason is in the log, naming ``call``) */
 #define NCFMU_DESERIALIZE "fmi_deserialize"
 /* slave.fmi_take_log() [method] -> list of (status, category, text) logged since the last call; the queue is emptied */
 #define NCFMU_TAKE_LOG "fmi_take_log"
@@ -41,8 +41,8 @@
 /* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */
 #define NCFMU_CONTRACT_NAMES(X) X(INSTANTIATE) X(PORTS) X(SETUP_EXPERIMENT) X(ENTER_INITIALIZATION) X(EXIT_INITIALIZATION) X(DO_STEP) X(TERMINATE) X(GET) X(SET) X(GET_STATE) X(SET_STATE) X(SERIALIZE) X(DESERIALIZE) X(TAKE_LOG) X(PENDING_LOG) X(OUT) X(INPUTS)
 
-#define NCFMU_STATE_TRAILER "ncfmu-t1"  /* then the time, a double */
-#define NCFMU_STATE_TRAILER_SIZE 16
+#define NCFMU_STATE_TRAILER "ncfmu-t2"  /* then the phase, an int32, and the time, a double */
+#define NCFMU_STATE_TRAILER_SIZE 20
 
 #define NCFMU_STATUS_OK 0
 #define NCFMU_STATUS_WARNING 1
@@ -59,5 +59,10 @@
 #define NCFMU_CAUSALITY_INPUT 1
 #define NCFMU_CAUSALITY_OUTPUT 2
 #define NCFMU_CAUSALITY_PARAMETER 3
+
+#define NCFMU_PHASE_INSTANTIATED 1
+#define NCFMU_PHASE_INIT 2
+#define NCFMU_PHASE_STEP 4
+#define NCFMU_PHASE_TERMINATED 8
 
 #endif

@@ -412,7 +412,7 @@ static void slave_drop(Model *m)
 
 /* The slave class: the model script's module, imported once per process from the FMU's resources folder
  * (its folder goes on sys.path then, not again: a host that extracts the FMU anew per run adds no entry a run). */
-static PyObject *slave_class(const Fmi2Log *log, const char *resources)
+static PyObject *slave_class(const Fmi2Log *log, const char *fmi_call, const char *resources)
 {
     PyObject *modules = py.SysGet("modules");                    /* borrowed */
     if (!modules || !py.DictGetItemString(modules, NCFMU_MODULE)) {
@@ -427,7 +427,7 @@ static PyObject *slave_class(const Fmi2Log *log, const char *resources)
     if (!cls) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(log, fmi2Error, "logStatusError", "fmi2Instantiate: the model %s could not be loaded from %s: %s",
+        FMI2_SAY(log, fmi2Error, "logStatusError", "%s: the model %s could not be loaded from %s: %s", fmi_call,
                  NCFMU_MODULE, resources, text);
     }
     return cls;
@@ -447,9 +447,9 @@ static VarCausality var_causality(long code)
 }
 
 /* A new Python slave for ``m`` and its table of variables; 0 (logged) if it cannot be made. */
-static int slave_make(Model *m)
+static int slave_make(Model *m, const char *fmi_call)
 {
-    PyObject *cls = slave_class(m->log, m->resources);
+    PyObject *cls = slave_class(m->log, fmi_call, m->resources);
     if (!cls) return 0;
     PyObject *n = py.StrFrom(m->name), *res = py.StrFrom(m->resources), *vis = py.BoolFrom(m->visible);
     PyObject *slave = (n && res && vis) ? py.CallMethod(cls, names[N_INSTANTIATE], n, res, vis, NULL) : NULL;
@@ -460,7 +460,7 @@ static int slave_make(Model *m)
     if (!slave || !ports || !inputs || !pending) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2Instantiate: the slave %s could not be made: %s",
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the slave %s could not be made: %s", fmi_call,
                  NCFMU_CLASS, text);
         py_drop(slave); py_drop(ports); py_drop(inputs); py_drop(pending);
         return 0;
@@ -530,7 +530,8 @@ static int binary_ready(void)
 }
 
 /* ---- the model interface ------------------------------------------------------------------------- */
-Model *fmu_model_new(const char *name, const char *resources, int visible, const Fmi2Log *log)
+Model *fmu_model_new(const char *fmi_call, const char *name, const char *resources, int visible,
+                     const Fmi2Log *log)
 {
     if (!binary_ready()) {
         FMI2_SAY(log, fmi2Error, "logStatusError", "%s",
@@ -544,7 +545,7 @@ Model *fmu_model_new(const char *name, const char *resources, int visible, const
     snprintf(m->resources, sizeof m->resources, "%s", resources);
     m->visible = visible;
     PyGILState_STATE g = py.GILEnsure();
-    int made = names_ready() && slave_make(m);
+    int made = names_ready() && slave_make(m, fmi_call);
     if (made) flush_log(m);
     py.GILRelease(g);
     if (!made) { free(m); return NULL; }
@@ -567,50 +568,50 @@ const VarInfo *fmu_model_variables(Model *m, unsigned *n)
     return m->vars;
 }
 
-int fmu_model_reset(Model *m)
+int fmu_model_reset(Model *m, const char *fmi_call)
 {
     PyGILState_STATE g = py.GILEnsure();
     flush_log(m);
     slave_drop(m);
-    int made = slave_make(m);
+    int made = slave_make(m, fmi_call);
     if (made) flush_log(m);
     py.GILRelease(g);
     return made ? 0 : -1;
 }
 
-fmi2Status fmu_model_setup_experiment(Model *m, int tolerance_defined, double tolerance, double start,
-                                      int stop_defined, double stop)
+fmi2Status fmu_model_setup_experiment(Model *m, const char *fmi_call, int tolerance_defined, double tolerance,
+                                      double start, int stop_defined, double stop)
 {
     PyGILState_STATE g = py.GILEnsure();
     PyObject *a = py.FloatFrom(start), *b = stop_defined ? py.FloatFrom(stop) : (py.IncRef(py.None), py.None);
     PyObject *t = tolerance_defined ? py.FloatFrom(tolerance) : (py.IncRef(py.None), py.None);
-    fmi2Status st = (a && b && t) ? call_status(m, "fmi2SetupExperiment", N_SETUP_EXPERIMENT, a, b, t) : fmi2Error;
+    fmi2Status st = (a && b && t) ? call_status(m, fmi_call, N_SETUP_EXPERIMENT, a, b, t) : fmi2Error;
     py_drop(a); py_drop(b); py_drop(t);
     flush_log(m);
     py.GILRelease(g);
     return st;
 }
 
-fmi2Status fmu_model_enter_initialization(Model *m)
+fmi2Status fmu_model_enter_initialization(Model *m, const char *fmi_call)
 {
-    return simple_call(m, "fmi2EnterInitializationMode", N_ENTER_INITIALIZATION);
+    return simple_call(m, fmi_call, N_ENTER_INITIALIZATION);
 }
 
-fmi2Status fmu_model_exit_initialization(Model *m)
+fmi2Status fmu_model_exit_initialization(Model *m, const char *fmi_call)
 {
-    return simple_call(m, "fmi2ExitInitializationMode", N_EXIT_INITIALIZATION);
+    return simple_call(m, fmi_call, N_EXIT_INITIALIZATION);
 }
 
-fmi2Status fmu_model_terminate(Model *m)
+fmi2Status fmu_model_terminate(Model *m, const char *fmi_call)
 {
-    return simple_call(m, "fmi2Terminate", N_TERMINATE);
+    return simple_call(m, fmi_call, N_TERMINATE);
 }
 
-fmi2Status fmu_model_do_step(Model *m, double t, double h)
+fmi2Status fmu_model_do_step(Model *m, const char *fmi_call, double t, double h)
 {
     PyGILState_STATE g = py.GILEnsure();
     PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
-    fmi2Status st = (a && b) ? call_status(m, "fmi2DoStep", N_DO_STEP, a, b, NULL) : fmi2Error;
+    fmi2Status st = (a && b) ? call_status(m, fmi_call, N_DO_STEP, a, b, NULL) : fmi2Error;
     py_drop(a); py_drop(b);
     flush_log(m);
     take_outputs(m);                      /* the step's outputs, for the Gets that follow (no GIL there) */
@@ -647,10 +648,8 @@ static int all_of(Model *m, const unsigned vr[], size_t n, VarCausality causalit
     return 1;
 }
 
-fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, void *values)
+fmi2Status fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type, void *values)
 {
-    const char *fmi_call = type == V_REAL ? "fmi2GetReal" : type == V_INTEGER ? "fmi2GetInteger"
-                         : type == V_BOOLEAN ? "fmi2GetBoolean" : "fmi2GetString";
     int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
     if (outputs && m->out_valid) {
         /* the master's every-step call: the outputs taken after the step, no Python */
@@ -704,10 +703,9 @@ fmi2Status fmu_model_get(Model *m, const unsigned vr[], size_t n, VarType type, 
     return st;
 }
 
-fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, const void *values)
+fmi2Status fmu_model_set(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type,
+                         const void *values)
 {
-    const char *fmi_call = type == V_REAL ? "fmi2SetReal" : type == V_INTEGER ? "fmi2SetInteger"
-                         : type == V_BOOLEAN ? "fmi2SetBoolean" : "fmi2SetString";
     if (type != V_STRING && all_of(m, vr, n, V_INPUT)) {
         /* the master's every-step call: kept here, handed to the slave's inputs dict before its next call */
         for (size_t k = 0; k < n; k++) {
@@ -737,20 +735,23 @@ fmi2Status fmu_model_set(Model *m, const unsigned vr[], size_t n, VarType type, 
 }
 
 /* ---- FMU states: the adapter's state objects ------------------------------------------------------- */
-void *fmu_model_state_take(Model *m)
+void *fmu_model_state_take(Model *m, const char *fmi_call)
 {
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *object = call(m, "fmi2GetFMUstate", N_GET_STATE, NULL, NULL, NULL);
+    PyObject *object = call(m, fmi_call, N_GET_STATE, NULL, NULL, NULL);
     flush_log(m);
     py.GILRelease(g);
     return object;
 }
 
-fmi2Status fmu_model_state_restore(Model *m, void *state, int initialized)
+fmi2Status fmu_model_state_restore(Model *m, const char *fmi_call, void *state, int initialized)
 {
     (void)initialized;                    /* the adapter judges a state's parameters itself */
     PyGILState_STATE g = py.GILEnsure();
-    fmi2Status st = call_status(m, "fmi2SetFMUstate", N_SET_STATE, state, NULL, NULL);
+    PyObject *name = py.StrFrom(fmi_call);  /* the adapter names the call in what it refuses */
+    fmi2Status st = name ? call_status(m, fmi_call, N_SET_STATE, state, name, NULL) : fmi2Error;
+    py_drop(name);
+    if (py.Occurred()) py.Clear();
     flush_log(m);
     py.GILRelease(g);
     return st;
@@ -764,25 +765,32 @@ void fmu_model_state_free(Model *m, void *state)
     py.GILRelease(g);
 }
 
-/* The serialized state: the Python side's bytes, then STATE_TRAILER and the state's time, so that a state
- * restored from bytes continues from its own time (the phase is not kept: a restored state leaves it). */
+/* The serialized state: the Python side's bytes, then STATE_TRAILER, the state's phase (an int32: the layer's
+ * P_*) and its time (a double), so that a state restored from bytes is where it was taken: in its phase, going
+ * on from its time. */
 #define TRAILER_SIZE NCFMU_STATE_TRAILER_SIZE
 #define STATE_TRAILER NCFMU_STATE_TRAILER
-_Static_assert(sizeof NCFMU_STATE_TRAILER - 1 + sizeof(double) == NCFMU_STATE_TRAILER_SIZE, "trailer: 8 bytes + a double");
+#define MAGIC_SIZE (sizeof STATE_TRAILER - 1)
+_Static_assert(MAGIC_SIZE + sizeof(int32_t) + sizeof(double) == NCFMU_STATE_TRAILER_SIZE,
+               "trailer: 8 bytes, an int32 and a double");
+_Static_assert(NCFMU_PHASE_INSTANTIATED == P_INSTANTIATED && NCFMU_PHASE_INIT == P_INIT && NCFMU_PHASE_STEP == P_STEP
+               && NCFMU_PHASE_TERMINATED == P_TERMINATED, "the contract's phases are the layer's");
 
-const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, double time, size_t *size)
+const unsigned char *fmu_model_serialize(Model *m, const char *fmi_call, void *state, int phase, double time,
+                                         size_t *size)
 {
-    (void)phase;
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *bytes = call(m, "fmi2SerializeFMUstate", N_SERIALIZE, state, NULL, NULL);
+    PyObject *bytes = call(m, fmi_call, N_SERIALIZE, state, NULL, NULL);
     char *data = NULL;
     Py_ssize_t_ n = 0;
     unsigned char *out = NULL;
+    int32_t phase32 = phase;
     if (bytes && py.BytesAs(bytes, &data, &n) == 0 && (out = realloc(m->bytes, (size_t)n + TRAILER_SIZE))) {
         m->bytes = out;
         memcpy(out, data, (size_t)n);
-        memcpy(out + n, STATE_TRAILER, sizeof STATE_TRAILER - 1);
-        memcpy(out + n + sizeof STATE_TRAILER - 1, &time, sizeof time);
+        memcpy(out + n, STATE_TRAILER, MAGIC_SIZE);
+        memcpy(out + n + MAGIC_SIZE, &phase32, sizeof phase32);
+        memcpy(out + n + MAGIC_SIZE + sizeof phase32, &time, sizeof time);
         *size = (size_t)n + TRAILER_SIZE;
     }
     if (py.Occurred()) py.Clear();
@@ -792,24 +800,30 @@ const unsigned char *fmu_model_serialize(Model *m, void *state, int phase, doubl
     return out;
 }
 
-void *fmu_model_deserialize(Model *m, const unsigned char *b, size_t size, int *phase, double *time)
+void *fmu_model_deserialize(Model *m, const char *fmi_call, const unsigned char *b, size_t size, int *phase,
+                            double *time)
 {
-    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, sizeof STATE_TRAILER - 1) != 0) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: %zu bytes that are not a "
-                 "state this FMU serialized (no time trailer)", size);
+    if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, MAGIC_SIZE) != 0) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: %zu bytes that are not a state this FMU "
+                 "serialized (no " STATE_TRAILER " trailer)", fmi_call, size);
         return NULL;
     }
+    int32_t phase32;
+    memcpy(&phase32, b + size - TRAILER_SIZE + MAGIC_SIZE, sizeof phase32);
     memcpy(time, b + size - sizeof *time, sizeof *time);
-    if (!isfinite(*time)) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate refused: the state's time is %g",
-                 *time);
+    if (!isfinite(*time) || !(phase32 == P_INSTANTIATED || phase32 == P_INIT || phase32 == P_STEP
+                              || phase32 == P_TERMINATED)) {
+        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: the state's %s is %g", fmi_call,
+                 isfinite(*time) ? "phase" : "time", isfinite(*time) ? (double)phase32 : *time);
         return NULL;
     }
-    *phase = -1;
+    *phase = phase32;
     PyGILState_STATE g = py.GILEnsure();
     PyObject *bytes = py.BytesFrom((const char *)b, (Py_ssize_t_)(size - TRAILER_SIZE));
-    PyObject *object = bytes ? call(m, "fmi2DeSerializeFMUstate", N_DESERIALIZE, bytes, NULL, NULL) : NULL;
+    PyObject *name = py.StrFrom(fmi_call);
+    PyObject *object = bytes && name ? call(m, fmi_call, N_DESERIALIZE, bytes, name, NULL) : NULL;
     py_drop(bytes);
+    py_drop(name);
     if (object == py.None) { py_drop(object); object = NULL; }    /* refused: the reason is in the log */
     if (py.Occurred()) py.Clear();
     flush_log(m);
