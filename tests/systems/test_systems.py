@@ -64,9 +64,12 @@ def test_controller_defaults_carry_no_system_scenario():
     the scenarios live in the systems."""
     limiter = AreaLimiter()
     inputs = dict(limiter.default_inputs())
-    for k in range(1, 5001):                       # to Z -500, X -900 at 100 and 180 mm/s: passed through
-        ref, lim = -0.1 * k, -0.18 * k
-        inputs.update(ref_cmd_in=ref, lim_cmd_in=lim, ref_vff_in=-100.0, lim_vff_in=-180.0, ref_pos=ref, lim_pos=lim)
+    ref = lim = 0.0
+    for k in range(1, 5001):                       # toward Z -500, X -900 up to 100 and 180 mm/s: passed through
+        # accelerating as an interpolator does (the limiter smooths a faster velocity step, whatever its table)
+        v_ref, v_lim = -min(100.0, limiter.decel * k * DT), -min(180.0, limiter.decel * k * DT)
+        ref, lim = ref + v_ref * DT, lim + v_lim * DT
+        inputs.update(ref_cmd_in=ref, lim_cmd_in=lim, ref_vff_in=v_ref, lim_vff_in=v_lim, ref_pos=ref, lim_pos=lim)
         o = limiter.step(k * DT, DT, inputs)
         assert (o["ref_cmd"], o["lim_cmd"], o["alarm"], o["blocked"]) == (ref, lim, False, 0)
 
