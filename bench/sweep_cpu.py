@@ -192,7 +192,8 @@ def report(s: dict, p: dict) -> None:
           f"CPU (opens the system), then {s['cpu_per_variant_s']:.3f} s CPU a variant (median; mean "
           f"{s['cpu_per_variant_mean_s']:.3f})")
     print(f"2 workers: {p['wall_s']:.2f} s wall (cluster up {p['cluster_start_wall_s']:.2f} s, first result "
-          f"{p['first_result_wall_s']:.2f} s later, end {p['end_wall_s']:.2f} s); wall ratio {s['wall_s'] / p['wall_s']:.2f}")
+          f"{p['first_result_wall_s']:.2f} s later, end {p['end_wall_s']:.2f} s); "
+          f"wall ratio {s['wall_s'] / p['wall_s']:.2f}")
     print("  CPU s by process up to the last result:",
           ", ".join(f"{r} {v:.2f}" for r, v in p["cpu_by_process_s"].items()))
     print(f"  client: main thread {p['client_main_thread_s']:.2f} s, other threads (event loop: scheduler + comms) "
@@ -251,9 +252,10 @@ def main() -> dict:
     report(s, p)
     if args.pair:
         out["pair"] = two = pair(args.stop)
+        extra = 100 * (two["cpu_per_variant_mean_s"] / s["cpu_per_variant_mean_s"] - 1)
         print(f"two serial halves side by side (no dask): {two['wall_s']:.2f} s wall, "
               f"{two['cpu_per_variant_mean_s']:.3f} s CPU a variant (mean; serial alone "
-              f"{s['cpu_per_variant_mean_s']:.3f} s: {100 * (two['cpu_per_variant_mean_s'] / s['cpu_per_variant_mean_s'] - 1):+.1f} %)")
+              f"{s['cpu_per_variant_mean_s']:.3f} s: {extra:+.1f} %)")
     print(f"load average {os.getloadavg()[0]:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=2))
