@@ -355,15 +355,27 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     return client
 
 
+#: dask settings of the LocalCluster a sweep starts (an existing cluster keeps its own): what a worker's process
+#: spends beside its variant, measured with bench/sweep_cpu.py (bench/README.md, "Issue 36, lever 3"): the
+#: statistical profiler (a thread sampling the task thread's stack every 10 ms, for the dashboard nobody opens)
+#: off; the event-loop health tick every 1 s instead of 20 ms and the system monitor (psutil samples for the
+#: dashboard) every 10 s instead of 0.5 s, in each worker and in the client's scheduler.
+LOCAL_CLUSTER_CONFIG: dict[str, object] = {"distributed.worker.profile.enabled": False,
+                                           "distributed.admin.tick.interval": "1s",
+                                           "distributed.admin.system-monitor.interval": "10s"}
+
+
 def local_cluster(workers: int):
     """A dask LocalCluster of ``workers`` single-threaded processes on this machine, with no dashboard.
 
     dask's scheduler serves HTTP (health, metrics) even with the dashboard off, on port 8787 unless told
     otherwise: a second cluster on the machine (two sweeps, a test run beside a notebook) then warns "Port 8787
     is already in use". Ours listens on a free port of the loopback instead."""
+    import dask
     from dask.distributed import LocalCluster
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):        # read by the scheduler, the nannies and (through them) workers
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
 
 
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,

@@ -202,3 +202,28 @@ def test_a_local_cluster_leaves_port_8787_alone():
     finally:
         holder.close()
     assert not [w for w in caught if "already in use" in str(w.message)]
+
+
+@pytest.mark.slow
+def test_a_local_cluster_spends_nothing_on_the_dashboard_it_does_not_serve():
+    """A sweep's worker ran dask's statistical profiler (a thread sampling the variant's stack every 10 ms), its
+    event-loop tick every 20 ms and its system monitor every 0.5 s, all for a dashboard that is off: ~4 % of a
+    core beside each worker (bench/sweep_cpu.py). The local cluster's scheduler and workers run with them off or
+    slow; the client's own dask settings are left as they were."""
+    import dask
+    from dask.distributed import Client
+
+    from ncfmu.batch import local_cluster
+
+    def settings() -> tuple:
+        return (dask.config.get("distributed.worker.profile.enabled"),
+                dask.config.get("distributed.admin.tick.interval"),
+                dask.config.get("distributed.admin.system-monitor.interval"))
+    before = settings()
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        on_worker = next(iter(client.run(settings).values()))
+        callbacks = cluster.scheduler.periodic_callbacks      # the scheduler, in this process
+        scheduler = (callbacks["tick"].callback_time, callbacks["monitor"].callback_time)
+    assert on_worker == (False, "1s", "10s")
+    assert scheduler == (1000.0, 10000.0)             # ms
+    assert settings() == before
