@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import asyncio
 import datetime
+import gc
 import ipaddress
 import logging
 import math
@@ -1342,6 +1343,11 @@ class LiveServer:
             said = os.strerror(err.errno).lower() if err.errno else str(err)
             raise ConfigError("--endpoint", self.endpoint, f"cannot listen there: {said}") from None
         watch: asyncio.Task | None = None
+        # what was built (the address space; with --cnc the OPC 40502 NodeSet import: ~5 s, many objects) lives
+        # for the whole serve: collected once and frozen here, before the clock starts, so that no full
+        # collection walks it in the paced loop (bench/serve_lag.py: a ~200 ms stall in every --cnc run)
+        gc.collect()
+        gc.freeze()
         try:
             self.runner.start()
             if self.watchdog is not None:
@@ -1359,6 +1365,7 @@ class LiveServer:
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
         finally:
+            gc.unfreeze()
             if watch is not None:
                 watch.cancel()
             if self.runner.thread.is_alive():      # the server failed: the FMUs must not step on while closed
