@@ -24,8 +24,10 @@ methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a
 session forced are released when it closes or is silent the watchdog's time.
 
 A crash is published as it happens (a system with a part check: the lathes, the mill): the simulation thread
-hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; at the first crash
-the simulation halts, as a machine's collision monitor stops it -- ``Simulation.state`` ``crashed``,
+hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; the check runs in a
+third thread (``ncfmu-part-check``), at most one hand-over behind (at --speed 0 each is waited for); at the
+first crash the simulation halts (above speed 0 up to one hand-over later; the crash's time, line and depth
+are those of the rows up to the halt, as a synchronous check has them), as a machine's collision monitor stops it -- ``Simulation.state`` ``crashed``,
 ``Simulation.reason`` and ``Simulation.crash`` the crash (time, program line, what, how deep),
 ``Simulation.crashes`` how many -- and the ``Simulation`` object emits a ``CrashEventType`` event (Message the
 same text, Severity 900, and the fields ``SimulationTime``, ``Line``, ``What``, ``DepthMm``). Reset starts
@@ -253,12 +255,29 @@ def crash_text(c) -> str:
 
 class CrashWatch:
     """A served run's part check: its accumulator is one of the session's sinks (a new one after each Reset),
-    and the crashes it saw so far are read after each hand-over of rows."""
+    and the crashes it saw so far are read after each hand-over of rows.
+
+    The check's work (shapely: 1-17 ms a hand-over for the lathes, measured) runs in a thread of its own,
+    ``ncfmu-part-check``, at most one hand-over behind: the simulation thread hands a copy of the rows over and
+    goes on; the next hand-over first waits for the previous check. With :attr:`wait_every_time` (--speed 0)
+    each hand-over waits for its own check too: the run is deterministic. What the check says comes from the
+    rows, not from when it judged them."""
 
     def __init__(self, report, parameters, record: Sequence[str] | None = None) -> None:
         self.report, self.parameters = report, parameters
         self.record = list(record) if record else None       # --record: what the recording's sinks keep
-        self.accumulator = self.new()
+        #: wait for each hand-over's check (--speed 0); else a check runs beside the next hand-over's steps
+        self.wait_every_time = False
+        #: a check finished since :meth:`crashes` was last read
+        self.fresh = False
+        self._jobs: queue.SimpleQueue[tuple[object, np.ndarray] | None] = queue.SimpleQueue()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._error: BaseException | None = None
+        self._seen: list = []
+        self._thread: threading.Thread | None = None
+        self._closed = False
+        self.accumulator = self.new_accumulator()
 
     def sinks(self, recording: Sequence) -> list:
         """A segment's sinks: the recording's (kept to ``--record``) and a new part check."""
@@ -266,13 +285,87 @@ class CrashWatch:
         kept = list(recording) if self.record is None else [SelectColumns(k, self.record) for k in recording]
         return [*kept, self.new()]
 
-    def new(self):
+    def new_accumulator(self):
+        self._idle.wait()               # the previous segment's last check done: what it finds is not this one's
         self.accumulator = self.report.accumulator(self.parameters)
+        self._seen, self.fresh = [], False
         return self.accumulator
 
+    def new(self) -> _PartCheckSink:
+        return _PartCheckSink(self, self.new_accumulator())
+
     def crashes(self) -> list:
+        """The crashes of the rows judged so far (up to the last hand-over whose check finished)."""
+        self.fresh = False
+        return list(self._seen)
+
+    def hand_over(self, accumulator, rows: np.ndarray) -> None:
+        """Give ``rows`` (copied: the session reuses its window) to the check, after the previous check."""
+        self.wait()
+        rows = np.array(rows, copy=True)
+        if self._closed:
+            self._judge(accumulator, rows)
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._main, name="ncfmu-part-check", daemon=True)
+            self._thread.start()
+        self._idle.clear()
+        self._jobs.put((accumulator, rows))
+        if self.wait_every_time:
+            self.wait()
+
+    def wait(self) -> None:
+        """Until the check handed over last is done; what it raised is raised here (the simulation fails)."""
+        self._idle.wait()
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def close(self) -> None:
+        """End the thread (the serve is over; what comes after is checked in the caller's thread)."""
+        self._closed = True
+        if self._thread is not None:
+            self._jobs.put(None)
+            self._thread.join()
+            self._thread = None
+
+    def _judge(self, accumulator, rows: np.ndarray) -> None:
         from .systems.part import crashes_so_far
-        return crashes_so_far(self.accumulator)
+        accumulator.write(rows)
+        if accumulator is self.accumulator:
+            self._seen = crashes_so_far(accumulator)
+            self.fresh = True
+
+    def _main(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            try:
+                self._judge(*job)
+            except BaseException as err:      # raised in the simulation thread at its next hand-over
+                self._error = err
+            finally:
+                self._idle.set()
+
+
+class _PartCheckSink:
+    """The part check's accumulator as a session sink whose ``write`` hands the rows to :class:`CrashWatch`'s
+    thread; ``open`` and ``close`` happen once the check is idle."""
+
+    def __init__(self, watch: CrashWatch, accumulator) -> None:
+        self.watch, self.accumulator = watch, accumulator
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self.watch.wait()
+        self.accumulator.open(columns)
+
+    def write(self, rows: np.ndarray) -> None:
+        self.watch.hand_over(self.accumulator, rows)
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.watch.wait()
+        self.accumulator.close(complete, stopped_at, reason)
 
 
 class PaceStats:
@@ -324,6 +417,8 @@ class Runner:
         self.state, self.reason = "running", ""
         #: the part check (None: the system has none), the crashes it saw and when it was last handed rows
         self.watch = watch
+        if watch is not None:
+            watch.wait_every_time = self.speed == 0      # as fast as possible: deterministic, as `ncfmu run`
         self.crashes: tuple = ()
         self._checked = float(session.time)
         self.stats = PaceStats()
@@ -427,19 +522,26 @@ class Runner:
             self._want_snapshot = True
         return rebase
 
-    def _check_crashes(self) -> None:
-        """Hand the rows so far to the part check; at its first crash the simulation halts ("crashed")."""
+    def _check_crashes(self, hand_over: bool) -> None:
+        """Hand the rows so far to the part check (``hand_over``) and read what it found; at its first crash
+        the simulation halts ("crashed"), with the crash's records those of every row up to the halt."""
         s = self.session
-        self._checked = float(s.time)
-        s.flush()
         assert self.watch is not None
+        if hand_over:
+            self._checked = float(s.time)
+            s.flush()
         crashes = self.watch.crashes()
         if len(crashes) > len(self.crashes):
-            first = crashes[len(self.crashes)]
-            self.crashes = tuple(crashes)
             if self.state == "running":
-                self.state, self.reason = "crashed", crash_text(first)
+                # the check may be a hand-over behind: the rows simulated since are judged before the halt
+                # (a crash goes deeper until it halts; its depth is the rows', as a synchronous check has it)
+                s.flush()
+                self.watch.wait()
+                crashes = self.watch.crashes()
+                self._checked = float(s.time)
+                self.state, self.reason = "crashed", crash_text(crashes[len(self.crashes)])
                 log.error("ncfmu serve: %s; the simulation halts (Reset starts again)", self.reason)
+            self.crashes = tuple(crashes)
             self._take_snapshot()
 
     def _main(self) -> None:
@@ -494,8 +596,11 @@ class Runner:
                 else:
                     n = min(FAST_CHUNK, remaining)
                 s.advance(n)
-                if self.watch is not None and s.time - self._checked >= CRASH_CHECK - 1e-9:
-                    self._check_crashes()
+                if self.watch is not None:
+                    if s.time - self._checked >= CRASH_CHECK - 1e-9:
+                        self._check_crashes(hand_over=True)
+                    elif self.watch.fresh:        # the check of the last hand-over finished meanwhile
+                        self._check_crashes(hand_over=False)
                 if self.speed > 0:
                     lag = _time.perf_counter() - (wall0 + (s.time - sim0) / self.speed)
                     self.lag = lag
@@ -1454,6 +1559,8 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             end = float(session.time)
             # a served run ends by being stopped: its recording is complete unless the simulation failed
             session.close(complete=runner.state != "failed", reason=runner.reason)
+            if watch is not None:
+                watch.close()
             if recorder is not None:
                 recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files
