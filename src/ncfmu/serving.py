@@ -24,18 +24,21 @@ methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a
 session forced are released when it closes or is silent the watchdog's time.
 
 A crash is published as it happens (a system with a part check: the lathes, the mill): the simulation thread
-hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; at the first crash
-the simulation halts, as a machine's collision monitor stops it -- ``Simulation.state`` ``crashed``,
-``Simulation.reason`` and ``Simulation.crash`` the crash (time, program line, what, how deep),
-``Simulation.crashes`` how many -- and the ``Simulation`` object emits a ``CrashEventType`` event (Message the
-same text, Severity 900, and the fields ``SimulationTime``, ``Line``, ``What``, ``DepthMm``). Reset starts
-again; Resume is refused.
+hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; the check runs in a
+third thread (``ncfmu-part-check``), at most one hand-over behind (at --speed 0 each is waited for); at the first
+crash the simulation halts (above speed 0 up to one hand-over later; the crash's time, line and depth are those
+of the rows up to the halt, as a synchronous check has them), as a machine's collision monitor stops it --
+``Simulation.state`` ``crashed``, ``Simulation.reason`` and ``Simulation.crash`` the crash (time, program line,
+what, how deep), ``Simulation.crashes`` how many -- and the ``Simulation`` object emits a ``CrashEventType``
+event (Message the same text, Severity 900, and the fields ``SimulationTime``, ``Line``, ``What``, ``DepthMm``).
+Reset starts again; Resume is refused.
 """
 
 from __future__ import annotations
 
 import asyncio
 import datetime
+import gc
 import ipaddress
 import logging
 import math
@@ -252,12 +255,29 @@ def crash_text(c) -> str:
 
 class CrashWatch:
     """A served run's part check: its accumulator is one of the session's sinks (a new one after each Reset),
-    and the crashes it saw so far are read after each hand-over of rows."""
+    and the crashes it saw so far are read after each hand-over of rows.
+
+    The check's work (shapely: 1-17 ms a hand-over for the lathes, measured) runs in a thread of its own,
+    ``ncfmu-part-check``, at most one hand-over behind: the simulation thread hands a copy of the rows over and
+    goes on; the next hand-over first waits for the previous check. With :attr:`wait_every_time` (--speed 0)
+    each hand-over waits for its own check too: the run is deterministic. What the check says comes from the
+    rows, not from when it judged them."""
 
     def __init__(self, report, parameters, record: Sequence[str] | None = None) -> None:
         self.report, self.parameters = report, parameters
         self.record = list(record) if record else None       # --record: what the recording's sinks keep
-        self.accumulator = self.new()
+        #: wait for each hand-over's check (--speed 0); else a check runs beside the next hand-over's steps
+        self.wait_every_time = False
+        #: a check finished since :meth:`crashes` was last read
+        self.fresh = False
+        self._jobs: queue.SimpleQueue[tuple[object, np.ndarray] | None] = queue.SimpleQueue()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._error: BaseException | None = None
+        self._seen: list = []
+        self._thread: threading.Thread | None = None
+        self._closed = False
+        self.accumulator = self.new_accumulator()
 
     def sinks(self, recording: Sequence) -> list:
         """A segment's sinks: the recording's (kept to ``--record``) and a new part check."""
@@ -265,13 +285,87 @@ class CrashWatch:
         kept = list(recording) if self.record is None else [SelectColumns(k, self.record) for k in recording]
         return [*kept, self.new()]
 
-    def new(self):
+    def new_accumulator(self):
+        self._idle.wait()               # the previous segment's last check done: what it finds is not this one's
         self.accumulator = self.report.accumulator(self.parameters)
+        self._seen, self.fresh = [], False
         return self.accumulator
 
+    def new(self) -> _PartCheckSink:
+        return _PartCheckSink(self, self.new_accumulator())
+
     def crashes(self) -> list:
+        """The crashes of the rows judged so far (up to the last hand-over whose check finished)."""
+        self.fresh = False
+        return list(self._seen)
+
+    def hand_over(self, accumulator, rows: np.ndarray) -> None:
+        """Give ``rows`` (copied: the session reuses its window) to the check, after the previous check."""
+        self.wait()
+        rows = np.array(rows, copy=True)
+        if self._closed:
+            self._judge(accumulator, rows)
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._main, name="ncfmu-part-check", daemon=True)
+            self._thread.start()
+        self._idle.clear()
+        self._jobs.put((accumulator, rows))
+        if self.wait_every_time:
+            self.wait()
+
+    def wait(self) -> None:
+        """Until the check handed over last is done; what it raised is raised here (the simulation fails)."""
+        self._idle.wait()
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def close(self) -> None:
+        """End the thread (the serve is over; what comes after is checked in the caller's thread)."""
+        self._closed = True
+        if self._thread is not None:
+            self._jobs.put(None)
+            self._thread.join()
+            self._thread = None
+
+    def _judge(self, accumulator, rows: np.ndarray) -> None:
         from .systems.part import crashes_so_far
-        return crashes_so_far(self.accumulator)
+        accumulator.write(rows)
+        if accumulator is self.accumulator:
+            self._seen = crashes_so_far(accumulator)
+            self.fresh = True
+
+    def _main(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            try:
+                self._judge(*job)
+            except BaseException as err:      # raised in the simulation thread at its next hand-over
+                self._error = err
+            finally:
+                self._idle.set()
+
+
+class _PartCheckSink:
+    """The part check's accumulator as a session sink whose ``write`` hands the rows to :class:`CrashWatch`'s
+    thread; ``open`` and ``close`` happen once the check is idle."""
+
+    def __init__(self, watch: CrashWatch, accumulator) -> None:
+        self.watch, self.accumulator = watch, accumulator
+
+    def open(self, columns: list[tuple[str, np.dtype]]) -> None:
+        self.watch.wait()
+        self.accumulator.open(columns)
+
+    def write(self, rows: np.ndarray) -> None:
+        self.watch.hand_over(self.accumulator, rows)
+
+    def close(self, complete: bool, stopped_at: float | None = None, reason: str = "") -> None:
+        self.watch.wait()
+        self.accumulator.close(complete, stopped_at, reason)
 
 
 class PaceStats:
@@ -323,6 +417,8 @@ class Runner:
         self.state, self.reason = "running", ""
         #: the part check (None: the system has none), the crashes it saw and when it was last handed rows
         self.watch = watch
+        if watch is not None:
+            watch.wait_every_time = self.speed == 0      # as fast as possible: deterministic, as `ncfmu run`
         self.crashes: tuple = ()
         self._checked = float(session.time)
         self.stats = PaceStats()
@@ -426,19 +522,26 @@ class Runner:
             self._want_snapshot = True
         return rebase
 
-    def _check_crashes(self) -> None:
-        """Hand the rows so far to the part check; at its first crash the simulation halts ("crashed")."""
+    def _check_crashes(self, hand_over: bool) -> None:
+        """Hand the rows so far to the part check (``hand_over``) and read what it found; at its first crash
+        the simulation halts ("crashed"), with the crash's records those of every row up to the halt."""
         s = self.session
-        self._checked = float(s.time)
-        s.flush()
         assert self.watch is not None
+        if hand_over:
+            self._checked = float(s.time)
+            s.flush()
         crashes = self.watch.crashes()
         if len(crashes) > len(self.crashes):
-            first = crashes[len(self.crashes)]
-            self.crashes = tuple(crashes)
             if self.state == "running":
-                self.state, self.reason = "crashed", crash_text(first)
+                # the check may be a hand-over behind: the rows simulated since are judged before the halt
+                # (a crash goes deeper until it halts; its depth is the rows', as a synchronous check has it)
+                s.flush()
+                self.watch.wait()
+                crashes = self.watch.crashes()
+                self._checked = float(s.time)
+                self.state, self.reason = "crashed", crash_text(crashes[len(self.crashes)])
                 log.error("ncfmu serve: %s; the simulation halts (Reset starts again)", self.reason)
+            self.crashes = tuple(crashes)
             self._take_snapshot()
 
     def _main(self) -> None:
@@ -493,8 +596,11 @@ class Runner:
                 else:
                     n = min(FAST_CHUNK, remaining)
                 s.advance(n)
-                if self.watch is not None and s.time - self._checked >= CRASH_CHECK - 1e-9:
-                    self._check_crashes()
+                if self.watch is not None:
+                    if s.time - self._checked >= CRASH_CHECK - 1e-9:
+                        self._check_crashes(hand_over=True)
+                    elif self.watch.fresh:        # the check of the last hand-over finished meanwhile
+                        self._check_crashes(hand_over=False)
                 if self.speed > 0:
                     lag = _time.perf_counter() - (wall0 + (s.time - sim0) / self.speed)
                     self.lag = lag
@@ -612,15 +718,19 @@ class _Mirror:
 
 
 async def build_cnc_model(server, idx: int, system: str, components: Mapping[str, str],
-                          points: Mapping[str, Point]) -> list[_Mirror]:
+                          points: Mapping[str, Point], values: Mapping[str, object] | None = None) -> list[_Mirror]:
     """The served system as an OPC 40502 ``CncInterfaceType`` object ``Objects/CncInterface`` (NodeIds
     ``ns=<idx>;s=Cnc...``): ``CncAxisList`` (an axis per servo axis: ``PosDirect``/``PosIndirect`` ``ActPos`` =
     the axis's ``pos``, ``CmdPos`` = its ``pos_cmd``, ``RemDist`` = CmdPos - ActPos, mm, with EngineeringUnits and
-    EURange; ``ActStatus`` in position or moving; ``ActTorque``), ``CncChannelList`` (a channel per NC cycle
-    controller: program status, the system's name as the active program, the block -- the part program's line
-    where the controller says it, else its block number --, feed override %, feed hold, mode automatic) and
-    ``CncSpindleList`` (a spindle per spindle drive: speeds, status, turn direction). The mirrors that keep
-    them current."""
+    EURange; ``ActStatus`` in position or moving; ``ActTorque`` within +-``torque_max``), ``CncChannelList`` (a
+    channel per NC cycle controller: program status, the system's name as the active program, the block -- the
+    part program's line where the controller says it, else its block number --, feed override % within its
+    port's range, feed hold, mode automatic) and ``CncSpindleList`` (a spindle per spindle drive: speeds within
+    +-``speed_max``, torque, power, status, turn direction). With one channel, each drive's ``ActChannel`` is
+    it. What the served system has nothing for: a mandatory variable reads Bad_NotConnected (never the 0 or the
+    empty value a client would take for known), an optional one is left out (:func:`_settle_unvalued`).
+    ``values``: the served values at the start (the parameters' for the ranges). The mirrors that keep the
+    model current."""
     from asyncua import ua
 
     from . import __version__
@@ -628,6 +738,8 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
     from .controllers.cycle import CycleController
     await server.import_xml(xmlstring=cnc_types_xml())
     cnc = await server.get_namespace_index(CNC_NAMESPACE)
+    start = dict(values or {})
+    fed: set = set()            # the NodeIds of what ncfmu writes or mirrors
 
     def nid(name: str):
         return ua.NodeId(ua.String(name), ua.Int16(idx))
@@ -643,15 +755,30 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
                 await server.delete_nodes([c], recursive=True)
         return obj
 
-    async def not_known(parent, prefix: str) -> None:
-        # mandatory positions the served system does not know, the structure and its parts: Bad_NotConnected
-        # ("should receive its value from another variable, but has never been configured to do so"; the value
-        # Null), never the type's 0 that a client would take for a position
-        unknown = ua.DataValue(ua.Variant(), StatusCode=ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotConnected)))
-        for c in await parent.get_children():
-            if (await c.read_browse_name()).Name.startswith(prefix):
-                for node in (c, *await c.get_children(refs=ua.ObjectIds.HasComponent)):
-                    await server.write_attribute_value(node.nodeid, unknown)
+    async def child(parent, path: str):
+        # the NodeSet's own browse names, or OPC UA's (an AnalogUnitType's EURange is 0:EURange)
+        node = parent
+        for p in path.split("/"):
+            try:
+                node = await node.get_child([f"{cnc}:{p}"])
+            except ua.UaStatusCodeError:
+                node = await node.get_child([f"0:{p}"])
+        return node
+
+    async def put(parent, path: str, value) -> None:
+        node = await child(parent, path)
+        await node.write_value(value)
+        fed.add(node.nodeid)
+
+    def limit(name: str) -> float | None:
+        v = start.get(name)
+        return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v > 0 else None
+
+    async def symmetric(parent, path: str, name: str, scale: float = 1.0) -> None:
+        # a range ncfmu knows: +- a limit parameter of the component (speed_max, torque_max, power_max)
+        v = limit(name)
+        if v is not None:
+            await put(parent, f"{path}/EURange", ua.Range(Low=-v * scale, High=v * scale))
     iface = await add(server.nodes.objects, "CncInterface", "Cnc", 1007)
     for name, value in (("VendorName", "ncfmu"), ("VendorRevision", __version__), ("Version", "1.00"),
                         ("CncTypeName", f"ncfmu {system}")):
@@ -660,13 +787,15 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
         except ua.UaStatusCodeError:             # an optional property: added
             node = await iface.add_property(nid(f"Cnc.{name}"), ua.QualifiedName(name, cnc), value)
         await node.write_value(ua.Variant(value, ua.VariantType.String))
+        fed.add(node.nodeid)
     mirrors: list[_Mirror] = []
     D, I32, B, S, U32 = (ua.VariantType.Double, ua.VariantType.Int32, ua.VariantType.Boolean,
                          ua.VariantType.String, ua.VariantType.UInt32)
 
     async def mirror(parent, path: str, vtype, fn) -> None:
-        node = await parent.get_child([f"{cnc}:{p}" for p in path.split("/")])
+        node = await child(parent, path)
         mirrors.append(_Mirror(node, vtype, fn))
+        fed.add(node.nodeid)
 
     def real(name: str) -> Callable[[Mapping[str, object]], float]:
         return lambda v: float(v.get(name) or 0.0)          # type: ignore[arg-type]
@@ -677,9 +806,11 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
     spindle_list = await iface.get_child([f"{cnc}:CncSpindleList"])
     channel_list = await iface.get_child([f"{cnc}:CncChannelList"])
     channel_id = 0
+    drives, channels = [], []
     for inst, model in components.items():
         if model in CNC_AXIS_MODELS:
             axis = await add(axis_list, inst, f"Cnc.{inst}", 1004)
+            drives.append(axis)
             pos, cmd = f"{inst}.pos", f"{inst}.pos_cmd"
             low = points[cmd].minimum if cmd in points else None
             high = points[cmd].maximum if cmd in points else None
@@ -687,8 +818,8 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
                                   DisplayName=ua.LocalizedText("mm"), Description=ua.LocalizedText("millimetre"))
             span = ua.Range(Low=-math.inf if low is None else low, High=math.inf if high is None else high)
             for which in ("PosDirect", "PosIndirect"):
-                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EngineeringUnits"])).write_value(eu)
-                await (await axis.get_child([f"{cnc}:{which}", f"{cnc}:EURange"])).write_value(span)
+                await put(axis, f"{which}/EngineeringUnits", eu)
+                await put(axis, f"{which}/EURange", span)
                 # the position variable's own value, the structure of the three (what a client reads whole)
                 await mirror(axis, which, ua.VariantType.ExtensionObject, lambda v, pos=pos, cmd=cmd: position(
                     ActPos=real(pos)(v), CmdPos=real(cmd)(v), RemDist=real(cmd)(v) - real(pos)(v)))
@@ -699,23 +830,34 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
             await mirror(axis, "ActStatus", I32, lambda v, inst=inst: AXIS_IN_POSITION
                          if v.get(f"{inst}.in_position") else AXIS_MOVING)
             await mirror(axis, "ActTorque", D, real(f"{inst}.torque"))
+            await symmetric(axis, "ActTorque", f"{inst}.torque_max")
             await mirror(axis, "IsInactive", B, lambda v, inst=inst: not v.get(f"{inst}.enable", True))
-            await (await axis.get_child([f"{cnc}:IsReferenced"])).write_value(True)
+            await put(axis, "IsReferenced", True)
+            await put(axis, "IsRotational", False)         # a servo axis of ncfmu is linear, in mm
+            await put(axis, "IsVirtual", False)
         elif model in CNC_SPINDLE_MODELS:
             spindle = await add(spindle_list, inst, f"Cnc.{inst}", 1005)
-            await not_known(spindle, "AnglePos")        # a spindle drive has a speed, no angle
+            drives.append(spindle)
             speed, cmd = f"{inst}.speed", f"{inst}.speed_cmd"
             await mirror(spindle, "ActSpeed", D, real(speed))
             await mirror(spindle, "CmdSpeed", D, real(cmd))
+            for which in ("ActSpeed", "CmdSpeed"):      # rev/min, signed: as the NodeSet's min⁻¹
+                await symmetric(spindle, which, f"{inst}.speed_max")
+            await mirror(spindle, "ActTorque", D, real(f"{inst}.torque"))
+            await symmetric(spindle, "ActTorque", f"{inst}.torque_max")
+            await mirror(spindle, "ActPower", D, lambda v, inst=inst: 1e3 * real(f"{inst}.power")(v))   # kW -> W
+            await symmetric(spindle, "ActPower", f"{inst}.power_max", 1e3)
             await mirror(spindle, "ActStatus", I32, lambda v, inst=inst, speed=speed: SPINDLE_STOPPED
                          if abs(real(speed)(v)) < 1e-9 else SPINDLE_IN_TARGET if v.get(f"{inst}.at_speed")
                          else SPINDLE_ACCELERATING)
             await mirror(spindle, "ActTurnDirection", I32, lambda v, speed=speed: TURN_NONE
                          if abs(real(speed)(v)) < 1e-9 else TURN_CW if real(speed)(v) > 0 else TURN_CCW)
+            await mirror(spindle, "IsInactive", B, lambda v, inst=inst: not v.get(f"{inst}.enable", True))
+            await put(spindle, "IsVirtual", False)
         elif model in logic and issubclass(logic[model], CycleController):
             channel_id += 1
             channel = await add(channel_list, inst, f"Cnc.{inst}", 1002)
-            await not_known(channel, "PosTcp")          # the tool centre point's, in each coordinate system
+            channels.append(channel)
             block = next((f"{inst}.{b}" for b in ("line", "block_no", "pc", "segment") if f"{inst}.{b}" in points),
                          None)
 
@@ -733,16 +875,71 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
                          if st(v) == PROGRAM_INTERRUPTED else CHANNEL_RESET)
             await mirror(channel, "ActProgramBlock", S, lambda v, block=block: "" if block is None
                          else str(v.get(block, "")))
-            await mirror(channel, "ActOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
-            await mirror(channel, "CmdOverride", D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+            override = points.get(f"{inst}.feed_override")
+            for which in ("ActOverride", "CmdOverride"):
+                await mirror(channel, which, D, lambda v, inst=inst: 100.0 * real(f"{inst}.feed_override")(v))
+                if override is not None and override.minimum is not None and override.maximum is not None:
+                    await put(channel, f"{which}/EURange", ua.Range(Low=100.0 * override.minimum,
+                                                                    High=100.0 * override.maximum))
             await mirror(channel, "FeedHold", B, lambda v, inst=inst: bool(v.get(f"{inst}.feed_hold")))
             fixed: tuple[tuple[str, object, object], ...]
             fixed = (("ActProgramName", system, S), ("ActMainProgramName", system, S),
                      ("ActOperationMode", MODE_AUTOMATIC, I32), ("CmdOperationMode", MODE_AUTOMATIC, I32),
-                     ("Id", channel_id, U32))
+                     ("Id", channel_id, U32), ("BlockMode", False, B))      # no single-block mode in ncfmu
             for prop, fixed_value, vt in fixed:
-                await (await channel.get_child([f"{cnc}:{prop}"])).write_value(ua.Variant(fixed_value, vt))
+                await put(channel, prop, ua.Variant(fixed_value, vt))
+    if len(channels) == 1:                      # one channel: every drive is its
+        for drive in drives:
+            await put(drive, "ActChannel", ua.Variant(channels[0].nodeid, ua.VariantType.NodeId))
+    await _settle_unvalued(server, iface, fed)
     return mirrors
+
+
+async def _settle_unvalued(server, iface, fed: set) -> None:
+    """What the served system has nothing for, below ``iface`` (the variables not in ``fed``): an optional one
+    (its instance declaration's ModellingRule) is deleted; a mandatory one reads Bad_NotConnected ("should
+    receive its value from another variable, but has never been configured to do so"), the value Null -- never
+    the Good 0, "" or Null that asyncua instantiated it with, which a client takes for known. The
+    EngineeringUnits the NodeSet declares (N·m, %, min⁻¹ ...) stay: a unit is the type's, not a value."""
+    from asyncua import ua
+    from asyncua.common.ua_utils import get_node_supertypes
+    optional = {ua.NodeId(ua.Int32(ua.ObjectIds.ModellingRule_Optional)),
+                ua.NodeId(ua.Int32(ua.ObjectIds.ModellingRule_OptionalPlaceholder))}
+    unknown = ua.DataValue(ua.Variant(), StatusCode=ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotConnected)))
+    declared: dict = {}
+
+    async def declarations(decl) -> dict:
+        # as asyncua instantiates: the children of the type or declaration and of its supertypes, lowest first
+        key = decl.nodeid
+        if key not in declared:
+            found: dict = {}
+            for parent in await get_node_supertypes(decl, includeitself=True):
+                for d in await parent.get_children_descriptions():
+                    found.setdefault(d.BrowseName.Name, server.get_node(d.NodeId))
+            declared[key] = found
+        return declared[key]
+
+    async def settle(node, decl) -> None:
+        decls = await declarations(decl) if decl is not None else {}
+        for child in await node.get_children():
+            name = (await child.read_browse_name()).Name
+            cls = await child.read_node_class()
+            if cls not in (ua.NodeClass.Object, ua.NodeClass.Variable):
+                continue
+            d = decls.get(name)
+            if d is None:                   # ncfmu's own (an axis, a spindle, a channel): from its type
+                d = await child.read_type_definition()
+                d = server.get_node(d) if d is not None else None
+            if cls == ua.NodeClass.Variable and child.nodeid not in fed:
+                if name == "EngineeringUnits" and (await child.read_value()) is not None:
+                    continue
+                rule = await d.get_referenced_nodes(refs=ua.ObjectIds.HasModellingRule) if d is not None else []
+                if rule and rule[0].nodeid in optional:
+                    await server.delete_nodes([child], recursive=True)
+                    continue
+                await server.write_attribute_value(child.nodeid, unknown)
+            await settle(child, d)
+    await settle(iface, server.get_node(await iface.read_type_definition()))
 
 
 # -- the OPC UA server -----------------------------------------------------------------------------------
@@ -1029,7 +1226,8 @@ class LiveServer:
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
                                 self._release_method, [arg], [])
         if self.cnc_components is not None:
-            self._mirrors = await build_cnc_model(server, idx, self.system_name, self.cnc_components, self.points)
+            self._mirrors = await build_cnc_model(server, idx, self.system_name, self.cnc_components, self.points,
+                                                  snap.values)
         service = server.iserver.attribute_service
         self._asyncua_write = service.write
         service.write = self._write      # type: ignore[method-assign]  # why: see _write
@@ -1342,6 +1540,11 @@ class LiveServer:
             said = os.strerror(err.errno).lower() if err.errno else str(err)
             raise ConfigError("--endpoint", self.endpoint, f"cannot listen there: {said}") from None
         watch: asyncio.Task | None = None
+        # what was built (the address space; with --cnc the OPC 40502 NodeSet import: ~5 s, many objects) lives
+        # for the whole serve: collected once and frozen here, before the clock starts, so that no full
+        # collection walks it in the paced loop (bench/serve_lag.py: a ~200 ms stall in every --cnc run)
+        gc.collect()
+        gc.freeze()
         try:
             self.runner.start()
             if self.watchdog is not None:
@@ -1359,6 +1562,7 @@ class LiveServer:
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
         finally:
+            gc.unfreeze()
             if watch is not None:
                 watch.cancel()
             if self.runner.thread.is_alive():      # the server failed: the FMUs must not step on while closed
@@ -1447,6 +1651,8 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             end = float(session.time)
             # a served run ends by being stopped: its recording is complete unless the simulation failed
             session.close(complete=runner.state != "failed", reason=runner.reason)
+            if watch is not None:
+                watch.close()
             if recorder is not None:
                 recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files

@@ -462,3 +462,86 @@ def test_the_cnc_companion_model_shows_each_axis_position_and_the_channel(ncfmu_
             assert await (await read("FeedHold")).read_value() is True
     run(hmi())
     assert served.stop() == 0, served.output
+
+
+async def _cnc_variables(c, iface) -> dict[str, ua.DataValue]:
+    """Every Variable under the CncInterface object (through its objects and variables), path -> DataValue."""
+    found: dict[str, ua.DataValue] = {}
+
+    async def walk(node, path: str) -> None:
+        for child in await node.get_children():
+            name = (await child.read_browse_name()).Name
+            cls = await child.read_node_class()
+            here = f"{path}/{name}"
+            if cls == ua.NodeClass.Variable:
+                read = ua.ReadValueId(NodeId=child.nodeid, AttributeId=ua.AttributeIds.Value)
+                (found[here],) = await c.uaclient.read(ua.ReadParameters(NodesToRead=[read]))
+            if cls in (ua.NodeClass.Object, ua.NodeClass.Variable):
+                await walk(child, here)
+    await walk(iface, "CncInterface")
+    return found
+
+
+#: What ncfmu feeds of the companion model (build_cnc_model's docstring), relative to each object; every other
+#: variable there is one it has nothing for: a mandatory one says Bad_NotConnected, an optional one is not there.
+FED_AXIS = {"ActStatus", "IsReferenced", "IsRotational", "IsVirtual", "IsInactive", "ActChannel",
+            "ActTorque", "ActTorque/EngineeringUnits", "ActTorque/EURange",
+            *(f"{w}{p}" for w in ("PosDirect", "PosIndirect")
+              for p in ("", "/ActPos", "/CmdPos", "/RemDist", "/EngineeringUnits", "/EURange"))}
+FED_SPINDLE = {"ActStatus", "ActTurnDirection", "IsInactive", "IsVirtual", "ActChannel",
+               *(f"{v}{p}" for v in ("ActSpeed", "CmdSpeed", "ActTorque", "ActPower")
+                 for p in ("", "/EngineeringUnits", "/EURange"))}
+FED_CHANNEL = {"ActProgramStatus", "ActStatus", "ActProgramBlock", "FeedHold", "ActProgramName",
+               "ActMainProgramName", "ActOperationMode", "CmdOperationMode", "Id", "BlockMode",
+               *(f"{v}{p}" for v in ("ActOverride", "CmdOverride") for p in ("", "/EngineeringUnits", "/EURange"))}
+FED_INTERFACE = {"VendorName", "VendorRevision", "Version", "CncTypeName"}
+
+
+def _fed(path: str) -> bool:
+    if path.endswith("/EngineeringUnits"):
+        return True             # a unit is the NodeSet's (N·m, W, %, min⁻¹, mm/min: ncfmu's ports' units)
+    parts = path.split("/")[1:]
+    if len(parts) == 1:
+        return parts[0] in FED_INTERFACE
+    rest = "/".join(parts[2:])
+    fed = {"CncAxisList": FED_AXIS, "CncSpindleList": FED_SPINDLE, "CncChannelList": FED_CHANNEL}[parts[0]]
+    return rest in fed
+
+
+@pytest.mark.slow
+def test_no_cnc_companion_variable_reads_good_without_a_value(ncfmu_serve):
+    """A client reading the companion model sees a value or a status that says why there is none: Good with a
+    Null value (an EURange, an EngineeringUnits, a G-function list asyncua left empty) is neither. What ncfmu does
+    not feed is Bad_NotConnected, never the 0 asyncua fills a Double with (ActLoad, ActPower, ZeroOffset, a
+    spindle override of 0 %: an HMI shows them as measured); what it feeds reads Good; the ranges are the ports'."""
+    served = ncfmu_serve("lathe_roughing", "--speed", "2", "--cnc")
+
+    async def hmi():
+        async with connect(served) as p:
+            await p.wait_until("seq.busy", lambda v: v is True, timeout=30)
+            iface = await p.client.nodes.objects.get_child([f"{p.idx}:CncInterface"])
+            return await _cnc_variables(p.client, iface), await p.read("spindle.speed_max"), \
+                await p.read("x_axis.torque_max")
+    found, speed_max, torque_max = run(hmi())
+    assert len(found) > 100
+    empty = sorted(path for path, dv in found.items() if dv.StatusCode.is_good() and dv.Value.Value is None)
+    assert empty == [], empty
+    good = {path for path, dv in found.items() if dv.StatusCode.is_good()}
+    assert sorted(p for p in good if not _fed(p)) == []
+    assert sorted(p for p in found if _fed(p) and p not in good and not p.endswith("/EngineeringUnits")) == []
+    bad = {dv.StatusCode.value for path, dv in found.items() if path not in good}
+    assert bad == {ua.StatusCodes.BadNotConnected}
+    # the mandatory variables ncfmu has nothing for are there, saying so; the optional ones are not
+    for path in ("CncAxisList/x_axis/ActLoad", "CncAxisList/x_axis/ZeroOffset", "CncSpindleList/spindle/ActOverride",
+                 "CncChannelList/seq/ActFeedrate", "CncChannelList/seq/PosTcpBcsX/ActPos"):
+        assert f"CncInterface/{path}" in found and f"CncInterface/{path}" not in good, path
+    for path in ("Fix", "CncChannelList/seq/ActProgramLine", "CncChannelList/seq/ActMainProgramFileOffset"):
+        assert f"CncInterface/{path}" not in found, path
+    rng = {path: found[f"CncInterface/{path}/EURange"].Value.Value for path in (
+        "CncChannelList/seq/ActOverride", "CncSpindleList/spindle/CmdSpeed", "CncAxisList/x_axis/ActTorque")}
+    assert (rng["CncChannelList/seq/ActOverride"].Low, rng["CncChannelList/seq/ActOverride"].High) == (0.0, 150.0)
+    assert (rng["CncSpindleList/spindle/CmdSpeed"].Low, rng["CncSpindleList/spindle/CmdSpeed"].High) == \
+        (-speed_max, speed_max)
+    assert (rng["CncAxisList/x_axis/ActTorque"].Low, rng["CncAxisList/x_axis/ActTorque"].High) == \
+        (-torque_max, torque_max)
+    assert served.stop() == 0, served.output
