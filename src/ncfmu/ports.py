@@ -12,6 +12,8 @@ import re
 from dataclasses import dataclass
 from typing import Literal, SupportsFloat, SupportsIndex, SupportsInt
 
+from .mypyc_compat import mypyc_attr
+
 PortType = Literal["Real", "Integer", "Boolean", "String"]
 Causality = Literal["parameter", "input", "output"]
 #: The value of one variable: a Real, Integer, Boolean or String.
@@ -41,6 +43,7 @@ DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
 }
 
 
+@mypyc_attr(native_class=False)
 @dataclass(frozen=True)
 class Port:
     """One FMI variable of a controller.
