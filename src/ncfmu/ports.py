@@ -43,7 +43,7 @@ DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
 }
 
 
-@mypyc_attr(native_class=False)
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Port:
     """One FMI variable of a controller.

@@ -14,14 +14,12 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 from ..errors import ConfigError
-from ..mypyc_compat import mypyc_attr
 from ..ports import Port, boolean, real, to_float, to_int
 
 #: An entry of a counted table: ``block[3].Xd`` (counted by ``n_blocks``).
 _TABLE_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
-@mypyc_attr(native_class=False)
 class Controller:
     """Base class of the controller logic behind every ncfmu FMU.
 
@@ -248,7 +246,6 @@ POSITION_LIMIT = 1.0e5
 SPEED_LIMIT = 2000.0
 
 
-@mypyc_attr(native_class=False)
 class PositionGuard:
     """Judges position inputs every step: finite, within ``POSITION_LIMIT``, and no jump beyond
     ``SPEED_LIMIT * dt`` since the last step (the first step after ``reset()`` has nothing to compare)."""
@@ -288,7 +285,6 @@ class PositionGuard:
         raise AssertionError("called for an absurd input only")
 
 
-@mypyc_attr(native_class=False)
 class OverrideDial:
     """A feed-override input: clamped to 0..``hi``; a value outside is said once per excursion."""
 

@@ -37,7 +37,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
-from ..mypyc_compat import mypyc_attr
 from ..ports import Port, real
 from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, finite_inputs, real_param
 
@@ -64,7 +63,6 @@ def cycle_ports(what: str = "a motion", *names: str) -> tuple[Port, ...]:
     return tuple(ports[n] for n in (names or tuple(ports)))
 
 
-@mypyc_attr(native_class=False)
 class Button:
     """A push-button input read for its rising edge."""
 
@@ -77,7 +75,6 @@ class Button:
         return edge
 
 
-@mypyc_attr(native_class=False)
 class InPosition:
     """Decides when a motion has ended (see the module docstring), one judgement per step.
 
@@ -123,7 +120,6 @@ def follow_up(actual: Mapping[str, float], command: Mapping[str, float], band: f
     return [axis for axis in command if abs(actual[axis] - command[axis]) > band]
 
 
-@mypyc_attr(native_class=False)
 class CycleController(Controller):
     """Base of the controllers that run cycles on servo axes (:data:`AXES`): the skeleton's parameters,
     state, judgements and the order of a step (:meth:`step`). A subclass lists :func:`cycle_ports` among its

@@ -102,7 +102,7 @@ LATHE = Dialect(
 )
 
 
-@mypyc_attr(native_class=False)
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Setup:
     """What a lathe program is read with besides its text: the sequencer's parameters."""
@@ -114,7 +114,7 @@ class Setup:
     block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
 
 
-@mypyc_attr(native_class=False)
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class _Modes:
     motion: int | None = None
@@ -191,7 +191,7 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
     return Line(here, end), end
 
 
-@mypyc_attr(native_class=False)
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class _Cycle:
     code: int

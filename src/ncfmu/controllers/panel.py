@@ -18,7 +18,7 @@ from ..ports import boolean, integer, real
 from .base import Controller, real_param
 
 
-@mypyc_attr(native_class=False)
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class OperatorPanel(Controller):
     MODEL_NAME = "OperatorPanel"
     DESCRIPTION = ("Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; "

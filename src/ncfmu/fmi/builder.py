@@ -56,12 +56,16 @@ FMU_RUNTIME = ("__init__.py", "errors.py", "mypyc_compat.py", "ports.py", "contr
 
 
 #: The runtime modules compiled with mypyc (the lathe's controllers, bench/mypyc_probe.py): every stateful class in
-#: them is ``@mypyc_attr(native_class=False)`` (compiled methods, a ``__dict__`` kept for fmi/state.py and deepcopy).
-#: Not compilable, so shipped as sources only: ``errors.py`` (mypyc cannot subclass builtin exceptions) and
-#: ``controllers/contour.py`` (an instance attribute read through the class).
-COMPILED = ("ports.py", "controllers/base.py", "controllers/motion.py", "controllers/cycle.py",
-            "controllers/panel.py", "controllers/sequencer.py", "controllers/limiter.py", "controllers/geometry.py",
-            "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
+#: them is ``@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)`` (compiled methods, a ``__dict__``
+#: kept for fmi/state.py and deepcopy). Shipped as sources only: ``errors.py`` (mypyc cannot subclass builtin
+#: exceptions), ``controllers/contour.py`` (an instance attribute read through the class), and the bases
+#: ``controllers/base.py`` and ``controllers/cycle.py``: contour.py's and feed.py's controllers subclass them, and
+#: a compiled method checks ``self`` for exactly its compiled class or one compiled subclass (mypyc 2.4.1, even
+#: with ``allow_interpreted_subclasses=True`` on an interpreted class: ``CycleController object expected; got
+#: ProgrammableFeed``).
+COMPILED = ("ports.py", "controllers/motion.py", "controllers/panel.py", "controllers/sequencer.py",
+            "controllers/limiter.py", "controllers/geometry.py", "controllers/gcode.py", "controllers/g7x.py",
+            "controllers/lathe_program.py")
 #: Where compiled runtimes are kept, one folder per runtime digest and Python ABI (``NCFMU_CACHE`` overrides the
 #: root ``~/.cache/ncfmu``).
 COMPILED_CACHE = "compiled"
@@ -303,14 +307,16 @@ def build_fmu(script: Path, dest_dir: Path, compiled: Path | None = None) -> Pat
         finally:
             if str(stage) in sys.path:
                 sys.path.remove(str(stage))
+        try:
+            target = dest_dir / f"{logic.MODEL_NAME}.fmu"
+            _rewrite(built, target, logic, f"{__version__}+{digest}", module, model)
+        finally:
             # pythonfmu imported the script (and the vendored package) from the stage, which is deleted below:
             # forget what this build imported, so the package an FMU of this build runs in this process is the
             # FMU's own copy (the next build of the same package name imports its own stage's)
             for name in set(sys.modules) - loaded:
                 if name == module or name.split(".")[0] == vendored or name.endswith("__mypyc"):
                     del sys.modules[name]
-        target = dest_dir / f"{logic.MODEL_NAME}.fmu"
-        _rewrite(built, target, logic, f"{__version__}+{digest}", module, model)
     if not has_binary(target, logic.MODEL_NAME):
         target.unlink()
         raise BuildError(f"{script.name}: the built FMU lacks {binary_name(logic.MODEL_NAME)}")
