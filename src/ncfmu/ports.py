@@ -12,8 +12,6 @@ import re
 from dataclasses import dataclass
 from typing import Literal, SupportsFloat, SupportsIndex, SupportsInt
 
-from .mypyc_compat import mypyc_attr
-
 PortType = Literal["Real", "Integer", "Boolean", "String"]
 Causality = Literal["parameter", "input", "output"]
 #: The value of one variable: a Real, Integer, Boolean or String.
@@ -43,7 +41,6 @@ DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
 }
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Port:
     """One FMI variable of a controller.

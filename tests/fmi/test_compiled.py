@@ -63,7 +63,7 @@ RUN_SYSTEM = textwrap.dedent("""
     with OpenSystem(archive) as opened:
         result = opened.run(stop_time=float(sys.argv[3]))
         files = {m: sys.modules[m].__file__ for m in sys.modules
-                 if m.startswith("ncfmu_") and m.endswith((".panel", ".sequencer", ".limiter"))}
+                 if m.startswith("ncfmu_") and m.endswith((".limiter", ".g7x", ".lathe_program"))}
         data = {name: result[name].copy() for name in result.names}
     pickle.dump({"data": data, "time": result.time.copy(), "files": files}, open(out, "wb"))
 """)
@@ -125,7 +125,8 @@ def test_a_run_loads_the_controllers_from_the_fmus_extensions(fmus):
         if name in got["files"]:
             f = Path(got["files"][name]).resolve()
             assert f.name.endswith(EXT) and root in f.parents, (name, f)
-    assert Path(got["files"][f"{package}.controllers.sequencer"]).name == f"sequencer{EXT}"
+    assert Path(got["files"][f"{package}.controllers.lathe_program"]).name == f"lathe_program{EXT}"
+    assert Path(got["files"][f"{package}.controllers.limiter"]).name == f"limiter{EXT}"
     assert got["files"][f"{package}.errors"].endswith("errors.py")
     assert any(m.endswith("__mypyc") for m in got["files"])
     assert len({tuple(r) for r in got["rows"]}) > 100                 # it ran: the commands moved step by step
@@ -144,8 +145,8 @@ def test_another_python_falls_back_to_the_sources(fmus, tmp_path):
             zout.writestr(name[:-len(EXT)] + alien if name.endswith(EXT) else name, zin.read(item))
     compiled, fallback = _step_one(fmu), _step_one(other)
     package = vendored_package(fmu)
-    assert compiled["files"][f"{package}.controllers.sequencer"].endswith(EXT)
-    assert fallback["files"][f"{package}.controllers.sequencer"].endswith("sequencer.py")
+    assert compiled["files"][f"{package}.controllers.lathe_program"].endswith(EXT)
+    assert fallback["files"][f"{package}.controllers.lathe_program"].endswith("lathe_program.py")
     assert not any(f and f.endswith(".so") for f in fallback["files"].values())
     assert fallback["rows"] == compiled["rows"]
 
@@ -155,8 +156,8 @@ def test_pure_and_compiled_builds_of_lathe_taper_give_identical_records(project,
     """The reference: lathe_taper from a pure build (``ncfmu build --pure``) and from the compiled build, each in
     its own process (both carry the same package name: in one process the first loaded would serve both),
     recorded bit for bit the same."""
-    from ncfmu.project import models_dir
     from ncfmu.cosim.ssp import pack, write_system
+    from ncfmu.project import models_dir
     from ncfmu.systems import get_system
     pure_fmus = build_all(models_dir(ROOT), tmp_path / "fmus", pure=True)
     for fmu in pure_fmus:

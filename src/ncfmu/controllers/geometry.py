@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from ..errors import NcfmuError
-from ..mypyc_compat import mypyc_attr
 
 Point = tuple[float, float]
 
@@ -37,7 +36,6 @@ EPS = 1e-9
 TWO_PI = 2.0 * math.pi
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class CornerError(NcfmuError):
     """The offset contour cannot be built at element ``index`` (0-based), for ``reason``; ``other`` is the
     element it collides with, if any (:meth:`describe` names it in the caller's terms)."""
@@ -51,7 +49,6 @@ class CornerError(NcfmuError):
         return self.reason.replace("{other}", names[self.other] if self.other is not None else "")
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Line:
     start: Point
@@ -88,7 +85,6 @@ class Line:
         return Line(self.point(s0), self.point(s1))
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Arc:
     """Circular arc: ``center``, ``radius``, start angle ``a0`` (rad), signed ``sweep`` (+ counter-clockwise)."""

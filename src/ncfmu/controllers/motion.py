@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 
-from ..mypyc_compat import mypyc_attr
 from .geometry import Arc, Element, Point
 
 #: On an arc: tangential and centripetal acceleration as fractions of ``accel`` (as the contour interpolator).
@@ -30,7 +29,6 @@ def stop_speed(room: float, v_old: float, accel: float, dt: float) -> float:
     return 2.0 * accel * rest / (half + math.sqrt(half * half + 2.0 * accel * rest))
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class LinearMove:
     """One straight move in n axes, advanced step by step.
 
@@ -128,7 +126,6 @@ def xz(p: Point) -> tuple[float, float]:
     return (p[1], p[0])
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class ElementMove(LinearMove):
     """:class:`.motion.LinearMove`'s online speed profile along a line or an arc of the (z, x) plane; positions
     and velocities in (x, z). On an arc the tangential acceleration is ``ARC_TANGENTIAL * accel`` and the speed

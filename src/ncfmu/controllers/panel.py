@@ -13,12 +13,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from ..errors import ConfigError
-from ..mypyc_compat import mypyc_attr
 from ..ports import boolean, integer, real
 from .base import Controller, real_param
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class OperatorPanel(Controller):
     MODEL_NAME = "OperatorPanel"
     DESCRIPTION = ("Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; "

@@ -48,7 +48,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from ..errors import require
-from ..mypyc_compat import mypyc_attr
 from ..ports import boolean, integer, real, string
 from . import lathe_program
 from .base import POSITION_LIMIT, int_param, real_param, servo_ports
@@ -76,7 +75,6 @@ X_START, Z_START = 10.0, 0.0
 STOCK_DIAMETER, STOCK_LENGTH = 19.0, 50.0
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class Block:
     """One tape block: the seed's registers Xf, Xd, Xp, Zp, N plus the block's rates. The defaults are no
@@ -141,7 +139,6 @@ def _tool_ports():
 _PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout"}
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class CutSequencer(CycleController):
     """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
 

@@ -55,17 +55,19 @@ FMU_RUNTIME = ("__init__.py", "errors.py", "mypyc_compat.py", "ports.py", "contr
                "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
 
 
-#: The runtime modules compiled with mypyc (the lathe's controllers, bench/mypyc_probe.py): every stateful class in
-#: them is ``@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)`` (compiled methods, a ``__dict__``
-#: kept for fmi/state.py and deepcopy). Shipped as sources only: ``errors.py`` (mypyc cannot subclass builtin
-#: exceptions), ``controllers/contour.py`` (an instance attribute read through the class), and the bases
-#: ``controllers/base.py`` and ``controllers/cycle.py``: contour.py's and feed.py's controllers subclass them, and
-#: a compiled method checks ``self`` for exactly its compiled class or one compiled subclass (mypyc 2.4.1, even
-#: with ``allow_interpreted_subclasses=True`` on an interpreted class: ``CycleController object expected; got
-#: ProgrammableFeed``).
-COMPILED = ("ports.py", "controllers/motion.py", "controllers/panel.py", "controllers/sequencer.py",
-            "controllers/limiter.py", "controllers/geometry.py", "controllers/gcode.py", "controllers/g7x.py",
-            "controllers/lathe_program.py")
+#: The runtime modules compiled with mypyc: those whose compiled form was measured faster in the FMUs
+#: (bench/README.md, 2026-12-02 `compiled` branch) -- the AreaLimiter -- and the lathe program's planner (g7x,
+#: gcode, lathe_program: run at configure, not per step). Every class in them is
+#: ``@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)`` (compiled methods, a ``__dict__`` kept for
+#: fmi/state.py and deepcopy). The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
+#: ``controllers/contour.py`` (an instance attribute read through the class), ``base.py`` and ``cycle.py``
+#: (contour.py's and feed.py's controllers subclass them, and a compiled method checks ``self`` for exactly its
+#: compiled class -- mypyc 2.4.1, even with ``allow_interpreted_subclasses=True``: ``CycleController object
+#: expected; got ProgrammableFeed``), ``geometry.py`` (a compiled ``cached_property`` does not cache into the
+#: instance's ``__dict__``: the FMU states would differ from the reference's), and ``panel.py``, ``sequencer.py``,
+#: ``motion.py``, ``ports.py`` (interpreted classes with compiled methods measured slower than pure Python there:
+#: OperatorPanel 12.5k -> 16.7k instructions a step, CutSequencer 87.1k -> 88.4k).
+COMPILED = ("controllers/limiter.py", "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
 #: Where compiled runtimes are kept, one folder per runtime digest and Python ABI (``NCFMU_CACHE`` overrides the
 #: root ``~/.cache/ncfmu``).
 COMPILED_CACHE = "compiled"
