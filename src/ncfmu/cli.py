@@ -200,7 +200,7 @@ def cmd_pack(args) -> int:
 
 def cmd_build(args) -> int:
     from .project import build
-    out = build(args.root, only_stale=not args.force)
+    out = build(args.root, only_stale=not args.force, pure=args.pure)
     for kind, paths in out.items():
         for p in paths:
             print(f"{kind:4s} {p}")
@@ -604,6 +604,9 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("build", help="build every FMU into fmus/ and pack every system into ssp/<system>.ssp")
     p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
+    p.add_argument("--pure", action="store_true",
+                   help="ship the controllers as Python sources only (no mypyc compile; else compiled once, cached "
+                        "in ~/.cache/ncfmu/compiled/)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)

@@ -51,12 +51,13 @@ def models_dir(root: Path) -> Path:
     return Path(str(packaged.__file__)).parent
 
 
-def build(root: Path | None = None, only_stale: bool = True) -> dict[str, list[Path]]:
+def build(root: Path | None = None, only_stale: bool = True, pure: bool = False) -> dict[str, list[Path]]:
     """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``;
-    in a checkout also write ``docs/``. Nothing whose content is already right is touched."""
+    in a checkout also write ``docs/``. Nothing whose content is already right is touched. ``pure``: the Python
+    FMUs without their compiled controllers (else compiled with mypyc where it can be, once, cached)."""
     root = Path(root or project_root())
     (root / "fmus").mkdir(parents=True, exist_ok=True)
-    fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale)
+    fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale, pure=pure)
     fmus3 = build_all_fmi3(fmus, root / "fmus" / "fmi3", only_stale=only_stale)    # their FMI 3.0 twins
     if is_checkout(root):
         from .docs import write_docs

@@ -81,14 +81,13 @@ def test_branches_through_the_c_loop_match_the_python_loop(project):
 FAILING_STEP = textwrap.dedent("""
     import sys
     from ncfmu.errors import SimulationError
-    from ncfmu.fmi.builder import fmu_version
+    from ncfmu.fmi.builder import vendored_package
     from ncfmu.project import OpenSystem
 
     native = sys.argv[1] == "c"
     with OpenSystem(sys.argv[2]) as opened:
         opened.master.native = native
-        digest = fmu_version(sys.argv[3]).split("+")[1]      # the FMU's own vendored ncfmu
-        panel = sys.modules[f"ncfmu_{digest}.controllers.panel"].OperatorPanel
+        panel = sys.modules[f"{vendored_package(sys.argv[3])}.controllers.panel"].OperatorPanel   # the FMU's copy
         step = panel.step
 
         def broken(self, t, dt, inputs):

@@ -120,9 +120,8 @@ def test_a_controller_exception_fails_the_step_with_fmi2error(fmus, fmu_runner, 
     """A defect inside the controller: fmi2Error and the exception in the log, the host keeps running."""
     r = fmu_runner(fmus["OperatorPanel"]).start()
     r.slave.do_step(0.0, 1e-3)
-    from ncfmu.fmi.builder import fmu_version
-    digest = fmu_version(fmus["OperatorPanel"]).split("+")[1]      # the FMU's own vendored ncfmu
-    vendored = sys.modules[f"ncfmu_{digest}.controllers.panel"]
+    from ncfmu.fmi.builder import vendored_package
+    vendored = sys.modules[f"{vendored_package(fmus['OperatorPanel'])}.controllers.panel"]   # the FMU's own copy
 
     def broken(self, t, dt, inputs):
         raise ZeroDivisionError("deliberate defect")

@@ -157,11 +157,10 @@ def test_the_log_is_taken_only_when_something_was_logged(fmus, monkeypatch):
     what is logged still reaches the logger, once."""
     import sys
 
-    from ncfmu.fmi.builder import fmu_version
+    from ncfmu.fmi.builder import vendored_package
 
     host = Host(fmus["CutSequencer"], debug_logging=False)
-    digest = fmu_version(fmus["CutSequencer"]).split("+")[1]        # the FMU's own copy of the adapter
-    adapter = sys.modules[f"ncfmu_{digest}.fmi.adapter"]
+    adapter = sys.modules[f"{vendored_package(fmus['CutSequencer'])}.fmi.adapter"]   # the FMU's own copy
     calls = []
     take = adapter.ControllerSlave.fmi_take_log
 

@@ -33,6 +33,7 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
+from ..mypyc_compat import mypyc_attr
 from .gcode import Move
 from .geometry import Arc, CornerError, Element, Line, Point
 from .nose import Nose
@@ -46,6 +47,7 @@ EPS = 1e-9
 TOL = 1e-6
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Tool:
     """A row of the tool table: where the tool's tip stands from the axes' reference (radius, Z), its nose."""
@@ -57,6 +59,7 @@ class Tool:
     max_depth: float = 0.0      # mm, the deepest cut the insert takes (0: not given)
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Modal:
     """What a lathe program sets besides positions, as it runs with a planned move: the tool and its offset, the
@@ -85,6 +88,7 @@ class Modal:
 NO_MODAL = Modal()
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Segment:
     """One planned move of the program and what the sequencer reports while it runs."""
@@ -102,6 +106,7 @@ class Segment:
     modal: Modal = NO_MODAL
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Profile:
     """The profile N<P>..N<Q>: the first block's move from the start point, then the part's outline."""
@@ -124,6 +129,7 @@ class Profile:
         return ([self.front] if self.front is not None else []) + self.elements
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Rough:
     """A G71 cycle: from ``start`` ((z, x)), depth ``depth`` and retract ``retract`` (radius), allowances
@@ -139,6 +145,7 @@ class Rough:
     feed: float
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Finish:
     """A G70 cycle from ``start`` ((z, x)) along ``profile`` (``feed`` mm/s overrides the blocks' own; 0: none),
@@ -152,6 +159,7 @@ class Finish:
 
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class State:
     """From here on the program runs with ``modal`` (T, S, M03/M04/M05, M08/M09, G96/G97, G98/G99, G50 S)."""
@@ -160,18 +168,21 @@ class State:
     modal: Modal
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Dwell:
     line: int
     seconds: float          # G04
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Stop:
     line: int
     optional: bool          # M01 (else M00)
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Home:
     """G28: at the rapid rate to the intermediate point ``via`` (programmed), then to the machine reference

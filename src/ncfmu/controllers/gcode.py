@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from ..errors import ProgramError, ProgramErrors
+from ..mypyc_compat import mypyc_attr
 from .geometry import Element, Point, arc_through
 
 #: Programs longer than this are refused (characters): a part program for one part is far shorter.
@@ -41,6 +42,7 @@ _WORD = re.compile(r"([A-Za-z])[ \t]*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))?")
 PROGRAM_END = frozenset({2, 30})
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Dialect:
     """A machine's words, as data: what :func:`read` accepts and the reason it gives for what it refuses."""
@@ -58,6 +60,7 @@ class Dialect:
     block_delete: bool = False           # a block may start with '/' (block delete, skipped with the switch on)
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Move:
     """One programmed move: its geometry (in the machine's plane) and how it is run -- the one move record of
@@ -72,6 +75,7 @@ class Move:
     raw: str = field(default="", compare=False)      # the block as written (for messages)
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class Block:
     """One checked block: its words in order, its number, its G and M codes and its other words' values."""

@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
+from ..mypyc_compat import mypyc_attr
 from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
     EPS,
     MAX_SEGMENTS,
@@ -101,6 +102,7 @@ LATHE = Dialect(
 )
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Setup:
     """What a lathe program is read with besides its text: the sequencer's parameters."""
@@ -112,6 +114,7 @@ class Setup:
     block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class _Modes:
     motion: int | None = None
@@ -188,6 +191,7 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
     return Line(here, end), end
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class _Cycle:
     code: int

@@ -43,6 +43,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 from ..errors import require
+from ..mypyc_compat import mypyc_attr
 from ..ports import boolean, integer, real
 from .base import POSITION_LIMIT, Controller, PositionGuard, int_param, real_param
 from .motion import stop_speed
@@ -73,6 +74,7 @@ def _table_ports():
 
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class AreaLimiter(Controller):
     MODEL_NAME = "AreaLimiter"
     DESCRIPTION = ("Operating-area limiter: stepped, region-dependent limits; blocks only the offending direction "

@@ -3,11 +3,16 @@
 An FMU must run the code it was built from, even in a process that has imported another ncfmu
 (pythonfmu FMUs share the host interpreter and ``sys.modules``). So the builder
 
-1. copies the ``ncfmu`` package into the FMU's resources under a content-addressed name,
-   ``ncfmu_<digest>`` (the package's imports are relative, so it runs under any name);
-2. rewrites the model script's ``ncfmu`` imports to that name and stores the script as the unique
-   module ``<Model>_<digest>``;
-3. post-processes the modelDescription (:mod:`.modeldesc`) and records the digest in its
+1. copies the ``ncfmu`` runtime (``FMU_RUNTIME``) into the FMU's resources under a content-addressed name,
+   ``ncfmu_<runtime digest>`` (the package's imports are relative, so it runs under any name); the digest covers
+   the runtime's files only, so every Python FMU of a build carries the same package, compiled once;
+2. unless built pure, ships beside those sources the runtime's controller modules (``COMPILED``) compiled with
+   mypyc for the building Python (ABI-tagged extensions and mypyc's group library, cached in
+   ``~/.cache/ncfmu/compiled/<runtime digest>/``): Python's import prefers an extension of its own ABI and falls
+   back to the ``.py`` beside it on any other Python;
+3. rewrites the model script's ``ncfmu`` imports to that name and stores the script as the unique
+   module ``<Model>_<digest>`` (the digest of everything the FMU is made from);
+4. post-processes the modelDescription (:mod:`.modeldesc`) and records that digest in its
    ``version`` attribute, so a stale FMU is rebuilt.
 """
 
@@ -16,10 +21,14 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib
+import importlib.util
+import logging
+import os
 import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import zipfile
 from pathlib import Path
@@ -42,24 +51,127 @@ _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 #: What a controller FMU runs, relative to the package: the controllers and the slave adapter. Only the
 #: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
 #: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
-FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py", "fmi/adapter.py",
-               "fmi/contract.py", "fmi/state.py")
+FMU_RUNTIME = ("__init__.py", "errors.py", "mypyc_compat.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
+               "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
+
+
+#: The runtime modules compiled with mypyc: those whose compiled form was measured faster in the FMUs
+#: (bench/README.md, 2026-12-02 `compiled` branch) -- the AreaLimiter -- and the lathe program's planner (g7x,
+#: gcode, lathe_program: run at configure, not per step). Every class in them is
+#: ``@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)`` (compiled methods, a ``__dict__`` kept for
+#: fmi/state.py and deepcopy). The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
+#: ``controllers/contour.py`` (an instance attribute read through the class), ``base.py`` and ``cycle.py``
+#: (contour.py's and feed.py's controllers subclass them, and a compiled method checks ``self`` for exactly its
+#: compiled class -- mypyc 2.4.1, even with ``allow_interpreted_subclasses=True``: ``CycleController object
+#: expected; got ProgrammableFeed``), ``geometry.py`` (a compiled ``cached_property`` does not cache into the
+#: instance's ``__dict__``: the FMU states would differ from the reference's), and ``panel.py``, ``sequencer.py``,
+#: ``motion.py``, ``ports.py`` (interpreted classes with compiled methods measured slower than pure Python there:
+#: OperatorPanel 12.5k -> 16.7k instructions a step, CutSequencer 87.1k -> 88.4k).
+COMPILED = ("controllers/limiter.py", "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
+#: Where compiled runtimes are kept, one folder per runtime digest and Python ABI (``NCFMU_CACHE`` overrides the
+#: root ``~/.cache/ncfmu``).
+COMPILED_CACHE = "compiled"
+
+log = logging.getLogger(__name__)
 
 
 def _package_files(package_dir: Path = PACKAGE_DIR) -> list[Path]:
     return sorted({p for pattern in FMU_RUNTIME for p in package_dir.glob(pattern)})
 
 
-def source_digest(script: Path, package_dir: Path = PACKAGE_DIR) -> str:
-    """Digest of the model script, every module the FMU carries and the generator of its documentation
-    (12 hex digits)."""
+def runtime_digest(package_dir: Path = PACKAGE_DIR) -> str:
+    """Digest of the runtime files every Python FMU carries (``FMU_RUNTIME``), 12 hex digits: the name of the
+    vendored package, ``ncfmu_<digest>``, the same for every Python FMU of a build."""
+    h = hashlib.sha256()
+    for path in _package_files(package_dir):
+        h.update(str(path.relative_to(package_dir)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def source_digest(script: Path, package_dir: Path = PACKAGE_DIR, compiled: bool = False) -> str:
+    """Digest of the model script, every module the FMU carries, the generator of its documentation and whether
+    the runtime is compiled (and by which mypyc, for which Python) (12 hex digits)."""
     h = hashlib.sha256()
     for path in [script, *_package_files(package_dir), *PYTHON_FMU_SOURCES, package_dir / "fmi" / "documentation.py"]:
         h.update(str(path.relative_to(path.parent if path == script or package_dir not in path.parents
                                       else package_dir)).encode())
         h.update(path.read_bytes())
     h.update(" ".join(SHIM_LINK).encode())             # how the binary is linked is part of what it is
+    if compiled:
+        h.update(f"mypyc {_compile_tag()} {' '.join(COMPILED)}".encode())
     return h.hexdigest()[:12]
+
+
+def _compile_tag() -> str:
+    """The Python ABI and the mypyc version a compiled runtime is for (part of its cache folder's name)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        mypy = version("mypy")
+    except PackageNotFoundError:
+        mypy = "none"
+    return f"{sysconfig.get_config_var('SOABI') or sys.implementation.cache_tag}-mypyc{mypy}"
+
+
+def _cache_root() -> Path:
+    return Path(os.environ.get("NCFMU_CACHE") or Path.home() / ".cache" / "ncfmu")
+
+
+def compile_unavailable() -> str | None:
+    """Why the runtime cannot be compiled here (no mypyc, no C compiler, no setuptools), or None."""
+    if importlib.util.find_spec("mypyc") is None:
+        return "mypyc is not installed (pip install mypy)"
+    if importlib.util.find_spec("setuptools") is None:
+        return "setuptools, which mypyc compiles with, is not installed"
+    if not any(shutil.which(cc) for cc in (os.environ.get("CC") or "cc", "gcc", "clang")):
+        return "no C compiler (cc, gcc or clang) found"
+    return None
+
+
+def compiled_runtime(package_dir: Path = PACKAGE_DIR) -> Path | None:
+    """The runtime's ``COMPILED`` modules compiled with mypyc under the vendored name ``ncfmu_<runtime digest>``:
+    a folder holding only the extensions, at the paths they take in an FMU's resources (``ncfmu_<d>/.../*.so``
+    and mypyc's group library ``<hash>__mypyc.*.so`` at the top). Compiled once per runtime digest and Python ABI
+    and kept in ``~/.cache/ncfmu/compiled/<digest>/<abi>-mypyc<version>/``: written into a temporary folder
+    beside it and renamed into place, so processes building at once never see a half-written one. None, with one
+    warning logged, when it cannot be compiled here (the FMUs are then built pure: never a BuildError)."""
+    digest = runtime_digest(package_dir)
+    target = _cache_root() / COMPILED_CACHE / digest / _compile_tag()
+    if (target / "COMPLETE").is_file():
+        return target
+    why = compile_unavailable()
+    if why is not None:
+        log.warning("ncfmu build: controllers not compiled (%s): building pure-Python FMUs", why)
+        return None
+    target.parent.mkdir(parents=True, exist_ok=True)
+    vendored = f"ncfmu_{digest}"
+    with tempfile.TemporaryDirectory(prefix=".compiling-", dir=target.parent) as tmp_name:
+        tmp = Path(tmp_name)
+        src, out = tmp / "src", tmp / "out"
+        for path in _package_files(package_dir):
+            copy = src / vendored / path.relative_to(package_dir)
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, copy)
+        proc = subprocess.run([sys.executable, "-m", "mypyc", *(f"{vendored}/{m}" for m in COMPILED)], cwd=src,
+                              capture_output=True, text=True)
+        ext = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+        built = sorted(p.relative_to(src) for p in src.rglob(f"*{ext}") if "build" not in p.relative_to(src).parts)
+        wanted = {f"{vendored}/{m[:-3]}{ext}" for m in COMPILED}
+        if proc.returncode != 0 or not wanted <= {str(p) for p in built}:
+            tail = (proc.stderr.strip() or proc.stdout.strip())[-400:]
+            log.warning("ncfmu build: mypyc could not compile the controllers (exit %s: %s): building pure-Python "
+                        "FMUs", proc.returncode, tail.replace("\n", " | "))
+            return None
+        for rel in built:
+            (out / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(src / rel, out / rel)
+        (out / "COMPLETE").write_text("\n".join(map(str, built)) + "\n")
+        try:
+            out.rename(target)
+        except OSError:                 # another process renamed its copy into place first: the same content
+            if not (target / "COMPLETE").is_file():
+                raise
+    return target
 
 
 C_LAYER = Path(__file__).with_name("c")
@@ -139,20 +251,30 @@ def fmu_version(fmu: Path) -> str | None:
     return m.group(1) if m else None
 
 
-def expected_version(script: Path) -> str:
-    return f"{__version__}+{source_digest(script)}"
+def expected_version(script: Path, compiled: bool = False) -> str:
+    return f"{__version__}+{source_digest(script, compiled=compiled)}"
 
 
-def build_fmu(script: Path, dest_dir: Path) -> Path:
-    """Build one FMU from a model script into ``dest_dir``; return the FMU's path."""
+def vendored_package(fmu: Path) -> str:
+    """The name of the ncfmu copy an FMU carries (``ncfmu_<runtime digest>``, the module prefix it runs under)."""
+    with zipfile.ZipFile(fmu) as z:
+        names = {n.split("/")[1] for n in z.namelist() if n.startswith("resources/ncfmu_") and n.count("/") >= 2}
+    if len(names) != 1:
+        raise BuildError(f"{fmu}: carries {sorted(names) or 'no'} ncfmu package(s), not one")
+    return names.pop()
+
+
+def build_fmu(script: Path, dest_dir: Path, compiled: Path | None = None) -> Path:
+    """Build one FMU from a model script into ``dest_dir``; return the FMU's path. ``compiled``: a folder
+    :func:`compiled_runtime` made, whose extensions the FMU ships beside the sources (None: pure Python)."""
     if not FmuBuilder.has_binary():
         where = sys.modules[FmuBuilder.__module__].__file__
         raise BuildError(f"pythonfmu at {Path(where).parent if where else FmuBuilder.__module__} has no binary for "
                          f"{get_platform()}: reinstall pythonfmu")
     script = Path(script).resolve()
     model = script.stem
-    digest = source_digest(script)
-    vendored = f"ncfmu_{digest}"
+    digest = source_digest(script, compiled=compiled is not None)
+    vendored = f"ncfmu_{runtime_digest()}"
     module = f"{model}_{digest}"
     dest_dir = Path(dest_dir)
     dest_dir.mkdir(parents=True, exist_ok=True)
@@ -164,21 +286,39 @@ def build_fmu(script: Path, dest_dir: Path) -> Path:
             copy = stage / vendored / path.relative_to(PACKAGE_DIR)
             copy.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, copy)
+        if compiled is not None:
+            for ext in sorted(compiled.rglob("*.so")):
+                rel = ext.relative_to(compiled)
+                if rel.parts[0].startswith("ncfmu_") and rel.parts[0] != vendored:
+                    raise BuildError(f"{compiled}: compiled for {rel.parts[0]}, not {vendored}")
+                (stage / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(ext, stage / rel)
         text = script.read_text()
         if not re.search(rf"^class {model}\(\s*Fmi2Slave\s*\)\s*:", text, re.MULTILINE):
             raise BuildError(f"{script}: needs a line 'class {model}(Fmi2Slave):' (pythonfmu finds the class by it)")
         (stage / f"{module}.py").write_text(_IMPORT.sub(rf"\g<1>{vendored}", text))
         out = tmp / "out"
+        loaded = set(sys.modules)
         try:
-            built = FmuBuilder.build_FMU(stage / f"{module}.py", dest=out, project_files=[stage / vendored])
+            group = sorted(stage.glob("*.so"))          # mypyc's group library, imported by the extensions
+            built = FmuBuilder.build_FMU(stage / f"{module}.py", dest=out,
+                                         project_files=[stage / vendored, *group])
+            logic = getattr(importlib.import_module(module), model).logic_class
         except Exception as err:  # pythonfmu raises plain exceptions; say which script failed
             raise BuildError(f"pythonfmu could not build {script.name}: {err}") from err
         finally:
             if str(stage) in sys.path:
                 sys.path.remove(str(stage))
-        logic = getattr(importlib.import_module(module), model).logic_class
-        target = dest_dir / f"{logic.MODEL_NAME}.fmu"
-        _rewrite(built, target, logic, f"{__version__}+{digest}", module, model)
+        try:
+            target = dest_dir / f"{logic.MODEL_NAME}.fmu"
+            _rewrite(built, target, logic, f"{__version__}+{digest}", module, model)
+        finally:
+            # pythonfmu imported the script (and the vendored package) from the stage, which is deleted below:
+            # forget what this build imported, so the package an FMU of this build runs in this process is the
+            # FMU's own copy (the next build of the same package name imports its own stage's)
+            for name in set(sys.modules) - loaded:
+                if name == module or name.split(".")[0] == vendored or name.endswith("__mypyc"):
+                    del sys.modules[name]
     if not has_binary(target, logic.MODEL_NAME):
         target.unlink()
         raise BuildError(f"{script.name}: the built FMU lacks {binary_name(logic.MODEL_NAME)}")
@@ -251,10 +391,13 @@ def model_scripts(models_dir: Path) -> list[Path]:
     return [scripts[name] for name in python_models()]
 
 
-def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> list[Path]:
+def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False, pure: bool = False) -> list[Path]:
     """Build every model script (pythonfmu) and every native model (C); with ``only_stale`` skip FMUs
-    built from the same source."""
+    built from the same source. The Python FMUs ship the runtime compiled (:func:`compiled_runtime`, once for
+    all of them) unless ``pure`` or it cannot be compiled here (then pure, one warning logged)."""
     from .native import build_native_fmu, native_models
+    compiled: Path | None = None
+    compile_here = not pure and compile_unavailable() is None
     built = []
     for native in native_models():
         target = Path(dest_dir) / f"{native.name}.fmu"
@@ -265,9 +408,13 @@ def build_all(models_dir: Path, dest_dir: Path, only_stale: bool = False) -> lis
         built.append(build_native_fmu(native, dest_dir))
     for script in model_scripts(models_dir):
         target = Path(dest_dir) / f"{script.stem}.fmu"
-        if (only_stale and target.exists() and fmu_version(target) == expected_version(script)
+        if (only_stale and target.exists() and fmu_version(target) == expected_version(script, compile_here)
                 and has_binary(target, script.stem)):
             built.append(target)
             continue
-        built.append(build_fmu(script, dest_dir))
+        if not pure and compiled is None:
+            compiled = compiled_runtime()
+            if compiled is None:
+                pure = True
+        built.append(build_fmu(script, dest_dir, compiled=compiled))
     return built
