@@ -4,11 +4,13 @@ seed, and the interface table read from the FMU's own modelDescription."""
 
 from __future__ import annotations
 
+import ast
 import html
 import re
 import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
+from pathlib import Path
 
 
 def _variables(md_xml: bytes) -> list[dict[str, str]]:
@@ -31,8 +33,18 @@ def seed_text(logic) -> str:
     return logic.SEED or "none: ncfmu's own design"
 
 
+def _module_doc(module) -> str | None:
+    """A module's docstring; of a module compiled with mypyc, its source's (mypyc 2.4 gives a compiled module
+    the docstring "mypyc filler docstring"; the FMU ships the source beside the extension)."""
+    file = getattr(module, "__file__", None) or ""
+    if file.endswith(".py"):
+        return module.__doc__
+    source = Path(file).parent / f"{module.__name__.rpartition('.')[2]}.py"
+    return ast.get_docstring(ast.parse(source.read_text()), clean=False) if source.is_file() else module.__doc__
+
+
 def _behaviour(logic) -> str:
-    return (sys.modules[logic.__module__].__doc__ or logic.__doc__ or "").strip()
+    return (_module_doc(sys.modules[logic.__module__]) or logic.__doc__ or "").strip()
 
 
 #: reStructuredText in the docstrings: a Sphinx role (``:func:`~ncfmu.servo.model.servo_axis```) or literal
