@@ -107,7 +107,7 @@ def test_the_override_variable_chooses_the_runtime(fmus, fmi_host, tmp_path):
 
 
 #: Imports of the vendored package that are optional, guarded by ImportError: (module, file in the package).
-GUARDED = {("numpy", "fmi/state.py"), ("mypy_extensions", "mypyc_compat.py")}
+GUARDED = {("numpy", "fmi/state.py"), ("mypy_extensions", "controllers/mypyc_compat.py")}
 
 
 def test_controller_fmus_carry_only_standard_library_code(fmus):

@@ -33,9 +33,9 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
-from ..mypyc_compat import mypyc_attr
 from .gcode import Move
 from .geometry import Arc, CornerError, Element, Line, Point
+from .mypyc_compat import mypyc_attr
 from .nose import Nose
 from .nose import translated as shifted
 

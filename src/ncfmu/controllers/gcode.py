@@ -22,8 +22,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from ..errors import ProgramError, ProgramErrors
-from ..mypyc_compat import mypyc_attr
 from .geometry import Element, Point, arc_through
+from .mypyc_compat import mypyc_attr
 
 #: Programs longer than this are refused (characters): a part program for one part is far shorter.
 MAX_PROGRAM_CHARS = 200_000

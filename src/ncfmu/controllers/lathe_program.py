@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
-from ..mypyc_compat import mypyc_attr
 from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
     EPS,
     MAX_SEGMENTS,
@@ -75,6 +74,7 @@ from .gcode import (
     strip_comments,
 )
 from .geometry import Arc, CornerError, Element, Line, Point
+from .mypyc_compat import mypyc_attr
 from .nose import Nose
 
 _MOTION = {0, 1, 2, 3}

@@ -43,10 +43,10 @@ import math
 from collections.abc import Mapping, Sequence
 
 from ..errors import require
-from ..mypyc_compat import mypyc_attr
 from ..ports import boolean, integer, real
 from .base import POSITION_LIMIT, Controller, PositionGuard, int_param, real_param
 from .motion import stop_speed
+from .mypyc_compat import mypyc_attr
 
 MAX_REGIONS = 32
 REF_PLUS, REF_MINUS, LIM_PLUS, LIM_MINUS = 1, 2, 4, 8

@@ -51,7 +51,7 @@ _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 #: What a controller FMU runs, relative to the package: the controllers and the slave adapter. Only the
 #: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
 #: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
-FMU_RUNTIME = ("__init__.py", "errors.py", "mypyc_compat.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
+FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
                "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
 
 
