@@ -120,7 +120,7 @@ def _cache_root() -> Path:
 def compile_unavailable() -> str | None:
     """Why the runtime cannot be compiled here (no mypyc, no C compiler, no setuptools), or None."""
     if importlib.util.find_spec("mypyc") is None:
-        return "mypyc is not installed (pip install mypy)"
+        return "mypyc is not installed: pip install \"ncfmu[compiled]\" (mypy)"
     if importlib.util.find_spec("setuptools") is None:
         return "setuptools, which mypyc compiles with, is not installed"
     if not any(shutil.which(cc) for cc in (os.environ.get("CC") or "cc", "gcc", "clang")):
