@@ -1542,7 +1542,7 @@ class LiveServer:
         watch: asyncio.Task | None = None
         # what was built (the address space; with --cnc the OPC 40502 NodeSet import: ~5 s, many objects) lives
         # for the whole serve: collected once and frozen here, before the clock starts, so that no full
-        # collection walks it in the paced loop (bench/serve_lag.py: a ~200 ms stall in every --cnc run)
+        # collection walks it in the paced loop (the ~200 ms stall once seen with --cnc was not shown to be one)
         gc.collect()
         gc.freeze()
         try:
