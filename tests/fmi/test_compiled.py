@@ -65,7 +65,14 @@ RUN_SYSTEM = textwrap.dedent("""
         files = {m: sys.modules[m].__file__ for m in sys.modules
                  if m.startswith("ncfmu_") and m.endswith((".limiter", ".g7x", ".lathe_program"))}
         data = {name: result[name].copy() for name in result.names}
-    pickle.dump({"data": data, "time": result.time.copy(), "files": files}, open(out, "wb"))
+        states = {}                 # each controller FMU's serialized state at the end (fmi2SerializeFMUstate)
+        for slave in opened.slaves:
+            model = slave.unpacked.model_description.modelName
+            if model in ("CutSequencer", "AreaLimiter", "OperatorPanel"):
+                state = slave.get_state()
+                states[model] = slave.serialize_state(state)
+                slave.free_state(state)
+    pickle.dump({"data": data, "time": result.time.copy(), "files": files, "states": states}, open(out, "wb"))
 """)
 
 
@@ -92,7 +99,7 @@ def test_the_fmus_carry_the_compiled_controllers_beside_their_sources(fmus):
         for module in COMPILED:
             assert f"resources/{package}/{module}" in files, (name, module)
             assert f"resources/{package}/{module[:-3]}{EXT}" in files, (name, module)
-        for module in ("errors.py", "controllers/contour.py"):       # not compilable: sources only
+        for module in ("errors.py", "controllers/geometry.py"):       # not compiled: sources only
             assert f"resources/{package}/{module[:-3]}{EXT}" not in files
         assert [f for f in files if f.startswith("resources/") and f.count("/") == 1 and f.endswith("__mypyc" + EXT)]
     assert len(packages) == 1, packages
@@ -179,6 +186,31 @@ def test_pure_and_compiled_builds_of_lathe_taper_give_identical_records(project,
     assert any(np.ptp(v) > 0 for v in compiled.values())
     for name in pure:
         assert np.array_equal(pure[name], compiled[name]), name
+    # the controllers' own registers too: the compiled (native) classes save the same state, byte for byte
+    assert set(runs["pure"]["states"]) == {"CutSequencer", "AreaLimiter", "OperatorPanel"}
+    assert runs["pure"]["states"] == runs["compiled"]["states"]
+
+
+def test_every_controller_of_the_runtime_is_compiled_with_its_base():
+    """The controllers are mypyc native classes, which deepcopy (the FMU states) copies through their pickle
+    state: an interpreted subclass's own attributes would be lost. So every Controller subclass of the
+    runtime's controllers package lives in a compiled module, as its bases do."""
+    import importlib
+    import pkgutil
+
+    import ncfmu.controllers as package
+    from ncfmu.controllers.base import Controller
+    for info in pkgutil.iter_modules(package.__path__):
+        importlib.import_module(f"ncfmu.controllers.{info.name}")
+    found, todo = set(), [Controller]
+    while todo:
+        cls = todo.pop()
+        found.add(cls)
+        todo.extend(cls.__subclasses__())
+    modules = {c.__module__ for c in found if c.__module__.startswith("ncfmu.controllers.")}
+    assert {"ncfmu.controllers.sequencer", "ncfmu.controllers.limiter", "ncfmu.controllers.feed"} <= modules
+    compiled = {"ncfmu." + m[:-3].replace("/", ".") for m in COMPILED}
+    assert modules <= compiled, modules - compiled
 
 
 def test_the_compile_is_cached_once_per_runtime(project, monkeypatch):

@@ -15,11 +15,13 @@ from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import Port, boolean, real, to_float, to_int
+from .mypyc_compat import attributes, mypyc_attr
 
 #: An entry of a counted table: ``block[3].Xd`` (counted by ``n_blocks``).
 _TABLE_ENTRY = re.compile(r"(?P<head>[A-Za-z_]\w*)\[(?P<k>\d+)\]\.")
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class Controller:
     """Base class of the controller logic behind every ncfmu FMU.
 
@@ -155,7 +157,7 @@ class Controller:
                    for m in self.messages):
             return "messages: not a list of (info|warning|error, text) pairs"
         input_ports = {p.name: p for p in self.ports("input")}
-        for name, value in vars(self).items():
+        for name, value in attributes(self).items():
             if isinstance(value, PositionGuard):
                 if not all(n in input_ports and input_ports[n].unit == "mm" for n in value.names):
                     return f"{name}.names = {value.names!r}: not position inputs of {type(self).__name__}"
@@ -183,7 +185,7 @@ class Controller:
         """A restored straight move (:class:`~ncfmu.controllers.motion.LinearMove`) is one its ``begin()`` and
         ``advance()`` can leave: its geometry recomputed from its end points, its path position and speed
         within the move and the rate it was given one of ``rates``."""
-        m = vars(move)
+        m = attributes(move)
         ends = (m["start_point"], m["end_point"], m["unit"])
         if m["accel"] != accel:
             return f"{name}.accel = {m['accel']!r}: not accel = {accel!r}"
@@ -246,6 +248,7 @@ POSITION_LIMIT = 1.0e5
 SPEED_LIMIT = 2000.0
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class PositionGuard:
     """Judges position inputs every step: finite, within ``POSITION_LIMIT``, and no jump beyond
     ``SPEED_LIMIT * dt`` since the last step (the first step after ``reset()`` has nothing to compare)."""
@@ -285,6 +288,7 @@ class PositionGuard:
         raise AssertionError("called for an absurd input only")
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class OverrideDial:
     """A feed-override input: clamped to 0..``hi``; a value outside is said once per excursion."""
 

@@ -35,16 +35,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
 from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
-from .geometry import TANGENT, Arc, CornerError, Element, Line, compensate, turn_angle
+from .geometry import TANGENT, Arc, CornerError, Element, Line, ToolMove, compensate, turn_angle
 from .motion import stop_speed
+from .mypyc_compat import mypyc_attr
 
 MAX_POINTS = 64
 #: The point path of the FMU's start values: one 10 mm move along X (a system gives its own).
@@ -57,18 +57,11 @@ MAX_DIAMETER_DELTA = 100.0
 ARC_CENTRIPETAL = 0.55
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 class GeometryError(ConfigError):
     """The corrected path cannot be built (a gouging inside corner, an element that vanishes or reverses)."""
 
 
-@dataclass(frozen=True)
-class ToolMove:
-    """One element of the cutter-centre path and how it is run."""
-
-    element: Element
-    rapid: bool          # at ``approach_feed`` (G00, the approach), not ``feed``
-    feed: float          # mm/s
-    label: int           # the ``segment`` output: segment number (point path) or program line
 
 
 def point_contour(points: Sequence[tuple[float, float]], closed: bool) -> list[Line]:
@@ -138,6 +131,7 @@ def _point_ports():
     return tuple(ports)
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class ContourInterpolator(CycleController):
     MODEL_NAME = "ContourInterpolator"
     DESCRIPTION = ("Contour interpolator with cutter compensation: part programs (RS274 subset) or terminal points, "
@@ -187,7 +181,7 @@ class ContourInterpolator(CycleController):
     )
 
     #: What only the point path reads: a program replaces it (its own G41/G42, F and path).
-    POINT_PATH_ONLY = ("n_points", "closed", "side", "feed")
+    POINT_PATH_ONLY: ClassVar[tuple[str, ...]] = ("n_points", "closed", "side", "feed")
 
     @classmethod
     def unread(cls, values: Mapping[str, object]) -> dict[str, str]:

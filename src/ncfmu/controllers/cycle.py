@@ -39,6 +39,7 @@ from typing import Any, ClassVar
 
 from ..ports import Port, real
 from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, finite_inputs, real_param
+from .mypyc_compat import mypyc_attr
 
 #: What :meth:`InPosition.judge` says of a motion this step.
 MOVING, WAITING, ARRIVED, LATE = 0, 1, 2, 3
@@ -63,6 +64,7 @@ def cycle_ports(what: str = "a motion", *names: str) -> tuple[Port, ...]:
     return tuple(ports[n] for n in (names or tuple(ports)))
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class Button:
     """A push-button input read for its rising edge."""
 
@@ -75,6 +77,7 @@ class Button:
         return edge
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class InPosition:
     """Decides when a motion has ended (see the module docstring), one judgement per step.
 
@@ -120,6 +123,7 @@ def follow_up(actual: Mapping[str, float], command: Mapping[str, float], band: f
     return [axis for axis in command if abs(actual[axis] - command[axis]) > band]
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class CycleController(Controller):
     """Base of the controllers that run cycles on servo axes (:data:`AXES`): the skeleton's parameters,
     state, judgements and the order of a step (:meth:`step`). A subclass lists :func:`cycle_ports` among its

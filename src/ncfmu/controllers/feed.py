@@ -48,6 +48,7 @@ from ..ports import boolean, integer, real, string
 from .base import int_param, real_param, servo_ports
 from .cycle import Button, CycleController, cycle_ports
 from .motion import LinearMove
+from .mypyc_compat import mypyc_attr
 
 #: The program store as the FMU starts: empty cycles, and an emergency return of X at F7 (a system or a
 #: host loads its own program, e.g. the seed's Table 1 in ``ncfmu.systems.grinder``).
@@ -62,6 +63,7 @@ RC_ZERO = 1e-6
 DWELL_EPS = 1e-9
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
 class Word:
     """One decoded control word."""
@@ -155,6 +157,7 @@ def _setting_ports():
     return tuple(ports)
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class ProgrammableFeed(CycleController):
     MODEL_NAME = "ProgrammableFeed"
     DESCRIPTION = ("Grinding-machine programmable feed control: program store, rough/fine/spark-out, wheel-wear "

@@ -417,3 +417,15 @@ def compensate(elements: list[Element], d: float, closed: bool,
         raise CornerError(k, f"its offset {near} (the correction is {abs(d):g} mm): the contour is narrower "
                              "than the cutter there, cutting it would gouge", other)
     return out
+
+
+# Here, not in contour.py: a state carries these, and fmi/state.py checks a dataclass's fields by their declared
+# types -- which mypyc erases in a compiled module's dataclasses (``element: Element`` reads ``type`` there).
+@dataclass(frozen=True)
+class ToolMove:
+    """One element of the cutter-centre path (the contour interpolator's) and how it is run."""
+
+    element: Element
+    rapid: bool          # at ``approach_feed`` (G00, the approach), not ``feed``
+    feed: float          # mm/s
+    label: int           # the ``segment`` output: segment number (point path) or program line

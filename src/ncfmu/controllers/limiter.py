@@ -74,7 +74,7 @@ def _table_ports():
 
 
 
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class AreaLimiter(Controller):
     MODEL_NAME = "AreaLimiter"
     DESCRIPTION = ("Operating-area limiter: stepped, region-dependent limits; blocks only the offending direction "

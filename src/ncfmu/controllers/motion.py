@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from .geometry import Arc, Element, Point
+from .mypyc_compat import mypyc_attr
 
 #: On an arc: tangential and centripetal acceleration as fractions of ``accel`` (as the contour interpolator).
 ARC_TANGENTIAL, ARC_CENTRIPETAL = 0.8, 0.55
@@ -29,6 +30,7 @@ def stop_speed(room: float, v_old: float, accel: float, dt: float) -> float:
     return 2.0 * accel * rest / (half + math.sqrt(half * half + 2.0 * accel * rest))
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class LinearMove:
     """One straight move in n axes, advanced step by step.
 
@@ -126,6 +128,7 @@ def xz(p: Point) -> tuple[float, float]:
     return (p[1], p[0])
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class ElementMove(LinearMove):
     """:class:`.motion.LinearMove`'s online speed profile along a line or an arc of the (z, x) plane; positions
     and velocities in (x, z). On an arc the tangential acceleration is ``ARC_TANGENTIAL * accel`` and the speed

@@ -15,8 +15,10 @@ from collections.abc import Mapping
 from ..errors import ConfigError
 from ..ports import boolean, integer, real
 from .base import Controller, real_param
+from .mypyc_compat import mypyc_attr
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class OperatorPanel(Controller):
     MODEL_NAME = "OperatorPanel"
     DESCRIPTION = ("Operator panel: cycle start, wear-compensation start, emergency, feed hold at given times; "

@@ -54,6 +54,7 @@ from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
+from .mypyc_compat import mypyc_attr
 
 MAX_BLOCKS = 8
 #: Rows of the tool table (T<tool><offset>: tool and offset 1..8).
@@ -75,6 +76,7 @@ X_START, Z_START = 10.0, 0.0
 STOCK_DIAMETER, STOCK_LENGTH = 19.0, 50.0
 
 
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
 class Block:
     """One tape block: the seed's registers Xf, Xd, Xp, Zp, N plus the block's rates. The defaults are no
@@ -139,6 +141,7 @@ def _tool_ports():
 _PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout"}
 
 
+@mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
 class CutSequencer(CycleController):
     """Repetitive cut sequencer: four sub-cycles per pass, N passes per block, a series of blocks."""
 

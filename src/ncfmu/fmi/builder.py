@@ -55,19 +55,19 @@ FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/
                "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
 
 
-#: The runtime modules compiled with mypyc: those whose compiled form was measured faster in the FMUs
-#: (bench/README.md, 2026-12-02 `compiled` branch) -- the AreaLimiter -- and the lathe program's planner (g7x,
-#: gcode, lathe_program: run at configure, not per step). Every class in them is
-#: ``@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)`` (compiled methods, a ``__dict__`` kept for
-#: fmi/state.py and deepcopy). The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
-#: ``controllers/contour.py`` (an instance attribute read through the class), ``base.py`` and ``cycle.py``
-#: (contour.py's and feed.py's controllers subclass them, and a compiled method checks ``self`` for exactly its
-#: compiled class -- mypyc 2.4.1, even with ``allow_interpreted_subclasses=True``: ``CycleController object
-#: expected; got ProgrammableFeed``), ``geometry.py`` (a compiled ``cached_property`` does not cache into the
-#: instance's ``__dict__``: the FMU states would differ from the reference's), and ``panel.py``, ``sequencer.py``,
-#: ``motion.py``, ``ports.py`` (interpreted classes with compiled methods measured slower than pure Python there:
-#: OperatorPanel 12.5k -> 16.7k instructions a step, CutSequencer 87.1k -> 88.4k).
-COMPILED = ("controllers/limiter.py", "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
+#: The runtime modules compiled with mypyc (bench/README.md, issue 36 round 4): every controller, its bases
+#: and the motion they step, as mypyc **native classes** (``controllers/mypyc_compat.py``: serializable, so the
+#: FMU states deepcopy and save them as from source), and the lathe program's planner (g7x, gcode,
+#: lathe_program: run at configure, not per step). A native class's subclass must be compiled with it (an
+#: interpreted subclass's own attributes would be lost by deepcopy): tests/fmi/test_compiled.py holds this list to
+#: Controller's subclasses. The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
+#: ``geometry.py`` (a compiled ``cached_property`` does not cache into the instance's ``__dict__``, and a compiled
+#: dataclass's field types read as the erased runtime types: fmi/state.py checks a restored ``Line``, ``Arc`` or
+#: ``ToolMove`` by its declared field types), ``nose.py``, ``rs274.py``, ``mypyc_compat.py`` and ``ports.py``
+#: (configure time only).
+COMPILED = ("controllers/base.py", "controllers/cycle.py", "controllers/motion.py", "controllers/sequencer.py",
+            "controllers/panel.py", "controllers/limiter.py", "controllers/feed.py", "controllers/contour.py",
+            "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
 #: Where compiled runtimes are kept, one folder per runtime digest and Python ABI (``NCFMU_CACHE`` overrides the
 #: root ``~/.cache/ncfmu``).
 COMPILED_CACHE = "compiled"

@@ -39,6 +39,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 from ..controllers.base import POSITION_LIMIT, SPEED_LIMIT
+from ..controllers.mypyc_compat import attributes, blank, set_attributes
 from ..errors import ConfigError, NcfmuError
 from ..ports import Port
 
@@ -104,7 +105,8 @@ def _encode(value: Any, where: str) -> Any:
     module = cls.__module__
     if module == _PACKAGE or module.startswith(_PACKAGE + "."):
         derived = set(getattr(cls, "DERIVED", ()))
-        attrs = {k: _encode(v, f"{where}.{k}") for k, v in vars(value).items() if k not in derived}
+        # sorted: a compiled controller lists its attributes in another order than the pure one's __dict__
+        attrs = {k: _encode(v, f"{where}.{k}") for k, v in sorted(attributes(value).items()) if k not in derived}
         return {"o": f"{module[len(_PACKAGE) + 1:]}:{cls.__qualname__}", "v": attrs}
     raise StateError(f"{where}: a {cls.__module__}.{cls.__qualname__} cannot be saved")
 
@@ -127,7 +129,7 @@ def _class(tag: str) -> type:
     if module is None or not isinstance(cls, type) or cls.__module__ != module.__name__:
         raise StateError(f"object tag {tag!r} names no class of this FMU")
     # an empty object of a class with its own construction (an exception, a builtin subclass) is no state
-    if issubclass(cls, BaseException) or cls.__new__ is not object.__new__:
+    if issubclass(cls, BaseException) or blank(cls) is None:
         raise StateError(f"object tag {tag!r} names a class whose objects are no state")
     return cls
 
@@ -167,8 +169,17 @@ def _decode(tree: Any, where: str) -> Any:
         except (TypeError, ValueError) as err:
             raise StateError(f"{where}: malformed array: {err}") from None
     if set(tree) == {"o", "v"} and isinstance(tree["o"], str) and isinstance(tree["v"], dict):
-        obj: object = object.__new__(_class(tree["o"]))
-        vars(obj).update({str(k): _decode(v, f"{where}.{k}") for k, v in tree["v"].items()})
+        cls = _class(tree["o"])
+        obj = blank(cls)
+        for k, v in tree["v"].items():
+            value = _decode(v, f"{where}.{k}")
+            try:
+                set_attributes(obj, {str(k): value})
+            except AttributeError:                    # a compiled (native) class has its fields only
+                raise StateError(f"{where}: {str(k)!r} is no attribute of a {cls.__name__}") from None
+            except TypeError:                         # ... each of its declared type
+                raise StateError(f"{where}.{k} = {_text(value)}: a {_kind(value)}, not what a {cls.__name__} "
+                                 "holds there") from None
         return obj
     return {str(k): _decode(v, f"{where}[{k!r}]") for k, v in tree.items()}
 
@@ -209,7 +220,7 @@ def _identical(a: Any, b: Any) -> bool:
                 and all(_identical(a[k], b[k]) for k in a))
     if isinstance(a, _NP_ARRAY):
         return a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
-    va, vb = vars(a), vars(b)
+    va, vb = attributes(a), attributes(b)
     cached = _cached(type(a))
     if any(k not in cached for k in va.keys() ^ vb.keys()):
         return False
@@ -255,7 +266,7 @@ def _conform(value: Any, template: Any, where: str) -> None:
         if value.dtype.kind == "f" and not np.isfinite(value).all():
             raise StateError(f"{where}: must be finite")
     elif not isinstance(value, (bool, int, str)):
-        va, vt = vars(value), vars(template)
+        va, vt = attributes(value), attributes(template)
         cached = _cached(type(value))
         if {k for k in va if k not in cached} != {k for k in vt if k not in cached}:
             raise StateError(f"{where}: attributes {sorted(va)}, not those of a {_kind(template)} {sorted(vt)}")
@@ -267,7 +278,8 @@ def _conform(value: Any, template: Any, where: str) -> None:
 
 def _cached_values(obj: Any, where: str) -> None:
     """A cached property's saved value is the one it computes from the object's fields."""
-    for k in _cached(type(obj)) & set(vars(obj)):
+    cached = _cached(type(obj))
+    for k in cached & set(vars(obj)) if cached else ():       # (a compiled controller has none, and no __dict__)
         saved = vars(obj).pop(k)
         if not _identical(saved, getattr(obj, k)):
             raise StateError(f"{where}.{k} = {_text(saved)}: not what the fields give ({_text(getattr(obj, k))})")
@@ -378,10 +390,10 @@ def _check_outputs(logic_class: type[Controller], outputs: Any, where: str) -> N
 
 def _configured(logic_class: type[Controller], parameters: Mapping[str, object]) -> set[str]:
     """The attributes configure() derives from the parameters (before reset() adds the dynamic ones)."""
-    probe = object.__new__(logic_class)
+    probe = logic_class.__new__(logic_class)          # object.__new__, or a compiled class's own allocator
     probe.messages = []
     probe.configure(logic_class.check_parameters(parameters))
-    return set(vars(probe)) - {"messages"}
+    return set(attributes(probe)) - {"messages"}
 
 
 def _dry_step(logic: Controller, inputs: dict[str, object]) -> None:
@@ -409,7 +421,7 @@ def _restore_logic(logic: Controller, saved: Mapping[str, Any], parameters: Mapp
     cls = type(logic)
     model = cls.MODEL_NAME
     attrs = {str(k): _decode(v, f"logic.{k}") for k, v in saved.items()}
-    fresh = dict(vars(logic))
+    fresh = attributes(logic)
     expected = set(fresh) - set(getattr(cls, "DERIVED", ()))
     if set(attrs) != expected:
         unknown, missing = sorted(set(attrs) - expected), sorted(expected - set(attrs))
@@ -423,7 +435,7 @@ def _restore_logic(logic: Controller, saved: Mapping[str, Any], parameters: Mapp
         else:
             _conform(value, fresh[name], f"logic.{name}")
     _check_outputs(cls, attrs.get("_outputs"), "logic._outputs")
-    vars(logic).update(attrs)
+    set_attributes(logic, attrs)
     why = logic.check_state(inputs)
     if why:
         raise StateError(f"logic.{why}")
