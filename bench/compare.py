@@ -13,6 +13,10 @@ Printed per system: microseconds per 1 ms of simulated time on each side (= us p
 (a digest of every recorded column): a speed change should not change the run. The machine's load average is
 printed first: the ratio is fair on a loaded machine (both sides share the load, interleaved), the absolute
 numbers are not.
+
+``--compiled a|b|both`` installs that side with the ``compiled`` extra (mypyc; the FMUs then carry the
+controllers compiled). ``compare.py HEAD HEAD --compiled b`` runs one revision's pure build against its compiled
+one: the compiled controllers' gain alone, and whether both record the same trajectory.
 """
 
 from __future__ import annotations
@@ -59,9 +63,11 @@ def resolve(rev: str) -> str:
     return out.stdout.strip()
 
 
-def prepare(sha: str, work: Path, constraints: Path) -> tuple[Path, Path]:
-    """The revision's worktree and venv python, built once and cached (a 'ready' marker after the build)."""
-    home = work / sha[:12]
+def prepare(sha: str, work: Path, constraints: Path, compiled: bool = False) -> tuple[Path, Path]:
+    """The revision's worktree and venv python, built once and cached (a 'ready' marker after the build);
+    ``compiled``: installed with the ``compiled`` extra (mypyc), so ``ncfmu build`` compiles the controllers
+    where the revision can (a revision without the extra builds as it always did)."""
+    home = work / (sha[:12] + ("-compiled" if compiled else ""))
     src, venv = home / "src", home / "venv"
     python = venv / "bin" / "python"
     if (home / "ready").is_file():
@@ -73,7 +79,8 @@ def prepare(sha: str, work: Path, constraints: Path) -> tuple[Path, Path]:
     steps = [
         ["git", "-C", str(REPO), "worktree", "add", "--detach", str(src), sha],
         [sys.executable, "-m", "venv", str(venv)],
-        [str(python), "-m", "pip", "install", "-q", "-c", str(constraints), "-e", str(src)],
+        [str(python), "-m", "pip", "install", "-q", "-c", str(constraints), "-e",
+         f"{src}[compiled]" if compiled else str(src)],
         [str(venv / "bin" / "ncfmu"), "build"],
     ]
     for cmd in steps:
@@ -94,16 +101,21 @@ def run_once(src: Path, python: Path, system: str, stop_time: float) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeats: int, work: Path) -> dict:
+def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeats: int, work: Path,
+            compiled: str | None = None) -> dict:
     constraints = REPO / ".ci" / "constraints.txt"
     sides = {}
-    for rev in (rev_a, rev_b):
-        sha = resolve(rev)
-        sides[rev] = (sha, *prepare(sha, work, constraints))
+    if rev_a == rev_b:                     # one revision, two builds: tell the sides apart by name
+        rev_a, rev_b = f"{rev_a} (pure)" if compiled == "b" else rev_a, f"{rev_b} (compiled)" if compiled else rev_b
+        if rev_a == rev_b:
+            raise CompareError("REV_A and REV_B are one revision: its pure and compiled builds: --compiled b")
+    for rev, side in ((rev_a, "a"), (rev_b, "b")):
+        sha = resolve(rev.removesuffix(" (pure)").removesuffix(" (compiled)"))
+        sides[rev] = (sha, *prepare(sha, work, constraints, compiled in (side, "both")))
     load = os.getloadavg()[0]
     print(f"load average {load:.2f} on {os.cpu_count()} cores"
           + (" -- loaded: trust the ratios, not the absolute numbers" if load > 0.5 else ""))
-    results: dict = {"load_average": load, "stop_time": stop_time, "repeats": repeats,
+    results: dict = {"load_average": load, "stop_time": stop_time, "repeats": repeats, "compiled": compiled,
                      "a": {"rev": rev_a, "sha": sides[rev_a][0]}, "b": {"rev": rev_b, "sha": sides[rev_b][0]},
                      "systems": {}}
     print(f"A = {rev_a} ({sides[rev_a][0][:10]}), B = {rev_b} ({sides[rev_b][0][:10]}); "
@@ -139,11 +151,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
                         help="where the revisions' worktrees and venvs are kept")
     parser.add_argument("--json", type=Path, help="also write the results here")
+    parser.add_argument("--compiled", choices=("a", "b", "both"),
+                        help="install that side (or both) with the 'compiled' extra (mypyc): the FMUs a user with it "
+                             "builds; 'b' with REV_A == REV_B measures the compiled controllers alone")
     args = parser.parse_args(argv)
     if args.repeats < 1 or not args.stop_time > 0:
         parser.error("--repeats must be >= 1 and --stop-time > 0")
     try:
-        results = compare(args.rev_a, args.rev_b, args.systems, args.stop_time, args.repeats, args.work)
+        results = compare(args.rev_a, args.rev_b, args.systems, args.stop_time, args.repeats, args.work,
+                          args.compiled)
     except CompareError as exc:
         print(f"bench/compare.py: {exc}", file=sys.stderr)
         return 2
