@@ -283,6 +283,9 @@ CASES = {
                     "logic.pos[0] = nan: must be finite"),
     "dda_unit_zero": ("ContourInterpolator", lambda lg: lg.__setitem__("dda_unit", 0.0), "logic.dda_unit = 0.0"),
     "x_cmd_far": ("CutSequencer", lambda lg: lg.__setitem__("x_cmd", 5000.0), "logic.x_cmd"),
+    # the input names a step reads are configured: a state that swaps them would read Z's position as X's
+    "input_names_swapped": ("CutSequencer", lambda lg: lg.__setitem__("_pos_inputs", {"t": ["z_pos", "x_pos"]}),
+                            "logic._pos_inputs = ('z_pos', 'x_pos'): not ('x_pos', 'z_pos'), what the parameters give"),
 }
 
 

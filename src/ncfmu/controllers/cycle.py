@@ -44,6 +44,19 @@ from .mypyc_compat import mypyc_attr
 #: What :meth:`InPosition.judge` says of a motion this step.
 MOVING, WAITING, ARRIVED, LATE = 0, 1, 2, 3
 
+#: The input names ``<axis><suffix>`` of a tuple of axes, by (axes, suffix): built once, not in every step
+#: (a name formatted anew is a new string, allocated and hashed again for each lookup).
+_AXIS_INPUTS: dict[tuple[tuple[str, ...], str], tuple[str, ...]] = {}
+
+
+def axis_inputs(axes: Sequence[str], suffix: str) -> tuple[str, ...]:
+    """``("x", "z"), "_pos"`` -> ``("x_pos", "z_pos")``."""
+    key = (tuple(axes), suffix)
+    names = _AXIS_INPUTS.get(key)
+    if names is None:
+        names = _AXIS_INPUTS[key] = tuple(f"{a}{suffix}" for a in key[0])
+    return names
+
 
 def cycle_ports(what: str = "a motion", *names: str) -> tuple[Port, ...]:
     """The parameters of the cycle skeleton, in every cycle controller: the excess-following-error limit, the
@@ -114,7 +127,11 @@ class InPosition:
         return WAITING
 
     def arrived(self, actual: Sequence[float], command: Sequence[float]) -> bool:
-        return all(abs(a - c) <= self.band for a, c in zip(actual, command))
+        band = self.band
+        for a, c in zip(actual, command):        # (a loop: a compiled generator costs more than the test)
+            if not abs(a - c) <= band:
+                return False
+        return True
 
 
 def follow_up(actual: Mapping[str, float], command: Mapping[str, float], band: float) -> list[str]:
@@ -263,13 +280,14 @@ class CycleController(Controller):
                 axes: Sequence[str] | None = None) -> bool:
         """One in-position judgement of the motion on ``axes`` (default all) against the controller's own
         command: True when it has ended; :data:`LATE` is the in-position alarm (:meth:`stop`)."""
-        if axes is None:
+        if axes is None:                             # (all axes: the input names configured, not looked up)
             axes, target = self.AXES, self.command_point()
+            actual, in_position = self.actual(inputs), self.in_position(inputs)
         else:
             command = dict(zip(self.AXES, self.command_point()))
             target = [command[a] for a in axes]
-        actual = self.actual(inputs, axes)
-        judged = self.inpos.judge(dt, stopped, self.in_position(inputs, axes), actual, target)
+            actual, in_position = self.actual(inputs, axes), self.in_position(inputs, axes)
+        judged = self.inpos.judge(dt, stopped, in_position, actual, target)
         if judged == LATE:
             if len(axes) == 1:
                 where = f"{axes[0].upper()} stands at {actual[0]:.4f}, not at the command {target[0]:.4f}"
@@ -283,6 +301,9 @@ class CycleController(Controller):
         self.max_following_error = real_param(values, "max_following_error")
         self.inpos_band = real_param(values, "inpos_band")
         self.inpos_timeout = real_param(values, "inpos_timeout")
+        # the input names every step reads, once (configured: a restored state must hold these very names)
+        self._pos_inputs = axis_inputs(self.AXES, "_pos")
+        self._in_position_inputs = axis_inputs(self.AXES, "_in_position")
 
     def reset_cycle(self) -> None:
         self.alarm = False
@@ -293,10 +314,14 @@ class CycleController(Controller):
 
     def actual(self, inputs: Mapping[str, object], axes: Sequence[str] | None = None) -> list[float]:
         """The actual positions of ``axes`` (default: all), from the servo inputs."""
-        return [float(inputs[f"{a}_pos"]) for a in (self.AXES if axes is None else axes)]  # type: ignore[arg-type]
+        names = self._pos_inputs if axes is None else axis_inputs(axes, "_pos")
+        return [float(inputs[n]) for n in names]  # type: ignore[arg-type]
 
     def in_position(self, inputs: Mapping[str, object], axes: Sequence[str] | None = None) -> bool:
-        return all(bool(inputs[f"{a}_in_position"]) for a in (self.AXES if axes is None else axes))
+        for name in self._in_position_inputs if axes is None else axis_inputs(axes, "_in_position"):
+            if not inputs[name]:
+                return False
+        return True
 
     def judge_inputs(self, inputs: Mapping[str, object], dt: float) -> str | None:
         """Why the inputs cannot be used this step (a position NaN, beyond any machine or jumping, an override
@@ -305,7 +330,11 @@ class CycleController(Controller):
 
     def following_error(self, inputs: Mapping[str, object], command: Sequence[float]) -> str | None:
         """The excess-following-error message when ``|command - actual|`` on any axis passes the limit."""
-        err = max(abs(c - a) for c, a in zip(command, self.actual(inputs)))
+        err = -1.0                                   # (max() of a generator, as a loop: the same first maximum)
+        for c, a in zip(command, self.actual(inputs)):
+            off = abs(c - a)
+            if off > err:
+                err = off
         if err > self.max_following_error:
             return f"excess following error {err:.4f} mm > max_following_error {self.max_following_error:g} mm"
         return None
