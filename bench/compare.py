@@ -101,17 +101,26 @@ def run_once(src: Path, python: Path, system: str, stop_time: float) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def side_labels(rev_a: str, rev_b: str, compiled: str | None) -> tuple[str, str]:
+    """The sides' names, distinct: their revisions; for one revision, also how each side is built (its pure
+    and compiled builds), and an A/A run of one build (the noise) as A and B."""
+    if rev_a != rev_b:
+        return rev_a, rev_b
+    build_a, build_b = ("compiled" if compiled in (side, "both") else "pure" for side in ("a", "b"))
+    if build_a != build_b:
+        return f"{rev_a} ({build_a})", f"{rev_b} ({build_b})"
+    return f"{rev_a} (A, {build_a})", f"{rev_b} (B, {build_b})"
+
+
 def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeats: int, work: Path,
             compiled: str | None = None) -> dict:
     constraints = REPO / ".ci" / "constraints.txt"
+    labels = side_labels(rev_a, rev_b, compiled)
     sides = {}
-    if rev_a == rev_b:                     # one revision, two builds: tell the sides apart by name
-        rev_a, rev_b = f"{rev_a} (pure)" if compiled == "b" else rev_a, f"{rev_b} (compiled)" if compiled else rev_b
-        if rev_a == rev_b:
-            raise CompareError("REV_A and REV_B are one revision: its pure and compiled builds: --compiled b")
-    for rev, side in ((rev_a, "a"), (rev_b, "b")):
-        sha = resolve(rev.removesuffix(" (pure)").removesuffix(" (compiled)"))
-        sides[rev] = (sha, *prepare(sha, work, constraints, compiled in (side, "both")))
+    for label, rev, side in zip(labels, (rev_a, rev_b), ("a", "b")):
+        sha = resolve(rev)
+        sides[label] = (sha, *prepare(sha, work, constraints, compiled in (side, "both")))
+    rev_a, rev_b = labels                  # from here on, a side is named by its label
     load = os.getloadavg()[0]
     print(f"load average {load:.2f} on {os.cpu_count()} cores"
           + (" -- loaded: trust the ratios, not the absolute numbers" if load > 0.5 else ""))
