@@ -62,8 +62,6 @@ class GeometryError(ConfigError):
     """The corrected path cannot be built (a gouging inside corner, an element that vanishes or reverses)."""
 
 
-
-
 def point_contour(points: Sequence[tuple[float, float]], closed: bool) -> list[Line]:
     """The lines through ``points`` (back to the first for a ``closed`` path)."""
     pts = [(float(x), float(y)) for x, y in points]

@@ -37,7 +37,7 @@ else:
         def mypyc_attr(*attrs: str, **kwattrs: object):
             return lambda cls: cls
 
-__all__ = ["attributes", "blank", "mypyc_attr", "set_attributes"]
+__all__ = ["attributes", "blank", "blankable", "mypyc_attr", "set_attributes"]
 
 
 def attributes(obj: object) -> dict[str, Any]:
@@ -62,14 +62,20 @@ def set_attributes(obj: object, values: Mapping[str, Any]) -> None:
         setattr(obj, name, value)
 
 
-def blank(cls: type[Any]) -> object | None:
-    """An object of ``cls`` with no attribute set, made without running any code of the class: ``object.__new__``
-    for a plain class; for a native class (instances without ``__dict__``, serializable) its allocator, which
-    only sets up the C fields. None for any other class (one with its own construction: an exception, a
+def blankable(cls: type[Any]) -> bool:
+    """Whether :func:`blank` can make an object of ``cls``: a plain class (``object.__new__``) or a native one
+    (instances without ``__dict__``, serializable); not a class with its own construction (an exception, a
     builtin's subclass). (ncfmu's classes define no ``__new__``.)"""
-    if cls.__new__ is object.__new__:
-        return object.__new__(cls)
-    native = (cls.__dictoffset__ == 0 and cls.__getstate__ is not object.__getstate__
-              and not issubclass(cls, BaseException))
+    if issubclass(cls, BaseException):
+        return False
+    return cls.__new__ is object.__new__ or (cls.__dictoffset__ == 0 and cls.__getstate__ is not object.__getstate__)
+
+
+def blank(cls: type[Any]) -> object:
+    """An object of a :func:`blankable` ``cls`` with no attribute set, made without running any code of the
+    class: ``object.__new__`` for a plain class; for a native class its allocator, which only sets up the C
+    fields."""
+    if not blankable(cls):
+        raise TypeError(f"a {cls.__qualname__} is made by its own construction, not blank")
     allocate: Any = cls.__new__
-    return allocate(cls) if native else None
+    return allocate(cls)

@@ -39,7 +39,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 from ..controllers.base import POSITION_LIMIT, SPEED_LIMIT
-from ..controllers.mypyc_compat import attributes, blank, set_attributes
+from ..controllers.mypyc_compat import attributes, blank, blankable, set_attributes
 from ..errors import ConfigError, NcfmuError
 from ..ports import Port
 
@@ -129,7 +129,7 @@ def _class(tag: str) -> type:
     if module is None or not isinstance(cls, type) or cls.__module__ != module.__name__:
         raise StateError(f"object tag {tag!r} names no class of this FMU")
     # an empty object of a class with its own construction (an exception, a builtin subclass) is no state
-    if issubclass(cls, BaseException) or blank(cls) is None:
+    if not blankable(cls):
         raise StateError(f"object tag {tag!r} names a class whose objects are no state")
     return cls
 
@@ -390,7 +390,7 @@ def _check_outputs(logic_class: type[Controller], outputs: Any, where: str) -> N
 
 def _configured(logic_class: type[Controller], parameters: Mapping[str, object]) -> set[str]:
     """The attributes configure() derives from the parameters (before reset() adds the dynamic ones)."""
-    probe = logic_class.__new__(logic_class)          # object.__new__, or a compiled class's own allocator
+    probe: Any = blank(logic_class)
     probe.messages = []
     probe.configure(logic_class.check_parameters(parameters))
     return set(attributes(probe)) - {"messages"}
