@@ -5,6 +5,7 @@ and a program without G71/G70 against drawings of them."""
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -223,12 +224,19 @@ def test_the_cli_refuses_a_bad_drawing_in_one_line_with_exit_2_before_it_runs(tm
     doc, msp = new_drawing(1)
     polyline_lines(msp, [(0.0, 0.0), (0.0, 1.0), (-2.0, 1.0), (-2.0, 0.0), (0.0, 0.0)])
     doc.saveas(tmp_path / "inch.dxf")
-    for argv in (["run", "lathe_roughing", "--drawing", str(tmp_path / "inch.dxf"), "--out", str(tmp_path)],
-                 ["run", "lathe_roughing", "--drawing", str(tmp_path / "none.dxf"), "--out", str(tmp_path)]):
-        assert main(argv) == 2
+    doc, msp = new_drawing()
+    polyline_lines(msp, [(0.0, -10.0), (0.0, 10.0), (-20.0, 10.0), (-20.0, -10.0), (0.0, -10.0)])
+    doc.saveas(tmp_path / "full.dxf")                  # a full section: fine for a mill, not for a lathe
+    out = tmp_path / "out"
+    for argv, says in (
+            (["run", "lathe_roughing", "--drawing", str(tmp_path / "inch.dxf")], "$INSUNITS = 1 (Inches)"),
+            (["run", "lathe_roughing", "--drawing", str(tmp_path / "none.dxf")], "cannot be read"),
+            (["run", "lathe_roughing", "--drawing", str(tmp_path / "full.dxf")], "below the axis"),
+            (["serve", "lathe_roughing", "--drawing", str(tmp_path / "inch.dxf")], "$INSUNITS = 1 (Inches)")):
+        assert main([*argv, "--out", str(out)]) == 2
         err = capsys.readouterr().err.strip()
-        assert len(err.splitlines()) == 1 and "--drawing" in err, err
-        assert not (tmp_path / "lathe_roughing.csv").exists()
+        assert len(err.splitlines()) == 1 and f"--drawing {tmp_path}" in err and says in err, err
+        assert not out.exists() or not any(out.iterdir())      # refused before anything was written
 
 
 # -- the judgement against the part drawn, without simulating ----------------------------------------------
@@ -273,3 +281,55 @@ def test_a_mill_outline_drawn_replaces_the_contour(tmp_path):
             assert d.gouge_at[0] == pytest.approx(60.05, abs=0.051) and 0.0 <= d.gouge_at[1] <= 40.0
         # the plate is the part drawn grown by the stock margin
         assert setup.removal.part(setup.anchor).bounds == pytest.approx((-5.0, -5.0, 65.0 + off, 45.0))
+
+
+# -- closed loop through the FMUs ------------------------------------------------------------------------------
+def plain_dxf(path: Path, off: float = 0.0) -> Path:
+    """PLAIN's part drawn, its 56 mm diameter (radius 28, Z -10 to -20) ``off`` mm higher."""
+    doc, msp = new_drawing()
+    outline = [(z, x + off if x == 28.0 else x) for z, x in PLAIN_OUTLINE]
+    polyline_lines(msp, outline + [outline[0]])
+    doc.saveas(path)
+    return path
+
+
+@pytest.mark.slow
+def test_the_fanuc_example_run_is_judged_against_its_drawing(ncfmu_run, tmp_path):
+    # the same run as tests/systems/test_fanuc_program_system.py's (the session shares it)
+    right, off = fanuc_dxf(tmp_path / "fanuc.dxf"), fanuc_dxf(tmp_path / "off.dxf", off=0.1)
+    start = {"seq.program": FANUC}
+    p = ncfmu_run("lathe_roughing", stop_time=100.0, start_values=start, drawing=right).part
+    assert p.crashes == [] and p.judged == ""
+    assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01 and p.within_tolerance is True
+    p = ncfmu_run("lathe_roughing", stop_time=100.0, start_values=start, drawing=off).part
+    assert p.within_tolerance is False and p.max_left_mm < 0.01
+    assert p.max_gouge_mm == pytest.approx(0.1, abs=0.005)
+    z, x = p.gouge_at
+    assert -26.0 - 0.01 <= z <= -20.0 + 0.01 and x == pytest.approx(20.0, abs=0.01)   # the 40 mm diameter
+    assert p.gouge_line == 16                                                         # N15 Z-26.
+
+
+@pytest.mark.slow
+def test_a_program_without_g71_gets_a_dimensional_verdict_with_a_drawing(ncfmu_run, tmp_path, capsys):
+    from ncfmu.cli import main
+    start = {"seq.program": PLAIN}
+    r = ncfmu_run("lathe_roughing", stop_time=8.0, start_values=start)
+    assert r.part.judged == "the program has no G71/G70 profile to judge against"
+    assert r.part.within_tolerance is None
+    # the tool went where the drawing says: radius 28 down to Z -20, 27 down to Z -10
+    x, z, line = r["x_axis.pos"], r["z_axis.pos"], r["seq.line"]
+    assert x[line == 7] == pytest.approx(28.0, abs=0.01) and z[line == 7].min() == pytest.approx(-20.0, abs=0.01)
+    assert x[line == 11] == pytest.approx(27.0, abs=0.01) and z[line == 11].min() == pytest.approx(-10.0, abs=0.01)
+    p = ncfmu_run("lathe_roughing", stop_time=8.0, start_values=start, drawing=plain_dxf(tmp_path / "p.dxf")).part
+    assert p.judged == "" and p.crashes == []
+    assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01 and p.within_tolerance is True
+    # drawn a tenth larger on the 56 mm diameter: out of tolerance there, by the tenth, on the line that cut it
+    off = plain_dxf(tmp_path / "off.dxf", off=0.1)
+    status = main(["run", "lathe_roughing", "--stop-time", "8", "--set", f"seq.program={PLAIN}",
+                   "--drawing", str(off), "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert status == 3, out
+    assert "  part: OUT OF TOLERANCE 0.0100 mm: left <= " in out and "(line 7)" in out
+    written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
+    assert written["max_gouge_mm"] == pytest.approx(0.1, abs=0.005) and written["within_tolerance"] is False
+    assert -20.01 <= written["gouge_at"]["Z"] <= -9.99 and written["gouge_at"]["line"] == 7

@@ -257,14 +257,26 @@ def _outline(name: str, loops: list[list[_Piece]]) -> Drawing:
     return Drawing(name, part, handles)
 
 
+def check_for(report: Any, drawing: Drawing) -> None:
+    """Refuse, before anything runs, a drawing the ``report``'s part check cannot take: a lathe's below the axis."""
+    from .part import LathePart
+    if any(isinstance(p, LathePart) for p in report.parts):
+        _half_section(drawing)
+
+
+def _half_section(drawing: Drawing) -> None:
+    x0 = drawing.outline.bounds[1]
+    if x0 < -JOIN_TOLERANCE:
+        raise DrawingError(drawing.path, "", f"reaches Y {x0:.4f}, below the axis: a lathe's drawing is the upper "
+                                             "half section (Y the radius >= 0, X the machine's Z)")
+
+
 def lathe_part(drawing: Drawing, stock: Any) -> Any:
     """The lathe's part drawn, in the part check's (Z, X) plane: the half section's region, and toward the chuck
     -- beyond the drawing's smallest Z -- the ``stock`` as held. Refused when it reaches below the axis."""
     from shapely.geometry import box
+    _half_section(drawing)
     outline = drawing.outline
-    z0, x0, _, _ = outline.bounds
-    if x0 < -JOIN_TOLERANCE:
-        raise DrawingError(drawing.path, "", f"reaches Y {x0:.4f}, below the axis: a lathe's drawing is the upper "
-                                             "half section (Y the radius >= 0, X the machine's Z)")
+    z0 = outline.bounds[0]
     sz0, _, _, sx1 = stock.bounds
     return outline.union(stock.intersection(box(sz0, 0.0, z0, sx1))) if z0 > sz0 else outline
