@@ -333,3 +333,19 @@ def test_a_program_without_g71_gets_a_dimensional_verdict_with_a_drawing(ncfmu_r
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["max_gouge_mm"] == pytest.approx(0.1, abs=0.005) and written["within_tolerance"] is False
     assert -20.01 <= written["gouge_at"]["Z"] <= -9.99 and written["gouge_at"]["line"] == 7
+
+
+def test_what_no_part_is_made_of_is_refused(tmp_path):
+    for name, says in (("empty", "cannot be read"), ("nan", "LINE 2F has the coordinate nan"),
+                       ("huge", "of arcs: more than 1000000 points")):
+        doc, msp = new_drawing()
+        if name == "nan":
+            msp.add_line((0.0, 0.0), (math.nan, 1.0))
+        elif name == "huge":                      # a 200 m circle: 31 million chords of 0.02 mm
+            msp.add_circle((0.0, 0.0), 1e5)
+        path = tmp_path / f"{name}.dxf"
+        if name == "empty":
+            path.write_text("")
+        else:
+            doc.saveas(path)
+        assert says in refusal(path)

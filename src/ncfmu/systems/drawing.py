@@ -29,11 +29,14 @@ from typing import Any
 
 from ..controllers.geometry import Arc, Element, Line, sample
 from ..errors import DrawingError
+from .part import ARC_SPACING
 
 #: Endpoints closer than this (mm) are one point of the outline: 1 um, a tenth of the default tolerance's tenth.
 JOIN_TOLERANCE = 1e-3
 #: $INSUNITS codes read as mm: 0 (unitless: the drawing is taken to be in mm) and 4 (millimeters).
 MM_UNITS = (0, 4)
+#: The most points an outline may make (at ARC_SPACING: 20 m of outline): a drawing is a part, not a site plan.
+MAX_POINTS = 1_000_000
 #: What the outline is made of.
 OUTLINE_ENTITIES = ("LINE", "ARC", "CIRCLE", "LWPOLYLINE")
 #: Annotations: they describe the part, they are not its outline; passed over.
@@ -111,7 +114,11 @@ def read_drawing(path: str | Path) -> Drawing:
             pieces += found
     loops += _chain(name, pieces)
     if not loops:
-        raise DrawingError(name, "", f"has no closed outline (no {', '.join(OUTLINE_ENTITIES)} entities)")
+        raise DrawingError(name, "", f"has no outline (no {', '.join(OUTLINE_ENTITIES)} entities of any length)")
+    arcs = sum(p.element.length for loop in loops for p in loop if isinstance(p.element, Arc))
+    if arcs / ARC_SPACING + sum(len(loop) for loop in loops) > MAX_POINTS:
+        raise DrawingError(name, "", f"has {arcs:.6g} mm of arcs: more than {MAX_POINTS} points at the part "
+                                     f"check's {ARC_SPACING:g} mm spacing (is it in mm?)")
     return _outline(name, loops)
 
 
@@ -124,8 +131,21 @@ def _flat(name: str, entity, what: str) -> int:
     return 1 if nz > 0 else -1
 
 
+def _finite(name: str, what: str, values: list[float]) -> None:
+    bad = [v for v in values if not math.isfinite(v)]
+    if bad:
+        raise DrawingError(name, what, f"has the coordinate {bad[0]!r}: every coordinate must be a finite number")
+
+
 def _pieces(name: str, entity, kind: str, handle: str) -> list[_Piece]:
     what = f"{kind} {handle}"
+    if kind == "LWPOLYLINE":
+        _finite(name, what, [float(v) for point in entity.get_points("xyb") for v in point])
+    else:
+        _finite(name, what, [float(v) for key in ("start", "end", "center") if entity.dxf.hasattr(key)
+                             for v in entity.dxf.get(key)]
+                + [float(entity.dxf.get(key)) for key in ("radius", "start_angle", "end_angle")
+                   if entity.dxf.hasattr(key)])
     if kind == "LINE":
         s, e = entity.dxf.start, entity.dxf.end
         if abs(s.z) > JOIN_TOLERANCE or abs(e.z) > JOIN_TOLERANCE:
@@ -215,8 +235,6 @@ def _ring(name: str, loop: list[_Piece]):
     """A closed loop as a valid shapely polygon (its arcs at the part check's spacing)."""
     import shapely
     from shapely.geometry import Polygon
-
-    from .part import ARC_SPACING
     # each element's points but its last (the next one's first is that joint); a joint an arc shares with a line
     # is the line's end as drawn (the arc's, from its angles, is off by rounding: a sliver would cross itself)
     points: list[tuple[float, float]] = []
