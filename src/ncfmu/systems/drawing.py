@@ -109,7 +109,8 @@ def read_drawing(path: str | Path) -> Drawing:
                                f"{', '.join(OUTLINE_ENTITIES)} (convert it to arcs and lines)")
         found = _pieces(name, entity, kind, handle)
         if kind == "CIRCLE" or (isinstance(entity, LWPolyline) and entity.closed):
-            loops.append(found)
+            if found:
+                loops.append(found)
         else:
             pieces += found
     loops += _chain(name, pieces)
@@ -126,7 +127,7 @@ def _flat(name: str, entity, what: str) -> int:
     """+1 (or -1, mirrored) when ``entity`` lies in the XY plane (its extrusion +Z or -Z, its elevation 0)."""
     nx, ny, nz = entity.dxf.extrusion
     if abs(nx) > 1e-9 or abs(ny) > 1e-9:
-        raise DrawingError(name, what, f"is not in the XY plane (extrusion {_xy((nx, ny))[:-1]}, {nz:g})): "
+        raise DrawingError(name, what, f"is not in the XY plane (extrusion ({nx:g}, {ny:g}, {nz:g})): "
                                        "the outline is drawn in XY")
     return 1 if nz > 0 else -1
 
@@ -198,36 +199,51 @@ def _pieces(name: str, entity, kind: str, handle: str) -> list[_Piece]:
     return out
 
 
+def _cell(p: tuple[float, float]) -> tuple[int, int]:
+    return (math.floor(p[0] / JOIN_TOLERANCE), math.floor(p[1] / JOIN_TOLERANCE))
+
+
 def _chain(name: str, pieces: list[_Piece]) -> list[list[_Piece]]:
-    """The open entities chained end to end into closed loops (each piece turned to run along its loop)."""
-    left = list(pieces)
+    """The open entities chained end to end into closed loops (each piece turned to run along its loop); the ends
+    are found through a grid of JOIN_TOLERANCE cells (a drawing of thousands of segments chains in linear time)."""
+    grid: dict[tuple[int, int], list[tuple[int, int]]] = {}       # cell -> (piece, 0 its start / 1 its end)
+    for i, p in enumerate(pieces):
+        for side, q in enumerate((_start(p.element), _end(p.element))):
+            grid.setdefault(_cell(q), []).append((i, side))
+
+    def ends_at(q: tuple[float, float]) -> list[tuple[int, int]]:
+        cx, cy = _cell(q)
+        return [(i, side) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for i, side in grid.get((cx + dx, cy + dy), ())
+                if math.dist(q, _end(pieces[i].element) if side else _start(pieces[i].element)) <= JOIN_TOLERANCE]
+
+    used = [False] * len(pieces)
     loops: list[list[_Piece]] = []
-    while left:
-        loop = [left.pop(0)]
+    for first in range(len(pieces)):
+        if used[first]:
+            continue
+        used[first] = True
+        loop = [pieces[first]]
         while True:
             head, tail = _start(loop[0].element), _end(loop[-1].element)
-            if len(loop) > 1 and math.dist(head, tail) <= JOIN_TOLERANCE:
-                loops.append(loop)
+            meeting = ends_at(tail)
+            others = [(i, side) for i, side in meeting if not (i == first and side == 0) and not used[i]]
+            if len(meeting) > 2 or len(others) > 1:
+                names = sorted({pieces[i].name for i, _ in meeting} | {loop[-1].name})
+                raise DrawingError(name, " and ".join(names), f"meet at {_xy(tail)}: the outline branches (one "
+                                   "closed outline, each end meeting one other, is the part)")
+            if not others and math.dist(head, tail) <= JOIN_TOLERANCE:
+                loops.append(loop)              # closed (a full arc alone too)
                 break
-            nexts = [(i, p) for i, p in enumerate(left)
-                     if min(math.dist(tail, _start(p.element)), math.dist(tail, _end(p.element))) <= JOIN_TOLERANCE]
-            if len(nexts) > 1:
-                raise DrawingError(name, " and ".join(p.name for _, p in nexts),
-                                   f"both continue the outline at {_xy(tail)} after {loop[-1].name}: the outline "
-                                   "branches (one closed outline is the part)")
-            if not nexts:
-                if len(loop) == 1 and math.dist(head, tail) <= JOIN_TOLERANCE:
-                    loops.append(loop)        # a full arc alone
-                    break
-                near = min(((math.dist(tail, q), p.name, q) for p in left + loop[:1]
-                            for q in (_start(p.element), _end(p.element))), default=None)
+            if not others:
+                near = min(((math.dist(tail, q), p.name, q) for i, p in enumerate(pieces) if not used[i] or i == first
+                            for q in (_start(p.element), _end(p.element)) if p is not loop[-1]), default=None)
                 hint = f"; the nearest end is {near[1]}'s at {_xy(near[2])}, {near[0]:.4f} mm away" if near else ""
                 raise DrawingError(name, loop[-1].name, f"ends at {_xy(tail)} where no other entity starts: the "
                                    f"outline is not closed (a gap; ends within {JOIN_TOLERANCE:g} mm join){hint}")
-            i, p = nexts[0]
-            left.pop(i)
-            e = p.element if math.dist(tail, _start(p.element)) <= JOIN_TOLERANCE else _reverse(p.element)
-            loop.append(_Piece(e, p.name, p.handle))
+            i, side = others[0]
+            used[i] = True
+            e = pieces[i].element
+            loop.append(_Piece(e if side == 0 else _reverse(e), pieces[i].name, pieces[i].handle))
     return loops
 
 
