@@ -2,7 +2,7 @@
 
 A program written by CAM has no G71/G70 profile, so the part check (:mod:`.part`) does not know the part it is
 meant to make; a drawing tells it. The DXF (read with ezdxf) holds the part's outline as LINE, ARC, CIRCLE and
-LWPOLYLINE entities (with bulges), in mm, in the XY plane:
+LWPOLYLINE entities (with bulges) of its model space, in mm, in the XY plane:
 
 - a lathe's: the upper half section in the part check's (Z, X) plane -- the drawing's X is the machine's Z (0 at
   the program's Z0), its Y the radius; the outline closes along the axis (Y 0), and the part is the region it
@@ -31,7 +31,7 @@ from ..controllers.geometry import Arc, Element, Line, sample
 from ..errors import DrawingError
 from .part import ARC_SPACING
 
-#: Endpoints closer than this (mm) are one point of the outline: 1 um, a tenth of the default tolerance's tenth.
+#: Endpoints closer than this (mm) are one point of the outline: 1 um, a tenth of the default tolerance (0.01 mm).
 JOIN_TOLERANCE = 1e-3
 #: $INSUNITS codes read as mm: 0 (unitless: the drawing is taken to be in mm) and 4 (millimeters).
 MM_UNITS = (0, 4)
