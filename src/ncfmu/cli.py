@@ -222,6 +222,16 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
     return [{name: values[i] for name, values in columns.items()} for i in range(n)]
 
 
+def _drawing(args):
+    """The part drawn (``--drawing FILE.dxf``), read before anything runs; None: none given."""
+    if args.drawing is None:
+        return None
+    if args.no_part_check:
+        raise NcfmuError("--drawing and --no-part-check together: the drawing is what the part check judges against")
+    from .systems.drawing import read_drawing
+    return read_drawing(args.drawing)
+
+
 def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
     completed) and the summary computed as the run goes; ``--plot`` keeps what a figure can show of it (a
@@ -239,7 +249,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
         raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
     settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
-                            args.max_depth)
+                            args.max_depth, _drawing(args))
     csv_sink = plotted = None
     try:
         with deferred_interrupts():
@@ -251,6 +261,9 @@ def _run_streamed(args, start_values: dict[str, object]):
                 rows = None
                 if step > 0 and math.isfinite(stop / step):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+                if settings.drawing is not None:        # refused for this system before any file is written
+                    from .systems.drawing import check_for
+                    check_for(opened.report(), settings.drawing)
                 _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
@@ -351,6 +364,9 @@ def cmd_run(args) -> int:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
                              "CSV; run the input without --branch-at, or branch with --branch-set")
+        if args.drawing is not None:
+            raise NcfmuError("--drawing and --branch-at together: the branches' summaries judge the programmed part; "
+                             "run the drawing without --branch-at")
         variants = _parse_branches(args.branch_set)
         results = simulate_branches(args.system, args.branch_at, variants, stop_time=args.stop_time,
                                     start_values=_parse_set(args.set), mode=args.mode, root=args.root)
@@ -572,7 +588,7 @@ def cmd_serve(args) -> int:
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
-                    watchdog=args.watchdog, cnc=args.cnc)
+                    watchdog=args.watchdog, cnc=args.cnc, drawing=_drawing(args))
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -639,6 +655,10 @@ def main(argv: list[str] | None = None) -> int:
                         "table's seq.tool[k].max_depth, else no limit)")
     p.add_argument("--no-part-check", action="store_true",
                    help="no material removal, crash and tolerance check (and no SYSTEM.part.json)")
+    p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
+                   help="judge the part made against the part drawn, in place of the programmed part (also for "
+                        "programs without G71/G70): a DXF of LINE, ARC, CIRCLE, LWPOLYLINE in mm; a lathe's upper "
+                        "half section (drawing X = machine Z, Y = radius), a mill's outline in XY")
     p.add_argument("--branch-at", type=_real_option, default=None, metavar="T",
                    help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
@@ -747,7 +767,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--watchdog", type=_real_option, default=None, metavar="S",
                    help="the inputs a client session forced fall back to what drives them when it closes or sends "
                         "nothing for S seconds (logged, and recorded as releases)")
-    p.set_defaults(func=cmd_serve)
+    p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
+                   help="the part check judges against the part drawn (as 'ncfmu run --drawing'): a served mill's "
+                        "gouges are crashes against the outline drawn")
+    p.set_defaults(func=cmd_serve, no_part_check=False)
 
     p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "
                        ".fmu; components replaced with --replace) as one .ssp archive")

@@ -80,3 +80,12 @@ def require(condition: bool, variable: str, value: object, rule: str) -> None:
     """Raise :class:`ConfigError` unless ``condition`` holds."""
     if not condition:
         raise ConfigError(variable, value, rule)
+
+
+class DrawingError(NcfmuError, ValueError):
+    """A drawing (``--drawing FILE.dxf``) has no part outline the part check can read: names the file, the entity
+    (its type and handle) and the rule."""
+
+    def __init__(self, path: str, entity: str, rule: str):
+        self.path, self.entity, self.rule = path, entity, rule
+        super().__init__(f"--drawing {path}: {entity + ' ' if entity else ''}{rule}")

@@ -1594,12 +1594,15 @@ def _quiet_asyncua() -> None:
 
 
 def _crash_watch(opened, start_values: Mapping[str, object], recorder: Recorder | None,
-                 record: Sequence[str] | None) -> tuple[CrashWatch | None, list, list[str] | None]:
-    """The served run's part check (None: the system has none), the session's sinks and what it records: with
-    ``--record``, also what the part check reads (the CSV keeps to ``--record``)."""
-    from .systems.part import part_check_only
+                 record: Sequence[str] | None, drawing=None) -> tuple[CrashWatch | None, list, list[str] | None]:
+    """The served run's part check (None: the system has none; with ``drawing``, judged against the part drawn),
+    the session's sinks and what it records: with ``--record``, also what the part check reads (the CSV keeps to
+    ``--record``)."""
+    from .systems.part import PartSettings, part_check_only, with_part_settings
     from .systems.report import start_parameters
     report = part_check_only(opened.report())
+    if report is not None and drawing is not None:
+        report = with_part_settings(report, PartSettings(drawing=drawing))
     recording = list(recorder.sinks()) if recorder is not None else []
     columns = list(record) if record else None
     if report is None:
@@ -1615,13 +1618,14 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
           ready: Callable[[str], None] | None = None, watchdog: float | None = None,
-          cnc: bool = False) -> ServeSummary:
+          cnc: bool = False, drawing=None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
     ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
     (s), the inputs a client session forced fall back (are released) when it closes or is silent that long. With
-    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
+    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object. With
+    ``drawing`` (a :class:`~ncfmu.systems.drawing.Drawing`), the part check judges against the part drawn."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
@@ -1635,7 +1639,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     files: list[Path] = []
     with OpenSystem(archive) as opened:
         recorder = Recorder(opened.system.name, Path(out)) if out is not None else None
-        watch, sinks, columns = _crash_watch(opened, start_values or {}, recorder, record)
+        watch, sinks, columns = _crash_watch(opened, start_values or {}, recorder, record, drawing)
         session = opened.open_session(
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
             start_values=dict(start_values or {}), record=columns, sinks=sinks)

@@ -65,6 +65,8 @@ class PartSettings:
     tolerance: float = TOLERANCE
     nose_radius: float | None = None
     max_depth: float | None = None
+    drawing: Any = None       # the part drawn (a systems.drawing.Drawing, --drawing): judged against in place of
+                              # the programmed part
 
 
 def first_tool_offset(program: str) -> int:
@@ -397,7 +399,7 @@ class LathePart(MachinedPart):
         removed: list[Any] = []
         lines: list[tuple[Any, int]] = []
         if program.strip():
-            if not profiles:
+            if not profiles and self.settings.drawing is None:
                 return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                              spindle_checked=self._drives_spindle(program))
             # what the profile cuts away: outside, all above it; inside (a bore), all below it down to the hole
@@ -419,6 +421,13 @@ class LathePart(MachinedPart):
                 # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
                 removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
         programmed = stock.difference(shapely.union_all(removed))
+        if self.settings.drawing is not None:
+            from ..controllers.gcode import Move
+            from .drawing import lathe_part
+            programmed = lathe_part(self.settings.drawing, stock)
+            if program.strip() and not lines:       # no profile: where the part is off, the nearest cut's line
+                lines = [(LineString(_elements_polyline([op.element])), op.line) for op in ops
+                         if isinstance(op, Move) and not op.rapid]
         return Setup(removal, programmed, anchor, lines, spindle_checked=self._drives_spindle(program))
 
     def _drives_spindle(self, program: str) -> bool:
@@ -476,6 +485,8 @@ class MillPart(MachinedPart):
         outline = _elements_polyline(elements) if elements else []
         closed = len(outline) > 3 and math.dist(outline[0], outline[-1]) < 1e-6
         part = Polygon(outline).buffer(0) if closed else None
+        if self.settings.drawing is not None:
+            part = self.settings.drawing.outline
         if part is None or part.is_empty:
             xs = [p[0] for p in outline] or [c.x_start]
             ys = [p[1] for p in outline] or [c.y_start]
