@@ -243,6 +243,15 @@ def test_a_port_out_of_range_and_a_certificate_that_is_none_are_one_line(project
     assert err.startswith("ncfmu serve: --certificate = ") and err.count("\n") == 1, err
 
 
+def test_on_lost_needs_a_watchdog_and_is_hold_or_release(capsys):
+    assert main(["serve", "grinder_feed", "--on-lost", "release"]) == 2
+    err = capsys.readouterr().err
+    assert err == "ncfmu serve: --on-lost release: needs --watchdog S (what tells that a client is lost)\n", err
+    with pytest.raises(SystemExit) as exit_:
+        main(["serve", "grinder_feed", "--watchdog", "1", "--on-lost", "ignore"])
+    assert exit_.value.code == 2 and "--on-lost: invalid choice: 'ignore'" in capsys.readouterr().err
+
+
 # -- forces a PLC can live with: Simulation.forced and the watchdog -----------------------------------------------
 #: A PLC that forces an input (subscribed, as PLCs are: asyncua keeps a session with subscriptions past its
 #: connection), says so, then reads the time every 0.2 s until killed -- or, with "close", disconnects properly.
@@ -272,8 +281,9 @@ FORCING_PLC = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve, tmp_path):
+    """``--on-lost release``: a lost session's forces fall back (the HMI's feed hold is lifted)."""
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--out", out)
+    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--on-lost", "release", "--out", out)
 
     def plc(node: str, how: str) -> subprocess.Popen:
         proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, how],
@@ -323,6 +333,76 @@ def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve,
     header = writes[0].split(",")
     hold = header.index('"seq.feed_hold"')
     assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "release"]
+
+
+def _forcing_plc(served, node: str) -> subprocess.Popen:
+    """An HMI process that forced ``node`` true and lives (subscribed) until killed."""
+    proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, "live"],
+                            stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "forced"
+    return proc
+
+
+@pytest.mark.slow
+def test_a_lost_hmi_leaves_the_machine_in_feed_hold_until_a_client_resumes(ncfmu_serve, tmp_path):
+    """``--on-lost hold`` (the default): a CNC that loses its HMI stops. The HMI's feed hold stays, the state
+    says why, the held inputs cannot be released one by one; a new client's Resume releases them and the axes
+    move on."""
+    out = tmp_path / "served"
+    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--out", out)
+    axes = ("x_axis.pos", "z_axis.pos")
+
+    async def positions(p) -> list[float]:
+        return [await p.read(a) for a in axes]
+
+    async def operator():
+        loop = asyncio.get_running_loop()
+        async with connect(served) as p:
+            await p.wait_until("seq.busy", lambda v: v is True, timeout=30)         # the cycle runs (START 0.1 s)
+            hmi = await loop.run_in_executor(None, _forcing_plc, served, "seq.feed_hold")
+            try:
+                assert await p.read("seq.feed_hold") is True
+                hmi.kill()                                  # the HMI dies with its feed hold on
+                await loop.run_in_executor(None, hmi.wait, 10)
+            finally:
+                if hmi.poll() is None:
+                    hmi.kill()
+            killed = time.monotonic()
+            await p.wait_until("Simulation.state", lambda s: s == "held", timeout=10)
+            assert time.monotonic() - killed < 5.0
+            reason = await p.read("Simulation.reason")
+            assert reason.startswith("client lost: session ") and "silent for 1 s" in reason, reason
+            assert "feed hold on seq.feed_hold" in reason and "Resume" in reason, reason
+            assert await p.read("Simulation.forced") == ["seq.feed_hold"]
+            # held: the simulation runs on (the spindle turns, time goes on), the axes stay put
+            t0, at = await p.time(), await positions(p)
+            await asyncio.sleep(1.0)
+            assert await p.time() > t0 + 0.5
+            assert await positions(p) == pytest.approx(at, abs=1e-3)
+            assert await p.read("Simulation.state") == "held"
+            # a held input is released by Resume only (not by Release, nor by writing it)
+            for attempt in (p.call("Release", "seq.feed_hold"), p.write("seq.feed_hold", False),
+                            p.write("seq.feed_hold.forced", False), p.call("Pause")):
+                with pytest.raises(ua.UaStatusCodeError) as err:
+                    await attempt
+                assert err.value.code == ua.StatusCodes.BadInvalidState
+            assert await p.read("seq.feed_hold.forced") is True
+            await p.call("Resume")                           # the new client acknowledges: cycle start
+            assert await p.read("Simulation.state") == "running" and await p.read("Simulation.reason") == ""
+            assert await p.read("Simulation.forced") == [] and await p.read("seq.feed_hold.forced") is False
+            await p.wait_until("seq.feed_hold", lambda v: v is False, timeout=5)     # the panel's again, off
+            end = time.monotonic() + 10
+            while max(abs(a - b) for a, b in zip(await positions(p), at)) < 0.1:    # the axes move again
+                assert time.monotonic() < end, "the axes did not move after Resume"
+                await asyncio.sleep(0.05)
+            await p.call("Stop")
+    run(operator())
+    assert served.wait(30) == 0, served.output
+    assert "watchdog: session" in served.output and "client lost" in served.output
+    writes = (out / "session_inputs.csv").read_text().splitlines()
+    hold = writes[0].split(",").index('"seq.feed_hold"')
+    # the HMI's force, the hold's (the same value: true), Resume's release
+    assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "1", "release"]
 
 
 # -- security: certificates, a trust list, who the server says it is ---------------------------------------------
