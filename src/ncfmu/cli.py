@@ -570,11 +570,15 @@ def cmd_serve(args) -> int:
     def ready(endpoint: str) -> None:
         print(f"ncfmu serve: {args.system} at {endpoint} (speed {args.speed:g}); Ctrl-C stops", flush=True)
 
+    def verdict(t: float, line: str) -> None:
+        print(f"ncfmu serve: program ended at t = {t:.3f} s: {line}", flush=True)
+
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
-                    watchdog=args.watchdog, cnc=args.cnc, on_lost=args.on_lost or "hold")
+                    watchdog=args.watchdog, cnc=args.cnc, on_lost=args.on_lost or "hold",
+                    on_verdict=verdict)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"

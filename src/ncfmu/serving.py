@@ -258,6 +258,25 @@ class Snapshot:
     lag: float = 0.0
     overruns: int = 0
     crashes: tuple = ()              # the part check's crash records so far (ncfmu.machining.Crash)
+    verdicts: tuple = ()             # the part check's verdicts so far: (program end's time, summary line)
+
+
+def program_ends(report) -> list[tuple[str, bool]]:
+    """Where a part check's program ends, as (column, True: its rising edge, False: its falling edge): a lathe's
+    or mill's part check is judged when its cycle says done, a grinder's after each cycle (RUN falls)."""
+    from .systems.part import GrindPart, MachinedPart
+    ends: list[tuple[str, bool]] = []
+    for part in report.parts:
+        if isinstance(part, MachinedPart):
+            ends.append((part.done_column(), True))
+        elif isinstance(part, GrindPart):
+            ends.append((f"{part.feed}.run", False))
+    return ends
+
+
+def verdict_text(verdict) -> str:
+    """A part check's verdict as ``Simulation.verdict`` and the printed line say it: its summary on one line."""
+    return "; ".join(line.strip() for line in verdict.summary())
 
 
 def crash_text(c) -> str:
@@ -287,6 +306,10 @@ class CrashWatch:
         self._idle.set()
         self._error: BaseException | None = None
         self._seen: list = []
+        #: the verdicts given so far, at each program end (the part check's summary line then)
+        self._verdicts: list[tuple[float, str]] = []
+        self._ends = program_ends(report)
+        self._flags: dict[str, bool] = {}          # each end column's value at the last row judged
         self._thread: threading.Thread | None = None
         self._closed = False
         self.accumulator = self.new_accumulator()
@@ -301,6 +324,7 @@ class CrashWatch:
         self._idle.wait()               # the previous segment's last check done: what it finds is not this one's
         self.accumulator = self.report.accumulator(self.parameters)
         self._seen, self.fresh = [], False
+        self._verdicts, self._flags = [], {}
         return self.accumulator
 
     def new(self) -> _PartCheckSink:
@@ -310,6 +334,10 @@ class CrashWatch:
         """The crashes of the rows judged so far (up to the last hand-over whose check finished)."""
         self.fresh = False
         return list(self._seen)
+
+    def verdicts(self) -> list[tuple[float, str]]:
+        """The verdicts of the programs that ended in the rows judged so far: (the end's time, the summary)."""
+        return list(self._verdicts)
 
     def hand_over(self, accumulator, rows: np.ndarray) -> None:
         """Give ``rows`` (copied: the session reuses its window) to the check, after the previous check."""
@@ -342,11 +370,31 @@ class CrashWatch:
             self._thread = None
 
     def _judge(self, accumulator, rows: np.ndarray) -> None:
-        from .systems.part import crashes_so_far
+        from .systems.part import crashes_so_far, verdict_of
         accumulator.write(rows)
         if accumulator is self.accumulator:
             self._seen = crashes_so_far(accumulator)
+            ended = self._program_end(rows)
+            if ended is not None:
+                verdict = verdict_of(accumulator)
+                if verdict is not None:
+                    self._verdicts.append((ended, verdict_text(verdict)))
             self.fresh = True
+
+    def _program_end(self, rows: np.ndarray) -> float | None:
+        """The time of the last program end in ``rows`` (None: none ended there)."""
+        end: float | None = None
+        for column, rising in self._ends:
+            if not len(rows) or column not in (rows.dtype.names or ()):
+                continue
+            flag = rows[column].astype(bool)
+            before = np.concatenate(([self._flags.get(column, False)], flag[:-1]))
+            edges = np.flatnonzero(flag & ~before if rising else ~flag & before)
+            self._flags[column] = bool(flag[-1])
+            if len(edges):
+                t = float(rows["time"][edges[-1]])
+                end = t if end is None else max(end, t)
+        return end
 
     def _main(self) -> None:
         while True:
@@ -438,6 +486,7 @@ class Runner:
         if watch is not None:
             watch.wait_every_time = self.speed == 0      # as fast as possible: deterministic, as `ncfmu run`
         self.crashes: tuple = ()
+        self.verdicts: tuple = ()            # the part check's verdicts at each program end (CrashWatch.verdicts)
         self._checked = float(session.time)
         self.stats = PaceStats()
         self.lag = 0.0
@@ -486,7 +535,7 @@ class Runner:
         values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
             self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
-                                      self.stats.overruns, self.crashes)
+                                      self.stats.overruns, self.crashes, self.verdicts)
         self._want_snapshot = False
 
     def _apply(self, c: _Command) -> bool:
@@ -536,7 +585,7 @@ class Runner:
                     if self.state in ("crashed", "held"):      # a new run: no crash yet, nothing forced
                         self.state, self.reason = "running", ""
                     self.held.clear()
-                    self.crashes, self._checked = (), float(s.time)
+                    self.crashes, self.verdicts, self._checked = (), (), float(s.time)
                     rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
@@ -580,7 +629,8 @@ class Runner:
 
     def _check_crashes(self, hand_over: bool) -> None:
         """Hand the rows so far to the part check (``hand_over``) and read what it found; at its first crash
-        the simulation halts ("crashed"), with the crash's records those of every row up to the halt."""
+        the simulation halts ("crashed"), with the crash's records those of every row up to the halt. A program
+        that ended: its verdict joins :attr:`verdicts`."""
         s = self.session
         assert self.watch is not None
         if hand_over:
@@ -598,6 +648,10 @@ class Runner:
                 self.state, self.reason = "crashed", crash_text(crashes[len(self.crashes)])
                 log.error("ncfmu serve: %s; the simulation halts (Reset starts again)", self.reason)
             self.crashes = tuple(crashes)
+            self._take_snapshot()
+        verdicts = self.watch.verdicts()
+        if len(verdicts) > len(self.verdicts):       # a program ended: its verdict is published
+            self.verdicts = tuple(verdicts)
             self._take_snapshot()
 
     def _main(self) -> None:
@@ -1145,7 +1199,7 @@ class LiveServer:
     def __init__(self, system_name: str, runner: Runner, endpoint: str = DEFAULT_ENDPOINT,
                  security: Security | None = None, publish_interval: float = 0.010,
                  watchdog: float | None = None, cnc_components: Mapping[str, str] | None = None,
-                 on_lost: str = "hold") -> None:
+                 on_lost: str = "hold", on_verdict: Callable[[float, str], None] | None = None) -> None:
         self.system_name, self.runner, self.endpoint = system_name, runner, endpoint
         self.security = security or Security()
         self.publish_interval = publish_interval
@@ -1162,6 +1216,9 @@ class LiveServer:
         self._clients: dict[int, _Client] = {}       # id(asyncua session) -> what the watchdog knows of it
         self._owner: dict[str, _Client] = {}         # a forced input -> the session that forced it last
         self._held: set[str] = set()                 # what a hold keeps forced until Resume (--on-lost hold)
+        #: told each part verdict as it is published (a program ended): its time and summary line
+        self.on_verdict = on_verdict
+        self.verdicts_published = 0
         #: with the OPC 40502 companion model: instance -> model of the served system's components
         self.cnc_components = cnc_components
         self._mirrors: list[_Mirror] = []
@@ -1269,7 +1326,10 @@ class LiveServer:
                  "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order"),
                 ("crashes", 0, ua.VariantType.Int32, "crashes the part check saw since the start (or the last Reset)"),
                 ("crash", "", ua.VariantType.String,
-                 "the last crash: time, program line, what and how deep (empty: none)")):
+                 "the last crash: time, program line, what and how deep (empty: none)"),
+                ("verdict", "", ua.VariantType.String,
+                 "the part check's verdict when the last program ended: its summary line (empty: none ended yet "
+                 "since the start or the last Reset)")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
                                              ua.Variant(value, vt), varianttype=vt)
             await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(desc))))
@@ -1576,6 +1636,7 @@ class LiveServer:
             await self._sim_value("reason", snap.reason)
             await self._sim_value("forced", [name for name in self.points if name in snap.forced])
             await self._publish_crashes(snap.crashes)
+            await self._publish_verdicts(snap.verdicts)
             if self._mirrors:
                 values = {**self._last, **snap.values}
                 for k, m in enumerate(self._mirrors):
@@ -1600,6 +1661,16 @@ class LiveServer:
         self._crashes_published = len(crashes)
         await self._sim_value("crashes", len(crashes))
         await self._sim_value("crash", crash_text(crashes[-1]) if crashes else "")
+
+    async def _publish_verdicts(self, verdicts: Sequence[tuple[float, str]]) -> None:
+        """The last program's verdict; each new one told to :attr:`on_verdict` (printed by the CLI)."""
+        if len(verdicts) < self.verdicts_published:          # a Reset: a new run
+            self.verdicts_published = 0
+        for t, text in verdicts[self.verdicts_published:]:
+            if self.on_verdict is not None:
+                self.on_verdict(t, text)
+        self.verdicts_published = len(verdicts)
+        await self._sim_value("verdict", verdicts[-1][1] if verdicts else "")
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -1703,14 +1774,16 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
           ready: Callable[[str], None] | None = None, watchdog: float | None = None,
-          cnc: bool = False, on_lost: str = "hold") -> ServeSummary:
+          cnc: bool = False, on_lost: str = "hold",
+          on_verdict: Callable[[float, str], None] | None = None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
     ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
     (s), a client session that forced inputs is lost when it closes or is silent that long: ``on_lost`` "hold"
     puts the machine in feed hold (state ``held``) until a client calls Resume, "release" lets its forces fall
-    back. With
+    back. ``on_verdict(time, line)`` is told the part check's verdict each time a program ends (also
+    ``Simulation.verdict``). With
     ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
     from .project import OpenSystem, system_archive
     security = security or Security()
@@ -1735,7 +1808,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         runner = Runner(session, points_of(opened.slaves), speed, recorder,
                         check_parameter=parameter_check(components, session), watch=watch)
         server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
-                            cnc_components=components if cnc else None, on_lost=on_lost)
+                            cnc_components=components if cnc else None, on_lost=on_lost, on_verdict=on_verdict)
         try:
             asyncio.run(server.serve(ready))
         finally:
@@ -1745,6 +1818,10 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             session.close(complete=runner.state != "failed", reason=runner.reason)
             if watch is not None:
                 watch.close()
+                # the rows after the last hand-over (judged at the close): a program that ended there is told too
+                if len(watch.verdicts()) > server.verdicts_published and on_verdict is not None:
+                    for t, text in watch.verdicts()[server.verdicts_published:]:
+                        on_verdict(t, text)
             if recorder is not None:
                 recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files

@@ -83,6 +83,8 @@ class Check:
 
 
 class Report:
+    parts: tuple = ()           # no part of ncfmu's: no program end to give a verdict at
+
     def __init__(self, cost: float = 0.0, crash_at: float = float("inf")) -> None:
         self.cost, self.crash_at = cost, crash_at
         self.made: list[Check] = []
