@@ -747,9 +747,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
                    help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
                         "DIR/ncfmu-key.pem, then exit")
-    p.add_argument("--cnc", action="store_true",
+    p.add_argument("--cnc", action=argparse.BooleanOptionalAction, default=True,
                    help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
-                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+                        "its CncAxisList, CncChannelList and CncSpindleList (the default; about 1 s more to start, "
+                        "--no-cnc leaves it out)")
     p.add_argument("--watchdog", type=_real_option, default=None, metavar="S",
                    help="a client session that forced inputs is lost when it closes or sends nothing for S "
                         "seconds: see --on-lost (logged)")

@@ -1774,7 +1774,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
           ready: Callable[[str], None] | None = None, watchdog: float | None = None,
-          cnc: bool = False, on_lost: str = "hold",
+          cnc: bool = True, on_lost: str = "hold",
           on_verdict: Callable[[float, str], None] | None = None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
@@ -1783,8 +1783,8 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     (s), a client session that forced inputs is lost when it closes or is silent that long: ``on_lost`` "hold"
     puts the machine in feed hold (state ``held``) until a client calls Resume, "release" lets its forces fall
     back. ``on_verdict(time, line)`` is told the part check's verdict each time a program ends (also
-    ``Simulation.verdict``). With
-    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
+    ``Simulation.verdict``). With ``cnc`` (the default), the system is also served as an OPC 40502 (OPC UA for
+    CNC Systems) ``CncInterface`` object (about 1 s more to start)."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)

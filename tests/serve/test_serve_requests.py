@@ -32,7 +32,7 @@ D = ua.VariantType.Double
 def test_a_batch_write_applies_its_good_values_and_answers_each_node(ncfmu_serve):
     """OPC UA Part 4 5.11.4: each WriteValue gets its own StatusCode and the good ones are applied -- a bad value
     in a batch is not a ServiceFault for all of it."""
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -110,7 +110,7 @@ def o6_read(endpoint: str, *nodes: str) -> list:
 @pytest.mark.slow
 def test_open62541_gets_a_result_per_node_and_per_argument(ncfmu_serve):
     """The same with a second stack: open62541's client (PyPI o6)."""
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def namespace():
         async with connect(served) as p:
@@ -130,7 +130,7 @@ def test_open62541_gets_a_result_per_node_and_per_argument(ncfmu_serve):
 # -- Call: argument errors -----------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_method_argument_errors_have_their_own_status_and_per_argument_results(ncfmu_serve):
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -163,7 +163,7 @@ def test_method_argument_errors_have_their_own_status_and_per_argument_results(n
 # -- the Simulation's state, the writes' count across a Reset ----------------------------------------------------
 @pytest.mark.slow
 def test_the_state_reads_paused_once_pause_returned_and_a_reset_keeps_the_write_count(ncfmu_serve, tmp_path):
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--out", tmp_path / "served")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--out", tmp_path / "served")
 
     async def plc():
         async with connect(served) as p:
@@ -186,7 +186,7 @@ def test_the_state_reads_paused_once_pause_returned_and_a_reset_keeps_the_write_
 @pytest.mark.slow
 def test_a_session_without_writes_replays(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_taper", "--speed", "0", "--stop-time", "1.5", "--out", out)
+    served = ncfmu_serve("lathe_taper", "--no-cnc", "--speed", "0", "--stop-time", "1.5", "--out", out)
     assert served.wait(60) == 0, served.output
     assert_same_trajectory(Result.from_csv(out / "lathe_taper.csv"),
                            replay("lathe_taper", out / "lathe_taper.csv", out / "session_inputs.csv", tmp_path))
@@ -202,7 +202,7 @@ def test_a_refused_tunable_write_leaves_the_run_and_its_replay_identical(ncfmu_s
     writes gives the recorded run bit for bit."""
     out = tmp_path / "served"
     sets = ["panel.start_at=0"]
-    served = ncfmu_serve("lathe_roughing", "--speed", "4", "--out", out, "--set", sets[0])
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "4", "--out", out, "--set", sets[0])
 
     async def plc():
         async with connect(served) as p:
@@ -283,7 +283,8 @@ FORCING_PLC = textwrap.dedent("""
 def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve, tmp_path):
     """``--on-lost release``: a lost session's forces fall back (the HMI's feed hold is lifted)."""
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--on-lost", "release", "--out", out)
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--watchdog", "1.0", "--on-lost", "release",
+                         "--out", out)
 
     def plc(node: str, how: str) -> subprocess.Popen:
         proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, how],
@@ -349,7 +350,7 @@ def test_a_lost_hmi_leaves_the_machine_in_feed_hold_until_a_client_resumes(ncfmu
     says why, the held inputs cannot be released one by one; a new client's Resume releases them and the axes
     move on."""
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--out", out)
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--watchdog", "1.0", "--out", out)
     axes = ("x_axis.pos", "z_axis.pos")
 
     async def positions(p) -> list[float]:
@@ -442,7 +443,7 @@ def test_a_trust_list_rejects_an_unknown_client_certificate_and_accepts_a_truste
     plc = _client_certificate(clients, "plc")
     stranger = _client_certificate(clients, "stranger")
     (trusted_dir / "plc.der").write_bytes(plc[0].read_bytes())
-    served = ncfmu_serve("grinder_feed", "--speed", "1", "--certificate", server_cert,
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "1", "--certificate", server_cert,
                          "--private-key", server_dir / "ncfmu-key.pem", "--trust", trusted_dir)
 
     async def session(client_cert, key, uri):

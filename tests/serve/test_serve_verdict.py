@@ -13,10 +13,12 @@ pytestmark = pytest.mark.slow
 
 
 def test_the_part_verdict_is_published_and_printed_when_the_program_ends(ncfmu_serve, lathe_taper):
-    served = ncfmu_serve("lathe_taper", "--speed", "0")
+    served = ncfmu_serve("lathe_taper", "--speed", "0")        # the defaults: with the OPC 40502 model
 
     async def plc():
         async with connect(served) as p:
+            cnc = await p.client.nodes.objects.get_child([f"{p.idx}:CncInterface"])
+            assert cnc.nodeid == p.node("Cnc").nodeid
             text = await p.wait_until("Simulation.verdict", lambda v: v != "", timeout=60)
             await p.call("Stop")
             return text
