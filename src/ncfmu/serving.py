@@ -19,7 +19,8 @@ Address space (stable: PLC projects point at these names): namespace ``urn:ncfmu
 component instance; one Variable per FMU variable, string NodeId ``<instance>.<variable>``, BrowseName the
 variable's name, DataType Double/Int32/Boolean/String, its description, its unit as EngineeringUnits
 (EUInformation); inputs also get ``<instance>.<variable>.forced`` (Boolean). The ``Simulation`` object holds
-``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs) and the
+``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs), ``verdict``
+(the part check's summary line when the last program ended: a lathe's or mill's done, a grinder's cycle end) and the
 methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``.
 
 With a watchdog (``--watchdog S``), a client session that forced inputs is lost when it closes or is silent S s.
