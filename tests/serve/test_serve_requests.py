@@ -375,10 +375,12 @@ def test_a_lost_hmi_leaves_the_machine_in_feed_hold_until_a_client_resumes(ncfmu
             assert reason.startswith("client lost: session ") and "silent for 1 s" in reason, reason
             assert "feed hold on seq.feed_hold" in reason and "Resume" in reason, reason
             assert await p.read("Simulation.forced") == ["seq.feed_hold"]
-            # held: the simulation runs on (the spindle turns, time goes on), the axes stay put
+            # held: the simulation runs on (the spindle turns, time goes on), the axes stay put (from 0.5 s
+            # after the hold was seen: at rest then, the feed hold's deceleration long over)
+            held = await p.time()
+            await p.wait_until("Simulation.time", lambda t: t > held + 0.5, timeout=20)
             t0, at = await p.time(), await positions(p)
-            await asyncio.sleep(1.0)
-            assert await p.time() > t0 + 0.5
+            await p.wait_until("Simulation.time", lambda t: t > t0 + 1.0, timeout=20)
             assert await positions(p) == pytest.approx(at, abs=1e-3)
             assert await p.read("Simulation.state") == "held"
             # a held input is released by Resume only (not by Release, nor by writing it)
