@@ -546,7 +546,7 @@ class Runner:
         refusal: str | None = None
         try:
             if c.what in ("force", "release") and c.name in self.held:
-                refusal = f"{c.name} is held: the simulation is held ({self.reason}); Resume releases it"
+                refusal = f"the simulation is held: {self.reason}"
             elif c.what == "force":
                 s.force(c.name, c.value)
             elif c.what == "release":
@@ -561,7 +561,7 @@ class Runner:
                 if self.state == "running":
                     self.state = "paused"
                 elif self.state == "held":
-                    refusal = f"the simulation is held ({self.reason}); Resume releases it"
+                    refusal = f"the simulation is held: {self.reason}"
             elif c.what == "resume":
                 if self.state == "paused":
                     self.state, rebase = "running", True
