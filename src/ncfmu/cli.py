@@ -580,15 +580,21 @@ def cmd_serve(args) -> int:
         raise NcfmuError(f"--speed {args.speed!r}: must be a number >= 0 (0: as fast as possible)")
     if args.record and not args.out:
         raise NcfmuError("--record needs --out DIR (where the recorded trajectory is written)")
+    if args.on_lost is not None and args.watchdog is None:
+        raise NcfmuError(f"--on-lost {args.on_lost}: needs --watchdog S (what tells that a client is lost)")
 
     def ready(endpoint: str) -> None:
         print(f"ncfmu serve: {args.system} at {endpoint} (speed {args.speed:g}); Ctrl-C stops", flush=True)
+
+    def verdict(t: float, line: str) -> None:
+        print(f"ncfmu serve: program ended at t = {t:.3f} s: {line}", flush=True)
 
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
-                    watchdog=args.watchdog, cnc=args.cnc, drawing=_drawing(args))
+                    watchdog=args.watchdog, cnc=args.cnc, on_lost=args.on_lost or "hold",
+                    on_verdict=verdict, drawing=_drawing(args))
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -761,12 +767,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
                    help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
                         "DIR/ncfmu-key.pem, then exit")
-    p.add_argument("--cnc", action="store_true",
+    p.add_argument("--cnc", action=argparse.BooleanOptionalAction, default=True,
                    help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
-                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+                        "its CncAxisList, CncChannelList and CncSpindleList (the default; about 1 s more to start, "
+                        "--no-cnc leaves it out)")
     p.add_argument("--watchdog", type=_real_option, default=None, metavar="S",
-                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
-                        "nothing for S seconds (logged, and recorded as releases)")
+                   help="a client session that forced inputs is lost when it closes or sends nothing for S "
+                        "seconds: see --on-lost (logged)")
+    p.add_argument("--on-lost", choices=("hold", "release"), default=None,
+                   help="with --watchdog, what a lost client leaves: hold (default) -- the machine goes to feed "
+                        "hold (each feed_hold input forced true; without one the simulation halts), its forces "
+                        "kept, Simulation.state 'held' and Simulation.reason why, until a client calls "
+                        "Simulation.Resume; release -- its forces fall back to what drives them at once "
+                        "(recorded as releases)")
     p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
                    help="the part check judges against the part drawn (as 'ncfmu run --drawing'): a served mill's "
                         "gouges are crashes against the outline drawn")
