@@ -151,12 +151,31 @@ def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
     return found
 
 
+#: What ends a line of a program, all alike: LF, CR LF, CR alone (old Macs, tape punch formats), NEL (U+0085) and
+#: Unicode's line and paragraph separators (U+2028, U+2029). A program reads the same, with the same line numbers,
+#: whatever wrote it; a CR followed by an LF is one line end.
+LINE_END = re.compile("\r\n|[\n\r\x85\u2028\u2029]")
+#: What str.splitlines (and tools built on it) also takes for a line end and this reader does not: a program
+#: holding one would read as other lines elsewhere, so it is refused wherever it stands, naming the character.
+NOT_LINE_ENDS = {"\x0b": "a vertical tab (U+000B)", "\x0c": "a form feed (U+000C)",
+                 "\x1c": "a file separator (U+001C)", "\x1d": "a group separator (U+001D)",
+                 "\x1e": "a record separator (U+001E)"}
+_NOT_LINE_END = re.compile("[\x0b\x0c\x1c\x1d\x1e]")
+
+
 def program_lines(text: str) -> list[str]:
-    """A program's lines, after its length check: only newlines end a line (str.splitlines would also split at
-    form feeds, U+2028 ...), a trailing CR is dropped."""
+    """A program's lines, after its length check, split at every :data:`LINE_END`; ProgramError at the first of
+    :data:`NOT_LINE_ENDS` (its line and column)."""
     if len(text) > MAX_PROGRAM_CHARS:
         raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
-    return [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
+    lines = LINE_END.split(text)
+    if _NOT_LINE_END.search(text):
+        for n, line in enumerate(lines, start=1):
+            found = _NOT_LINE_END.search(line)
+            if found:
+                raise ProgramError(n, found.start() + 1, line.strip(), f"{NOT_LINE_ENDS[found.group()]} is neither a "
+                                   "line end (LF, CR LF, CR, NEL, U+2028, U+2029) nor a blank in a program")
+    return lines
 
 
 def check_once(seen: dict[str, int], i: int, letter: str, col: int, n: int, raw: str) -> None:

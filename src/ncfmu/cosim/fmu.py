@@ -36,6 +36,7 @@ from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
 from .units import unit_from_fmpy, variable_unit
+from .value_references import check_value_references
 
 _T = TypeVar("_T")
 
@@ -223,6 +224,7 @@ class UnpackedFmu:
             raise SystemDefinitionError(f"{self.path.name}: a model-exchange-only FMU; ncfmu's master runs FMI 2.0 "
                                         "and 3.0 co-simulation FMUs only (no solver for model exchange)")
         self.fmi3 = md.fmiVersion == "3.0"
+        check_value_references(self.path.name, md.modelVariables, self.fmi3)
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
             if self.fmi3:
