@@ -102,3 +102,22 @@ def test_a_spindle_turning_backwards_during_the_thread_is_an_alarm():
     t_back = reference[10][0]
     rows = _run(_machine(), 2000, turns_at=lambda t: RPM / 60.0 * (t if t < t_back else 2 * t_back - t))
     assert any(out["alarm"] for t, _, out in rows if t >= t_back)
+
+
+def test_a_state_taken_mid_thread_restores_and_a_forged_one_is_refused():
+    import copy
+    seq = _machine()
+    inputs = dict(start=False, feed_hold=False, feed_override=1.0, alarm_in=False, x_pos=20.0, z_pos=10.0,
+                  x_in_position=True, z_in_position=True, spindle_speed=RPM, revolutions=0.0, optional_stop=False,
+                  block_delete=False)
+    for k in range(600):
+        inputs["start"] = 5 <= k < 10
+        inputs["revolutions"] = RPM / 60.0 * k * DT
+        out = seq.step(k * DT, DT, inputs)
+        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+    assert out["threading"]
+    restored = copy.deepcopy(seq)
+    assert restored.check_state(inputs) is None and restored.threading
+    forged = copy.deepcopy(seq)
+    forged.thread_rev0 = math.nan
+    assert "thread_rev0" in (forged.check_state(inputs) or "")
