@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from ncfmu.controllers.sequencer import CutSequencer
@@ -121,3 +122,47 @@ def test_a_state_taken_mid_thread_restores_and_a_forged_one_is_refused():
     forged = copy.deepcopy(seq)
     forged.thread_rev0 = math.nan
     assert "thread_rev0" in (forged.check_state(inputs) or "")
+
+
+def _servo_thread(rpm: float):
+    """A G92 pass driving two ServoAxis models (ideal, Python) directly, no limiter between: (turns, z, z_cmd)
+    while the pass follows the spindle."""
+    from ncfmu.servo.axis import ServoAxis
+    program = PROGRAM.replace("S600", f"S{rpm:g}")
+    seq = _machine(program)
+    axes = {"x": ServoAxis(pos_start=20.0, ideal=True), "z": ServoAxis(pos_start=10.0, ideal=True)}
+    for axis in axes.values():
+        axis.reset()
+    inputs = dict(start=False, feed_hold=False, feed_override=1.0, alarm_in=False, x_pos=20.0, z_pos=10.0,
+                  x_in_position=True, z_in_position=True, spindle_speed=rpm, revolutions=0.0, optional_stop=False,
+                  block_delete=False)
+    rows = []
+    for k in range(3000):
+        t = k * DT
+        inputs["start"] = 5 <= k < 10
+        inputs["revolutions"] = rpm / 60.0 * t
+        out = seq.step(t, DT, inputs)
+        assert not out["alarm"]
+        for name, axis in axes.items():
+            moved = axis.step(t, DT, {"pos_cmd": out[f"{name}_cmd"], "vel_ff": out[f"{name}_vff"], "enable": True})
+            inputs[f"{name}_pos"], inputs[f"{name}_in_position"] = moved["pos"], moved["in_position"]
+        if out["threading"]:
+            rows.append((inputs["revolutions"], inputs["z_pos"], out["z_cmd"]))
+    return (np.array(c) for c in zip(*rows))
+
+
+def test_without_the_limiter_the_servo_lag_is_uncompensated_and_sets_the_incomplete_lead():
+    """Z commanded from the spindle with no feed-forward: the position loop lags v/Kv (the servo's design, Kv =
+    30/s), and the local lead reaches (1 - a) of the lead after Fanuc's incomplete thread
+    delta1 = (v/Kv) (ln(1/a) - 1) of Z -- longer at the higher speed."""
+    kv, lead, a = 30.0, 1.5, 0.02
+    starts = []
+    for rpm in (600.0, 1200.0):
+        turns, z, z_cmd = _servo_thread(rpm)
+        v = lead * rpm / 60.0
+        assert np.median((z - z_cmd)[len(z) // 2:]) == pytest.approx(v / kv, rel=0.01)
+        ratio = np.abs(np.diff(z)) / (lead * np.diff(turns))
+        full = np.flatnonzero(np.abs(ratio - 1.0) <= a)[0]
+        starts.append(abs(z[full] - z[0]))
+        assert starts[-1] == pytest.approx(v / kv * (math.log(1 / a) - 1.0), rel=0.05)
+    assert starts[1] > 1.9 * starts[0]
