@@ -74,8 +74,9 @@ class ThreadResult:
 
     def summary(self) -> str:
         state = "CROSS-THREADED" if self.cross_threaded else "in one groove"
+        passes = f"{self.passes} pass" + ("es" if self.passes != 1 else "")
         return (f"  thread (line {self.line}): lead {self.lead_mm:.5f} mm (error {self.lead_error_um:+.2f} um over the "
-                f"full lead), {self.passes} passes {state} (phase spread {self.phase_spread_um:.2f} um), minor "
+                f"full lead), {passes} {state} (phase spread {self.phase_spread_um:.2f} um), minor "
                 f"diameter {self.minor_diameter_mm:.4f} mm (programmed {self.programmed_minor_diameter_mm:.4f}), "
                 f"incomplete lead {self.incomplete_start_mm:.3f} mm at the start, {self.incomplete_end_mm:.3f} mm at "
                 "the end")
