@@ -442,7 +442,7 @@ class CutSequencer(CycleController):
         speed the spindle gave it (its Z no longer follows the spindle: the thread is spoilt, as on a machine)."""
         if self.threading:
             self.move.v = self.thread_speed
-            self.threading = False
+        self.threading = self.thread_armed = False
         self.move.halt()
         self.phase = IDLE
         self.busy = False
@@ -534,7 +534,7 @@ class CutSequencer(CycleController):
         Always held for :meth:`advance`: this moves the command itself."""
         move = self.move
         if move.done:                          # the command reached the thread's end: the in-position check
-            self.threading = False
+            self.threading = self.thread_armed = False
             if self.arrival(t, dt, True, inputs):
                 self._next_phase()
             return 0.0, True
@@ -573,7 +573,7 @@ class CutSequencer(CycleController):
                 return self._thread(t, dt, inputs, self.plan[nxt])
             self.thread_speed = 0.0
             move.s, move.v, move.done = move.length, 0.0, True
-            self.threading = False
+            self.threading = self.thread_armed = False
             if self.arrival(t, dt, True, inputs):
                 self._next_phase()
             return 0.0, True
