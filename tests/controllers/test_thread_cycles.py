@@ -140,6 +140,10 @@ M30""")
     ("G97 S500 M03\nG00 X32. Z5.\nG92 X33. Z-30. F2.\nM30", 3, "below the start point"),
     ("G97 S500 M03\nG00 X32. Z5.\nG76 P020061 Q100 R0.05\nM30", 3, "tool angle"),
     ("G97 S500 M03\nG00 X32. Z5.\nG76 P020060 Q100 R2.\nG76 X27.546 Z-30. P1227 Q400 F2.0\nM30", 4, "allowance"),
+    ("G97 S500 M03\nG00 X300. Z5.\nG76 P090060 Q1 R0\nG76 X27.546 Z-30. P99000 Q1 F2.0\nM30", 4,
+     "more than 1000 roughing passes"),
+    ("G97 S500 M03\nG00 X300. Z5.\nG76 P090060 Q100 R0\n" + "G76 X27.546 Z-30. P99000 Q1 F2.0\n" * 6 + "M30", 9,
+     "more than 20000 planned thread moves"),
     # the red team's program: G96 S0 with G99 is accepted on 9c586ec and the tool never moves
     ("G50 S2500\nG99\nG96 S0 M03\nG01 X50. F0.2\nM30", 3, "S0 under G96"),
 ])

@@ -133,6 +133,7 @@ class _Modes:
     g92_taper: float = 0.0
     g92_pass: int = 0       # passes of the modal G92 so far
     g76: G76Setup | None = None     # G76's first block
+    thread_moves: int = 0   # the threads' planned moves so far (at most MAX_SEGMENTS in a program)
 
 
 def _r_centre(b: Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
@@ -412,6 +413,16 @@ def _microns(b: Block, letter: str, what: str) -> float:
 def _thread(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     """A thread block: G76's first block sets the cycle up; a thread's block adds its :class:`.g7x.Thread`.
     Returns where the tool ends."""
+    end = _thread_op(b, kind, modes, here, ops)
+    if ops and isinstance(ops[-1], Thread) and ops[-1].line == b.line:
+        modes.thread_moves += len(ops[-1].segments)
+        if modes.thread_moves > MAX_SEGMENTS:
+            raise b.err(1, f"more than {MAX_SEGMENTS} planned thread moves in the program (a least depth Q or "
+                           "first depth too small for the thread's height?)")
+    return end
+
+
+def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     v = b.values
     for g, _ in b.g:
         if g in (90, 91):
