@@ -35,6 +35,7 @@ from ..machining import Crash, Deviation, MaterialRemoval, deviation, lathe_tool
 from ..machining.removal import Forbidden
 from ..ports import to_float, to_int
 from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
+from .threads import ThreadJudge, ThreadResult, thread_judge
 
 #: The default tolerance of the part against the programmed part (mm): ``--tolerance``.
 TOLERANCE = 0.01
@@ -98,6 +99,7 @@ class PartVerdict:
     axes: tuple[str, str] = ("u", "v")    # the names of the plane's coordinates (Z, X or X, Y)
     made: Any = field(default=None, repr=False)          # the part as made (a shapely geometry), for the plot
     programmed: Any = field(default=None, repr=False)    # the programmed part
+    threads: list[ThreadResult] = field(default_factory=list)   # the program's threads (systems/threads.py)
 
     @property
     def crashed(self) -> bool:
@@ -106,7 +108,7 @@ class PartVerdict:
     @property
     def within_tolerance(self) -> bool | None:
         """False on a crash or a part out of tolerance; None when the part was not judged (and nothing crashed)."""
-        if self.crashed:
+        if self.crashed or any(t.cross_threaded for t in self.threads):
             return False
         if self.judged:
             return None
@@ -120,7 +122,8 @@ class PartVerdict:
                 "max_left_mm": number(self.max_left_mm), "max_gouge_mm": number(self.max_gouge_mm),
                 "tolerance_mm": self.tolerance_mm, "within_tolerance": self.within_tolerance,
                 "left_at": self._where(self.left_at, self.left_line),
-                "gouge_at": self._where(self.gouge_at, self.gouge_line), "not_judged": self.judged or None}
+                "gouge_at": self._where(self.gouge_at, self.gouge_line), "not_judged": self.judged or None,
+                "threads": [t.as_json() for t in self.threads]}
 
     def _where(self, at: tuple[float, float] | None, line: int) -> dict[str, object] | None:
         if at is None:
@@ -150,7 +153,7 @@ class PartVerdict:
             gouge = (f"gouge {self.max_gouge_mm:.4f} mm{self._place(self.gouge_at, self.gouge_line)}"
                      if self.max_gouge_mm > self.tolerance_mm else f"gouge <= {self.max_gouge_mm:.4f} mm")
             lines.append(f"  part: OUT OF TOLERANCE {tol}: {left}, {gouge}")
-        return lines
+        return lines + [t.summary() for t in self.threads]
 
     def metrics(self) -> dict[str, float]:
         within = self.within_tolerance
@@ -201,6 +204,7 @@ class _PartCheckAccumulator(_Judging):
         self.setup = part.setup(parameters)
         self.done = FirstTime()
         self._verdict: PartVerdict | None = None
+        self.threads = part.threads(parameters)
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
@@ -212,11 +216,15 @@ class _PartCheckAccumulator(_Judging):
         standing = p.standing(rows) if self.setup.spindle_checked else None
         self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing)
         self.done.write(rows["time"], rows[p.done_column()])
+        if self.threads is not None:
+            self.threads.write(rows)
         self._verdict = None
 
     def verdict(self) -> PartVerdict:
         if self._verdict is None:
             self._verdict = self.part.judge(self.setup, finished=not math.isnan(self.done.value))
+            if self.threads is not None:
+                self._verdict.threads = self.threads.results()
         return self._verdict
 
 
@@ -248,6 +256,10 @@ class MachinedPart(PartCheck):
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _PartCheckAccumulator(self, parameters)
+
+    def threads(self, parameters: Parameters) -> ThreadJudge | None:
+        """The judge of the program's threads (systems/threads.py); None: nothing threads."""
+        return None
 
     def judge(self, setup: Setup, finished: bool) -> PartVerdict:
         m = setup.removal
@@ -296,7 +308,16 @@ class LathePart(MachinedPart):
 
     def variables(self) -> tuple[str, ...]:
         spindle = (f"{self.spindle}.speed", f"{self.seq}.s_cmd", f"{self.seq}.spindle_dir") if self.spindle else ()
-        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos", *spindle)
+        threads = (f"{self.seq}.threading", f"{self.spindle}.revolutions") if self.spindle else ()
+        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos", *spindle,
+                *threads)
+
+    def threads(self, parameters: Parameters) -> ThreadJudge | None:
+        if self.spindle is None:
+            return None
+        from ..controllers.sequencer import CutSequencer
+        seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
+        return thread_judge(seq, self.seq, self.x, self.z, self.spindle, self.settings.tolerance)
 
     def standing(self, rows: np.ndarray) -> np.ndarray | None:
         """The spindle stands: |actual speed| below STANDSTILL_RPM and below STANDSTILL_FRACTION of the speed
