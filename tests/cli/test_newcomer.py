@@ -11,7 +11,6 @@ import pytest
 
 from ncfmu.cli import main
 from ncfmu.errors import NcfmuError, ProgramErrors
-from ncfmu.fmi.builder import KIND_FILE
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -151,6 +150,7 @@ def test_a_build_keeps_the_kind_asked_for(tmp_path, monkeypatch):
     """``build --pure`` is not undone by the next run: a build not told which kind keeps the recorded one;
     ``--compiled`` (or ``build`` without --pure) switches back."""
     import ncfmu.project as project_module
+    from ncfmu.fmi.builder import KIND_FILE
 
     class Stop(NcfmuError):
         pass
@@ -177,3 +177,9 @@ def test_a_build_keeps_the_kind_asked_for(tmp_path, monkeypatch):
     assert main(["--root", str(tmp_path), "build"]) == 2
     assert kind() == "compiled\n"
     assert asked == [False, True, False, True, True, False]
+
+
+def test_the_mill_reads_tape_marks_a_program_number_and_both_comment_forms():
+    from ncfmu.controllers import rs274
+    moves = rs274.parse(MILL_PART, (0.0, 0.0))
+    assert [(m.element.end, m.line) for m in moves] == [((10.0, 0.0), 4), ((10.0, 10.0), 5)]

@@ -13,8 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from ncfmu.fmi.builder import COMPILED, COMPILING
-
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -34,6 +32,7 @@ def readme_commands() -> list[str]:
 
 @pytest.mark.slow
 def test_readme_first_command_on_a_bare_venv_compiles_the_controllers(tmp_path):
+    from ncfmu.fmi.builder import COMPILED, COMPILING
     first = readme_commands()[0]
     assert first == "pip install -c .ci/constraints.txt -e . && ncfmu run"
     checkout, venv, cache = tmp_path / "checkout", tmp_path / "venv", tmp_path / "cache"
