@@ -183,3 +183,17 @@ def test_the_mill_reads_tape_marks_a_program_number_and_both_comment_forms():
     from ncfmu.controllers import rs274
     moves = rs274.parse(MILL_PART, (0.0, 0.0))
     assert [(m.element.end, m.line) for m in moves] == [((10.0, 0.0), 4), ((10.0, 10.0), 5)]
+
+
+def test_program_for_every_variant_of_a_sweep(project, tmp_path, capsys):
+    import csv
+    part = tmp_path / "square.nc"
+    part.write_text(MILL_PART)
+    rc = main(["sweep", "mill_contour", "--program", str(part), "--vary", "contour.diameter_delta=0.4,0.8",
+               "--workers", "0", "--stop-time", "0.05", "--out", str(tmp_path / "sw")])
+    out = capsys.readouterr().out
+    assert rc == 1, out                        # 0.05 s: the cycle is running, not refused
+    with open(tmp_path / "sw" / "summary.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["status"] for r in rows] == ["unfinished", "unfinished"]
+    assert all(r["contour.program"] == MILL_PART for r in rows)
