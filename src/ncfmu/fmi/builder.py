@@ -137,7 +137,7 @@ COMPILE_LAYOUT = "split"
 #: The setup script the controllers are compiled with (run in a child Python, in the staging folder): mypyc's
 #: ``mypycify`` as ``python -m mypyc`` calls it, but multi-file, and a ``build_ext`` that compiles every C file of
 #: every extension in a pool of ``jobs`` threads (setuptools' own ``-j`` runs one job per extension, and the
-#: group library is one extension of 30 C files), then links each extension. It prints ``ncfmu-compiled K/N``
+#: group library is one extension of 29 C files), then links each extension. It prints ``ncfmu-compiled K/N``
 #: after each C file, which :func:`compiled_runtime` turns into its progress line.
 _SETUP = """
 import sys
