@@ -161,6 +161,71 @@ def _replace_options(p: argparse.ArgumentParser) -> None:
                    help="a replacing FMU's name for an old connector, e.g. --map x_axis.x=pos; repeatable")
 
 
+def _in_words(err: NcfmuError) -> str:
+    """An error's one line: an FMU that refused its parameters by what it said (a program's lines in a CNC's words:
+    ``seq: parameter refused: program: line 3 (N30): G112: ...``), not by the FMI call and status it returned
+    (which its log keeps); anything else as it is."""
+    return getattr(err, "refusal", "") or str(err)
+
+
+def _kind_options(p: argparse.ArgumentParser) -> None:
+    """``--pure``/``--compiled`` of the commands that build what they run (run, sweep, serve)."""
+    kind = p.add_mutually_exclusive_group()
+    kind.add_argument("--pure", dest="kind", action="store_const", const="pure", default=None,
+                      help="(re)build the FMUs with the controllers as Python sources only, and keep that kind: later "
+                           "commands without --compiled run pure FMUs too (the kind is recorded in fmus/)")
+    kind.add_argument("--compiled", dest="kind", action="store_const", const="compiled",
+                      help="(re)build the FMUs with the controllers compiled (mypyc, the default kind), and keep it. "
+                           "Without either flag the FMUs are kept as the last build made them ('ncfmu build' "
+                           "without --pure: compiled)")
+
+
+def _build_kind(args) -> None:
+    """``--pure``/``--compiled``: build the project's FMUs of that kind now (recorded in fmus/, so the command's own
+    build keeps it)."""
+    if getattr(args, "kind", None) is not None:
+        from .project import build
+        build(args.root, only_stale=True, pure=args.kind == "pure")
+
+
+def _program_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--program", default=None, metavar="FILE",
+                   help="a part program for the system's program parameter (seq.program on the lathes, "
+                        "contour.program on the mill), read from FILE ('-': standard input)")
+
+
+def _program_value(args) -> dict[str, object]:
+    """``--program FILE``: {the system's program parameter: the file's text}, or {} without it. A system with no
+    program parameter, or with several, is refused (exit 2)."""
+    if args.program is None:
+        return {}
+    source = "standard input" if args.program == "-" else args.program
+    try:
+        text = sys.stdin.read() if args.program == "-" else Path(args.program).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise NcfmuError(f"--program {source}: cannot read it ({getattr(err, 'strerror', None) or err})") from None
+    from .systems import SYSTEMS, get_system
+    from .systems.settable import settable
+    if args.system in SYSTEMS:
+        rows = settable(get_system(args.system))
+    else:
+        from .cosim.ssp import read_ssp
+        from .project import model_descriptions
+        archive = Path(args.system)
+        system = read_ssp(archive)
+        rows = settable(system, model_descriptions(archive, system).__getitem__)
+    names = [r.name for r in rows if r.kind.startswith("parameter") and r.name.split(".", 1)[1] == "program"]
+    if len(names) != 1:
+        raise NcfmuError(f"--program {source}: {args.system} has "
+                         + ("no program parameter (INSTANCE.program): it runs no part program" if not names else
+                            f"more than one program parameter ({', '.join(names)}): give one with --set NAME=...")
+                         )
+    given = [item.partition("=")[0] for item in (getattr(args, "set", None) or [])]
+    if names[0] in given:
+        raise NcfmuError(f"--program and --set {names[0]}=... both give {names[0]}: give one")
+    return {names[0]: text}
+
+
 def _prepare_source(args) -> list[str]:
     """``args.system`` (a name, .ssp, .ssd, system folder or .fmu, with --replace/--map) made the path of the .ssp
     the command runs; returns the replacement's warning lines."""
@@ -290,7 +355,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     except NcfmuError as err:
         if csv_sink is None or csv_sink.final_path is None:
             raise
-        raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
+        raise NcfmuError(f"{_in_words(err)} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
     accumulator = how.summary
     assert accumulator is not None
@@ -360,6 +425,7 @@ def _where_stopped(sink) -> str:
 def cmd_run(args) -> int:
     from .project import simulate_branches
     replace_warnings = _prepare_source(args)
+    program = _program_value(args)
     if args.branch_at is not None:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
@@ -369,7 +435,8 @@ def cmd_run(args) -> int:
                              "run the drawing without --branch-at")
         variants = _parse_branches(args.branch_set)
         results = simulate_branches(args.system, args.branch_at, variants, stop_time=args.stop_time,
-                                    start_values=_parse_set(args.set), mode=args.mode, root=args.root)
+                                    start_values={**_parse_set(args.set), **program}, mode=args.mode,
+                                    root=args.root)
         out = Path(args.out)
         for i, (variant, result) in enumerate(zip(variants, results)):
             csv = result.to_csv(out / f"{result.system}_branch{i}.csv")
@@ -383,7 +450,7 @@ def cmd_run(args) -> int:
                                      dict.fromkeys(variants[0], "--branch-set")):
             print(line)
         return 0
-    start_values = _parse_set(args.set)
+    start_values = {**_parse_set(args.set), **program}
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
     result, csv, system, accumulator, shown = _run_streamed(args, start_values)
@@ -448,6 +515,10 @@ def cmd_sweep(args) -> int:
     vary = _parse_vary(args.vary)
     for line in _prepare_source(args):
         print(f"  [warning] {line}")
+    for name, text in _program_value(args).items():     # the program: one value every variant runs
+        if name in vary:
+            raise NcfmuError(f"--program and --vary {name}=... both give {name}: give one")
+        vary[name] = [text]
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
                  output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
@@ -589,7 +660,9 @@ def cmd_serve(args) -> int:
     def verdict(t: float, line: str) -> None:
         print(f"ncfmu serve: program ended at t = {t:.3f} s: {line}", flush=True)
 
-    summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
+    program = _program_value(args)
+    summary = serve(args.system, endpoint=args.endpoint, speed=args.speed,
+                    start_values={**_parse_set(args.set), **program},
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
@@ -627,8 +700,10 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("build", help="build every FMU into fmus/ and pack every system into ssp/<system>.ssp")
     p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
     p.add_argument("--pure", action="store_true",
-                   help="ship the controllers as Python sources only (no mypyc compile; else compiled once, cached "
-                        "in ~/.cache/ncfmu/compiled/)")
+                   help="ship the controllers as Python sources only (no mypyc compile; else compiled once per "
+                        "source change, cached in ~/.cache/ncfmu/compiled/). The kind is recorded in fmus/ and "
+                        "kept by later run, sweep, serve and validate until 'ncfmu build' without --pure or "
+                        "--compiled switches back")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
@@ -671,6 +746,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="tunable parameter or input set at the branch point, one value per branch, "
                         "e.g. --branch-set panel.emergency_at=12,21,31")
     _replace_options(p)
+    _program_option(p)
+    _kind_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
@@ -707,6 +784,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--connect-timeout", type=_real_option, default=5.0, metavar="S",
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     _replace_options(p)
+    _program_option(p)
+    _kind_options(p)
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
@@ -783,6 +862,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
                    help="the part check judges against the part drawn (as 'ncfmu run --drawing'): a served mill's "
                         "gouges are crashes against the outline drawn")
+    _program_option(p)
+    _kind_options(p)
     p.set_defaults(func=cmd_serve, no_part_check=False)
 
     p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "
@@ -802,9 +883,10 @@ def main(argv: list[str] | None = None) -> int:
         _check_positive(args)
         if args.command in ("run", "sweep"):
             _output_folder(args.out)
+        _build_kind(args)
         return args.func(args)
     except NcfmuError as err:
-        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        print(f"ncfmu {args.command}: {_in_words(err)}", file=sys.stderr)
         return 2
     except OSError as err:           # the machine's refusal (a full disk, a folder that went away): one line too
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)

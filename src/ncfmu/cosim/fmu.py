@@ -321,8 +321,11 @@ class FmuSlave:
         errors = [msg for lvl, msg in recent if lvl == "error"]
         said = "; ".join(errors) if errors else "; ".join(f"[{lvl}] {msg}" for lvl, msg in recent
                                                               if lvl in ("fatal", "warning"))
-        return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
-                               + (f": {said}" if said else ""))
+        error = SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
+                                + (f": {said}" if said else ""))
+        if errors and "Initialization" in what:
+            error.refusal = "; ".join(errors)
+        return error
 
     def _asks_to_terminate(self) -> bool:
         """After fmi2Discard from fmi2DoStep: fmi2GetBooleanStatus(fmi2Terminated) says whether the FMU asks to end

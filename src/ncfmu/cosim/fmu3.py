@@ -52,8 +52,11 @@ class Fmu3Slave:
         if status >= 4:
             self._alive = False
         errors = [msg for lvl, msg in self.messages[-5:] if lvl in ("error", "fatal")]
-        return SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
-                               + (f": {'; '.join(errors)}" if errors else ""))
+        error = SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
+                                + (f": {'; '.join(errors)}" if errors else ""))
+        if errors and "Initialization" in what:
+            error.refusal = "; ".join(errors)
+        return error
 
     def _call(self, what: str, call: Callable[..., _T], *args: object) -> _T:
         try:
