@@ -81,6 +81,7 @@ class Execution:
     forced: dict = field(default_factory=dict)
     unbound: dict = field(default_factory=dict)   # inputs outside the plan: the value last set
     flush: Callable[[], None] | None = None
+    ended: str = ""           # why the run ended before its stop time (a check's answer), "" while it runs
 
     def time_of(self, step: int) -> float:
         """The communication point after ``step`` steps: computed as both loops compute it."""
@@ -137,13 +138,17 @@ class Execution:
 
     # -- the loop -------------------------------------------------------------------------------
     def steps(self, first: int, last: int, progress: Callable[[float], None] | None = None,
-              deadline: float | None = None) -> float:
+              deadline: float | None = None, until: Callable[[], str] | None = None, check_every: int = 0) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time.
 
         The steps run in chunks that end where Python must act before the next step (an input change, a
-        progress report, a deadline check every 64 steps, a full record window, and every ``NATIVE_CHUNK``
-        steps so that Ctrl-C is seen); each chunk runs in C when every slave allows it, else in Python. Both
-        make the same calls.
+        progress report, a deadline check every 64 steps, a full record window, a check of ``until`` every
+        ``check_every`` steps, and every ``NATIVE_CHUNK`` steps so that Ctrl-C is seen); each chunk runs in C when
+        every slave allows it, else in Python. Both make the same calls.
+
+        ``until``: asked every ``check_every`` steps, after the sinks were handed every row so far (the window is
+        flushed first); a non-empty answer ends the run there (:attr:`ended` says why). Asked between chunks, never
+        inside the loop: the steps cost what they cost without it.
         """
         schedule, every = self.schedule, self.every
         report_every = max(1, (self.n_steps or 1) // 100)
@@ -172,6 +177,8 @@ class Execution:
                     end = min(end, (i + report_every) // report_every * report_every)   # the next row to report
                 if deadline is not None:
                     end = min(end, (i + 64) // 64 * 64)
+                if until is not None:
+                    end = min(end, (i + check_every) // check_every * check_every)
                 advance(i, end, self.row_base)
                 i = self.step = end
                 raise_pending()
@@ -181,6 +188,12 @@ class Execution:
                     stop = f" of {self.time_of(self.n_steps):.3f} s" if self.n_steps is not None else ""
                     raise SimulationTimeout(f"stopped at t = {self.time_of(end):.3f} s{stop}: over the time allowed "
                                             f"({_time.perf_counter() - wall0:.1f} s of wall time)")
+                if until is not None and end % check_every == 0 and end < last:
+                    assert self.flush is not None, "a check of the rows needs the rows handed to the sinks"
+                    self.flush()
+                    self.ended = until()
+                    if self.ended:
+                        break
         except SimulationError as err:
             failed = getattr(self.native, "failed_step", None)
             if failed is not None and i <= failed:
