@@ -254,9 +254,13 @@ def _run_streamed(args, start_values: dict[str, object]):
                 report = opened.report()
                 report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
                 to_done = report.ends_when_done(start_parameters(system.components, start_values))
-                stop = (RUN_LIMIT if to_done else system.stop_time) if args.stop_time is None else args.stop_time
+                stop = args.stop_time
+                if stop is None:                # a longer stop time of the system's own is kept as the limit
+                    stop = max(RUN_LIMIT, system.stop_time) if to_done else system.stop_time
                 rows = None
-                if step > 0 and math.isfinite(stop / step) and not to_done:   # to done: the limit is not the length
+                # the CSV's size checked against the disk for the whole span -- for a run to done, only for a limit
+                # beyond RUN_LIMIT (the run's length is where its work ends, not the limit; a billion s is a mistake)
+                if step > 0 and math.isfinite(stop / step) and (not to_done or stop > RUN_LIMIT):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
                 _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,

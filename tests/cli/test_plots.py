@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
+
 pytest.importorskip("matplotlib")     # the plot extra; the test extra installs it (CI runs these)
 
 
@@ -222,8 +224,8 @@ def _plane_lines(result) -> dict[str, list[np.ndarray]]:
     return lines
 
 
-def _plotted_planes(monkeypatch, argv: list[str]) -> list[dict[str, list[np.ndarray]]]:
-    """Run ``ncfmu`` with ``argv``; the plane lines of every result it plotted."""
+def _plotted_planes(monkeypatch, argv: list[str], status: int = 0) -> list[dict[str, list[np.ndarray]]]:
+    """Run ``ncfmu`` with ``argv`` (exiting with ``status``); the plane lines of every result it plotted."""
     from ncfmu import plots
     from ncfmu.cli import main
     planes: list[dict[str, list[np.ndarray]]] = []
@@ -232,7 +234,7 @@ def _plotted_planes(monkeypatch, argv: list[str]) -> list[dict[str, list[np.ndar
         planes.append(_plane_lines(result))
         return _plot(result, path)
     monkeypatch.setattr(plots, "plot_result", plotted)
-    assert main(argv) == 0
+    assert main(argv) == status
     return planes
 
 
@@ -245,7 +247,7 @@ def test_the_offline_plot_of_a_part_program_run_draws_its_profile_as_plot_did(pr
     program = (ROOT / "docs" / "examples" / "lathe_shaft.ngc").read_text()
     out = tmp_path / "out"
     [live] = _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "1", "--out", str(out),
-                                           "--set", f"seq.program={program}", "--plot"])
+                                           "--set", f"seq.program={program}", "--plot"], EXIT_NOT_FINISHED)
     assert (out / "lathe_roughing.run.json").is_file()
     [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv"), "--png",
                                               str(tmp_path / "offline.png")])
@@ -266,7 +268,7 @@ def test_the_offline_plot_of_a_part_program_run_draws_its_profile_as_plot_did(pr
 def test_the_offline_plot_draws_the_stock_of_a_runs_set_registers(project, tmp_path, monkeypatch, capsys):
     out = tmp_path / "out"
     _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "0.5", "--out", str(out),
-                                  "--set", "seq.block[1].Xf=2.5"])
+                                  "--set", "seq.block[1].Xf=2.5"], EXIT_NOT_FINISHED)
     [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv")])
     assert "stock outline X = 27.5" in offline                # 30 - 2.5 (the system's own: X = 29)
     # a CSV moved away from its run record is plotted with the system's parameter sets, as before

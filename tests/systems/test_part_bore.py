@@ -15,6 +15,7 @@ import pytest
 from lathe_oracle import BORE, BORE_OPTIONS, SHAFT, fanuc
 
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_PART_REJECTED
 from ncfmu.machining.removal import TOUCH
 from ncfmu.systems.part import LathePart
 
@@ -88,11 +89,17 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
     assert r.part.within_tolerance is False
     code = main(["run", "lathe_roughing", "--stop-time", "2", "--set", f"seq.program={text}", "--out",
                  str(tmp_path)])
-    assert code == 3
+    assert code == EXIT_PART_REJECTED
     out = capsys.readouterr().out
-    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, 5" in out
+    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, " in out
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
+    # the crash halts the machine: the run ended within a second of it, with the crash as deep as it went by then
+    # (the in-memory run above went on to 2 s: the whole 5 mm)
+    assert f"  ended: crash at t = {crashes[0].t:.3f} s" in out
+    last = float((tmp_path / "lathe_roughing.csv").read_text().rstrip("\n").rsplit("\n", 1)[1].split(",")[0])
+    assert crashes[0].t < last <= crashes[0].t + 1.0
+    assert 0 < written["crashes"][0]["depth_mm"] <= crashes[0].depth_mm
 
 
 @pytest.mark.slow
