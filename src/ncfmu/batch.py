@@ -104,7 +104,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     from .cosim.master import CHECK_INTERVAL
     from .cosim.record import CsvSink
     from .project import OpenSystem, recording
-    from .systems.outcome import RUN_LIMIT, ends_when_done, halted, outcome
+    from .systems.outcome import RUN_LIMIT, ends_when_done, halted, outcome, watched
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -131,7 +131,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         row_time = every * opened.system.step_size     # asked at whole rows, about every CHECK_INTERVAL s
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
                    until=lambda: halted(metrics), check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
-                   **how.run_arguments())
+                   watch=watched(metrics), **how.run_arguments())
         came_out = outcome(metrics)
         row.update(status=came_out.status, error=came_out.why)
     except SimulationTimeout as err:

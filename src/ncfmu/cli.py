@@ -234,7 +234,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
     from .project import OpenSystem, ScaledSink, recording, system_archive
-    from .systems.outcome import RUN_LIMIT, halted
+    from .systems.outcome import RUN_LIMIT, halted, watched
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
@@ -280,7 +280,7 @@ def _run_streamed(args, start_values: dict[str, object]):
                 result = opened.run(stop_time=stop, step_size=args.step, start_values=start_values,
                                     inputs=inputs, keep=False, until=lambda: halted(accumulator),
                                     check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
-                                    **how.run_arguments())
+                                    watch=watched(accumulator), **how.run_arguments())
                 if not result.ended_by and to_done:
                     result.ended_by = f"the --stop-time limit {stop:g} s reached"
     except KeyboardInterrupt as err:

@@ -91,15 +91,17 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
                  str(tmp_path)])
     assert code == EXIT_PART_REJECTED
     out = capsys.readouterr().out
-    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, " in out
+    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, 5" in out
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
-    # the crash halts the machine: the run ended within a second of it, with the crash as deep as it went by then
-    # (the in-memory run above went on to 2 s: the whole 5 mm)
+    # without a --stop-time the crash halts the machine: the run ends as soon as the rows reach the part check (a
+    # record window, a few seconds), long before the program would have
+    assert main(["run", "lathe_roughing", "--set", f"seq.program={text}", "--out", str(tmp_path)]) \
+        == EXIT_PART_REJECTED
+    out = capsys.readouterr().out
     assert f"  ended: crash at t = {crashes[0].t:.3f} s" in out
     last = float((tmp_path / "lathe_roughing.csv").read_text().rstrip("\n").rsplit("\n", 1)[1].split(",")[0])
-    assert crashes[0].t < last <= crashes[0].t + 1.0
-    assert 0 < written["crashes"][0]["depth_mm"] <= crashes[0].depth_mm
+    assert crashes[0].t < last < 10.0
 
 
 @pytest.mark.slow

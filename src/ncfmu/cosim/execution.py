@@ -10,7 +10,7 @@ through :meth:`Execution.apply`.
 from __future__ import annotations
 
 import time as _time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -138,7 +138,8 @@ class Execution:
 
     # -- the loop -------------------------------------------------------------------------------
     def steps(self, first: int, last: int, progress: Callable[[float], None] | None = None,
-              deadline: float | None = None, until: Callable[[], str] | None = None, check_every: int = 0) -> float:
+              deadline: float | None = None, until: Callable[[], str] | None = None, check_every: int = 0,
+              watch: Sequence[tuple[str, int]] = ()) -> float:
         """Steps ``first`` .. ``last - 1``; returns the wall time.
 
         The steps run in chunks that end where Python must act before the next step (an input change, a
@@ -146,9 +147,12 @@ class Execution:
         ``check_every`` steps, and every ``NATIVE_CHUNK`` steps so that Ctrl-C is seen); each chunk runs in C when
         every slave allows it, else in Python. Both make the same calls.
 
-        ``until``: asked every ``check_every`` steps, after the sinks were handed every row so far (the window is
-        flushed first); a non-empty answer ends the run there (:attr:`ended` says why). Asked between chunks, never
-        inside the loop: the steps cost what they cost without it.
+        ``until``: asked whenever the record window was handed to the sinks because it was full, and -- every
+        ``check_every`` steps -- when one of the ``watch`` outputs (``(kind, index)`` in the value vectors: a done
+        signal, an alarm) changed since the last look: then the window is handed over first, so ``until`` reads
+        every row so far. A non-empty answer ends the run there (:attr:`ended` says why). Looked at between chunks,
+        never inside the loop, and the window handed over early only when a watched output changed: the steps cost
+        what they cost without it (a window handed over every ``check_every`` steps cost the lathe 10 %).
         """
         schedule, every = self.schedule, self.every
         report_every = max(1, (self.n_steps or 1) // 100)
@@ -160,6 +164,8 @@ class Execution:
         else:
             advance = self._python_steps()
         wall0 = _time.perf_counter()
+        watched = [(self.values[kind], j) for kind, j in watch]
+        seen = [vector[j] for vector, j in watched]
         i = first
         try:
             while i < last:
@@ -170,6 +176,10 @@ class Execution:
                 if i // every + 1 - self.row_base >= self.capacity:
                     assert self.flush is not None, "the record window is full and nothing takes its rows"
                     self.flush()
+                    if until is not None and i > first:
+                        self.ended = until()
+                        if self.ended:
+                            break
                 end = min(last, i + NATIVE_CHUNK, (self.row_base + self.capacity) * every - 1)
                 if self.next_change < len(schedule):
                     end = min(end, schedule[self.next_change][0])
@@ -189,11 +199,14 @@ class Execution:
                     raise SimulationTimeout(f"stopped at t = {self.time_of(end):.3f} s{stop}: over the time allowed "
                                             f"({_time.perf_counter() - wall0:.1f} s of wall time)")
                 if until is not None and end % check_every == 0 and end < last:
-                    assert self.flush is not None, "a check of the rows needs the rows handed to the sinks"
-                    self.flush()
-                    self.ended = until()
-                    if self.ended:
-                        break
+                    now = [vector[j] for vector, j in watched]
+                    if now != seen:
+                        seen = now
+                        assert self.flush is not None, "a check of the rows needs the rows handed to the sinks"
+                        self.flush()
+                        self.ended = until()
+                        if self.ended:
+                            break
         except SimulationError as err:
             failed = getattr(self.native, "failed_step", None)
             if failed is not None and i <= failed:

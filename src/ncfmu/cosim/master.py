@@ -159,7 +159,8 @@ class Master:
             start_time: float = 0.0, progress: Callable[[float], None] | None = None,
             deadline: float | None = None, record: Sequence[str] | None = None,
             output_interval: float | None = None, sinks: Sequence[RecordSink] = (), keep: bool = True,
-            until: Callable[[], str] | None = None, check_interval: float | None = None) -> Result:
+            until: Callable[[], str] | None = None, check_interval: float | None = None,
+            watch: Sequence[str] = ()) -> Result:
         """Initialise every slave, step to ``stop_time`` and return the recorded outputs.
 
         ``record`` names the outputs recorded (default: every output), ``output_interval`` records every so
@@ -168,8 +169,9 @@ class Master:
         Result has no rows (only its span, messages and parameters). An interrupted run (an exception,
         Ctrl-C) closes the sinks as incomplete with every row of the finished chunks, then raises.
         ``deadline`` (a ``time.perf_counter()`` value): past it the run stops with :class:`SimulationTimeout`.
-        ``until`` (with ``keep`` False): asked every ``check_interval`` s of simulated time (default
-        ``CHECK_INTERVAL``) once the sinks have every row so far -- e.g. "is the work done?"; its first non-empty
+        ``until`` (with ``keep`` False): asked once the sinks have every row so far -- e.g. "is the work done?" --
+        whenever the record window is full, and when one of the ``watch`` outputs (a done signal, an alarm) changed,
+        looked at every ``check_interval`` s of simulated time (default ``CHECK_INTERVAL``); its first non-empty
         answer ends the run there, a complete run (``Result.ended_by`` says why).
         """
         if stop_time is not None and not math.isfinite(float(stop_time)):
@@ -182,7 +184,7 @@ class Master:
             if until is not None:
                 every = max(1, int(round((CHECK_INTERVAL if check_interval is None else check_interval)
                                          / session.step_size)))
-            work_ended = session.run_to_stop(progress, deadline, until, every)
+            work_ended = session.run_to_stop(progress, deadline, until, every, watch)
         except TerminationRequested as ended:
             # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
             # (the execution has made the step whole where the FMU had: Execution._end_where_asked)

@@ -3,7 +3,8 @@
 One home for what ``ncfmu run``'s exit status and a sweep variant's status say, from the run's summary as it went
 (a :class:`~ncfmu.systems.report.ReportAccumulator`, the part check's verdict in it):
 
-- :func:`halted`: asked as the run goes (``Master.run``'s ``until``, every ``CHECK_INTERVAL`` of simulated time):
+- :func:`halted`: asked as the run goes (``Master.run``'s ``until``: when the rows reach the sinks, and within
+  ``CHECK_INTERVAL`` of simulated time after a :func:`watched` output -- a done signal, an alarm -- changed):
   the run ends when the part check saw a crash, when an alarm halted the machine, or when every cycle of the
   system is done (its report's done signals, :meth:`~ncfmu.systems.report.Report.done_signals`) -- unless the
   system repeats its cycle (a soak), or has no done signal (a bare FMU): then it runs to its stop time.
@@ -32,6 +33,15 @@ EXIT_OF = {OK: EXIT_OK, CRASHED: EXIT_PART_REJECTED, OUT_OF_TOLERANCE: EXIT_PART
 def ends_when_done(accumulator: ReportAccumulator) -> bool:
     """The run the accumulator summarises ends where its work ends (a done signal, no repeat)."""
     return accumulator.report.ends_when_done(accumulator.parameters)
+
+
+def watched(accumulator: ReportAccumulator) -> list[str]:
+    """The outputs whose change makes a run look at :func:`halted` at once (``Master.run``'s ``watch``): the done
+    signals of a run that :func:`ends_when_done`, and every alarm. (A crash is seen as the rows reach the part
+    check: whenever the record window is full -- every few seconds of simulated time --, or at one of these.)"""
+    report = accumulator.report
+    done = list(report.done_signals()) if ends_when_done(accumulator) else []
+    return list(dict.fromkeys([*done, *(p.alarm for p in report.parts if p.alarm is not None)]))
 
 
 def halted(accumulator: ReportAccumulator) -> str:
