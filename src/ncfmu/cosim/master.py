@@ -50,8 +50,9 @@ __all__ = ["MAX_RECORD_BYTES", "MODES", "Execution", "InputTable", "Interrupted"
 #: The record window of a run that keeps nothing in memory: about this many bytes of rows.
 WINDOW_BYTES = 2 ** 20
 
-#: How often (s of simulated time) a run asks whether it should end (``Master.run``'s ``until``): a run that
-#: ends where its work ends stops at most this long after it (the check is between chunks of steps, not in them).
+#: How often (s of simulated time) a run looks at its watched outputs (``Master.run``'s ``watch``: a done signal, an
+#: alarm) to ask whether it should end: it stops at most this long after one changed (looked at between chunks of
+#: steps, not in them).
 CHECK_INTERVAL = 0.5
 
 #: Steps a run counts at most (whole numbers in a double): a stop time beyond is a mistake, not a run.
