@@ -54,21 +54,20 @@ import numpy as np
 
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
+from .systems.outcome import RAN, STATUSES
 
 if TYPE_CHECKING:
     from .cosim.ssp import System
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
-#: A variant's status, as ``ncfmu run`` judges a run (:mod:`ncfmu.systems.outcome`): ``ok`` (the work done, every
-#: cycle of the system's report finished, the part within tolerance), ``crashed`` (the part check saw a crash:
-#: the run ended there), ``out_of_tolerance``, ``unfinished`` (the stop-time limit reached with a cycle still
-#: running or never started -- the error column says ``cycle not finished by t = <stop> s`` --, an alarm, or the
-#: part not judged), ``failed`` (refused, or an FMU failed: the error says why), ``timeout``.
-STATUSES = ("ok", "crashed", "out_of_tolerance", "unfinished", "failed", "timeout")
-#: The statuses of a variant that ran to its end (its work done, a crash, an alarm or the stop time): its
-#: trajectory file is written.
-RAN = ("ok", "crashed", "out_of_tolerance", "unfinished")
+# A variant's status, as ``ncfmu run`` judges a run (:mod:`ncfmu.systems.outcome`): ``ok`` (the work done, every
+# cycle of the system's report finished, the part within tolerance), ``crashed`` (the part check saw a crash:
+# the run ended there), ``out_of_tolerance``, ``unfinished`` (the stop-time limit reached with a cycle still
+# running or never started -- the error column says ``cycle not finished by t = <stop> s`` --, an alarm, or the
+# part not judged), ``failed`` (refused, or an FMU failed: the error says why), ``timeout``.
+# (:data:`ncfmu.systems.outcome.STATUSES`). A variant of a status in ``RAN`` has its trajectory file written.
+
 #: Bytes of a variant's trajectory file per message from a worker to the client.
 FETCH_CHUNK = 2 ** 20
 

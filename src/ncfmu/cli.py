@@ -465,10 +465,9 @@ def sweep_exit_status(statuses: list[str]) -> int:
     tolerance) in any variant is EXIT_PART_REJECTED, else any variant not done (unfinished, failed, timed out)
     EXIT_NOT_FINISHED, else EXIT_OK."""
     from .exitcodes import EXIT_NOT_FINISHED, EXIT_OK, EXIT_PART_REJECTED
-    from .systems.outcome import EXIT_OF, OK
-    if any(EXIT_OF.get(s) == EXIT_PART_REJECTED for s in statuses):
-        return EXIT_PART_REJECTED
-    return EXIT_OK if all(s == OK for s in statuses) else EXIT_NOT_FINISHED
+    from .systems.outcome import EXIT_OF
+    exits = {EXIT_OF[s] for s in statuses}
+    return next((e for e in (EXIT_PART_REJECTED, EXIT_NOT_FINISHED) if e in exits), EXIT_OK)
 
 
 def cmd_plot(args) -> int:

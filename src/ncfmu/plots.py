@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .batch import RAN, STATUSES
+from .systems.outcome import RAN, STATUSES
 
 
 def _plt():

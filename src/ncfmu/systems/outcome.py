@@ -24,10 +24,15 @@ from .report import ReportAccumulator
 #: with a done signal): longer than any program a test or a sweep runs; the run stops where the work does.
 RUN_LIMIT = 3600.0
 
-#: A variant's (and a run's) status, and the exit status it gives
+#: A run's status (and a sweep variant's), and the exit status it gives; a sweep's variant may also have
+#: ``failed`` (refused, or an FMU failed) or ``timeout`` (over its wall time)
 OK, CRASHED, OUT_OF_TOLERANCE, UNFINISHED = "ok", "crashed", "out_of_tolerance", "unfinished"
+FAILED, TIMEOUT = "failed", "timeout"
 EXIT_OF = {OK: EXIT_OK, CRASHED: EXIT_PART_REJECTED, OUT_OF_TOLERANCE: EXIT_PART_REJECTED,
-           UNFINISHED: EXIT_NOT_FINISHED}
+           UNFINISHED: EXIT_NOT_FINISHED, FAILED: EXIT_NOT_FINISHED, TIMEOUT: EXIT_NOT_FINISHED}
+#: The statuses of a run that ran to its end (its work done, a crash, an alarm or the stop time)
+RAN = (OK, CRASHED, OUT_OF_TOLERANCE, UNFINISHED)
+STATUSES = (*RAN, FAILED, TIMEOUT)
 
 
 def ends_when_done(accumulator: ReportAccumulator) -> bool:
