@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from .errors import NcfmuError
-from .exitcodes import EXIT_HELP, EXIT_REFUSED
+from .exitcodes import EXIT_HELP, EXIT_OK, EXIT_PROBLEMS, EXIT_REFUSED
 from .ports import is_integer_text, parse_integer, parse_real
 
 if TYPE_CHECKING:
@@ -464,7 +464,7 @@ def sweep_exit_status(statuses: list[str]) -> int:
     """A sweep's exit status from its variants' statuses, as ``ncfmu run``'s: a part rejected (a crash, out of
     tolerance) in any variant is EXIT_PART_REJECTED, else any variant not done (unfinished, failed, timed out)
     EXIT_NOT_FINISHED, else EXIT_OK."""
-    from .exitcodes import EXIT_NOT_FINISHED, EXIT_OK, EXIT_PART_REJECTED
+    from .exitcodes import EXIT_NOT_FINISHED, EXIT_PART_REJECTED
     from .systems.outcome import EXIT_OF
     exits = {EXIT_OF[s] for s in statuses}
     return next((e for e in (EXIT_PART_REJECTED, EXIT_NOT_FINISHED) if e in exits), EXIT_OK)
@@ -603,7 +603,7 @@ def cmd_serve(args) -> int:
           flush=True)
     for path in summary.files:
         print(f"  written: {path}")
-    return 1 if summary.state == "failed" else 0
+    return EXIT_PROBLEMS if summary.state == "failed" else EXIT_OK
 
 
 def cmd_validate(args) -> int:
@@ -613,7 +613,7 @@ def cmd_validate(args) -> int:
     for p in checked.problems:
         print(p)
     print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
-    return 1 if checked.problems else 0
+    return EXIT_PROBLEMS if checked.problems else EXIT_OK
 
 
 def main(argv: list[str] | None = None) -> int:
