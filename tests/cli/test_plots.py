@@ -111,6 +111,37 @@ def test_plot_sweep_writes_the_png(tmp_path):
     assert png.read_bytes()[:4] == b"\x89PNG" and _longest_blank_band(png) < 0.05
 
 
+def test_a_sweep_of_part_programs_plots_with_numbered_values_and_its_rejected_variants(tmp_path):
+    """A program text as a sweep value: numbered on the axis and listed under the panels (as tick labels the
+    texts overlapped into one smear); a variant out of tolerance is drawn, marked as rejected."""
+    import csv
+
+    import matplotlib.pyplot as plt
+
+    from ncfmu.cli import main
+    from ncfmu.plots import sweep_figure
+    programs = ["M0: X+D3F7; M1: X+D2F1; M2: X+D5F2; M3: T1; M4: X-D4F7; M5: END",
+                "M0: X+D3F7\nM1: X+D2F7; M2: X+D5F2; M3: T1; M4: X-D4F7; M5: END"]
+    header = ["key", "feed.program", "status", "error", "rows", "sim_time", "wall_time", "max_gouge_mm"]
+    rows = [["a", programs[0], "ok", "", "100", "31.0", "0.5", "0.000003"],
+            ["b", programs[1], "out_of_tolerance", "part out of tolerance 0.01 mm: gouge 0.66 mm", "100", "31.0",
+             "0.5", "0.66"]]
+    fig = sweep_figure([dict(zip(header, r)) for r in rows], "sweep sw")
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["#1", "#2"]
+    assert ax.get_xlabel() == "feed.program (values listed below)"
+    key = "\n".join(t.get_text() for t in fig.texts)
+    assert f"#1: {programs[0]}" in key and "#2: M0: X+D3F7 | M1: X+D2F7" in key     # a program's lines on one
+    rejected = {line.get_label(): line for line in ax.get_lines()}["out of tolerance: the part rejected"]
+    assert list(rejected.get_xdata()) == [1.0] and list(rejected.get_ydata()) == [0.66]
+    assert ax.get_title() == "sweep sw: 1 ok, 1 out_of_tolerance"
+    plt.close(fig)
+    summary = tmp_path / "summary.csv"
+    with open(summary, "w", newline="") as f:
+        csv.writer(f).writerows([header, *rows])
+    assert main(["plot", str(summary)]) == 0 and (tmp_path / "summary.png").stat().st_size > 10_000
+
+
 # -- the ServoAxis Bode plot ------------------------------------------------------------------------------
 AXES = {"defaults": {}, "stiffer": {"Kv": 60.0, "vel_bandwidth": 800.0, "tau_current": 0.25e-3}}
 
