@@ -103,7 +103,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     from .cosim.master import CHECK_INTERVAL
     from .cosim.record import CsvSink
     from .project import OpenSystem, recording
-    from .systems.outcome import RUN_LIMIT, ends_when_done, halted, outcome, watched
+    from .systems.outcome import default_stop_time, ends_when_done, halted, outcome, watched
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -125,8 +125,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         assert metrics is not None
         deadline = None if timeout is None else time.perf_counter() + timeout
         # as ncfmu run: to where the work ends (stop_time, default RUN_LIMIT, the limit), a crash or an alarm
-        if stop_time is None and ends_when_done(metrics):
-            stop_time = RUN_LIMIT
+        if stop_time is None:
+            stop_time = default_stop_time(opened.system.stop_time, ends_when_done(metrics))
         row_time = every * opened.system.step_size     # asked at whole rows, about every CHECK_INTERVAL s
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
                    until=lambda: halted(metrics), check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),

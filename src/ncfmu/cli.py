@@ -234,7 +234,7 @@ def _run_streamed(args, start_values: dict[str, object]):
     from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
     from .project import OpenSystem, ScaledSink, recording, system_archive
-    from .systems.outcome import RUN_LIMIT, halted, watched
+    from .systems.outcome import RUN_LIMIT, default_stop_time, halted, watched
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
@@ -254,9 +254,7 @@ def _run_streamed(args, start_values: dict[str, object]):
                 report = opened.report()
                 report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
                 to_done = report.ends_when_done(start_parameters(system.components, start_values))
-                stop = args.stop_time
-                if stop is None:                # a longer stop time of the system's own is kept as the limit
-                    stop = max(RUN_LIMIT, system.stop_time) if to_done else system.stop_time
+                stop = default_stop_time(system.stop_time, to_done) if args.stop_time is None else args.stop_time
                 rows = None
                 # the CSV's size checked against the disk for the whole span -- for a run to done, only for a limit
                 # beyond RUN_LIMIT (the run's length is where its work ends, not the limit; a billion s is a mistake)

@@ -40,6 +40,12 @@ def ends_when_done(accumulator: ReportAccumulator) -> bool:
     return accumulator.report.ends_when_done(accumulator.parameters)
 
 
+def default_stop_time(system_stop_time: float, to_done: bool) -> float:
+    """The stop time of a run given none: for a run that ends where its work ends, the limit RUN_LIMIT (or the
+    system's own stop time when longer); for one without a done signal, the system's stop time."""
+    return max(RUN_LIMIT, system_stop_time) if to_done else system_stop_time
+
+
 def watched(accumulator: ReportAccumulator) -> list[str]:
     """The outputs whose change makes a run look at :func:`halted` at once (``Master.run``'s ``watch``): the done
     signals of a run that :func:`ends_when_done`, and every alarm. (A crash is seen as the rows reach the part
