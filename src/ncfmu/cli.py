@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from .errors import NcfmuError
+from .exitcodes import EXIT_HELP, EXIT_OK, EXIT_PROBLEMS, EXIT_REFUSED
 from .ports import is_integer_text, parse_integer, parse_real
 
 if TYPE_CHECKING:
@@ -305,9 +306,10 @@ def _run_streamed(args, start_values: dict[str, object]):
     import math
     import signal
 
-    from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
     from .project import OpenSystem, ScaledSink, recording, system_archive
+    from .systems.outcome import RUN_LIMIT, default_stop_time, halted, watched
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
@@ -322,9 +324,16 @@ def _run_streamed(args, start_values: dict[str, object]):
             with OpenSystem(archive, args.mode) as opened:
                 system = opened.system
                 step = system.step_size if args.step is None else args.step
-                stop = system.stop_time if args.stop_time is None else args.stop_time
+                # a system with a done signal runs until its work is done, --stop-time (default RUN_LIMIT) the limit;
+                # one without (a bare FMU) to --stop-time, default the system's
+                report = opened.report()
+                report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
+                to_done = report.ends_when_done(start_parameters(system.components, start_values))
+                stop = default_stop_time(system.stop_time, to_done) if args.stop_time is None else args.stop_time
                 rows = None
-                if step > 0 and math.isfinite(stop / step):
+                # the CSV's size checked against the disk for the whole span -- for a run to done, only for a limit
+                # beyond RUN_LIMIT (the run's length is where its work ends, not the limit; a billion s is a mistake)
+                if step > 0 and math.isfinite(stop / step) and (not to_done or stop > RUN_LIMIT):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
                 if settings.drawing is not None:        # refused for this system before any file is written
                     from .systems.drawing import check_for
@@ -334,15 +343,22 @@ def _run_streamed(args, start_values: dict[str, object]):
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
                 # the summary reads every step; the CSV gets the --record columns at the --output-interval; the
                 # plot, every step decimated to what a figure shows (its axes in mm, as the summary's)
-                report = opened.report()
-                report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
                 how = recording(opened, start_values, csv_sink, args.record, args.output_interval, args.step,
                                 in_mm=True, report=report)    # a user's axis in m: the report reads mm
                 if args.plot:
                     plotted = DecimatingSink(system.name)
                     how.sinks.append(ScaledSink(plotted, how.scales) if how.scales else plotted)
-                result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
-                                    inputs=inputs, keep=False, **how.run_arguments())
+                accumulator = how.summary
+                assert accumulator is not None
+                # asked at the CSV's rows (a whole number of them, about every CHECK_INTERVAL s): the last row is
+                # at most that long after the work ended
+                row_time = steps_per_row(args.output_interval, step) * step
+                result = opened.run(stop_time=stop, step_size=args.step, start_values=start_values,
+                                    inputs=inputs, keep=False, until=lambda: halted(accumulator),
+                                    check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
+                                    watch=watched(accumulator), **how.run_arguments())
+                if not result.ended_by and to_done:
+                    result.ended_by = f"the --stop-time limit {stop:g} s reached"
     except KeyboardInterrupt as err:
         terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
         where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
@@ -357,8 +373,6 @@ def _run_streamed(args, start_values: dict[str, object]):
             raise
         raise NcfmuError(f"{_in_words(err)} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    accumulator = how.summary
-    assert accumulator is not None
     print(_summary(result, accumulator.summary()))
     parameters = result.parameters or start_parameters(system.components, start_values)
     if csv_sink.final_path is not None:
@@ -479,9 +493,11 @@ def cmd_run(args) -> int:
         print(f"  plot: {plot_result(shown, out / f'{result.system}.png')}")
         if verdict is not None and verdict.made is not None:
             print(f"  plot: {plot_part(verdict, result.system, out / f'{result.system}.part.png')}")
-    if verdict is not None and verdict.within_tolerance is False:
-        return PART_REJECTED
-    return 0
+    from .systems.outcome import outcome
+    came_out = outcome(accumulator)
+    if came_out.why:
+        print(f"  {came_out.status}: {came_out.why} (exit status {came_out.exit_status})")
+    return came_out.exit_status
 
 
 def _parse_vary(items: list[str]) -> dict[str, list[object]]:
@@ -497,15 +513,6 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     return vary
 
 
-#: ``ncfmu run``'s exit status when the part check saw a crash or a part out of tolerance (2 is a refusal).
-PART_REJECTED = 3
-
-
-#: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
-#: command line, as for every command.
-SWEEP_INCOMPLETE = 1
-
-
 def cmd_sweep(args) -> int:
     from .batch import STATUSES, sweep
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
@@ -515,13 +522,15 @@ def cmd_sweep(args) -> int:
     vary = _parse_vary(args.vary)
     for line in _prepare_source(args):
         print(f"  [warning] {line}")
+    fixed = _parse_set(args.set)
     for name, text in _program_value(args).items():     # the program: one value every variant runs
-        if name in vary:
-            raise NcfmuError(f"--program and --vary {name}=... both give {name}: give one")
-        vary[name] = [text]
+        if name in vary or name in fixed:
+            raise NcfmuError(f"--program and --vary/--set {name}=... both give {name}: give one")
+        fixed[name] = text
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
-                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
+                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout,
+                 fixed=fixed)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
           + f" -> {Path(args.out) / 'summary.csv'}")
@@ -529,10 +538,21 @@ def cmd_sweep(args) -> int:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
             print(f"  {r['status']}: {varied}: {r['error']}")
-    for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
+    for line in _unreached_lines(args.system, [{**fixed, **dict(zip(vary, values))}
+                                               for values in itertools.product(*vary.values())],
                                  dict.fromkeys(vary, "--vary")):
         print(line)
-    return 0 if counts["ok"] == len(rows) else SWEEP_INCOMPLETE
+    return sweep_exit_status([str(r["status"]) for r in rows])
+
+
+def sweep_exit_status(statuses: list[str]) -> int:
+    """A sweep's exit status from its variants' statuses, as ``ncfmu run``'s: a part rejected (a crash, out of
+    tolerance) in any variant is EXIT_PART_REJECTED, else any variant not done (unfinished, failed, timed out)
+    EXIT_NOT_FINISHED, else EXIT_OK."""
+    from .exitcodes import EXIT_NOT_FINISHED, EXIT_PART_REJECTED
+    from .systems.outcome import EXIT_OF
+    exits = {EXIT_OF[s] for s in statuses}
+    return next((e for e in (EXIT_PART_REJECTED, EXIT_NOT_FINISHED) if e in exits), EXIT_OK)
 
 
 def cmd_plot(args) -> int:
@@ -676,7 +696,7 @@ def cmd_serve(args) -> int:
           flush=True)
     for path in summary.files:
         print(f"  written: {path}")
-    return 1 if summary.state == "failed" else 0
+    return EXIT_PROBLEMS if summary.state == "failed" else EXIT_OK
 
 
 def cmd_validate(args) -> int:
@@ -686,11 +706,15 @@ def cmd_validate(args) -> int:
     for p in checked.problems:
         print(p)
     print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
-    return 1 if checked.problems else 0
+    return EXIT_PROBLEMS if checked.problems else EXIT_OK
 
 
 def main(argv: list[str] | None = None) -> int:
     from .cosim.algorithm import MODES
+    from .systems.outcome import RUN_LIMIT
+    stop_time_help = (f"the limit of simulated time, s: a system with a done signal stops where its work ends "
+                      f"(default limit {RUN_LIMIT:g} s); one without (a bare FMU) runs to it (default: the system's "
+                      "stop time)")
     help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
                      "run closed loop with servo axes.", epilog=help_epilog)
@@ -706,9 +730,14 @@ def main(argv: list[str] | None = None) -> int:
                         "--compiled switches back")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
+    p = sub.add_parser("run", help="simulate a system closed loop and print a summary",
+                       description="Simulate a system closed loop until its work is done (the program's M30/M02, "
+                                   "the registers' last pass, the grinder's return, the contour's end: the last row "
+                                   "within a second of it), a crash of the part check or an alarm halts the "
+                                   "machine, or the --stop-time limit; print a summary. " + EXIT_HELP,
+                       epilog=help_epilog)
     p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
-    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help=stop_time_help)
     p.add_argument("--step", type=_real_option, default=None, help="communication step in s (default 0.001)")
     p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
@@ -754,17 +783,22 @@ def main(argv: list[str] | None = None) -> int:
                        description="Run every combination of the --vary values on dask workers (they need ncfmu "
                                    "installed, nothing else: the system is shipped to them, results come back). "
                                    "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
-                                   "ok/unfinished/failed/timeout, error, wall time, metrics), atomically; "
-                                   "'unfinished': the run reached the stop time with the cycle not finished "
-                                   "(error 'cycle not finished by t = ...'). A sweep into an existing OUT merges "
-                                   "into it; variants already done are not run again. Exit status 0 when every "
-                                   "variant is ok, 1 when any is unfinished, failed or timed out, 2 for a bad "
-                                   "command line.",
+                                   "ok/crashed/out_of_tolerance/unfinished/failed/timeout, error, wall time, "
+                                   "metrics), atomically. Each variant runs as 'ncfmu run' runs: until its work is "
+                                   "done, a crash or an alarm, --stop-time the limit; 'unfinished': the limit "
+                                   "reached with the cycle not finished (error 'cycle not finished by t = ...'), an "
+                                   "alarm, or the part not judged. A sweep into an existing OUT merges into it; "
+                                   "variants already done are not run again. Exit status 0 when every variant is "
+                                   "ok, 3 when any crashed or is out of tolerance, else 4 when any is unfinished, "
+                                   "failed or timed out, 2 for a bad command line.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--vary", action="append", required=True, metavar="INSTANCE.VAR=V1,V2,...",
                    help="values of one parameter (repeat for more: the product is run)")
+    p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
+                   help="a start value or parameter every variant shares, e.g. --set seq.program=\"...\" "
+                        "(repeatable)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--workers", type=_integer_option, default=2,
                        help="worker processes of a local dask cluster (default 2; 0: serial, no dask)")
@@ -772,7 +806,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="address of a running dask scheduler, e.g. tcp://127.0.0.1:8786")
     group.add_argument("--scheduler-file", default=None, metavar="FILE",
                        help="the scheduler file of a running dask scheduler (dask scheduler --scheduler-file FILE)")
-    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help=stop_time_help)
     p.add_argument("--out", required=True, help="folder for summary.csv and variants/")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs kept per variant, INSTANCE.VARIABLE (default: the axes' positions and what the "
@@ -887,10 +921,10 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except NcfmuError as err:
         print(f"ncfmu {args.command}: {_in_words(err)}", file=sys.stderr)
-        return 2
+        return EXIT_REFUSED
     except OSError as err:           # the machine's refusal (a full disk, a folder that went away): one line too
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
-        return 2
+        return EXIT_REFUSED
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ speed-arrival wait, feed per revolution) and whose encoder angle a thread's Z fo
 from __future__ import annotations
 
 from ..cosim.ssp import System
-from .compose import blocks, component, table, wire
+from .compose import REPEATS, blocks, component, table, wire
 from .part import LathePart
 from .report import Axes, Envelope, LatheCycle, Plane, Report
 
@@ -22,7 +22,8 @@ REPORT = Report(
      Axes(("x_axis", "z_axis")),
      LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter", spindle="spindle")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
-          ylabel="X (radius) [mm]"))
+          ylabel="X (radius) [mm]"),
+    repeats=REPEATS)
 
 
 def _lathe(name: str, description: str, stop_time: float, program: dict[str, object]) -> System:
