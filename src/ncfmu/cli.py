@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from .errors import NcfmuError
+from .errors import FmuCrashed, NcfmuError
 from .ports import is_integer_text, parse_integer, parse_real
 
 if TYPE_CHECKING:
@@ -274,6 +274,11 @@ def _run_streamed(args, start_values: dict[str, object]):
         if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
+    except FmuCrashed as err:             # a foreign FMU's process died: the run did not finish, its rows are kept
+        where = _where_stopped(csv_sink) if csv_sink is not None and csv_sink.final_path is not None \
+            else "no rows recorded"
+        print(f"ncfmu run: {err}: {where}", file=sys.stderr)
+        raise SystemExit(EXIT_NOT_FINISHED) from None
     except NcfmuError as err:
         if csv_sink is None or csv_sink.final_path is None:
             raise
@@ -416,6 +421,11 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
 
 #: ``ncfmu run``'s exit status when the part check saw a crash or a part out of tolerance (2 is a refusal).
 PART_REJECTED = 3
+
+
+#: ``ncfmu run``'s exit status when the run did not finish: an FMU's process died (issue 45). Defined here until
+#: the exit statuses have their one home (SPEC: 4 not finished).
+EXIT_NOT_FINISHED = 4
 
 
 #: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad

@@ -471,6 +471,10 @@ class FmuSlave:
     def read_outputs(self) -> None:
         self._transfer(self._reads, "Get")
 
+    def read_kind(self, kind: str) -> None:
+        """Fill the bound outputs of ``kind`` alone (an isolated FMU's process names each call before it makes it)."""
+        self._transfer([call for call in self._reads if call[4] == kind], "Get")
+
     def get(self, name: str) -> object:
         """Read one variable (for checks outside the loop)."""
         v = self.variables[name]
