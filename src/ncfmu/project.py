@@ -201,7 +201,7 @@ class OpenSystem:
             for c in self.system.components:
                 unpacked = self.unpacked[c.model]
                 self.slaves.append(make_slave(unpacked, c.name) if self.identities[c.name].model or not isolate
-                                   else isolated_slave(unpacked.path, c.name, unpacked.variables, unpacked.fmi3))
+                                   else isolated_slave(unpacked, c.name))
             self.master = Master(self.system, self.slaves, mode)
         except Exception:
             for slave in getattr(self, "slaves", ()):

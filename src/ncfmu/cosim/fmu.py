@@ -203,14 +203,19 @@ class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 
     def __init__(self, path: Path, workdir: Path | None = None) -> None:
+        """``path``: the FMU archive, or the folder it was unpacked to already (where an isolated FMU's process
+        loads the master's copy from, :mod:`~ncfmu.cosim.isolated`)."""
         self.path = Path(path)
-        if not self.path.is_file():
-            raise SystemDefinitionError(f"FMU not found: {self.path}")
         self._tmp = None
-        if workdir is None:
-            self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
-            workdir = Path(self._tmp)
-        self.directory = safe_extract(self.path, Path(workdir))
+        if self.path.is_dir():
+            self.directory = self.path
+        else:
+            if not self.path.is_file():
+                raise SystemDefinitionError(f"FMU not found: {self.path}")
+            if workdir is None:
+                self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
+                workdir = Path(self._tmp)
+            self.directory = safe_extract(self.path, Path(workdir))
         try:
             self.model_description = read_model_description(str(self.path))
         except Exception as err:                         # fmpy's own errors name the schema problem

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, FmuCrashed, SimulationError, SystemDefinitionError, TerminationRequested
+from .fmu import UnpackedFmu
 from .slave import DTYPES, Variable
 
 __all__ = ["IsolatedSlave", "IsolatedStatefulSlave", "isolated_slave"]
@@ -124,7 +125,7 @@ class _RemoteState:
 class IsolatedSlave:
     """The proxy of one FMU instance run in a child process (see the module's docstring)."""
 
-    def __init__(self, fmu_path: Path, instance_name: str, variables: dict[str, Variable]) -> None:
+    def __init__(self, directory: Path, instance_name: str, variables: dict[str, Variable]) -> None:
         self.name = instance_name
         self.variables = variables
         self.messages: list[tuple[str, str]] = []
@@ -143,7 +144,7 @@ class IsolatedSlave:
         try:
             self._process = subprocess.Popen(
                 [sys.executable, "-m", "ncfmu.cosim.isolated", str(calls_r), str(answers_w), str(mark.fileno()),
-                 str(fmu_path), str(self._workdir / "fmu"), instance_name],
+                 str(directory), instance_name],
                 pass_fds=(calls_r, answers_w, mark.fileno()), stdin=subprocess.DEVNULL)
         except OSError:
             for fd in (calls_r, calls_w, answers_r, answers_w):
@@ -341,20 +342,21 @@ class IsolatedStatefulSlave(IsolatedSlave):
         return _RemoteState(self._call("fmi2DeSerializeFMUstate", "deserialize_state", data=bytes(data)))
 
 
-def isolated_slave(fmu_path: Path, instance_name: str, variables: dict[str, Variable], fmi3: bool) -> IsolatedSlave:
-    """The proxy of an instance of the FMU at ``fmu_path`` run in a child process (FMI 2.0 instances save states)."""
-    cls = IsolatedSlave if fmi3 else IsolatedStatefulSlave
-    return cls(fmu_path, instance_name, variables)
+def isolated_slave(unpacked: UnpackedFmu, instance_name: str) -> IsolatedSlave:
+    """The proxy of an instance of ``unpacked`` run in a child process that loads it from the folder it is unpacked
+    in (FMI 2.0 instances save states)."""
+    cls = IsolatedSlave if unpacked.fmi3 else IsolatedStatefulSlave
+    return cls(unpacked.directory, instance_name, unpacked.variables)
 
 
 # -- the child's side ----------------------------------------------------------------------------------------
 class _Child:
     """The child's loop: one slave, driven by the calls that come down the pipe."""
 
-    def __init__(self, calls: Connection, answers: Connection, mark: mmap.mmap, fmu_path: str, workdir: str,
+    def __init__(self, calls: Connection, answers: Connection, mark: mmap.mmap, directory: str,
                  instance_name: str) -> None:
         self.calls, self.answers, self.mark = calls, answers, mark
-        self.fmu_path, self.workdir, self.instance_name = Path(fmu_path), Path(workdir), instance_name
+        self.directory, self.instance_name = Path(directory), instance_name
         self.slave: Any = None
         self.said = 0                      # messages of the slave already sent
         self.inputs: list[tuple[np.ndarray, str]] = []
@@ -460,8 +462,8 @@ class _Child:
 
     def dispatch(self, op: str, args: list[Any], data: bytes | None) -> object:
         if op == "instantiate":
-            from .fmu import UnpackedFmu, make_slave
-            unpacked = UnpackedFmu(self.fmu_path, self.workdir)
+            from .fmu import make_slave
+            unpacked = UnpackedFmu(self.directory)
             self.fmi = "fmi3" if unpacked.fmi3 else "fmi2"
             self.note(f"{self.fmi}Instantiate")
             self.slave = make_slave(unpacked, self.instance_name)
@@ -535,18 +537,16 @@ _FMI3_NAMES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "Str
 
 def main(argv: list[str]) -> None:
     calls_fd, answers_fd, mark_fd = (int(a) for a in argv[:3])
-    fmu_path, workdir, instance_name = argv[3:6]
+    directory, instance_name = argv[3:5]
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the master's to handle: it ends this process
     mark = mmap.mmap(mark_fd, MARK_SIZE)
     os.close(mark_fd)
-    child = _Child(Connection(calls_fd, writable=False), Connection(answers_fd, readable=False), mark, fmu_path,
-                   workdir, instance_name)
+    child = _Child(Connection(calls_fd, writable=False), Connection(answers_fd, readable=False), mark, directory,
+                   instance_name)
     try:
         child.serve()
     except BrokenPipeError:
         pass                                        # the master went away mid-answer
-    finally:
-        shutil.rmtree(workdir, ignore_errors=True)
 
 
 if __name__ == "__main__":
