@@ -14,8 +14,8 @@ into an FMU (binaries/linux64 plus its sources) with the system C compiler. They
   fmi2Discard + fmi2Terminated (fmi2LastSuccessfulTime at the step's end);
 - ``Feedthrough``: inputs to outputs per type (Real with a declaredType in s and one in mm, Integer, Boolean),
   a gain with min/max, a String parameter;
-- ``PlantAxis3``, ``Countdown3``, ``Stairs3``, ``Feedthrough3``: the same models as FMI 3.0 co-simulation FMUs
-  (``frame3.c``; Float64, Int32, Boolean, String).
+- ``PlantAxis3``, ``Countdown3``, ``Stairs3``, ``Feedthrough3``, ``CrashingAxis3``: the same models as FMI 3.0
+  co-simulation FMUs (``frame3.c``; Float64, Int32, Boolean, String; CrashingAxis3 crashes in fmi3DoStep only).
 """
 
 from __future__ import annotations
@@ -70,6 +70,14 @@ _CRASH_VARIABLES = """
     <ScalarVariable name="crash_in" valueReference="1" causality="parameter" variability="fixed" initial="exact"
         description="0: fmi2DoStep, 1: fmi2GetReal"><Integer start="0" min="0" max="1"/></ScalarVariable>"""
 
+#: the same as FMI 3.0 variables (tests/foreign/frame3.c: Float64 from 1, Int32 from 101); it crashes in fmi3DoStep
+_CRASH_VARIABLES3 = """
+    <Float64 name="crash_at" valueReference="11" causality="parameter" variability="fixed" unit="s" start="1"/>
+    <Int32 name="crash_how" valueReference="101" causality="parameter" variability="fixed" start="1" min="1"
+        max="3"/>
+    <Int32 name="crash_in" valueReference="102" causality="parameter" variability="fixed" start="0" min="0"
+        max="0"/>"""
+
 # the Countdown made whole at its last step (-DWHOLE_STEP), under a name and GUID of its own
 _STAIRS = {'Countdown"': 'Stairs"', 'Countdown3"': 'Stairs3"', "countdown001": "stairs000001",
            "countdown3fm": "stairs3fmu00"}
@@ -81,7 +89,10 @@ FOREIGN = {f.name: f for f in (
     _plant("CrashingAxis", 1.0, "mm", "crashing_axis.c", _CRASH_VARIABLES, {"GET_HOOK": "crash_in_get"}),
     Foreign("Countdown", "countdown.c", "countdown.xml", {}, {}),
     Foreign("Feedthrough", "feedthrough.c", "feedthrough.xml", {}, {}),
-    Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {}, 3),
+    Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {"@EXTRA@": ""}, 3),
+    Foreign("CrashingAxis3", "crashing_axis.c", "plant_axis3.xml", {"SCALE": "1.0"},
+            {'PlantAxis3"': 'CrashingAxis3"', "plantaxis3fm": "crashaxis3fm", "@EXTRA@": _CRASH_VARIABLES3}, 3,
+            ("plant_axis.c",)),
     Foreign("Countdown3", "countdown.c", "countdown3.xml", {}, {}, 3),
     Foreign("Stairs", "countdown.c", "countdown.xml", {"WHOLE_STEP": "1"}, _STAIRS),
     Foreign("Stairs3", "countdown.c", "countdown3.xml", {"WHOLE_STEP": "1"}, _STAIRS, 3),

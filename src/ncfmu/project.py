@@ -18,7 +18,6 @@ from typing import Any
 
 from .cosim.connect import free_inputs
 from .cosim.fmu import UnpackedFmu, make_slave, safe_extract, unpacked_fmu
-from .cosim.isolated import isolated_slave
 from .cosim.master import InputTable, Master, Session, steps_per_row
 from .cosim.native_loop import build_library
 from .cosim.record import EveryKth, RecordSink, SelectColumns
@@ -200,8 +199,11 @@ class OpenSystem:
             self.slaves = []
             for c in self.system.components:
                 unpacked = self.unpacked[c.model]
-                self.slaves.append(make_slave(unpacked, c.name) if self.identities[c.name].model or not isolate
-                                   else isolated_slave(unpacked, c.name))
+                if self.identities[c.name].model or not isolate:
+                    self.slaves.append(make_slave(unpacked, c.name))
+                else:
+                    from .cosim.isolated import isolated_slave
+                    self.slaves.append(isolated_slave(unpacked, c.name))
             self.master = Master(self.system, self.slaves, mode)
         except Exception:
             for slave in getattr(self, "slaves", ()):

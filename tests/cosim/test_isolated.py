@@ -1,8 +1,9 @@
 """A user's FMU that dies takes nothing with it (issue 45): a foreign FMU runs in a process of its own
-(:mod:`ncfmu.cosim.isolated`), and its crash -- SIGSEGV, abort(), exit(3), in fmi2DoStep or fmi2GetReal -- ends the
-run with a message naming the instance, the call and the simulated time, every whole row before it on disk: ``ncfmu
-run`` exits 4 (not finished), a sweep's variant is ``failed`` and the sweep goes on, a served run fails with its
-rows kept. The crashing FMU is tests/foreign/crashing_axis.c (``CrashingAxis``, PlantAxis with a bug).
+(:mod:`ncfmu.cosim.isolated`), and its crash -- SIGSEGV, abort(), exit(3), in fmi2DoStep, fmi2GetReal or
+fmi3DoStep -- ends the run with a message naming the instance, the call and the simulated time, every whole row
+before it on disk: ``ncfmu run`` exits 4 (not finished), a sweep's variant is ``failed`` and the sweep goes on, a
+served run fails with its rows kept. The crashing FMUs are tests/foreign/crashing_axis.c (``CrashingAxis``,
+``CrashingAxis3``: PlantAxis with a bug).
 
 Each crash runs in a subprocess: on a master that runs foreign FMUs in its own process, the crash kills it.
 """
@@ -46,17 +47,17 @@ def crashing_taper(foreign, project, tmp_path_factory) -> Path:
                   tmp_path_factory.mktemp("crashing"))
 
 
-@pytest.mark.parametrize("crash_in, how, at, call, ended, rows", [
+@pytest.mark.parametrize("model, crash_in, how, at, call, ended, rows", [
     # fmi2DoStep of the step that starts at crash_at: the row at crash_at is whole (every FMU made that step)
-    (0, 1, 1.0, "fmi2DoStep", "its process was killed by SIGSEGV", 101),
-    (0, 3, 0.5, "fmi2DoStep", "its process exited with status 3", 51),
+    ("CrashingAxis", 0, 1, 1.0, "fmi2DoStep", "its process was killed by SIGSEGV", 101),
+    ("CrashingAxis3", 0, 3, 0.75, "fmi3DoStep", "its process exited with status 3", 76),
     # fmi2GetReal after the step that reached crash_at: the row at crash_at is not whole, the rows before are
-    (1, 2, 1.0, "fmi2GetReal", "its process was killed by SIGABRT", 100),
+    ("CrashingAxis", 1, 2, 1.0, "fmi2GetReal", "its process was killed by SIGABRT", 100),
 ])
 def test_a_crash_in_a_foreign_fmu_ends_ncfmu_run_with_exit_4_and_keeps_every_row_before(
-        foreign, project, tmp_path, crash_in, how, at, call, ended, rows):
+        foreign, project, tmp_path, model, crash_in, how, at, call, ended, rows):
     out = tmp_path / "out"
-    done = _ncfmu("run", "lathe_taper", "--replace", f"x_axis={foreign['CrashingAxis']}", "--out", str(out),
+    done = _ncfmu("run", "lathe_taper", "--replace", f"x_axis={foreign[model]}", "--out", str(out),
                   "--stop-time", "2", "--output-interval", str(INTERVAL), "--set", f"x_axis.crash_in={crash_in}",
                   "--set", f"x_axis.crash_how={how}", "--set", f"x_axis.crash_at={at}", cwd=tmp_path)
     assert done.returncode == 4, done.stderr
