@@ -777,6 +777,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.command in ("run", "sweep"):
             _output_folder(args.out)
         return args.func(args)
+    except FmuCrashed as err:        # a foreign FMU's process died (a branch run, an instantiation): not finished
+        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        return EXIT_NOT_FINISHED
     except NcfmuError as err:
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
         return 2
