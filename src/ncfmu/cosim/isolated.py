@@ -31,7 +31,6 @@ import struct
 import subprocess
 import sys
 import tempfile
-from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +50,40 @@ REAP_TIMEOUT = 5.0
 _STEP = struct.Struct("<dd")
 #: Tags of the first byte of a frame: a step's inputs, a JSON call; an answer: a step's outputs, a JSON answer.
 _CALL_STEP, _CALL_JSON, _ANSWER_OUTPUTS, _ANSWER_JSON = b"S", b"J", b"O", b"A"
+
+
+class _Pipe:
+    """One direction of a pipe, in frames (a length, then the bytes): a frame written in one ``write`` and most read
+    in one ``read`` (multiprocessing's Connection reads a frame's length and its bytes in two)."""
+
+    _LENGTH = struct.Struct("<I")
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.closed = False
+        self._buffer = b""
+
+    def send_bytes(self, data: bytes) -> None:
+        view = memoryview(self._LENGTH.pack(len(data)) + data)
+        while view:
+            view = view[os.write(self.fd, view):]
+
+    def recv_bytes(self) -> bytes:
+        """The next frame; EOFError when the other end closed the pipe."""
+        buffer = self._buffer
+        while len(buffer) < 4 or len(buffer) < 4 + self._LENGTH.unpack_from(buffer)[0]:
+            more = os.read(self.fd, 1 << 16)
+            if not more:
+                raise EOFError("the pipe was closed")
+            buffer += more
+        end = 4 + self._LENGTH.unpack_from(buffer)[0]
+        self._buffer = buffer[end:]
+        return buffer[4:end]
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            os.close(self.fd)
 
 
 class _Repr:
@@ -156,8 +189,8 @@ class IsolatedSlave:
             mark.close()
         os.close(calls_r)
         os.close(answers_w)
-        self._calls = Connection(calls_w, readable=False)
-        self._answers = Connection(answers_r, writable=False)
+        self._calls = _Pipe(calls_w)
+        self._answers = _Pipe(answers_r)
         try:
             self._call("fmi2Instantiate", "instantiate")
         except BaseException:
@@ -353,7 +386,7 @@ def isolated_slave(unpacked: UnpackedFmu, instance_name: str) -> IsolatedSlave:
 class _Child:
     """The child's loop: one slave, driven by the calls that come down the pipe."""
 
-    def __init__(self, calls: Connection, answers: Connection, mark: mmap.mmap, directory: str,
+    def __init__(self, calls: _Pipe, answers: _Pipe, mark: mmap.mmap, directory: str,
                  instance_name: str) -> None:
         self.calls, self.answers, self.mark = calls, answers, mark
         self.directory, self.instance_name = Path(directory), instance_name
@@ -541,7 +574,7 @@ def main(argv: list[str]) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the master's to handle: it ends this process
     mark = mmap.mmap(mark_fd, MARK_SIZE)
     os.close(mark_fd)
-    child = _Child(Connection(calls_fd, writable=False), Connection(answers_fd, readable=False), mark, directory,
+    child = _Child(_Pipe(calls_fd), _Pipe(answers_fd), mark, directory,
                    instance_name)
     try:
         child.serve()
