@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from .errors import NcfmuError
-from .exitcodes import EXIT_HELP, EXIT_OK, EXIT_PROBLEMS, EXIT_REFUSED
+from .errors import FmuCrashed, NcfmuError
+from .exitcodes import EXIT_HELP, EXIT_NOT_FINISHED, EXIT_OK, EXIT_PROBLEMS, EXIT_REFUSED
 from .ports import is_integer_text, parse_integer, parse_real
 
 if TYPE_CHECKING:
@@ -368,6 +368,11 @@ def _run_streamed(args, start_values: dict[str, object]):
         if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
+    except FmuCrashed as err:             # a foreign FMU's process died: the run did not finish, its rows are kept
+        where = _where_stopped(csv_sink) if csv_sink is not None and csv_sink.final_path is not None \
+            else "no rows recorded"
+        print(f"ncfmu run: {err}: {where}", file=sys.stderr)
+        raise SystemExit(EXIT_NOT_FINISHED) from None
     except NcfmuError as err:
         if csv_sink is None or csv_sink.final_path is None:
             raise
@@ -549,7 +554,7 @@ def sweep_exit_status(statuses: list[str]) -> int:
     """A sweep's exit status from its variants' statuses, as ``ncfmu run``'s: a part rejected (a crash, out of
     tolerance) in any variant is EXIT_PART_REJECTED, else any variant not done (unfinished, failed, timed out)
     EXIT_NOT_FINISHED, else EXIT_OK."""
-    from .exitcodes import EXIT_NOT_FINISHED, EXIT_PART_REJECTED
+    from .exitcodes import EXIT_PART_REJECTED
     from .systems.outcome import EXIT_OF
     exits = {EXIT_OF[s] for s in statuses}
     return next((e for e in (EXIT_PART_REJECTED, EXIT_NOT_FINISHED) if e in exits), EXIT_OK)
@@ -919,6 +924,9 @@ def main(argv: list[str] | None = None) -> int:
             _output_folder(args.out)
         _build_kind(args)
         return args.func(args)
+    except FmuCrashed as err:        # a foreign FMU's process died (a branch run, an instantiation): not finished
+        print(f"ncfmu {args.command}: {err}", file=sys.stderr)
+        return EXIT_NOT_FINISHED
     except NcfmuError as err:
         print(f"ncfmu {args.command}: {_in_words(err)}", file=sys.stderr)
         return EXIT_REFUSED

@@ -110,6 +110,17 @@ class TerminationRequested(SimulationError):
         return TerminationRequested(self.instance, time, self.detail, self.last_time)
 
 
+class FmuCrashed(SimulationError):
+    """An FMU's process died inside one of its calls (a signal such as SIGSEGV, ``abort()``, ``exit()``): a foreign
+    FMU runs in a process of its own (:mod:`ncfmu.cosim.isolated`), so the run ends with this error and keeps its
+    rows. ``instance`` names the FMU, ``call`` the FMI call it died in, ``time`` the simulated time, ``how`` how its
+    process ended."""
+
+    def __init__(self, instance: str, call: str, time: float, how: str):
+        self.instance, self.call, self.time, self.how = instance, call, time, how
+        super().__init__(f"{instance}: the FMU crashed in {call} at t = {time:.6g} s ({how})")
+
+
 class SimulationTimeout(SimulationError):
     """A run passed its wall-clock deadline (a sweep's ``--timeout``)."""
 

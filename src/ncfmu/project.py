@@ -182,7 +182,9 @@ def archive_models(archive: Path, system: System) -> dict[str, str]:
 class OpenSystem:
     """An .ssp archive unpacked once, its FMUs instantiated through fmpy, ready to run."""
 
-    def __init__(self, archive: Path, mode: str = "gauss-seidel") -> None:
+    def __init__(self, archive: Path, mode: str = "gauss-seidel", isolate: bool = True) -> None:
+        """``isolate``: each foreign FMU (not one of ncfmu's models) in a process of its own
+        (:mod:`~ncfmu.cosim.isolated`); False runs it in this process, as ncfmu's own."""
         self.archive = Path(archive)
         self._tmp = Path(tempfile.mkdtemp(prefix="ncfmu_ssp_"))
         try:
@@ -193,13 +195,23 @@ class OpenSystem:
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
                     self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
-            self.slaves = [make_slave(self.unpacked[c.model], c.name) for c in self.system.components]
-            self.master = Master(self.system, self.slaves, mode)
             #: instance -> what its FMU is, from its modelDescription (never the file name)
             self.identities = {c.name: identify((self.unpacked[c.model].directory / "modelDescription.xml")
                                                 .read_bytes(), f"{self.archive}: {c.source}")
                                for c in self.system.components}
+            # a foreign FMU runs in a process of its own: its crash ends the run with an error, not the process
+            self.slaves = []
+            for c in self.system.components:
+                unpacked = self.unpacked[c.model]
+                if self.identities[c.name].model or not isolate:
+                    self.slaves.append(make_slave(unpacked, c.name))
+                else:
+                    from .cosim.isolated import isolated_slave
+                    self.slaves.append(isolated_slave(unpacked, c.name))
+            self.master = Master(self.system, self.slaves, mode)
         except Exception:
+            for slave in getattr(self, "slaves", ()):
+                slave.terminate()           # an isolated one's process ends with it
             shutil.rmtree(self._tmp, ignore_errors=True)
             raise
 

@@ -204,14 +204,19 @@ class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 
     def __init__(self, path: Path, workdir: Path | None = None) -> None:
+        """``path``: the FMU archive, or the folder it was unpacked to already (where an isolated FMU's process
+        loads the master's copy from, :mod:`~ncfmu.cosim.isolated`)."""
         self.path = Path(path)
-        if not self.path.is_file():
-            raise SystemDefinitionError(f"FMU not found: {self.path}")
         self._tmp = None
-        if workdir is None:
-            self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
-            workdir = Path(self._tmp)
-        self.directory = safe_extract(self.path, Path(workdir))
+        if self.path.is_dir():
+            self.directory = self.path
+        else:
+            if not self.path.is_file():
+                raise SystemDefinitionError(f"FMU not found: {self.path}")
+            if workdir is None:
+                self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
+                workdir = Path(self._tmp)
+            self.directory = safe_extract(self.path, Path(workdir))
         try:
             self.model_description = read_model_description(str(self.path))
         except Exception as err:                         # fmpy's own errors name the schema problem
@@ -475,6 +480,10 @@ class FmuSlave:
 
     def read_outputs(self) -> None:
         self._transfer(self._reads, "Get")
+
+    def read_kind(self, kind: str) -> None:
+        """Fill the bound outputs of ``kind`` alone (an isolated FMU's process names each call before it makes it)."""
+        self._transfer([call for call in self._reads if call[4] == kind], "Get")
 
     def get(self, name: str) -> object:
         """Read one variable (for checks outside the loop)."""

@@ -108,6 +108,12 @@ class Fmu3Slave:
         for kind, vrs, buffer in self._reads:
             buffer[:] = self._call(f"fmi3G{_GET[kind][1:]}", getattr(self.fmu, _GET[kind]), vrs)
 
+    def read_kind(self, kind: str) -> None:
+        """Fill the bound outputs of ``kind`` alone (an isolated FMU's process names each call before it makes it)."""
+        for bound, vrs, buffer in self._reads:
+            if bound == kind:
+                buffer[:] = self._call(f"fmi3G{_GET[kind][1:]}", getattr(self.fmu, _GET[kind]), vrs)
+
     def get(self, name: str) -> object:
         v = self.variables[name]
         value = self._call(f"fmi3Get{v.type}({name})", lambda: getattr(self.fmu, _GET[v.type])([v.vr])[0])
