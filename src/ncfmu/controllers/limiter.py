@@ -41,6 +41,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping, Sequence
+from typing import ClassVar
 
 from ..errors import require
 from ..ports import boolean, integer, real
@@ -83,7 +84,7 @@ class AreaLimiter(Controller):
     STOP_TIME = 1.0
     # The region the reference axis is in, cached with its bounds and range (_enter): derived from the table alone,
     # whichever region it holds, so not saved in a state -- a restored limiter keeps its fresh cache, a valid one.
-    DERIVED = ("_reg", "_reg_lo", "_reg_hi", "_reg_min", "_reg_max")
+    DERIVED: ClassVar[tuple[str, ...]] = ("_reg", "_reg_lo", "_reg_hi", "_reg_min", "_reg_max")
 
     PORTS = (
         integer("n_regions", "parameter", 1, "number of regions in the limit table",

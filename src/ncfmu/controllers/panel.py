@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import boolean, integer, real
@@ -30,7 +31,7 @@ class OperatorPanel(Controller):
     # The schedule's event times and the quiet interval of the buttons published last (_publish): derived from the
     # parameters and this object's own publishing, so not saved in a state -- a restored panel keeps a fresh
     # panel's, which reset() leaves empty (its first step publishes in full).
-    DERIVED = ("_events", "_quiet_from", "_quiet_until")
+    DERIVED: ClassVar[tuple[str, ...]] = ("_events", "_quiet_from", "_quiet_until")
 
     PORTS = (
         real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never",
