@@ -5,7 +5,8 @@ A limit table splits a reference axis into regions by ordered upper boundaries
 below). Each region allows its own range ``[lim_min, lim_max]`` on the limited axis, so the envelope
 is stepped, not rectangular. A reference position above the last boundary is outside the table.
 
-Every monitor period (5 ms in the seed) the limiter finds the region (binary search, O(log n);
+Every monitor period (5 ms in the seed) the limiter finds the region (the cached one while the position stays
+in it, else a binary search, O(log n);
 the seed scans linearly) and compares the limited axis with that region's range. On a violation it
 blocks the direction that was being commanded -- on whichever axis moved into the violation, as the
 seed resets that bit of its movement-axis register. Motion in the opposite direction passes at once,
