@@ -9,8 +9,9 @@ into an FMU's binary (``fmi2SetReal``, ``fmi2DoStep``, ``fmi2GetBoolean``, ...) 
 per FMU (the binary's file name) and per call, divided by the steps run (imports, instantiation and
 initialisation are outside the loop, so not counted).
 
-``--python`` and ``--cwd`` count another checkout's build (its venv's python, its worktree), e.g. the ones
-``compare.py`` keeps under ``~/.cache/ncfmu-compare/``.
+``--keep DIR`` keeps each profile (``callgrind_annotate --inclusive=yes DIR/callgrind.<system>.out``: which
+controller function costs what). ``--python`` and ``--cwd`` count another checkout's build (its venv's python,
+its worktree), e.g. the ones ``compare.py`` keeps under ``~/.cache/ncfmu-compare/``.
 """
 
 from __future__ import annotations
@@ -80,10 +81,10 @@ def parse(path: Path) -> dict[tuple[str, str], int]:
     return calls
 
 
-def count(system: str, stop: float, python: str, cwd: Path) -> dict:
+def count(system: str, stop: float, python: str, cwd: Path, keep: Path | None = None) -> dict:
     archive = cwd / "ssp" / f"{system}.ssp"
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
+        out = (keep / f"callgrind.{system}.out") if keep else Path(tmp) / "callgrind.out"
         cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--compress-strings=no",
                "--compress-pos=no",
                python, "-c", RUNNER, str(archive), repr(stop)]
@@ -114,9 +115,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stop-time", type=float, default=2.0)
     ap.add_argument("--python", default=sys.executable)
     ap.add_argument("--cwd", type=Path, default=REPO)
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep the profiles as DIR/callgrind.<system>.out (for callgrind_annotate: a function's share)")
     args = ap.parse_args(argv)
     for system in args.systems:
-        report(count(system, args.stop_time, args.python, args.cwd))
+        report(count(system, args.stop_time, args.python, args.cwd, args.keep))
     return 0
 
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from ncfmu.controllers.limiter import LIM_MINUS, LIM_PLUS, REF_PLUS, AreaLimiter, find_region
+from ncfmu.controllers.limiter import LIM_MINUS, LIM_PLUS, REF_MINUS, REF_PLUS, AreaLimiter, find_region
 from ncfmu.controllers.motion import LinearMove
 from ncfmu.errors import ConfigError
 from ncfmu.servo.axis import ServoAxis
@@ -501,3 +501,105 @@ def test_property_lower_limit_stops_the_limited_axis_and_blocks_only_lim_minus(c
     assert_no_velocity_step(d.lim, trace)
     o = trace[-1]
     assert not o["alarm"] and o["blocked"] == 0 and o["lim_cmd"] >= low
+
+
+# -- the cached region (issue 50): a step inside the region it was in skips the binary search -----------------
+class Uncached(AreaLimiter):
+    """The limiter judging as before its region was cached: every lookup a binary search (its cache holds an
+    empty interval that no position is in). Before the cache existed this is the limiter itself."""
+
+    def _enter(self, r):
+        self._reg, self._reg_lo, self._reg_hi, self._reg_min, self._reg_max = r, math.inf, -math.inf, 0.0, 0.0
+
+    def _region(self, ref):
+        return find_region(self.ref_max, ref)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(table=tables(), program=moves, predictive=st.booleans(), use_actual=st.booleans())
+def test_property_the_cached_region_gives_the_uncached_run_bit_for_bit(table, program, predictive, use_actual):
+    """Tours across the regions of a stepped table (and off its end): the limiter with its region cached gives
+    every output and every message of one that searches the table at every lookup, to the last bit."""
+    start = table[0][0] / 2
+    cached = make(table, ref=start, lim=0.0, predictive=predictive, use_actual=use_actual)
+    uncached = Uncached.with_table(table, ref_start=start, lim_start=0.0, predictive=predictive,
+                                   use_actual=use_actual)
+    up = Upstream(start, 0.0, cached.decel)
+    o, t, regions = dict(cached.outputs()), 0.0, set()
+    for d_ref, d_lim, speed in program:
+        up.go(d_ref, d_lim, speed)
+        for _ in up.steps(150):
+            inputs = up.inputs(o)
+            o = dict(cached.step(t, DT, inputs))
+            assert uncached.step(t, DT, inputs) == o, f"t = {t:.3f} s"
+            regions.add(o["region"])
+            t += DT
+    assert cached.take_messages() == uncached.take_messages()
+
+
+def _tour(limiters, up, t, d_ref, d_lim, speed, n):
+    """``n`` steps of one move fed to every limiter (the same inputs): the first one's outputs, which the others'
+    must equal at every step."""
+    up.go(d_ref, d_lim, speed)
+    o, seen = dict(limiters[0].outputs()), []
+    for _ in up.steps(n):
+        inputs = up.inputs(o)
+        o = dict(limiters[0].step(t, DT, inputs))
+        for other in limiters[1:]:
+            assert other.step(t, DT, inputs) == o, f"t = {t:.3f} s"
+        seen.append(o["region"])
+        t += DT
+    return seen
+
+
+@pytest.mark.parametrize("predictive", [True, False])
+def test_crossing_down_into_a_stricter_region_as_uncached(predictive):
+    """Down from the grinder's region 3 (X <= 180) into region 2 (X <= 80) while X rises from 0 to 150: the
+    predictive governor must take region 2's range as soon as the reference axis's stopping reach enters it (its
+    cached region 3 no longer holds the reach), then hold the reference axis at the boundary; the same outputs as
+    the limiter searching every step, and the region output 3, then 2 only where it is allowed."""
+    cached = make(GRINDER, ref=500.0, lim=0.0, predictive=predictive)
+    uncached = Uncached.with_table(GRINDER, ref_start=500.0, lim_start=0.0, predictive=predictive)
+    up = Upstream(500.0, 0.0, cached.decel)
+    seen = _tour([cached, uncached], up, 0.0, -200.0, 150.0, 100.0, 3000)
+    out = cached.outputs()
+    if predictive:          # Z held a margin above the boundary, X where it was asked to go: region 2 never entered
+        assert set(seen) == {3} and 350.0 < out["ref_cmd"] < 350.0 + cached.margin + 1e-3
+        assert out["lim_cmd"] == 150.0 and out["blocked"] == REF_MINUS and out["alarm"]
+    else:                   # seen at the monitor tick after the crossing (X 112.56 > 80), both directions stopped
+        assert seen.index(2) == 1975 and set(seen[1975:]) == {2} and set(seen[:1975]) == {3}
+        assert out["blocked"] == REF_MINUS | LIM_PLUS and out["alarm"]
+
+
+def test_a_state_restored_in_another_region_steps_as_the_original():
+    """A limiter saved in region 3 (it started in region 1) and restored -- from the serialized state (a fresh
+    limiter filled with the saved registers) and from an in-memory copy (fmi2GetFMUstate) -- steps as the original
+    while all cross back down to region 1; the serialized state carries the registers only (the cached region is
+    derived from the table, not saved)."""
+    import copy
+
+    from ncfmu.fmi import state
+
+    parameters = {"n_regions": len(GRINDER), "ref_start": 100.0, "lim_start": 0.0, "predictive": True,
+                  "use_actual": True}
+    for i, (b, lo, hi) in enumerate(GRINDER, start=1):
+        parameters[f"region[{i}].ref_max"], parameters[f"region[{i}].lim_min"] = b, lo
+        parameters[f"region[{i}].lim_max"] = hi
+    limiter = AreaLimiter(**parameters)
+    up = Upstream(100.0, 0.0, limiter.decel)
+    o, t = dict(limiter.outputs()), 0.0
+    up.go(400.0, 0.0, 200.0)
+    for _ in up.steps(2200):
+        o = dict(limiter.step(t, DT, up.inputs(o)))
+        t += DT
+    assert o["region"] == 3 and abs(o["ref_cmd"] - 500.0) < 1e-6 and o["blocked"] == 0
+    blob = state.dumps("AreaLimiter", AreaLimiter.default_parameters() | parameters,
+                       AreaLimiter.default_inputs(), limiter)
+    assert b'"_reg' not in blob            # no attribute _reg, _reg_lo, ... saved
+    restored, _, _ = state.loads(blob, AreaLimiter, AreaLimiter.from_parameters)
+    assert restored is not None
+    in_memory = copy.deepcopy(limiter)
+    # down across 350 and 200 into region 1, the limited axis up toward region 2's stricter 80 mm (governed)
+    seen = _tour([limiter, restored, in_memory], up, t, -380.0, 120.0, 150.0, 3000)
+    assert seen[0] == 3 and seen[-1] == 1 and 2 in seen
+    assert restored.take_messages() == in_memory.take_messages()

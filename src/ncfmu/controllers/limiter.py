@@ -5,7 +5,8 @@ A limit table splits a reference axis into regions by ordered upper boundaries
 below). Each region allows its own range ``[lim_min, lim_max]`` on the limited axis, so the envelope
 is stepped, not rectangular. A reference position above the last boundary is outside the table.
 
-Every monitor period (5 ms in the seed) the limiter finds the region (binary search, O(log n);
+Every monitor period (5 ms in the seed) the limiter finds the region (the cached one while the position stays
+in it, else a binary search, O(log n);
 the seed scans linearly) and compares the limited axis with that region's range. On a violation it
 blocks the direction that was being commanded -- on whichever axis moved into the violation, as the
 seed resets that bit of its movement-axis register. Motion in the opposite direction passes at once,
@@ -41,6 +42,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping, Sequence
+from typing import ClassVar
 
 from ..errors import require
 from ..ports import boolean, integer, real
@@ -81,6 +83,9 @@ class AreaLimiter(Controller):
                    "(JP S61-33202)")
     SEED = "area-limiter-JPS6133202.txt"
     STOP_TIME = 1.0
+    # The region the reference axis is in, cached with its bounds and range (_enter): derived from the table alone,
+    # whichever region it holds, so not saved in a state -- a restored limiter keeps its fresh cache, a valid one.
+    DERIVED: ClassVar[tuple[str, ...]] = ("_reg", "_reg_lo", "_reg_hi", "_reg_min", "_reg_max")
 
     PORTS = (
         integer("n_regions", "parameter", 1, "number of regions in the limit table",
@@ -178,7 +183,8 @@ class AreaLimiter(Controller):
         self._jump_text = ["", ""]
         self._feedback = PositionGuard(("ref_pos", "lim_pos"))
         self.alarm = False
-        self.region = find_region(self.ref_max, self.ref_start)
+        self._enter(find_region(self.ref_max, self.ref_start))
+        self.region = self._region(self.ref_start)
         self.clock = self.monitor_period        # monitor at the first step
         self._tick = list(self.pos)             # gated positions at the last tick
         self.fault: str | None = None
@@ -186,13 +192,35 @@ class AreaLimiter(Controller):
         self._publish()
 
     # -- the envelope -----------------------------------------------------------------------------
-    def inside(self, ref: float, lim: float) -> bool:
+    def _enter(self, r: int) -> None:
+        """Cache region ``r`` (1..n; 0 above the table): the reference positions it spans, ``_reg_lo < ref <=
+        _reg_hi`` (find_region's rule), and its range on the limited axis. A step that stays in it (nearly
+        every step) then finds its region in two comparisons instead of a binary search."""
+        n = self.n_regions
+        self._reg = r
+        if r == 0:                       # above the last boundary: no range (the callers test r > 0 first)
+            self._reg_lo, self._reg_hi = self.ref_max[n - 1], math.inf
+            self._reg_min, self._reg_max = math.inf, -math.inf
+            return
+        self._reg_lo = self.ref_max[r - 2] if r > 1 else -math.inf
+        self._reg_hi = self.ref_max[r - 1]
+        self._reg_min, self._reg_max = self.lim_min[r - 1], self.lim_max[r - 1]
+
+    def _region(self, ref: float) -> int:
+        """:func:`find_region` of ``ref``, the cached region when ``ref`` is in it (NaN never is)."""
+        if self._reg_lo < ref <= self._reg_hi:
+            return self._reg
         r = find_region(self.ref_max, ref)
+        self._enter(r)
+        return r
+
+    def inside(self, ref: float, lim: float) -> bool:
+        r = self._region(ref)
         return r > 0 and self.lim_min[r - 1] <= lim <= self.lim_max[r - 1]
 
     def _violations(self, ref: float, lim: float, ref_from: float, dir_ref: int, dir_lim: int) -> int:
         """Directions to block for the judged point (ref, lim); ``ref_from`` is where the reference came from."""
-        r = find_region(self.ref_max, ref)
+        r = self._region(ref)
         if r > 0 and self.lim_min[r - 1] <= lim <= self.lim_max[r - 1]:
             return 0
         mask = 0
@@ -205,7 +233,7 @@ class AreaLimiter(Controller):
         # its last boundary) only going further up is blocked: going down leads back onto it.
         if r == 0:
             mask |= REF_PLUS
-        elif dir_ref != 0 and find_region(self.ref_max, ref_from) != r:
+        elif dir_ref != 0 and self._region(ref_from) != r:
             mask |= REF_PLUS if dir_ref > 0 else REF_MINUS
         if mask == 0:
             # Outside with nothing moving that way yet: block whatever motion would deepen it.
@@ -241,6 +269,12 @@ class AreaLimiter(Controller):
         inf = math.inf
         # limited axis: the tightest range over the regions the reference axis may be in (find_region written
         # out: bisect, 0 above the table)
+        if self._reg_lo < ref_lo and ref_hi <= self._reg_hi and self._reg > 0:
+            # the whole reach in the cached region (nearly every step): its range, and ref's region is it too
+            r = self._reg
+            lim_plus = self._reg_max - m - lim
+            lim_minus = lim - (self._reg_min + m)
+            return self._ref_rooms(r, ref, lim_lo, lim_hi, lim_plus, lim_minus)
         r1 = bisect.bisect_left(bounds, ref_lo) + 1
         if r1 > n:                       # off the table: the reference axis must back out; X is no worse
             lim_plus = lim_minus = inf
@@ -255,9 +289,18 @@ class AreaLimiter(Controller):
                 lim_plus = min(highs[r1 - 1:last]) - m - lim
                 lim_minus = lim - (max(lows[r1 - 1:last]) + m)
 
+        r = bisect.bisect_left(bounds, ref) + 1     # n + 1 above the table
+        self._enter(r if r <= n else 0)             # crossed into another region: cache it
+        return self._ref_rooms(r, ref, lim_lo, lim_hi, lim_plus, lim_minus)
+
+    def _ref_rooms(self, r: int, ref: float, lim_lo: float, lim_hi: float, lim_plus: float,
+                   lim_minus: float) -> tuple[float, float, float, float]:
+        """_rooms of the reference axis in region ``r`` (n + 1 above the table), with the limited axis's."""
+        m, n = self.margin, self.n_regions
+        bounds, lows, highs = self.ref_max, self.lim_min, self.lim_max
+        inf = math.inf
         # region j forbids the limited axis's reach: lim_lo < lim_min[j - 1] or lim_hi > lim_max[j - 1]
         # (written out in both loops: a closure made every step costs more than the test)
-        r = bisect.bisect_left(bounds, ref) + 1     # n + 1 above the table
         ref_plus = bounds[n - 1] - m - ref          # the end of the table
         for j in range(r + 1, n + 1):
             if lim_lo < lows[j - 1] or lim_hi > highs[j - 1]:
@@ -475,7 +518,7 @@ class AreaLimiter(Controller):
         new = 0
         for ref, lim in points:
             new |= self._violations(ref, lim, self._tick[0], dir_ref, dir_lim)
-        self.region = find_region(self.ref_max, ref_out)
+        self.region = self._region(ref_out)
         if new & ~self.hard:
             for bit, axis in ((REF_PLUS, 0), (REF_MINUS, 0), (LIM_PLUS, 1), (LIM_MINUS, 1)):
                 if new & bit & ~self.hard:
@@ -490,7 +533,7 @@ class AreaLimiter(Controller):
                 soft = self._violations(c[0], c[1], ref_out, _sign(c[0] - ref_out), _sign(c[1] - lim_out))
             if soft & ~self.soft:
                 self.say("warning", f"t = {t:.4f} s: command (ref {c[0]:.4f}, lim {c[1]:.4f}) outside the envelope "
-                                    f"in region {find_region(self.ref_max, c[0])}; holding {_mask_text(soft)} at the "
+                                    f"in region {self._region(c[0])}; holding {_mask_text(soft)} at the "
                                     "boundary")
             elif self.soft and not soft:
                 self.say("info", f"t = {t:.4f} s: command inside the envelope again; following it")

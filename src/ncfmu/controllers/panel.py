@@ -10,7 +10,9 @@ means "never".
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
+from typing import ClassVar
 
 from ..errors import ConfigError
 from ..ports import boolean, integer, real
@@ -26,6 +28,10 @@ class OperatorPanel(Controller):
     SEED = "programmable-feed-JPS6043522.txt"
     STOP_TIME = 10.0
     # The button times and dials are tunable: a run can branch from a saved state with other times.
+    # The schedule's event times and the quiet interval of the buttons published last (_publish): derived from the
+    # parameters and this object's own publishing, so not saved in a state -- a restored panel keeps a fresh
+    # panel's, which reset() leaves empty (its first step publishes in full).
+    DERIVED: ClassVar[tuple[str, ...]] = ("_events", "_quiet_from", "_quiet_until")
 
     PORTS = (
         real("start_at", "parameter", 0.1, "s", "time of the cycle-start push (START1); negative: never",
@@ -78,6 +84,18 @@ class OperatorPanel(Controller):
         if 0.0 <= self.repeat_every <= self.pulse:
             raise ConfigError("repeat_every", self.repeat_every, f"must be negative (once) or longer than the "
                               f"pulse ({self.pulse:g} s)")
+        # The times in the schedule at which a button output can change: each output is a test ``now >= e``
+        # of these (written as _publish writes them, so equal to the last bit), or a combination of them.
+        events: list[float] = []
+        for at in (self.start_at, self.restart_at, self.wear_start_at, self.emergency_at):
+            if at >= 0.0:
+                events += [at - 1e-9, at + self.pulse - 1e-9]
+        if self.hold_at >= 0.0:
+            events.append(self.hold_at - 1e-9)
+        if self.release_at >= 0.0 and self.release_at > self.hold_at:
+            events.append(self.release_at - 1e-9)
+        self._events = sorted(events)
+        self._forget()          # a retune (a time, the dial) publishes in full at the next step
 
     def reset(self) -> None:
         self.clock = 0.0            # panel time, advanced only by dt
@@ -85,6 +103,11 @@ class OperatorPanel(Controller):
         self.m_seen = 0             # which M word that is
         self._outputs: dict[str, object] = {}
         self._publish(0)
+        self._forget()
+
+    def _forget(self) -> None:
+        """No quiet interval: the next step publishes every output."""
+        self._quiet_from, self._quiet_until = math.inf, -math.inf
 
     def _pressed(self, at: float, now: float) -> bool:
         # Half a step of slack so a press at k*dt is seen at that step whatever the rounding.
@@ -102,13 +125,25 @@ class OperatorPanel(Controller):
         out = self._outputs
         # the time in the button schedule: the panel's clock, or its time into the present period
         now = self.clock % self.repeat_every if self.repeat_every > 0.0 else self.clock
+        mfin = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
+        if self._quiet_from <= now < self._quiet_until:
+            out["mfin"] = mfin
+            return out          # no event since the last full publish: the buttons and the dial are as they were
+        # the interval between events that ``now`` is in: the buttons stay as below until the schedule leaves it
+        self._quiet_from, self._quiet_until = -math.inf, math.inf
+        for e in self._events:
+            if e <= now:
+                self._quiet_from = e
+            else:
+                self._quiet_until = e
+                break
         out["start"] = self._pressed(self.start_at, now) or self._pressed(self.restart_at, now)
         out["wear_start"] = self._pressed(self.wear_start_at, now)
         out["emergency"] = self._pressed(self.emergency_at, now)
         held = self.hold_at >= 0.0 and now >= self.hold_at - 1e-9
         released = self.release_at >= 0.0 and self.release_at > self.hold_at and now >= self.release_at - 1e-9
         out["feed_hold"] = held and not released
-        out["mfin"] = bool(m) and self.m_seen_for >= self.mfin_delay - 1e-9
+        out["mfin"] = mfin
         out["feed_override"] = self.override
         return out
 
