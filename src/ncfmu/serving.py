@@ -66,9 +66,13 @@ import numpy as np
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
-from .errors import ConfigError, NcfmuError, SimulationError, TerminationRequested
+from .errors import ConfigError, FmuCrashed, NcfmuError, SimulationError, TerminationRequested
 
 log = logging.getLogger("ncfmu.serve")
+
+#: The states a simulation ends in when it did not finish: ``failed`` (an FMU refused a call, the part check broke)
+#: and ``faulted`` (a foreign FMU's process died: :class:`~ncfmu.errors.FmuCrashed`); the session's rows are kept.
+ENDED_BADLY = ("failed", "faulted")
 
 #: An overrun: the loop falls behind, a chunk's last step finishing more than this after its wall-clock due time
 #: (counted once until a chunk is on time again).
@@ -573,7 +577,7 @@ class Runner:
                 elif self.state != "running":
                     refusal = f"the simulation is {self.state}"
             elif c.what == "reset":
-                if self.state in ("stopped", "failed"):
+                if self.state in ("stopped", *ENDED_BADLY):
                     refusal = f"the simulation is {self.state}"
                 else:
                     writes = list(s.writes)
@@ -736,6 +740,9 @@ class Runner:
             s.failed = None
             self.state, self.reason = "stopped", str(ended)
             log.info("ncfmu serve: %s", ended)
+        except FmuCrashed as err:    # a foreign FMU's process died (ncfmu.cosim.isolated): the server lives on
+            self.state, self.reason = "faulted", str(err)
+            log.error("ncfmu serve: the simulation faulted at t = %.3f s: %s", s.time, err)
         except SimulationError as err:
             self.state, self.reason = "failed", str(err)
             log.error("ncfmu serve: the simulation failed at t = %.3f s: %s", s.time, err)
@@ -1321,8 +1328,10 @@ class LiveServer:
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
                 ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
                 ("state", "running", ua.VariantType.String,
-                 "running, paused, held (a client was lost: see reason), crashed, stopped or failed"),
-                ("reason", "", ua.VariantType.String, "why the simulation is held, crashed, stopped or failed"),
+                 "running, paused, held (a client was lost: see reason), crashed, stopped, failed, or faulted (a "
+                 "foreign FMU's process died)"),
+                ("reason", "", ua.VariantType.String,
+                 "why the simulation is held, crashed, stopped, failed or faulted"),
                 ("forced", [], ua.VariantType.String,
                  "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order"),
                 ("crashes", 0, ua.VariantType.Int32, "crashes the part check saw since the start (or the last Reset)"),
@@ -1385,7 +1394,7 @@ class LiveServer:
                     future.set_result(refusal)
             loop.call_soon_threadsafe(settle)
         command.done = done
-        if self.runner.state in ("stopped", "failed"):
+        if self.runner.state in ("stopped", *ENDED_BADLY):
             return f"the simulation is {self.runner.state}"
         self.runner.submit(command)
         try:
@@ -1479,7 +1488,7 @@ class LiveServer:
             if args:
                 return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
                                          ["BadTooManyArguments"] * len(args))
-            if what == "stop" and self.runner.state == "failed":
+            if what == "stop" and self.runner.state in ENDED_BADLY:
                 self.stopped.set()
                 return []
             refusal = await self._submit(_Command(what))
@@ -1691,7 +1700,7 @@ class LiveServer:
         def wake() -> None:
             # stopped (Stop, the stop time): the server ends too; failed: it stays up so that clients see the
             # state and the reason, until Stop, Ctrl-C or SIGTERM
-            if self.runner.state != "failed":
+            if self.runner.state not in ENDED_BADLY:
                 loop.call_soon_threadsafe(self.stopped.set)
         self.runner._on_state = wake
         try:
@@ -1820,7 +1829,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             writes = list(session.writes)
             end = float(session.time)
             # a served run ends by being stopped: its recording is complete unless the simulation failed
-            session.close(complete=runner.state != "failed", reason=runner.reason)
+            session.close(complete=runner.state not in ENDED_BADLY, reason=runner.reason)
             if watch is not None:
                 watch.close()
                 # the rows after the last hand-over (judged at the close): a program that ended there is told too

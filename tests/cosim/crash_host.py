@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from ncfmu.project import OpenSystem
-from ncfmu.serving import Recorder, Runner, points_of
+from ncfmu.serving import ENDED_BADLY, Recorder, Runner, points_of
 
 
 def main(archive: str, out: str, crash_at: str) -> None:
@@ -29,8 +29,8 @@ def main(archive: str, out: str, crash_at: str) -> None:
         if alive:
             runner.stop("the test's time is over")
             runner.thread.join(10)
-        # as serve() closes a served run: complete unless the simulation failed
-        session.close(complete=runner.state != "failed", reason=runner.reason)
+        # as serve() closes a served run: complete unless the simulation failed or faulted
+        session.close(complete=runner.state not in ENDED_BADLY, reason=runner.reason)
         recorder.end_segment(list(session.writes), final=True, start=runner.start_time)
         print(json.dumps({"state": runner.state, "reason": runner.reason, "time": float(session.time),
                           "timed_out": alive, "files": [str(f) for f in recorder.files]}))

@@ -2,7 +2,7 @@
 (:mod:`ncfmu.cosim.isolated`), and its crash -- SIGSEGV, abort(), exit(3), in fmi2DoStep, fmi2GetReal or
 fmi3DoStep -- ends the run with a message naming the instance, the call and the simulated time, every whole row
 before it on disk: ``ncfmu run`` exits 4 (not finished), a sweep's variant is ``failed`` and the sweep goes on, a
-served run fails with its rows kept. The crashing FMUs are tests/foreign/crashing_axis.c (``CrashingAxis``,
+served run is faulted (Simulation.state) with its rows kept. The crashing FMUs are tests/foreign/crashing_axis.c (``CrashingAxis``,
 ``CrashingAxis3``: PlantAxis with a bug).
 
 Each crash runs in a subprocess: on a master that runs foreign FMUs in its own process, the crash kills it.
@@ -96,7 +96,7 @@ def test_a_served_run_whose_fmu_crashes_fails_with_the_crash_and_keeps_its_rows(
     assert done.returncode == 0, done.stderr
     served = json.loads(done.stdout.strip().splitlines()[-1])
     assert not served["timed_out"]
-    assert served["state"] == "failed"
+    assert served["state"] == "faulted"
     assert served["reason"] == "x_axis: the FMU crashed in fmi2DoStep at t = 0.2 s (its process was killed by SIGSEGV)"
     # every step before the crash recorded (the served CSV records every step), the session left unfinished
     times = _times(out / "lathe_taper.csv.partial")
