@@ -31,6 +31,7 @@ UNITS: dict[str, dict] = {
     "mm/rev": {"m": 1, "rad": -1, "factor": 1e-3 / (2 * math.pi)},
     "rev/min": {"rad": 1, "s": -1, "factor": 2 * math.pi / 60},
     "rev": {"rad": 1, "factor": 2 * math.pi},
+    "deg": {"rad": 1, "factor": math.pi / 180},
     "kW": {"kg": 1, "m": 2, "s": -3, "factor": 1e3},
     "1": {},
 }
