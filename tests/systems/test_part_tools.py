@@ -21,7 +21,6 @@ from shapely.geometry import LineString, Polygon
 from ncfmu.controllers.contour import ContourInterpolator
 from ncfmu.controllers.sequencer import CutSequencer
 from ncfmu.errors import ConfigError
-from ncfmu.machining import grooving_insert, placed, turning_insert
 from ncfmu.machining.removal import STANDING
 from ncfmu.systems.compose import points
 from ncfmu.systems.part import LathePart, MillPart, PartVerdict
@@ -164,6 +163,7 @@ N50 M30
 
 
 def test_the_insert_shapes_have_their_programmed_point_where_the_tip_says():
+    from ncfmu.machining import grooving_insert, placed, turning_insert
     r = 0.4
     for tip in (1, 2, 3, 4):
         outline = placed(turning_insert(r), tip, r)
