@@ -148,7 +148,8 @@ def test_the_stock_of_a_bore_is_a_tube_from_its_start_x_and_what_is_not_judged()
     assert s.removal.stock.bounds == pytest.approx((-80.0, HOLE, 0.0, 29.0))
     assert [f.what for f in s.removal.forbidden] == ["boring bar into the far wall of the bore"]
     # the tool mirrored: the (point) tip on top, the bar a hole's radius below it
-    assert s.removal.tool_xy[:, 1].max() == 0.0 and s.removal.tool_xy[:, 1].min() == pytest.approx(-HOLE)
+    tool = s.removal.cutter(0).outline
+    assert tool[:, 1].max() == 0.0 and tool[:, 1].min() == pytest.approx(-HOLE)
     # a bore from X0 has no hole; a program with a bore and an outside profile is not judged (one kind at a time)
     zero = part.setup({"seq": {"program": PROGRAM.replace("N5 G00 X20.", "N5 G00 X0."), **BAR}})
     assert zero.programmed is None and zero.why_not.startswith("the bore's cycle starts at X 0 (radius)")

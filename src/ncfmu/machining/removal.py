@@ -62,6 +62,8 @@ BLADE = 100.0
 INSERT = 12.0
 #: The default turning insert's corner angle (degrees): an 80-degree rhombic insert (ISO C).
 INSERT_ANGLE = 80.0
+#: Beyond any tool (mm): the extent of the box a tool's outline is clipped to.
+FAR_TOOL = 1e4
 #: A drill's point angle (degrees).
 DRILL_POINT = 118.0
 
@@ -112,23 +114,27 @@ def turning_insert(nose_radius: float, angle: float = INSERT_ANGLE, blade: float
     along X, and the usual retract straight up X (G00 X after G01 Z) leaves it as it is -- a side edge leaning
     past X (a 95-degree holder's) would leave a wedge that very retract cuts at rapid, 0.09 mm a millimetre of
     shoulder, and the check would cry crash at a move every program makes. Both edges are :data:`INSERT` mm
-    long (at most ``blade``), the holder stands on them ``blade`` mm up: what the tool passes under is cut away,
+    long, the holder stands on them up to ``blade`` mm above the tip (the tool's height: a boring bar fits its
+    hole): what the tool passes under is cut away,
     whatever the direction -- along Z, a plunge in X, a face. ``nose_radius`` 0 is a sharp corner."""
     r = float(nose_radius)
     side = math.pi / 2.0
     end = side - math.radians(float(angle))
-    length = min(INSERT, blade)
+    length = INSERT
     c = np.array([r, r])
     # the edges leave the nose circle where they touch it: the end edge below the body, the side edge left of it
     t_end = c + r * np.array([math.sin(end), -math.cos(end)])
     t_side = c + r * np.array([-math.sin(side), math.cos(side)])
     e_end = t_end + length * np.array([math.cos(end), math.sin(end)])
     e_side = t_side + length * np.array([math.cos(side), math.sin(side)])
-    ends = np.array([e_end, e_side, e_end + (0.0, blade), e_side + (0.0, blade), t_end, t_side])
+    ends = np.array([e_end, e_side, (e_end[0], blade), (e_side[0], blade), t_end, t_side])
     parts: list[BaseGeometry] = [shapely.multipoints(ends)]
     if r > 0.0:
         parts.append(_disc((r, r), r))
-    return _hull(parts)
+    # ``blade`` high in all (a boring bar fits its hole)
+    outline = shapely.convex_hull(shapely.union_all(parts)).intersection(shapely.box(-FAR_TOOL, -FAR_TOOL, FAR_TOOL,
+                                                                                       blade))
+    return np.asarray(outline.exterior.coords)[:-1]
 
 
 def grooving_insert(width: float, nose_radius: float = 0.0, blade: float = BLADE) -> np.ndarray:
