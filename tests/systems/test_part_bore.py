@@ -90,7 +90,7 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
                  str(tmp_path)])
     assert code == 3
     out = capsys.readouterr().out
-    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, 5" in out
+    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong} (N52): rapid into the stock, 5" in out
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
 
