@@ -23,6 +23,9 @@ every trial. Claim nothing from the first mode's numbers about a change; claim f
     python bench/serve_lag.py --on-off --options "--watchdog 5 --cnc" [--repeats 5] [--seconds 30]
 
 the same, but this checkout against itself: without the options ("off") and with them ("on"), interleaved.
+
+Since issue 47 ``ncfmu serve`` serves the OPC 40502 model by default (``--cnc`` is its explicit form): a run
+"without options" has it; ``--options "--no-cnc"`` is the side without it.
 """
 
 from __future__ import annotations

@@ -7,13 +7,15 @@ into an FMU (binaries/linux64 plus its sources) with the system C compiler. They
 - ``PlantAxis``: a feed axis in mm (pos_cmd, vel_ff -> pos, vel, following_error, in_position);
 - ``PlantAxisMetre``: the same axis in metres (m, m/s);
 - ``PlantAxisBare``: the same axis in mm without any unit declared;
+- ``CrashingAxis``: the PlantAxis with a bug: at ``crash_at`` (s) it dies in fmi2DoStep or fmi2GetReal
+  (``crash_in`` 0 or 1) by SIGSEGV, abort() or exit(3) (``crash_how`` 1, 2, 3) -- the process that runs it with it;
 - ``Countdown``: counts seconds, ends the experiment at ``end_at`` (fmi2Discard + fmi2Terminated), an output in min;
 - ``Stairs``: the Countdown as the Reference-FMUs' Stair ends: the step that reaches ``end_at`` is made whole, then
   fmi2Discard + fmi2Terminated (fmi2LastSuccessfulTime at the step's end);
 - ``Feedthrough``: inputs to outputs per type (Real with a declaredType in s and one in mm, Integer, Boolean),
   a gain with min/max, a String parameter;
-- ``PlantAxis3``, ``Countdown3``, ``Stairs3``, ``Feedthrough3``: the same models as FMI 3.0 co-simulation FMUs
-  (``frame3.c``; Float64, Int32, Boolean, String).
+- ``PlantAxis3``, ``Countdown3``, ``Stairs3``, ``Feedthrough3``, ``CrashingAxis3``: the same models as FMI 3.0
+  co-simulation FMUs (``frame3.c``; Float64, Int32, Boolean, String; CrashingAxis3 crashes in fmi3DoStep only).
 """
 
 from __future__ import annotations
@@ -37,9 +39,11 @@ class Foreign:
     defines: dict[str, str]
     substitutions: dict[str, str]
     fmi: int = 2               # the FMI version of its frame: 2 (frame2.c) or 3 (frame3.c + stubs3.c)
+    includes: tuple[str, ...] = ()   # other sources its model file includes
 
 
-def _plant(name: str, scale: float, length: str | None) -> Foreign:
+def _plant(name: str, scale: float, length: str | None, model_c: str = "plant_axis.c", extra: str = "",
+           defines: dict[str, str] | None = None) -> Foreign:
     velocity = None if length is None else f"{length}/s"
     units = "" if length is None else "".join(
         f'<Unit name="{u}"><BaseUnit {base}/></Unit>'
@@ -50,11 +54,29 @@ def _plant(name: str, scale: float, length: str | None) -> Foreign:
 
     def attr(unit: str | None) -> str:
         return "" if unit is None else f' unit="{unit}"'
-    return Foreign(name, "plant_axis.c", "plant_axis.xml", {"SCALE": repr(scale)},
-                   {"@NAME@": name, "@UNITS@": units, "@LEN@": attr(length), "@VEL@": attr(velocity),
+    return Foreign(name, model_c, "plant_axis.xml", {"SCALE": repr(scale), **(defines or {})},
+                   {"@NAME@": name, "@EXTRA@": extra, "@UNITS@": units, "@LEN@": attr(length), "@VEL@": attr(velocity),
                     "@PER_S@": attr(None if length is None else "1/s"), "@S@": attr(None if length is None else "s"),
-                    "@VEL_MAX@": repr(500.0 * scale), "@BAND@": repr(0.005 * scale)})
+                    "@VEL_MAX@": repr(500.0 * scale), "@BAND@": repr(0.005 * scale)},
+                   includes=() if model_c == "plant_axis.c" else ("plant_axis.c",))
 
+
+#: CrashingAxis's variables beyond PlantAxis's (tests/foreign/crashing_axis.c)
+_CRASH_VARIABLES = """
+    <ScalarVariable name="crash_at" valueReference="10" causality="parameter" variability="fixed" initial="exact"
+        description="the simulated time the FMU crashes at"><Real unit="s" start="1"/></ScalarVariable>
+    <ScalarVariable name="crash_how" valueReference="0" causality="parameter" variability="fixed" initial="exact"
+        description="1: SIGSEGV, 2: abort(), 3: exit(3)"><Integer start="1" min="1" max="3"/></ScalarVariable>
+    <ScalarVariable name="crash_in" valueReference="1" causality="parameter" variability="fixed" initial="exact"
+        description="0: fmi2DoStep, 1: fmi2GetReal"><Integer start="0" min="0" max="1"/></ScalarVariable>"""
+
+#: the same as FMI 3.0 variables (tests/foreign/frame3.c: Float64 from 1, Int32 from 101); it crashes in fmi3DoStep
+_CRASH_VARIABLES3 = """
+    <Float64 name="crash_at" valueReference="11" causality="parameter" variability="fixed" unit="s" start="1"/>
+    <Int32 name="crash_how" valueReference="101" causality="parameter" variability="fixed" start="1" min="1"
+        max="3"/>
+    <Int32 name="crash_in" valueReference="102" causality="parameter" variability="fixed" start="0" min="0"
+        max="0"/>"""
 
 # the Countdown made whole at its last step (-DWHOLE_STEP), under a name and GUID of its own
 _STAIRS = {'Countdown"': 'Stairs"', 'Countdown3"': 'Stairs3"', "countdown001": "stairs000001",
@@ -64,9 +86,13 @@ FOREIGN = {f.name: f for f in (
     _plant("PlantAxis", 1.0, "mm"),
     _plant("PlantAxisMetre", 1e-3, "m"),
     _plant("PlantAxisBare", 1.0, None),
+    _plant("CrashingAxis", 1.0, "mm", "crashing_axis.c", _CRASH_VARIABLES, {"GET_HOOK": "crash_in_get"}),
     Foreign("Countdown", "countdown.c", "countdown.xml", {}, {}),
     Foreign("Feedthrough", "feedthrough.c", "feedthrough.xml", {}, {}),
-    Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {}, 3),
+    Foreign("PlantAxis3", "plant_axis.c", "plant_axis3.xml", {"SCALE": "1.0"}, {"@EXTRA@": ""}, 3),
+    Foreign("CrashingAxis3", "crashing_axis.c", "plant_axis3.xml", {"SCALE": "1.0"},
+            {'PlantAxis3"': 'CrashingAxis3"', "plantaxis3fm": "crashaxis3fm", "@EXTRA@": _CRASH_VARIABLES3}, 3,
+            ("plant_axis.c",)),
     Foreign("Countdown3", "countdown.c", "countdown3.xml", {}, {}, 3),
     Foreign("Stairs", "countdown.c", "countdown.xml", {"WHOLE_STEP": "1"}, _STAIRS),
     Foreign("Stairs3", "countdown.c", "countdown3.xml", {"WHOLE_STEP": "1"}, _STAIRS, 3),
@@ -101,7 +127,7 @@ def build_one(f: Foreign, dest: Path) -> Path:
     (stage / "sources").mkdir()
     (stage / "modelDescription.xml").write_text(md)
     frame = ("frame2.c",) if f.fmi == 2 else ("frame3.c", "stubs3.c")
-    for src in (*frame, "model.h", f.model_c):
+    for src in (*frame, "model.h", f.model_c, *f.includes):
         shutil.copy(SOURCES / src, stage / "sources" / src)
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or "cc"
     defines = {"MODEL_GUID": f'"{guid.group(1)}"', **f.defines}

@@ -54,18 +54,20 @@ import numpy as np
 
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
+from .systems.outcome import RAN, STATUSES
 
 if TYPE_CHECKING:
     from .cosim.ssp import System
     from .project import OpenSystem
 
 SUMMARY = "summary.csv"
-#: A variant's status: ``ok`` (ran to the stop time and every cycle of the system's report finished),
-#: ``unfinished`` (ran to the stop time with a cycle still running or never started: the error column says
-#: ``cycle not finished by t = <stop> s``), ``failed`` (refused or crashed: the error says why), ``timeout``.
-STATUSES = ("ok", "unfinished", "failed", "timeout")
-#: The statuses of a variant that ran to its stop time: its trajectory file is written.
-RAN = ("ok", "unfinished")
+# A variant's status, as ``ncfmu run`` judges a run (:mod:`ncfmu.systems.outcome`): ``ok`` (the work done, every
+# cycle of the system's report finished, the part within tolerance), ``crashed`` (the part check saw a crash:
+# the run ended there), ``out_of_tolerance``, ``unfinished`` (the stop-time limit reached with a cycle still
+# running or never started -- the error column says ``cycle not finished by t = <stop> s`` --, an alarm, or the
+# part not judged), ``failed`` (refused, or an FMU failed: the error says why), ``timeout``.
+# (:data:`ncfmu.systems.outcome.STATUSES`). A variant of a status in ``RAN`` has its trajectory file written.
+
 #: Bytes of a variant's trajectory file per message from a worker to the client.
 FETCH_CHUNK = 2 ** 20
 
@@ -98,8 +100,10 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
     the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
     client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
     """
+    from .cosim.master import CHECK_INTERVAL
     from .cosim.record import CsvSink
     from .project import OpenSystem, recording
+    from .systems.outcome import default_stop_time, ends_when_done, halted, outcome, watched
     t0 = time.perf_counter()
     row: dict[str, object] = {}
     opened = _OPEN.get(digest)
@@ -120,11 +124,15 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         metrics = how.summary
         assert metrics is not None
         deadline = None if timeout is None else time.perf_counter() + timeout
+        # as ncfmu run: to where the work ends (stop_time, default RUN_LIMIT, the limit), a crash or an alarm
+        if stop_time is None:
+            stop_time = default_stop_time(opened.system.stop_time, ends_when_done(metrics))
+        row_time = every * opened.system.step_size     # asked at whole rows, about every CHECK_INTERVAL s
         opened.run(stop_time=stop_time, start_values=dict(variant), deadline=deadline, keep=False,
-                   **how.run_arguments())
-        row.update(status="ok", error="")
-        if not metrics.finished():
-            row.update(status="unfinished", error=f"cycle not finished by t = {metrics.last_time:g} s")
+                   until=lambda: halted(metrics), check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
+                   watch=watched(metrics), **how.run_arguments())
+        came_out = outcome(metrics)
+        row.update(status=came_out.status, error=came_out.why)
     except SimulationTimeout as err:
         row.update(status="timeout", error=str(err))       # the instances are reset before the next variant
     except NcfmuError as err:
@@ -293,8 +301,10 @@ class Progress:
     def update(self, status: str) -> None:
         self.counts[status] = self.counts.get(status, 0) + 1
         if self.bar is not None:
-            self.bar.set_postfix(unfinished=self.counts["unfinished"], done=self.counts["ok"],
-                                 failed=self.counts["failed"], timeout=self.counts["timeout"], refresh=False)
+            self.bar.set_postfix(done=self.counts["ok"],
+                                 rejected=self.counts["crashed"] + self.counts["out_of_tolerance"],
+                                 unfinished=self.counts["unfinished"], failed=self.counts["failed"],
+                                 timeout=self.counts["timeout"], refresh=False)
             self.bar.update(1)
 
     def close(self) -> None:
@@ -379,7 +389,8 @@ def local_cluster(workers: int):
 
 
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
-                 scheduler_file: str | None, connect_timeout: float, record_result: Callable) -> None:
+                 scheduler_file: str | None, connect_timeout: float, record_result: Callable,
+                 fixed: Mapping[str, object]) -> None:
     from dask.distributed import Client, as_completed
     cluster = None
     if scheduler is not None or scheduler_file is not None:
@@ -389,7 +400,8 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
         client = Client(cluster)
     try:
         shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
-        futures = {client.submit(run_variant, shipped, digest, v, *args, pure=False): (key, v) for key, v in todo}
+        futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, pure=False): (key, v)
+                   for key, v in todo}
         for future in as_completed(futures):
             key, v = futures[future]
             answer = future.result()
@@ -413,8 +425,13 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
           scheduler: str | None = None, scheduler_file: str | None = None, stop_time: float | None = None,
           root: Path | None = None, record: Sequence[str] | None = None, output_interval: float | None = None,
           timeout: float | None = None, progress: bool = True,
-          on_done: Callable[[dict], None] | None = None, connect_timeout: float = 5.0) -> list[dict[str, object]]:
+          on_done: Callable[[dict], None] | None = None, connect_timeout: float = 5.0,
+          fixed: Mapping[str, object] | None = None) -> list[dict[str, object]]:
     """Run the cartesian product of ``vary`` on ``system`` (a name or an ``.ssp`` path); return its summary rows.
+
+    ``fixed`` (``--set``): the start values every variant shares (``INSTANCE.VARIABLE`` -> value); they are part of
+    each variant's key (a sweep into the same ``out`` with other ``fixed`` values runs its variants again), not
+    columns of the summary.
 
     ``workers = 0`` runs the variants serially in this process (no dask); ``scheduler`` (an address) or
     ``scheduler_file`` runs them on an existing dask cluster, else on a LocalCluster of ``workers`` processes.
@@ -451,6 +468,18 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         record = list(dict.fromkeys(record))
     variants = product(vary)
     varied = list(vary)
+    fixed = dict(fixed or {})
+    both = [name for name in fixed if name in vary]
+    if both:
+        raise SystemDefinitionError(f"--set {both[0]} and --vary {both[0]}: a variable is either shared by every "
+                                    "variant (--set) or varied (--vary), not both")
+    for name, value in fixed.items():
+        if "." not in name:
+            raise SystemDefinitionError(f"--set {name!r}: expected INSTANCE.VARIABLE")
+        canonical(value)
+
+    def key_of(variant: Mapping[str, object]) -> str:
+        return variant_key({**fixed, **variant})
 
     (out / "variants").mkdir(parents=True, exist_ok=True)
     for leftover in [*out.glob("*.part"), *(out / "variants").glob("*.part")]:
@@ -460,7 +489,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     order = list(rows)
     todo = []
     for v in variants:
-        key = variant_key(v)
+        key = key_of(v)
         old = rows.get(key)
         done = old is not None and old.get("status") in STATUSES and (
             old["status"] not in RAN or _complete(out / "variants" / f"{key}.csv", str(old.get("rows", ""))))
@@ -500,12 +529,12 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     try:
         if todo and workers == 0 and scheduler is None and scheduler_file is None:
             for key, v in todo:
-                record_result(key, v, run_variant(data, digest, v, *args))
+                record_result(key, v, run_variant(data, digest, {**fixed, **v}, *args))
         elif todo:
             _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, connect_timeout,
-                         record_result)
+                         record_result, fixed)
     finally:
         flush_summary(force=True)
     if bar:
         bar.close()
-    return [rows[variant_key(v)] for v in variants]
+    return [rows[key_of(v)] for v in variants]

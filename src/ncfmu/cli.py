@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from .errors import NcfmuError
+from .errors import FmuCrashed, NcfmuError
+from .exitcodes import EXIT_HELP, EXIT_NOT_FINISHED, EXIT_OK, EXIT_PROBLEMS, EXIT_REFUSED
 from .ports import is_integer_text, parse_integer, parse_real
 
 if TYPE_CHECKING:
@@ -161,6 +162,71 @@ def _replace_options(p: argparse.ArgumentParser) -> None:
                    help="a replacing FMU's name for an old connector, e.g. --map x_axis.x=pos; repeatable")
 
 
+def _in_words(err: NcfmuError) -> str:
+    """An error's one line: an FMU that refused its parameters by what it said (a program's lines in a CNC's words:
+    ``seq: parameter refused: program: line 3 (N30): G112: ...``), not by the FMI call and status it returned
+    (which its log keeps); anything else as it is."""
+    return getattr(err, "refusal", "") or str(err)
+
+
+def _kind_options(p: argparse.ArgumentParser) -> None:
+    """``--pure``/``--compiled`` of the commands that build what they run (run, sweep, serve)."""
+    kind = p.add_mutually_exclusive_group()
+    kind.add_argument("--pure", dest="kind", action="store_const", const="pure", default=None,
+                      help="(re)build the FMUs with the controllers as Python sources only, and keep that kind: later "
+                           "commands without --compiled run pure FMUs too (the kind is recorded in fmus/)")
+    kind.add_argument("--compiled", dest="kind", action="store_const", const="compiled",
+                      help="(re)build the FMUs with the controllers compiled (mypyc, the default kind), and keep it. "
+                           "Without either flag the FMUs are kept as the last build made them ('ncfmu build' "
+                           "without --pure: compiled)")
+
+
+def _build_kind(args) -> None:
+    """``--pure``/``--compiled``: build the project's FMUs of that kind now (recorded in fmus/, so the command's own
+    build keeps it)."""
+    if getattr(args, "kind", None) is not None:
+        from .project import build
+        build(args.root, only_stale=True, pure=args.kind == "pure")
+
+
+def _program_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--program", default=None, metavar="FILE",
+                   help="a part program for the system's program parameter (seq.program on the lathes, "
+                        "contour.program on the mill), read from FILE ('-': standard input)")
+
+
+def _program_value(args) -> dict[str, object]:
+    """``--program FILE``: {the system's program parameter: the file's text}, or {} without it. A system with no
+    program parameter, or with several, is refused (exit 2)."""
+    if args.program is None:
+        return {}
+    source = "standard input" if args.program == "-" else args.program
+    try:
+        text = sys.stdin.read() if args.program == "-" else Path(args.program).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise NcfmuError(f"--program {source}: cannot read it ({getattr(err, 'strerror', None) or err})") from None
+    from .systems import SYSTEMS, get_system
+    from .systems.settable import settable
+    if args.system in SYSTEMS:
+        rows = settable(get_system(args.system))
+    else:
+        from .cosim.ssp import read_ssp
+        from .project import model_descriptions
+        archive = Path(args.system)
+        system = read_ssp(archive)
+        rows = settable(system, model_descriptions(archive, system).__getitem__)
+    names = [r.name for r in rows if r.kind.startswith("parameter") and r.name.split(".", 1)[1] == "program"]
+    if len(names) != 1:
+        raise NcfmuError(f"--program {source}: {args.system} has "
+                         + ("no program parameter (INSTANCE.program): it runs no part program" if not names else
+                            f"more than one program parameter ({', '.join(names)}): give one with --set NAME=...")
+                         )
+    given = [item.partition("=")[0] for item in (getattr(args, "set", None) or [])]
+    if names[0] in given:
+        raise NcfmuError(f"--program and --set {names[0]}=... both give {names[0]}: give one")
+    return {names[0]: text}
+
+
 def _prepare_source(args) -> list[str]:
     """``args.system`` (a name, .ssp, .ssd, system folder or .fmu, with --replace/--map) made the path of the .ssp
     the command runs; returns the replacement's warning lines."""
@@ -222,6 +288,16 @@ def _parse_branches(items: list[str]) -> list[dict[str, object]]:
     return [{name: values[i] for name, values in columns.items()} for i in range(n)]
 
 
+def _drawing(args):
+    """The part drawn (``--drawing FILE.dxf``), read before anything runs; None: none given."""
+    if args.drawing is None:
+        return None
+    if args.no_part_check:
+        raise NcfmuError("--drawing and --no-part-check together: the drawing is what the part check judges against")
+    from .systems.drawing import read_drawing
+    return read_drawing(args.drawing)
+
+
 def _run_streamed(args, start_values: dict[str, object]):
     """Run with the rows streamed to ``OUT/SYSTEM.csv`` (through ``SYSTEM.csv.partial``, renamed when the run
     completed) and the summary computed as the run goes; ``--plot`` keeps what a figure can show of it (a
@@ -230,16 +306,17 @@ def _run_streamed(args, start_values: dict[str, object]):
     import math
     import signal
 
-    from .cosim.master import InputTable, Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
     from .project import OpenSystem, ScaledSink, recording, system_archive
+    from .systems.outcome import RUN_LIMIT, default_stop_time, halted, watched
     from .systems.part import TOLERANCE, PartSettings, with_part_settings, without_part_check
     from .systems.report import start_parameters
     archive = system_archive(args.system, args.root)
     if args.nose_radius is not None and not (args.nose_radius >= 0 and math.isfinite(args.nose_radius)):
         raise NcfmuError(f"--nose-radius {args.nose_radius!r}: must be >= 0 and finite (0: a sharp point)")
     settings = PartSettings(TOLERANCE if args.tolerance is None else args.tolerance, args.nose_radius,
-                            args.max_depth)
+                            args.max_depth, _drawing(args))
     csv_sink = plotted = None
     try:
         with deferred_interrupts():
@@ -247,24 +324,41 @@ def _run_streamed(args, start_values: dict[str, object]):
             with OpenSystem(archive, args.mode) as opened:
                 system = opened.system
                 step = system.step_size if args.step is None else args.step
-                stop = system.stop_time if args.stop_time is None else args.stop_time
+                # a system with a done signal runs until its work is done, --stop-time (default RUN_LIMIT) the limit;
+                # one without (a bare FMU) to --stop-time, default the system's
+                report = opened.report()
+                report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
+                to_done = report.ends_when_done(start_parameters(system.components, start_values))
+                stop = default_stop_time(system.stop_time, to_done) if args.stop_time is None else args.stop_time
                 rows = None
-                if step > 0 and math.isfinite(stop / step):
+                # the CSV's size checked against the disk for the whole span -- for a run to done, only for a limit
+                # beyond RUN_LIMIT (the run's length is where its work ends, not the limit; a billion s is a mistake)
+                if step > 0 and math.isfinite(stop / step) and (not to_done or stop > RUN_LIMIT):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
+                if settings.drawing is not None:        # refused for this system before any file is written
+                    from .systems.drawing import check_for
+                    check_for(opened.report(), settings.drawing)
                 _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
                                    run=f"stop time {stop:g} s at a step of {step:g} s")
                 # the summary reads every step; the CSV gets the --record columns at the --output-interval; the
                 # plot, every step decimated to what a figure shows (its axes in mm, as the summary's)
-                report = opened.report()
-                report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
                 how = recording(opened, start_values, csv_sink, args.record, args.output_interval, args.step,
                                 in_mm=True, report=report)    # a user's axis in m: the report reads mm
                 if args.plot:
                     plotted = DecimatingSink(system.name)
                     how.sinks.append(ScaledSink(plotted, how.scales) if how.scales else plotted)
-                result = opened.run(stop_time=args.stop_time, step_size=args.step, start_values=start_values,
-                                    inputs=inputs, keep=False, **how.run_arguments())
+                accumulator = how.summary
+                assert accumulator is not None
+                # asked at the CSV's rows (a whole number of them, about every CHECK_INTERVAL s): the last row is
+                # at most that long after the work ended
+                row_time = steps_per_row(args.output_interval, step) * step
+                result = opened.run(stop_time=stop, step_size=args.step, start_values=start_values,
+                                    inputs=inputs, keep=False, until=lambda: halted(accumulator),
+                                    check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
+                                    watch=watched(accumulator), **how.run_arguments())
+                if not result.ended_by and to_done:
+                    result.ended_by = f"the --stop-time limit {stop:g} s reached"
     except KeyboardInterrupt as err:
         terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
         where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
@@ -274,13 +368,16 @@ def _run_streamed(args, start_values: dict[str, object]):
         if csv_sink is None or csv_sink.final_path is None:
             raise
         raise NcfmuError(f"writing the rows failed ({err.reason}): {_where_stopped(csv_sink)}") from None
+    except FmuCrashed as err:             # a foreign FMU's process died: the run did not finish, its rows are kept
+        where = _where_stopped(csv_sink) if csv_sink is not None and csv_sink.final_path is not None \
+            else "no rows recorded"
+        print(f"ncfmu run: {err}: {where}", file=sys.stderr)
+        raise SystemExit(EXIT_NOT_FINISHED) from None
     except NcfmuError as err:
         if csv_sink is None or csv_sink.final_path is None:
             raise
-        raise NcfmuError(f"{err} ({_where_stopped(csv_sink)})") from None
+        raise NcfmuError(f"{_in_words(err)} ({_where_stopped(csv_sink)})") from None
     result.system = system.name
-    accumulator = how.summary
-    assert accumulator is not None
     print(_summary(result, accumulator.summary()))
     parameters = result.parameters or start_parameters(system.components, start_values)
     if csv_sink.final_path is not None:
@@ -347,13 +444,18 @@ def _where_stopped(sink) -> str:
 def cmd_run(args) -> int:
     from .project import simulate_branches
     replace_warnings = _prepare_source(args)
+    program = _program_value(args)
     if args.branch_at is not None:
         if args.input:
             raise NcfmuError("--input and --branch-at together: branches start from a saved state and take no input "
                              "CSV; run the input without --branch-at, or branch with --branch-set")
+        if args.drawing is not None:
+            raise NcfmuError("--drawing and --branch-at together: the branches' summaries judge the programmed part; "
+                             "run the drawing without --branch-at")
         variants = _parse_branches(args.branch_set)
         results = simulate_branches(args.system, args.branch_at, variants, stop_time=args.stop_time,
-                                    start_values=_parse_set(args.set), mode=args.mode, root=args.root)
+                                    start_values={**_parse_set(args.set), **program}, mode=args.mode,
+                                    root=args.root)
         out = Path(args.out)
         for i, (variant, result) in enumerate(zip(variants, results)):
             csv = result.to_csv(out / f"{result.system}_branch{i}.csv")
@@ -367,7 +469,7 @@ def cmd_run(args) -> int:
                                      dict.fromkeys(variants[0], "--branch-set")):
             print(line)
         return 0
-    start_values = _parse_set(args.set)
+    start_values = {**_parse_set(args.set), **program}
     if args.output_interval is not None and not (args.output_interval > 0 and args.output_interval < float("inf")):
         raise NcfmuError(f"--output-interval {args.output_interval!r}: must be a number of seconds > 0")
     result, csv, system, accumulator, shown = _run_streamed(args, start_values)
@@ -396,9 +498,11 @@ def cmd_run(args) -> int:
         print(f"  plot: {plot_result(shown, out / f'{result.system}.png')}")
         if verdict is not None and verdict.made is not None:
             print(f"  plot: {plot_part(verdict, result.system, out / f'{result.system}.part.png')}")
-    if verdict is not None and verdict.within_tolerance is False:
-        return PART_REJECTED
-    return 0
+    from .systems.outcome import outcome
+    came_out = outcome(accumulator)
+    if came_out.why:
+        print(f"  {came_out.status}: {came_out.why} (exit status {came_out.exit_status})")
+    return came_out.exit_status
 
 
 def _parse_vary(items: list[str]) -> dict[str, list[object]]:
@@ -414,15 +518,6 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
     return vary
 
 
-#: ``ncfmu run``'s exit status when the part check saw a crash or a part out of tolerance (2 is a refusal).
-PART_REJECTED = 3
-
-
-#: ``ncfmu sweep``'s exit status when a variant is not ``ok`` (unfinished, failed or timed out); 2 is a bad
-#: command line, as for every command.
-SWEEP_INCOMPLETE = 1
-
-
 def cmd_sweep(args) -> int:
     from .batch import STATUSES, sweep
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
@@ -432,9 +527,15 @@ def cmd_sweep(args) -> int:
     vary = _parse_vary(args.vary)
     for line in _prepare_source(args):
         print(f"  [warning] {line}")
+    fixed = _parse_set(args.set)
+    for name, text in _program_value(args).items():     # the program: one value every variant runs
+        if name in vary or name in fixed:
+            raise NcfmuError(f"--program and --vary/--set {name}=... both give {name}: give one")
+        fixed[name] = text
     rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
                  scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
-                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout)
+                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout,
+                 fixed=fixed)
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
           + f" -> {Path(args.out) / 'summary.csv'}")
@@ -442,10 +543,21 @@ def cmd_sweep(args) -> int:
         if r["status"] != "ok":
             varied = ", ".join(f"{k}={r[k]}" for k in vary)
             print(f"  {r['status']}: {varied}: {r['error']}")
-    for line in _unreached_lines(args.system, [dict(zip(vary, values)) for values in itertools.product(*vary.values())],
+    for line in _unreached_lines(args.system, [{**fixed, **dict(zip(vary, values))}
+                                               for values in itertools.product(*vary.values())],
                                  dict.fromkeys(vary, "--vary")):
         print(line)
-    return 0 if counts["ok"] == len(rows) else SWEEP_INCOMPLETE
+    return sweep_exit_status([str(r["status"]) for r in rows])
+
+
+def sweep_exit_status(statuses: list[str]) -> int:
+    """A sweep's exit status from its variants' statuses, as ``ncfmu run``'s: a part rejected (a crash, out of
+    tolerance) in any variant is EXIT_PART_REJECTED, else any variant not done (unfinished, failed, timed out)
+    EXIT_NOT_FINISHED, else EXIT_OK."""
+    from .exitcodes import EXIT_PART_REJECTED
+    from .systems.outcome import EXIT_OF
+    exits = {EXIT_OF[s] for s in statuses}
+    return next((e for e in (EXIT_PART_REJECTED, EXIT_NOT_FINISHED) if e in exits), EXIT_OK)
 
 
 def cmd_plot(args) -> int:
@@ -564,15 +676,23 @@ def cmd_serve(args) -> int:
         raise NcfmuError(f"--speed {args.speed!r}: must be a number >= 0 (0: as fast as possible)")
     if args.record and not args.out:
         raise NcfmuError("--record needs --out DIR (where the recorded trajectory is written)")
+    if args.on_lost is not None and args.watchdog is None:
+        raise NcfmuError(f"--on-lost {args.on_lost}: needs --watchdog S (what tells that a client is lost)")
 
     def ready(endpoint: str) -> None:
         print(f"ncfmu serve: {args.system} at {endpoint} (speed {args.speed:g}); Ctrl-C stops", flush=True)
 
-    summary = serve(args.system, endpoint=args.endpoint, speed=args.speed, start_values=_parse_set(args.set),
+    def verdict(t: float, line: str) -> None:
+        print(f"ncfmu serve: program ended at t = {t:.3f} s: {line}", flush=True)
+
+    program = _program_value(args)
+    summary = serve(args.system, endpoint=args.endpoint, speed=args.speed,
+                    start_values={**_parse_set(args.set), **program},
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
                     security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
                     root=args.root, ready=ready,
-                    watchdog=args.watchdog, cnc=args.cnc)
+                    watchdog=args.watchdog, cnc=args.cnc, on_lost=args.on_lost or "hold",
+                    on_verdict=verdict, drawing=_drawing(args))
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -581,7 +701,7 @@ def cmd_serve(args) -> int:
           flush=True)
     for path in summary.files:
         print(f"  written: {path}")
-    return 1 if summary.state == "failed" else 0
+    return EXIT_PROBLEMS if summary.state == "failed" else EXIT_OK
 
 
 def cmd_validate(args) -> int:
@@ -591,11 +711,15 @@ def cmd_validate(args) -> int:
     for p in checked.problems:
         print(p)
     print("all FMUs and SSPs valid" if not checked.problems else f"{len(checked.problems)} problem(s)")
-    return 1 if checked.problems else 0
+    return EXIT_PROBLEMS if checked.problems else EXIT_OK
 
 
 def main(argv: list[str] | None = None) -> int:
     from .cosim.algorithm import MODES
+    from .systems.outcome import RUN_LIMIT
+    stop_time_help = (f"the limit of simulated time, s: a system with a done signal stops where its work ends "
+                      f"(default limit {RUN_LIMIT:g} s); one without (a bare FMU) runs to it (default: the system's "
+                      "stop time)")
     help_epilog = epilog()
     parser = _Parser(prog="ncfmu", description="Classic NC controllers as FMI 2.0 co-simulation FMUs, "
                      "run closed loop with servo axes.", epilog=help_epilog)
@@ -605,13 +729,20 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("build", help="build every FMU into fmus/ and pack every system into ssp/<system>.ssp")
     p.add_argument("--force", action="store_true", help="rebuild FMUs even when they are up to date")
     p.add_argument("--pure", action="store_true",
-                   help="ship the controllers as Python sources only (no mypyc compile; else compiled once, cached "
-                        "in ~/.cache/ncfmu/compiled/)")
+                   help="ship the controllers as Python sources only (no mypyc compile; else compiled once per "
+                        "source change, cached in ~/.cache/ncfmu/compiled/). The kind is recorded in fmus/ and "
+                        "kept by later run, sweep, serve and validate until 'ncfmu build' without --pure or "
+                        "--compiled switches back")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("run", help="simulate a system closed loop and print a summary", epilog=help_epilog)
+    p = sub.add_parser("run", help="simulate a system closed loop and print a summary",
+                       description="Simulate a system closed loop until its work is done (the program's M30/M02, "
+                                   "the registers' last pass, the grinder's return, the contour's end: the last row "
+                                   "within a second of it), a crash of the part check or an alarm halts the "
+                                   "machine, or the --stop-time limit; print a summary. " + EXIT_HELP,
+                       epilog=help_epilog)
     p.add_argument("system", nargs="?", default="lathe_roughing", help="system name or path of an .ssp file")
-    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help=stop_time_help)
     p.add_argument("--step", type=_real_option, default=None, help="communication step in s (default 0.001)")
     p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
                    help="start value or parameter, e.g. --set seq.block[1].Xd=0.4 (repeatable)")
@@ -639,29 +770,40 @@ def main(argv: list[str] | None = None) -> int:
                         "table's seq.tool[k].max_depth, else no limit)")
     p.add_argument("--no-part-check", action="store_true",
                    help="no material removal, crash and tolerance check (and no SYSTEM.part.json)")
+    p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
+                   help="judge the part made against the part drawn, in place of the programmed part (also for "
+                        "programs without G71/G70): a DXF of LINE, ARC, CIRCLE, LWPOLYLINE in mm; a lathe's upper "
+                        "half section (drawing X = machine Z, Y = radius), a mill's outline in XY")
     p.add_argument("--branch-at", type=_real_option, default=None, metavar="T",
                    help="simulate to T once, save every FMU's state, then run one branch per --branch-set value")
     p.add_argument("--branch-set", action="append", metavar="INSTANCE.VAR=V1,V2,...",
                    help="tunable parameter or input set at the branch point, one value per branch, "
                         "e.g. --branch-set panel.emergency_at=12,21,31")
     _replace_options(p)
+    _program_option(p)
+    _kind_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("sweep", help="run the cartesian product of parameter values on dask.distributed",
                        description="Run every combination of the --vary values on dask workers (they need ncfmu "
                                    "installed, nothing else: the system is shipped to them, results come back). "
                                    "The client writes OUT/variants/<key>.csv and a row of OUT/summary.csv (status "
-                                   "ok/unfinished/failed/timeout, error, wall time, metrics), atomically; "
-                                   "'unfinished': the run reached the stop time with the cycle not finished "
-                                   "(error 'cycle not finished by t = ...'). A sweep into an existing OUT merges "
-                                   "into it; variants already done are not run again. Exit status 0 when every "
-                                   "variant is ok, 1 when any is unfinished, failed or timed out, 2 for a bad "
-                                   "command line.",
+                                   "ok/crashed/out_of_tolerance/unfinished/failed/timeout, error, wall time, "
+                                   "metrics), atomically. Each variant runs as 'ncfmu run' runs: until its work is "
+                                   "done, a crash or an alarm, --stop-time the limit; 'unfinished': the limit "
+                                   "reached with the cycle not finished (error 'cycle not finished by t = ...'), an "
+                                   "alarm, or the part not judged. A sweep into an existing OUT merges into it; "
+                                   "variants already done are not run again. Exit status 0 when every variant is "
+                                   "ok, 3 when any crashed or is out of tolerance, else 4 when any is unfinished, "
+                                   "failed or timed out, 2 for a bad command line.",
                        epilog="example: ncfmu sweep lathe_roughing --vary seq.block[1].Xd=0.4,0.5,0.6 --workers 2 "
                               "--out sweep_xd")
     p.add_argument("system", help="system name or path of an .ssp file")
     p.add_argument("--vary", action="append", required=True, metavar="INSTANCE.VAR=V1,V2,...",
                    help="values of one parameter (repeat for more: the product is run)")
+    p.add_argument("--set", action="append", metavar="INSTANCE.VAR=VALUE",
+                   help="a start value or parameter every variant shares, e.g. --set seq.program=\"...\" "
+                        "(repeatable)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--workers", type=_integer_option, default=2,
                        help="worker processes of a local dask cluster (default 2; 0: serial, no dask)")
@@ -669,7 +811,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="address of a running dask scheduler, e.g. tcp://127.0.0.1:8786")
     group.add_argument("--scheduler-file", default=None, metavar="FILE",
                        help="the scheduler file of a running dask scheduler (dask scheduler --scheduler-file FILE)")
-    p.add_argument("--stop-time", type=_real_option, default=None, help="stop time in s (default: the system's)")
+    p.add_argument("--stop-time", type=_real_option, default=None, help=stop_time_help)
     p.add_argument("--out", required=True, help="folder for summary.csv and variants/")
     p.add_argument("--record", nargs="+", default=None, metavar="NAME",
                    help="outputs kept per variant, INSTANCE.VARIABLE (default: the axes' positions and what the "
@@ -681,6 +823,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--connect-timeout", type=_real_option, default=5.0, metavar="S",
                    help="seconds to wait for --scheduler or --scheduler-file to answer and have a worker (default 5)")
     _replace_options(p)
+    _program_option(p)
+    _kind_options(p)
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("plot", help="plot a result CSV (positions, errors, path with envelope) or a sweep summary.csv",
@@ -741,13 +885,25 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--make-certificate", type=Path, default=None, metavar="DIR",
                    help="write DIR/ncfmu.der (a self-signed certificate with ncfmu's application URI) and "
                         "DIR/ncfmu-key.pem, then exit")
-    p.add_argument("--cnc", action="store_true",
+    p.add_argument("--cnc", action=argparse.BooleanOptionalAction, default=True,
                    help="also serve the system as OPC UA for CNC Systems (OPC 40502): Objects/CncInterface with "
-                        "its CncAxisList, CncChannelList and CncSpindleList (a few seconds more to start)")
+                        "its CncAxisList, CncChannelList and CncSpindleList (the default; about 1 s more to start, "
+                        "--no-cnc leaves it out)")
     p.add_argument("--watchdog", type=_real_option, default=None, metavar="S",
-                   help="the inputs a client session forced fall back to what drives them when it closes or sends "
-                        "nothing for S seconds (logged, and recorded as releases)")
-    p.set_defaults(func=cmd_serve)
+                   help="a client session that forced inputs is lost when it closes or sends nothing for S "
+                        "seconds: see --on-lost (logged)")
+    p.add_argument("--on-lost", choices=("hold", "release"), default=None,
+                   help="with --watchdog, what a lost client leaves: hold (default) -- the machine goes to feed "
+                        "hold (each feed_hold input forced true; without one the simulation halts), its forces "
+                        "kept, Simulation.state 'held' and Simulation.reason why, until a client calls "
+                        "Simulation.Resume; release -- its forces fall back to what drives them at once "
+                        "(recorded as releases)")
+    p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
+                   help="the part check judges against the part drawn (as 'ncfmu run --drawing'): a served mill's "
+                        "gouges are crashes against the outline drawn")
+    _program_option(p)
+    _kind_options(p)
+    p.set_defaults(func=cmd_serve, no_part_check=False)
 
     p = sub.add_parser("pack", help="write a system (an .ssd with its folder, an unpacked folder, an .ssp or a bare "
                        ".fmu; components replaced with --replace) as one .ssp archive")
@@ -766,13 +922,17 @@ def main(argv: list[str] | None = None) -> int:
         _check_positive(args)
         if args.command in ("run", "sweep"):
             _output_folder(args.out)
+        _build_kind(args)
         return args.func(args)
-    except NcfmuError as err:
+    except FmuCrashed as err:        # a foreign FMU's process died (a branch run, an instantiation): not finished
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
-        return 2
+        return EXIT_NOT_FINISHED
+    except NcfmuError as err:
+        print(f"ncfmu {args.command}: {_in_words(err)}", file=sys.stderr)
+        return EXIT_REFUSED
     except OSError as err:           # the machine's refusal (a full disk, a folder that went away): one line too
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
-        return 2
+        return EXIT_REFUSED
 
 
 if __name__ == "__main__":

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .systems.outcome import RAN, STATUSES
+
 
 def _plt():
     import matplotlib
@@ -160,11 +162,15 @@ def sweep_figure(rows: list[dict[str, str]], title: str):
     xs = [r[x_name] for r in rows]
     numeric = all(_number(x) is not None for x in xs)
     categories = list(dict.fromkeys(xs))
+    # a long text value (a part program) is no tick label: the ticks are numbered, the values listed below
+    keyed = not numeric and any(len(c) > SWEEP_TICK_CHARS for c in categories)
+    ticks = [f"#{i + 1}" for i in range(len(categories))] if keyed else categories
+    key = "\n".join(f"#{i + 1}: {_shortened(c)}" for i, c in enumerate(categories)) if keyed else ""
 
     def x_of(r: dict[str, str]) -> float:
         return float(r[x_name]) if numeric else float(categories.index(r[x_name]))
-    ran = [r for r in rows if r["status"] in ("ok", "unfinished")]
-    stopped = [r for r in rows if r["status"] not in ("ok", "unfinished")]
+    ran = [r for r in rows if r["status"] in RAN]
+    stopped = [r for r in rows if r["status"] not in RAN]
     groups = list(dict.fromkeys(", ".join(f"{v}={r[v]}" for v in varied[1:]) for r in rows))
     colours = {g: f"C{i % 10}" for i, g in enumerate(groups)}
     fig, axes = plt.subplots(len(metrics) or 1, 1, figsize=(10, 2.6 * max(1, len(metrics))), squeeze=False)
@@ -192,6 +198,12 @@ def sweep_figure(rows: list[dict[str, str]], title: str):
             if open_:
                 ax.plot([p[0] for p in open_], [p[1] for p in open_], "o", mfc="none", color=colour,
                         label=once("unfinished: value at the stop time"))
+            for status, marker in (("crashed", "X"), ("out_of_tolerance", "s")):
+                bad = [(x_of(r), float(r[metric])) for r in mine
+                       if r["status"] == status and np.isfinite(float(r[metric]))]
+                if bad:
+                    ax.plot([p[0] for p in bad], [p[1] for p in bad], marker, ms=8, color=colour, mec="tab:red",
+                            mew=1.5, ls="none", label=once(f"{status.replace('_', ' ')}: the part rejected"))
             nans = [x_of(r) for r in mine if not np.isfinite(float(r[metric]))]
             if nans:
                 ax.plot(nans, [0.05] * len(nans), "x", ms=9, mew=2, color=colour, transform=edges, clip_on=False,
@@ -204,15 +216,34 @@ def sweep_figure(rows: list[dict[str, str]], title: str):
                     ax.plot(at, [0.95] * len(at), "v", ms=9, mfc=colours[group], mec=edge, mew=2, ls="none",
                             transform=edges, clip_on=False, label=f"{status}, no value" + (f": {group}" if group
                                                                                            else ""))
-        ax.set(xlabel=x_name, ylabel=metric)
+        ax.set(xlabel=x_name + (" (values listed below)" if keyed else ""), ylabel=metric)
         if not numeric:
-            ax.set_xticks(range(len(categories)), categories)
+            ax.set_xticks(range(len(categories)), ticks)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "unfinished", "failed", "timeout")}
-    axes[0, 0].set_title(f"{title}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
-    fig.tight_layout()
+    counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+    axes[0, 0].set_title(f"{title}: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ok"))
+    if key:
+        height = fig.get_figheight()
+        key_height = 0.2 + 0.16 * (key.count("\n") + 1)         # inches under the panels
+        fig.set_figheight(height + key_height)
+        fig.text(0.01, 0.1 / (height + key_height), f"{x_name}:\n{key}", fontsize=7, va="bottom", family="monospace")
+        fig.tight_layout(rect=(0, (key_height + 0.16) / (height + key_height), 1, 1))
+    else:
+        fig.tight_layout()
     return fig
+
+
+#: A text value of a sweep longer than this is numbered on the axis and listed below the panels.
+SWEEP_TICK_CHARS = 16
+#: How much of a long text value the list below the panels shows.
+SWEEP_KEY_CHARS = 110
+
+
+def _shortened(text: str) -> str:
+    """A long text value (a program) on one line of the list: its lines joined, cut at SWEEP_KEY_CHARS."""
+    one = " | ".join(line.strip() for line in text.splitlines() if line.strip())
+    return one if len(one) <= SWEEP_KEY_CHARS else one[:SWEEP_KEY_CHARS - 3] + "..."
 
 
 def plot_sweep(summary_csv: Path, path: Path) -> Path:

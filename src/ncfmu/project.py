@@ -25,7 +25,7 @@ from .cosim.result import Result
 from .cosim.ssp import SSD_NAME, Component, System, fmu_path, pack, read_ssd, read_ssp, write_system
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
-from .fmi.builder import build_all
+from .fmi.builder import build_all, chosen_pure, remember_kind
 from .fmi.fmi3 import build_all_fmi3
 from .systems import SYSTEMS, get_system, report_for
 from .systems.report import Report, ReportAccumulator, start_parameters
@@ -51,12 +51,16 @@ def models_dir(root: Path) -> Path:
     return Path(str(packaged.__file__)).parent
 
 
-def build(root: Path | None = None, only_stale: bool = True, pure: bool = False) -> dict[str, list[Path]]:
+def build(root: Path | None = None, only_stale: bool = True, pure: bool | None = None) -> dict[str, list[Path]]:
     """Build every FMU into ``fmus/``, write every system to ``ssp/<system>/`` and pack ``ssp/<system>.ssp``;
-    in a checkout also write ``docs/``. Nothing whose content is already right is touched. ``pure``: the Python
-    FMUs without their compiled controllers (else compiled with mypyc where it can be, once, cached)."""
+    in a checkout also write ``docs/``. Nothing whose content is already right is touched. ``pure``: True, the
+    Python FMUs without their compiled controllers; False, compiled with mypyc where it can be (once, cached);
+    None, the kind the last build into ``fmus/`` was asked for (``fmus/ncfmu-build-kind``), else compiled. The
+    kind asked for is recorded there, so it sticks until asked otherwise."""
     root = Path(root or project_root())
     (root / "fmus").mkdir(parents=True, exist_ok=True)
+    pure = chosen_pure(root / "fmus", pure)
+    remember_kind(root / "fmus", pure)
     fmus = build_all(models_dir(root), root / "fmus", only_stale=only_stale, pure=pure)
     fmus3 = build_all_fmi3(fmus, root / "fmus" / "fmi3", only_stale=only_stale)    # their FMI 3.0 twins
     if is_checkout(root):
@@ -178,7 +182,9 @@ def archive_models(archive: Path, system: System) -> dict[str, str]:
 class OpenSystem:
     """An .ssp archive unpacked once, its FMUs instantiated through fmpy, ready to run."""
 
-    def __init__(self, archive: Path, mode: str = "gauss-seidel") -> None:
+    def __init__(self, archive: Path, mode: str = "gauss-seidel", isolate: bool = True) -> None:
+        """``isolate``: each foreign FMU (not one of ncfmu's models) in a process of its own
+        (:mod:`~ncfmu.cosim.isolated`); False runs it in this process, as ncfmu's own."""
         self.archive = Path(archive)
         self._tmp = Path(tempfile.mkdtemp(prefix="ncfmu_ssp_"))
         try:
@@ -189,13 +195,23 @@ class OpenSystem:
             for comp in self.system.components:
                 if comp.model not in self.unpacked:
                     self.unpacked[comp.model] = unpacked_fmu(fmu_path(folder, comp, self.archive))
-            self.slaves = [make_slave(self.unpacked[c.model], c.name) for c in self.system.components]
-            self.master = Master(self.system, self.slaves, mode)
             #: instance -> what its FMU is, from its modelDescription (never the file name)
             self.identities = {c.name: identify((self.unpacked[c.model].directory / "modelDescription.xml")
                                                 .read_bytes(), f"{self.archive}: {c.source}")
                                for c in self.system.components}
+            # a foreign FMU runs in a process of its own: its crash ends the run with an error, not the process
+            self.slaves = []
+            for c in self.system.components:
+                unpacked = self.unpacked[c.model]
+                if self.identities[c.name].model or not isolate:
+                    self.slaves.append(make_slave(unpacked, c.name))
+                else:
+                    from .cosim.isolated import isolated_slave
+                    self.slaves.append(isolated_slave(unpacked, c.name))
+            self.master = Master(self.system, self.slaves, mode)
         except Exception:
+            for slave in getattr(self, "slaves", ()):
+                slave.terminate()           # an isolated one's process ends with it
             shutil.rmtree(self._tmp, ignore_errors=True)
             raise
 
@@ -328,12 +344,15 @@ class Validation:
     fmus: int
     systems: int
     parameter_sets: int
+    fmus3: int = 0
 
     def checked(self) -> list[str]:
         """What was checked, in words."""
         return [f"{self.fmus} FMUs ({self.root / 'fmus'}) with fmpy.validation: modelDescription.xml against the "
                 "FMI 2.0 schema, unique and valid variable names, a complete ModelStructure, the required start "
                 "values, causality/variability combinations, units; no backslash in a file path",
+                f"{self.fmus3} FMI 3.0 FMUs ({self.root / 'fmus' / 'fmi3'}) with fmpy.validation: "
+                "modelDescription.xml against the FMI 3.0 schema, the same rules",
                 f"{self.systems} systems ({self.root / 'ssp'}/<system>.ssp): SystemStructure.ssd against the SSP 1.0 "
                 "schema (fmpy) and one flat ssd:System with literal prefixes (as libcosim reads it); their "
                 f"{self.parameter_sets} .ssv parameter sets against the SSP 1.0 parameter-values schema"]
@@ -356,8 +375,9 @@ def validation(root: Path | None = None) -> Validation:
     build(root, only_stale=True)
     problems = []
     fmus = sorted((root / "fmus").glob("*.fmu"))
+    fmus3 = sorted((root / "fmus" / "fmi3").glob("*.fmu"))       # their FMI 3.0 twins, validated as FMI 3.0
     n_ssv = 0
-    for fmu in fmus:
+    for fmu in [*fmus, *fmus3]:
         for p in validate_fmu(str(fmu)):
             problems.append(f"{fmu}: {p}")
     for name in SYSTEMS:
@@ -378,7 +398,7 @@ def validation(root: Path | None = None) -> Validation:
                 fmpy_read_ssv(str(archive), resource=ssv, validate=True)
             except Exception as err:
                 problems.append(f"{archive}: {ssv} breaks the SSP 1.0 parameter-values schema: {err}")
-    return Validation(problems, root, len(fmus), len(SYSTEMS), n_ssv)
+    return Validation(problems, root, len(fmus), len(SYSTEMS), n_ssv, len(fmus3))
 
 
 def simulate_branches(system: str, branch_time: float, variants: Sequence[Mapping[str, object]],

@@ -6,10 +6,11 @@ ncfmu_project
     Session: builds what is missing or stale (FMUs in fmus/, systems in ssp/) once; the artefact paths.
 ncfmu_run
     Session: ``ncfmu_run(system, stop_time=None, start_values=None, input_csv=None, mode="gauss-seidel",
-    tolerance=0.01, nose_radius=None, max_depth=None)`` runs a system closed loop through the FMUs and returns the
-    Result; identical calls share one run. ``result.part`` is the part check's verdict of a lathe or mill run
-    (``within_tolerance``, ``crashes``, ``max_left_mm``, ``max_gouge_mm``, ...; judged on first use with the
-    call's tolerance and tool -- None: the tool table's), None for a system without one.
+    tolerance=0.01, nose_radius=None, max_depth=None, drawing=None)`` runs a system closed loop through the FMUs
+    and returns the Result; identical calls share one run. ``result.part`` is the part check's verdict of a lathe
+    or mill run (``within_tolerance``, ``crashes``, ``max_left_mm``, ``max_gouge_mm``, ...; judged on first use
+    with the call's tolerance and tool -- None: the tool table's -- and against the part drawn in ``drawing``, a
+    DXF file's path, in place of the programmed part), None for a system without one.
 ncfmu_checks
     The :mod:`ncfmu.checks` module (``assert_reaches``, ``assert_no_motion``, ``assert_inside_envelope``,
     ``assert_alarm``).
@@ -52,7 +53,7 @@ def ncfmu_run(ncfmu_project):
 
     def run(system: str = "lathe_roughing", stop_time: float | None = None, start_values: dict | None = None,
             input_csv=None, mode: str = "gauss-seidel", tolerance: float = 0.01, nose_radius: float | None = None,
-            max_depth: float | None = None):
+            max_depth: float | None = None, drawing=None):
         from ncfmu.systems.part import PartSettings
         key = json.dumps([system, stop_time, sorted((start_values or {}).items()), str(input_csv), mode],
                          default=str)
@@ -60,7 +61,12 @@ def ncfmu_run(ncfmu_project):
             cache[key] = simulate(system, stop_time=stop_time, start_values=start_values, input_csv=input_csv,
                                   mode=mode)
         result = cache[key]
-        result.part = PartView(result, PartSettings(tolerance, nose_radius, max_depth))  # type: ignore[attr-defined]
+        part_drawn = None
+        if drawing is not None:
+            from ncfmu.systems.drawing import read_drawing
+            part_drawn = read_drawing(drawing)
+        settings = PartSettings(tolerance, nose_radius, max_depth, part_drawn)
+        result.part = PartView(result, settings)  # type: ignore[attr-defined]
         return result
     return run
 

@@ -19,9 +19,17 @@ Address space (stable: PLC projects point at these names): namespace ``urn:ncfmu
 component instance; one Variable per FMU variable, string NodeId ``<instance>.<variable>``, BrowseName the
 variable's name, DataType Double/Int32/Boolean/String, its description, its unit as EngineeringUnits
 (EUInformation); inputs also get ``<instance>.<variable>.forced`` (Boolean). The ``Simulation`` object holds
-``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs) and the
-methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``. With a watchdog, the inputs a client
-session forced are released when it closes or is silent the watchdog's time.
+``time``, ``speed``, ``lag``, ``overruns``, ``state``, ``reason``, ``forced`` (the forced inputs), ``verdict``
+(the part check's summary line when the last program ended: a lathe's or mill's done, a grinder's cycle end) and the
+methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``.
+
+With a watchdog (``--watchdog S``), a client session that forced inputs is lost when it closes or is silent S s.
+As a CNC that loses its PLC or HMI link stops, ``--on-lost hold`` (the default) puts the machine in feed hold:
+each feed-hold input (:data:`FEED_HOLD_INPUT`) forced true, the simulation running on (a system without one
+halts: a stop), the lost session's forces kept, ``Simulation.state`` ``held`` and ``Simulation.reason`` which
+session was lost and what is held. Those inputs cannot be forced or released one by one meanwhile (Bad_InvalidState);
+a client's ``Resume`` -- the cycle start after a feed hold -- releases them all and the machine moves on (Reset
+starts again). ``--on-lost release`` lets the lost session's forces fall back at once instead.
 
 A crash is published as it happens (a system with a part check: the lathes, the mill): the simulation thread
 hands the recorded rows to the part check every :data:`CRASH_CHECK` s of simulated time; the check runs in a
@@ -75,6 +83,11 @@ FAST_CHUNK = 50
 CRASH_CHECK = 0.05
 #: The OPC UA Severity of a crash event (1..1000; 801-1000 is "high" in Part 5).
 CRASH_SEVERITY = 900
+#: The input that puts a channel in feed hold (our NC controllers' name for it; a foreign FMU may follow it): what
+#: ``--on-lost hold`` forces true when a client that forced inputs is lost.
+FEED_HOLD_INPUT = "feed_hold"
+#: What the watchdog does with a lost client's forces: hold the machine (the default) or release them.
+ON_LOST = ("hold", "release")
 #: How long a client's write waits for the simulation thread to take it (the thread takes writes between
 #: chunks, every few ms; longer means the simulation is stopped or failed).
 WRITE_TIMEOUT = 2.0
@@ -228,7 +241,7 @@ class Recorder:
 # -- the simulation thread ------------------------------------------------------------------------------
 @dataclass
 class _Command:
-    what: str                       # force, release, set, pause, resume, stop, reset
+    what: str                       # force, release, set, pause, resume, stop, reset, hold
     name: str = ""
     value: object = None
     done: Callable[[str | None], None] | None = None    # called with None (applied) or the refusal's text
@@ -246,6 +259,25 @@ class Snapshot:
     lag: float = 0.0
     overruns: int = 0
     crashes: tuple = ()              # the part check's crash records so far (ncfmu.machining.Crash)
+    verdicts: tuple = ()             # the part check's verdicts so far: (program end's time, summary line)
+
+
+def program_ends(report) -> list[tuple[str, bool]]:
+    """Where a part check's program ends, as (column, True: its rising edge, False: its falling edge): a lathe's
+    or mill's part check is judged when its cycle says done, a grinder's after each cycle (RUN falls)."""
+    from .systems.part import GrindPart, MachinedPart
+    ends: list[tuple[str, bool]] = []
+    for part in report.parts:
+        if isinstance(part, MachinedPart):
+            ends.append((part.done_column(), True))
+        elif isinstance(part, GrindPart):
+            ends.append((f"{part.feed}.run", False))
+    return ends
+
+
+def verdict_text(verdict) -> str:
+    """A part check's verdict as ``Simulation.verdict`` and the printed line say it: its summary on one line."""
+    return "; ".join(line.strip() for line in verdict.summary())
 
 
 def crash_text(c) -> str:
@@ -275,6 +307,10 @@ class CrashWatch:
         self._idle.set()
         self._error: BaseException | None = None
         self._seen: list = []
+        #: the verdicts given so far, at each program end (the part check's summary line then)
+        self._verdicts: list[tuple[float, str]] = []
+        self._ends = program_ends(report)
+        self._flags: dict[str, bool] = {}          # each end column's value at the last row judged
         self._thread: threading.Thread | None = None
         self._closed = False
         self.accumulator = self.new_accumulator()
@@ -289,6 +325,7 @@ class CrashWatch:
         self._idle.wait()               # the previous segment's last check done: what it finds is not this one's
         self.accumulator = self.report.accumulator(self.parameters)
         self._seen, self.fresh = [], False
+        self._verdicts, self._flags = [], {}
         return self.accumulator
 
     def new(self) -> _PartCheckSink:
@@ -298,6 +335,10 @@ class CrashWatch:
         """The crashes of the rows judged so far (up to the last hand-over whose check finished)."""
         self.fresh = False
         return list(self._seen)
+
+    def verdicts(self) -> list[tuple[float, str]]:
+        """The verdicts of the programs that ended in the rows judged so far: (the end's time, the summary)."""
+        return list(self._verdicts)
 
     def hand_over(self, accumulator, rows: np.ndarray) -> None:
         """Give ``rows`` (copied: the session reuses its window) to the check, after the previous check."""
@@ -330,11 +371,31 @@ class CrashWatch:
             self._thread = None
 
     def _judge(self, accumulator, rows: np.ndarray) -> None:
-        from .systems.part import crashes_so_far
+        from .systems.part import crashes_so_far, verdict_of
         accumulator.write(rows)
         if accumulator is self.accumulator:
             self._seen = crashes_so_far(accumulator)
+            ended = self._program_end(rows)
+            if ended is not None:
+                verdict = verdict_of(accumulator)
+                if verdict is not None:
+                    self._verdicts.append((ended, verdict_text(verdict)))
             self.fresh = True
+
+    def _program_end(self, rows: np.ndarray) -> float | None:
+        """The time of the last program end in ``rows`` (None: none ended there)."""
+        end: float | None = None
+        for column, rising in self._ends:
+            if not len(rows) or column not in (rows.dtype.names or ()):
+                continue
+            flag = rows[column].astype(bool)
+            before = np.concatenate(([self._flags.get(column, False)], flag[:-1]))
+            edges = np.flatnonzero(flag & ~before if rising else ~flag & before)
+            self._flags[column] = bool(flag[-1])
+            if len(edges):
+                t = float(rows["time"][edges[-1]])
+                end = t if end is None else max(end, t)
+        return end
 
     def _main(self) -> None:
         while True:
@@ -415,11 +476,18 @@ class Runner:
         #: the writes of the segments before the last Reset (the session's own log restarts at a Reset)
         self.earlier_writes: list[tuple[float, str, object]] = []
         self.state, self.reason = "running", ""
+        #: the feed-hold inputs (Boolean inputs named FEED_HOLD_INPUT): what a hold forces true while the
+        #: simulation runs on; a system without one halts when held (a stop, as a machine without feed hold has)
+        self.feed_holds = [p.name for p in self.points
+                           if p.causality == "input" and p.type == "Boolean" and p.variable == FEED_HOLD_INPUT]
+        #: held: the inputs kept forced until Resume (a lost client's forces and the feed holds)
+        self.held: set[str] = set()
         #: the part check (None: the system has none), the crashes it saw and when it was last handed rows
         self.watch = watch
         if watch is not None:
             watch.wait_every_time = self.speed == 0      # as fast as possible: deterministic, as `ncfmu run`
         self.crashes: tuple = ()
+        self.verdicts: tuple = ()            # the part check's verdicts at each program end (CrashWatch.verdicts)
         self._checked = float(session.time)
         self.stats = PaceStats()
         self.lag = 0.0
@@ -468,7 +536,7 @@ class Runner:
         values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
             self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
-                                      self.stats.overruns, self.crashes)
+                                      self.stats.overruns, self.crashes, self.verdicts)
         self._want_snapshot = False
 
     def _apply(self, c: _Command) -> bool:
@@ -477,10 +545,14 @@ class Runner:
         rebase = False
         refusal: str | None = None
         try:
-            if c.what == "force":
+            if c.what in ("force", "release") and c.name in self.held:
+                refusal = f"the simulation is held: {self.reason}"
+            elif c.what == "force":
                 s.force(c.name, c.value)
             elif c.what == "release":
                 s.release(c.name)
+            elif c.what == "hold":
+                rebase = self._hold(*c.value)          # type: ignore[misc]
             elif c.what == "set":
                 if self.check_parameter is not None:
                     self.check_parameter(c.name, c.value)
@@ -488,9 +560,16 @@ class Runner:
             elif c.what == "pause":
                 if self.state == "running":
                     self.state = "paused"
+                elif self.state == "held":
+                    refusal = f"the simulation is held: {self.reason}"
             elif c.what == "resume":
                 if self.state == "paused":
                     self.state, rebase = "running", True
+                elif self.state == "held":           # a client acknowledges the lost one: what it held falls back
+                    for name in sorted(self.held):
+                        s.release(name)
+                    self.held.clear()
+                    self.state, self.reason, rebase = "running", "", True
                 elif self.state != "running":
                     refusal = f"the simulation is {self.state}"
             elif c.what == "reset":
@@ -504,9 +583,10 @@ class Runner:
                     self.earlier_writes += writes
                     if rec is not None:
                         rec.end_segment(writes, final=False, start=self.start_time)
-                    if self.state == "crashed":      # a new run: no crash yet
+                    if self.state in ("crashed", "held"):      # a new run: no crash yet, nothing forced
                         self.state, self.reason = "running", ""
-                    self.crashes, self._checked = (), float(s.time)
+                    self.held.clear()
+                    self.crashes, self.verdicts, self._checked = (), (), float(s.time)
                     rebase = True
             elif c.what == "stop":
                 self.state, self.reason = "stopped", str(c.value or "Stop called")
@@ -522,9 +602,36 @@ class Runner:
             self._want_snapshot = True
         return rebase
 
+    def _hold(self, why: str, names: Sequence[str]) -> bool:
+        """A client that forced ``names`` is lost (``--on-lost hold``): the machine goes to feed hold -- each
+        feed-hold input forced true, the lost client's forces kept -- and stays there until a client calls
+        Resume (or Reset). Without a feed-hold input the simulation halts. True when the pacing's origin must
+        move (a paused simulation runs on held)."""
+        s = self.session
+        if self.state not in ("running", "paused", "held"):
+            # crashed, stopped or failed: nothing moves anyway; its forces fall back as a release would have it
+            for name in names:
+                if name not in self.held:
+                    s.release(name)
+            return False
+        for name in self.feed_holds:
+            s.force(name, True)
+        self.held.update(names)
+        self.held.update(self.feed_holds)
+        was = self.state
+        if was != "held":
+            self.state, self.reason = "held", why
+        return was == "paused"
+
+    def _stepping(self) -> bool:
+        """Whether the simulation steps in its present state (held: on, with its feed held, if it has a feed
+        hold; else it stands)."""
+        return self.state == "running" or (self.state == "held" and bool(self.feed_holds))
+
     def _check_crashes(self, hand_over: bool) -> None:
         """Hand the rows so far to the part check (``hand_over``) and read what it found; at its first crash
-        the simulation halts ("crashed"), with the crash's records those of every row up to the halt."""
+        the simulation halts ("crashed"), with the crash's records those of every row up to the halt. A program
+        that ended: its verdict joins :attr:`verdicts`."""
         s = self.session
         assert self.watch is not None
         if hand_over:
@@ -532,7 +639,7 @@ class Runner:
             s.flush()
         crashes = self.watch.crashes()
         if len(crashes) > len(self.crashes):
-            if self.state == "running":
+            if self.state in ("running", "held"):
                 # the check may be a hand-over behind: the rows simulated since are judged before the halt
                 # (a crash goes deeper until it halts; its depth is the rows', as a synchronous check has it)
                 s.flush()
@@ -542,6 +649,10 @@ class Runner:
                 self.state, self.reason = "crashed", crash_text(crashes[len(self.crashes)])
                 log.error("ncfmu serve: %s; the simulation halts (Reset starts again)", self.reason)
             self.crashes = tuple(crashes)
+            self._take_snapshot()
+        verdicts = self.watch.verdicts()
+        if len(verdicts) > len(self.verdicts):       # a program ended: its verdict is published
+            self.verdicts = tuple(verdicts)
             self._take_snapshot()
 
     def _main(self) -> None:
@@ -565,7 +676,7 @@ class Runner:
                     break
                 if rebase:
                     wall0, sim0 = _time.perf_counter(), s.time
-                if self.state != "running":
+                if not self._stepping():
                     if self._want_snapshot:
                         self._take_snapshot()
                     try:
@@ -633,7 +744,7 @@ class Runner:
             log.exception("ncfmu serve: the simulation failed at t = %.3f s", s.time)
         finally:
             self.wall = _time.perf_counter() - self.started
-            if self.state == "running":
+            if self.state in ("running", "held"):
                 self.state = "stopped"
             try:
                 self._take_snapshot()
@@ -1088,7 +1199,8 @@ class LiveServer:
 
     def __init__(self, system_name: str, runner: Runner, endpoint: str = DEFAULT_ENDPOINT,
                  security: Security | None = None, publish_interval: float = 0.010,
-                 watchdog: float | None = None, cnc_components: Mapping[str, str] | None = None) -> None:
+                 watchdog: float | None = None, cnc_components: Mapping[str, str] | None = None,
+                 on_lost: str = "hold", on_verdict: Callable[[float, str], None] | None = None) -> None:
         self.system_name, self.runner, self.endpoint = system_name, runner, endpoint
         self.security = security or Security()
         self.publish_interval = publish_interval
@@ -1097,10 +1209,17 @@ class LiveServer:
         self._publishing = asyncio.Lock()
         if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
             raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
-        #: with a watchdog: the inputs a client session forced fall back when it closes or is silent this long
-        self.watchdog = watchdog
+        if on_lost not in ON_LOST:
+            raise ConfigError("--on-lost", on_lost, f"must be one of {', '.join(ON_LOST)}")
+        #: with a watchdog: a client session that forced inputs is lost when it closes or is silent this long;
+        #: then (``on_lost``) the machine is held until a client calls Resume, or its forces fall back
+        self.watchdog, self.on_lost = watchdog, on_lost
         self._clients: dict[int, _Client] = {}       # id(asyncua session) -> what the watchdog knows of it
         self._owner: dict[str, _Client] = {}         # a forced input -> the session that forced it last
+        self._held: set[str] = set()                 # what a hold keeps forced until Resume (--on-lost hold)
+        #: told each part verdict as it is published (a program ended): its time and summary line
+        self.on_verdict = on_verdict
+        self.verdicts_published = 0
         #: with the OPC 40502 companion model: instance -> model of the served system's components
         self.cnc_components = cnc_components
         self._mirrors: list[_Mirror] = []
@@ -1201,13 +1320,17 @@ class LiveServer:
                  "simulated seconds per wall-clock second (0: as fast as possible)"),
                 ("lag", 0.0, ua.VariantType.Double, "wall clock minus the paced simulated time, s"),
                 ("overruns", 0, ua.VariantType.Int32, "times the simulation fell more than 10 ms behind the clock"),
-                ("state", "running", ua.VariantType.String, "running, paused, crashed, stopped or failed"),
-                ("reason", "", ua.VariantType.String, "why the simulation stopped or failed"),
+                ("state", "running", ua.VariantType.String,
+                 "running, paused, held (a client was lost: see reason), crashed, stopped or failed"),
+                ("reason", "", ua.VariantType.String, "why the simulation is held, crashed, stopped or failed"),
                 ("forced", [], ua.VariantType.String,
                  "the inputs a client's value overrides now, INSTANCE.VARIABLE, in system order"),
                 ("crashes", 0, ua.VariantType.Int32, "crashes the part check saw since the start (or the last Reset)"),
                 ("crash", "", ua.VariantType.String,
-                 "the last crash: time, program line, what and how deep (empty: none)")):
+                 "the last crash: time, program line, what and how deep (empty: none)"),
+                ("verdict", "", ua.VariantType.String,
+                 "the part check's verdict when the last program ended: its summary line (empty: none ended yet "
+                 "since the start or the last Reset)")):
             node = await simobj.add_variable(self._nid(f"Simulation.{name}"), ua.QualifiedName(name, idx),
                                              ua.Variant(value, vt), varianttype=vt)
             await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(ua.LocalizedText(desc))))
@@ -1364,6 +1487,10 @@ class LiveServer:
                 return self._call_result("BadInvalidState", refusal)
             if what == "reset":
                 self._owner.clear()            # nothing is forced after a Reset
+            if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
+                for name in self._held:
+                    self._owner.pop(name, None)
+                self._held.clear()
             await self._publish_once()
             return []
         return call
@@ -1437,6 +1564,10 @@ class LiveServer:
                 silent = now - client.heard > self.watchdog
                 if closed or silent:
                     names = [name for name, owner in self._owner.items() if owner is client]
+                    why = "closed" if closed else f"silent for {self.watchdog:g} s"
+                    if names and self.on_lost == "hold":
+                        await self._hold(client, why, names)
+                        names = []
                     for name in names:
                         refusal = await self._submit(_Command("release", name))
                         if self._owner.get(name) is client:
@@ -1444,7 +1575,6 @@ class LiveServer:
                         if refusal is not None:
                             log.warning("ncfmu serve: watchdog: could not release %s: %s", name, refusal)
                     if names:
-                        why = "closed" if closed else f"silent for {self.watchdog:g} s"
                         log.warning("ncfmu serve: watchdog: session %s %s at t = %.3f s: released %s",
                                     client.name, why, self._last.get("Simulation.time", 0.0), ", ".join(names))
                 if closed:
@@ -1453,6 +1583,25 @@ class LiveServer:
                 await asyncio.wait_for(self.stopped.wait(), min(0.1, self.watchdog / 10))
             except TimeoutError:
                 pass
+
+    async def _hold(self, client: _Client, why: str, names: Sequence[str]) -> None:
+        """``--on-lost hold``: the machine goes to feed hold (Simulation.state ``held``, Simulation.reason why),
+        the lost session's forces kept; Simulation.Resume (a client's explicit act) releases both."""
+        for name in names:
+            if self._owner.get(name) is client:
+                del self._owner[name]
+        feed = self.runner.feed_holds
+        reason = (f"client lost: session {client.name} {why}; "
+                  + (f"feed hold on {', '.join(feed)}" if feed else "halted (no feed-hold input)")
+                  + f", its forces kept ({', '.join(names)}); Resume releases them")
+        refusal = await self._submit(_Command("hold", value=(reason, tuple(names))))
+        if refusal is not None:
+            log.warning("ncfmu serve: watchdog: could not hold the machine: %s", refusal)
+            return
+        self._held.update(names)
+        self._held.update(feed)
+        log.warning("ncfmu serve: watchdog: session %s %s at t = %.3f s: %s", client.name, why,
+                    self._last.get("Simulation.time", 0.0), reason)
 
     # -- publishing ---------------------------------------------------------------------------------------
     async def _publish_once(self) -> None:
@@ -1488,6 +1637,7 @@ class LiveServer:
             await self._sim_value("reason", snap.reason)
             await self._sim_value("forced", [name for name in self.points if name in snap.forced])
             await self._publish_crashes(snap.crashes)
+            await self._publish_verdicts(snap.verdicts)
             if self._mirrors:
                 values = {**self._last, **snap.values}
                 for k, m in enumerate(self._mirrors):
@@ -1512,6 +1662,16 @@ class LiveServer:
         self._crashes_published = len(crashes)
         await self._sim_value("crashes", len(crashes))
         await self._sim_value("crash", crash_text(crashes[-1]) if crashes else "")
+
+    async def _publish_verdicts(self, verdicts: Sequence[tuple[float, str]]) -> None:
+        """The last program's verdict; each new one told to :attr:`on_verdict` (printed by the CLI)."""
+        if len(verdicts) < self.verdicts_published:          # a Reset: a new run
+            self.verdicts_published = 0
+        for t, text in verdicts[self.verdicts_published:]:
+            if self.on_verdict is not None:
+                self.on_verdict(t, text)
+        self.verdicts_published = len(verdicts)
+        await self._sim_value("verdict", verdicts[-1][1] if verdicts else "")
 
     async def _sim_value(self, name: str, value: object) -> None:
         if self._last.get(f"Simulation.{name}") == value:
@@ -1557,7 +1717,7 @@ class LiveServer:
                     await asyncio.wait_for(self.stopped.wait(), self.publish_interval)
                 except TimeoutError:
                     pass
-            if self.runner.state == "running" or self.runner.state == "paused":
+            if self.runner.state in ("running", "paused", "held"):
                 self.runner.stop("stopped by a signal")
             await asyncio.get_running_loop().run_in_executor(None, self.runner.thread.join, 5.0)
             await self._publish_once()
@@ -1594,12 +1754,15 @@ def _quiet_asyncua() -> None:
 
 
 def _crash_watch(opened, start_values: Mapping[str, object], recorder: Recorder | None,
-                 record: Sequence[str] | None) -> tuple[CrashWatch | None, list, list[str] | None]:
-    """The served run's part check (None: the system has none), the session's sinks and what it records: with
-    ``--record``, also what the part check reads (the CSV keeps to ``--record``)."""
-    from .systems.part import part_check_only
+                 record: Sequence[str] | None, drawing=None) -> tuple[CrashWatch | None, list, list[str] | None]:
+    """The served run's part check (None: the system has none; with ``drawing``, judged against the part drawn),
+    the session's sinks and what it records: with ``--record``, also what the part check reads (the CSV keeps to
+    ``--record``)."""
+    from .systems.part import PartSettings, part_check_only, with_part_settings
     from .systems.report import start_parameters
     report = part_check_only(opened.report())
+    if report is not None and drawing is not None:
+        report = with_part_settings(report, PartSettings(drawing=drawing))
     recording = list(recorder.sinks()) if recorder is not None else []
     columns = list(record) if record else None
     if report is None:
@@ -1615,13 +1778,18 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           step_size: float | None = None, record: Sequence[str] | None = None, out: Path | str | None = None,
           security: Security | None = None, root: Path | None = None,
           ready: Callable[[str], None] | None = None, watchdog: float | None = None,
-          cnc: bool = False) -> ServeSummary:
+          cnc: bool = True, on_lost: str = "hold",
+          on_verdict: Callable[[float, str], None] | None = None, drawing=None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
     ``ncfmu run --input`` replays). ``ready(endpoint)`` is called once clients can connect. With ``watchdog``
-    (s), the inputs a client session forced fall back (are released) when it closes or is silent that long. With
-    ``cnc``, the system is also served as an OPC 40502 (OPC UA for CNC Systems) ``CncInterface`` object."""
+    (s), a client session that forced inputs is lost when it closes or is silent that long: ``on_lost`` "hold"
+    puts the machine in feed hold (state ``held``) until a client calls Resume, "release" lets its forces fall
+    back. ``on_verdict(time, line)`` is told the part check's verdict each time a program ends (also
+    ``Simulation.verdict``). With ``cnc`` (the default), the system is also served as an OPC 40502 (OPC UA for
+    CNC Systems) ``CncInterface`` object (about 1 s more to start). With ``drawing`` (a
+    :class:`~ncfmu.systems.drawing.Drawing`), the part check judges against the part drawn."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
@@ -1629,13 +1797,15 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         raise ConfigError("--stop-time", stop_time, "must be a number > 0")
     if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
         raise ConfigError("--watchdog", watchdog, "must be a number of seconds > 0")
+    if on_lost not in ON_LOST:
+        raise ConfigError("--on-lost", on_lost, f"must be one of {', '.join(ON_LOST)}")
     _quiet_asyncua()
     sys.setswitchinterval(0.001)    # the server and the simulation thread share the GIL: hand it over often
     archive = system_archive(system, root)
     files: list[Path] = []
     with OpenSystem(archive) as opened:
         recorder = Recorder(opened.system.name, Path(out)) if out is not None else None
-        watch, sinks, columns = _crash_watch(opened, start_values or {}, recorder, record)
+        watch, sinks, columns = _crash_watch(opened, start_values or {}, recorder, record, drawing)
         session = opened.open_session(
             stop_time=math.inf if stop_time is None else stop_time, step_size=step_size,
             start_values=dict(start_values or {}), record=columns, sinks=sinks)
@@ -1643,7 +1813,7 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         runner = Runner(session, points_of(opened.slaves), speed, recorder,
                         check_parameter=parameter_check(components, session), watch=watch)
         server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
-                            cnc_components=components if cnc else None)
+                            cnc_components=components if cnc else None, on_lost=on_lost, on_verdict=on_verdict)
         try:
             asyncio.run(server.serve(ready))
         finally:
@@ -1653,6 +1823,10 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
             session.close(complete=runner.state != "failed", reason=runner.reason)
             if watch is not None:
                 watch.close()
+                # the rows after the last hand-over (judged at the close): a program that ended there is told too
+                if len(watch.verdicts()) > server.verdicts_published and on_verdict is not None:
+                    for t, text in watch.verdicts()[server.verdicts_published:]:
+                        on_verdict(t, text)
             if recorder is not None:
                 recorder.end_segment(writes, final=True, start=runner.start_time)
                 files = recorder.files

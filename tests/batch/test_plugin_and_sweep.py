@@ -7,6 +7,7 @@ import pytest
 
 from ncfmu.batch import sweep
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
@@ -68,9 +69,9 @@ def test_sweep_on_an_existing_cluster_gives_the_same_summary(project, tmp_path):
     with local_cluster(2) as cluster:
         # a failed variant (D3 = -1) and unfinished ones (3 s of the cycle): exit status 1 both ways
         assert main(["sweep", "grinder_feed", "--vary", "feed.D3=4.0,3.0,-1,3.5", "--stop-time", "3",
-                     "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "remote")]) == 1
+                     "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "remote")]) == EXIT_NOT_FINISHED
     assert main(["sweep", "grinder_feed", "--vary", "feed.D3=4.0,3.0,-1,3.5", "--stop-time", "3",
-                 "--workers", "2", "--out", str(tmp_path / "local")]) == 1
+                 "--workers", "2", "--out", str(tmp_path / "local")]) == EXIT_NOT_FINISHED
     drop = ("wall_time",)
     remote = [{k: v for k, v in r.items() if k not in drop} for r in read_summary(tmp_path / "remote" / "summary.csv")]
     local = [{k: v for k, v in r.items() if k not in drop} for r in read_summary(tmp_path / "local" / "summary.csv")]
@@ -116,7 +117,8 @@ def test_progress_bar_shows_done_failed_remaining_on_a_terminal():
     bar.close()
     last = term.getvalue().rsplit("\r", 1)[-1]
     # 4 of 5 done, elapsed < ETA, and the counts by status (tqdm sorts them by name)
-    assert re.search(r"4/5 \[\d\d:\d\d<\d\d:\d\d, .*done=1, failed=1, timeout=1, unfinished=1\]", last), last
+    assert re.search(r"4/5 \[\d\d:\d\d<\d\d:\d\d, .*done=1, failed=1, rejected=0, timeout=1, unfinished=1\]",
+                     last), last
     pipe = io.StringIO()                       # not a terminal: silent
     Progress(4, stream=pipe).update("ok")
     assert pipe.getvalue() == ""

@@ -1,8 +1,9 @@
-"""A sweep's row says whether the variant's cycle finished, and ``ncfmu sweep`` exits 1 when any did not.
+"""A sweep's row says whether the variant's cycle finished, and ``ncfmu sweep`` exits 4 when any did not.
 
 Statuses: ``ok`` (the run reached its stop time and every cycle of the system's report finished),
 ``unfinished`` (it ran, but a cycle was still running or never started at the stop time: the error column says
-``cycle not finished by t = <stop> s``), ``failed``, ``timeout``. Exit status 0 only when every variant is ``ok``.
+``cycle not finished by t = <stop> s``), ``failed``, ``timeout`` (and ``crashed``, ``out_of_tolerance``:
+tests/cli/test_run_end.py). Exit status 0 only when every variant is ``ok``, else 4 (3 for a part rejected).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
@@ -25,11 +27,11 @@ def _rows(out: Path) -> dict[str, dict[str, str]]:
         return {r["panel.override"]: r for r in csv.DictReader(f)}
 
 
-def test_a_variant_whose_cycle_does_not_finish_is_unfinished_and_the_sweep_exits_1(project, tmp_path, capsys):
+def test_a_variant_whose_cycle_does_not_finish_is_unfinished_and_the_sweep_exits_4(project, tmp_path, capsys):
     out = tmp_path / "sw"
     rc = main(["sweep", "grinder_feed", "--vary", "panel.override=1,0.5", "--stop-time", "40", "--workers", "0",
                "--out", str(out)])
-    assert rc == 1
+    assert rc == EXIT_NOT_FINISHED
     rows = _rows(out)
     assert rows["1"]["status"] == "ok" and rows["1"]["error"] == ""
     assert float(rows["1"]["cycle_time_s"]) == pytest.approx(CYCLE_END, abs=1e-9)
@@ -41,7 +43,7 @@ def test_a_variant_whose_cycle_does_not_finish_is_unfinished_and_the_sweep_exits
     assert 4.2 < float(slow["deepest_x_mm"]) < 4.3
     assert len((out / "variants" / f"{slow['key']}.csv").read_text().splitlines()) == 40_001 + 1
     text = capsys.readouterr().out
-    assert "2 variants, 1 ok, 1 unfinished, 0 failed, 0 timeout" in text
+    assert "2 variants, 1 ok, 0 crashed, 0 out_of_tolerance, 1 unfinished, 0 failed, 0 timeout" in text
     assert "unfinished: panel.override=0.5: cycle not finished by t = 40 s" in text
 
 
@@ -55,14 +57,14 @@ def test_a_sweep_whose_variants_all_finish_exits_0(project, tmp_path):
     assert float(rows["1.2"]["cycle_time_s"]) < float(rows["1"]["cycle_time_s"]) == pytest.approx(CYCLE_END)
 
 
-def test_a_failed_or_timed_out_variant_makes_the_sweep_exit_1(project, tmp_path, capsys):
+def test_a_failed_or_timed_out_variant_makes_the_sweep_exit_4(project, tmp_path, capsys):
     assert main(["sweep", "grinder_feed", "--vary", "feed.D3=4,-1", "--stop-time", "35", "--workers", "0",
-                 "--out", str(tmp_path / "failed")]) == 1
-    assert "1 ok, 0 unfinished, 1 failed" in capsys.readouterr().out
+                 "--out", str(tmp_path / "failed")]) == EXIT_NOT_FINISHED
+    assert "1 ok, 0 crashed, 0 out_of_tolerance, 0 unfinished, 1 failed" in capsys.readouterr().out
     # a microsecond of wall time for a 35 s run: over it
     assert main(["sweep", "grinder_feed", "--vary", "feed.D3=4", "--stop-time", "35", "--workers", "0",
-                 "--timeout", "1e-6", "--out", str(tmp_path / "timeout")]) == 1
-    assert "0 ok, 0 unfinished, 0 failed, 1 timeout" in capsys.readouterr().out
+                 "--timeout", "1e-6", "--out", str(tmp_path / "timeout")]) == EXIT_NOT_FINISHED
+    assert "0 ok, 0 crashed, 0 out_of_tolerance, 0 unfinished, 0 failed, 1 timeout" in capsys.readouterr().out
 
 
 def test_an_unfinished_variant_is_done_for_a_resumed_sweep(project, tmp_path):

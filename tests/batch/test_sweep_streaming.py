@@ -72,20 +72,22 @@ def test_what_a_worker_answers_does_not_grow_with_the_variant(project, tmp_path)
 def test_a_timed_out_variant_leaves_the_rows_it_recorded(project, tmp_path):
     """A deadline mid-run: ``<key>.csv.partial`` is a byte prefix of the whole run's file (whole rows), the row
     says how many rows and up to when, with the metrics of those rows; ``<key>.csv`` is not written."""
-    rows = sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=3000.0, progress=False,
-                 timeout=3.0)
+    # a panel that repeats its cycle: never done, the run would go on to the 3000 s
+    rows = sweep("grinder_feed", {"feed.D3": [4.0], "panel.repeat_every": [80.0]}, tmp_path, workers=0,
+                 stop_time=3000.0, progress=False, timeout=3.0)
     row = rows[0]
     assert row["status"] == "timeout" and "over the time allowed" in row["error"]
     assert not (tmp_path / "variants" / f"{row['key']}.csv").exists()
     prefix = (tmp_path / "variants" / f"{row['key']}.csv.partial").read_bytes()
     n, stopped = int(row["rows"]), float(row["sim_time"])
     assert 1000 < n < 3_000_000 and stopped == pytest.approx((n - 1) * 1e-3)
-    r, whole = in_memory("grinder_feed", {"feed.D3": 4.0}, stopped)
+    r, whole = in_memory("grinder_feed", {"feed.D3": 4.0, "panel.repeat_every": 80.0}, stopped)
     assert prefix == whole and len(prefix.splitlines()) == n + 1
     assert float(row["deepest_x_mm"]) == float(r["x_axis.pos"].max())
     # its row lost (an interrupted sweep), the variant runs again, to the end: the whole file replaces the prefix
     (tmp_path / "summary.csv").unlink()
-    again = sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=5.0, progress=False)
+    again = sweep("grinder_feed", {"feed.D3": [4.0], "panel.repeat_every": [80.0]}, tmp_path, workers=0,
+                  stop_time=5.0, progress=False)
     assert again[0]["status"] == "unfinished" and (tmp_path / "variants" / f"{row['key']}.csv").is_file()
     assert not list((tmp_path / "variants").glob("*.partial"))
 

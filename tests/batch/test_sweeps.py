@@ -16,6 +16,7 @@ from conftest import ROOT
 from ncfmu.batch import sweep
 from ncfmu.cli import main
 from ncfmu.cosim.result import Result
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
@@ -73,7 +74,7 @@ def test_a_sweep_through_a_hand_started_scheduler_and_worker(project, tmp_path, 
     out = client_dir / "out"
     # 3 s of a 32.5 s cycle: both variants run to the stop time unfinished, and the sweep says so (exit 1)
     assert main(["sweep", str(archive), "--vary", "feed.D3=4.0,3.0", "--stop-time", "3", "--scheduler-file",
-                 str(scheduler_file), "--out", str(out)]) == 1
+                 str(scheduler_file), "--out", str(out)]) == EXIT_NOT_FINISHED
     rows = summary(out)
     assert [r["status"] for r in rows] == ["unfinished", "unfinished"]
     deepest = {float(r["feed.D3"]): float(r["deepest_x_mm"]) for r in rows}

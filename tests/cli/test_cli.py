@@ -5,11 +5,12 @@ import csv
 import pytest
 
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 
 
 def test_run_writes_fmpy_csv_and_summary(project, tmp_path, capsys):
     rc = main(["run", "lathe_taper", "--stop-time", "1.0", "--set", "seq.block[1].Xd=0.25", "--out", str(tmp_path)])
-    assert rc == 0
+    assert rc == EXIT_NOT_FINISHED
     out = capsys.readouterr().out
     assert "simulated/wall-clock ratio" in out
     with open(tmp_path / "lathe_taper.csv") as f:
@@ -71,7 +72,7 @@ def test_run_changes_no_file_of_the_checkout(project, tmp_path):
     before = snapshot()
     done = subprocess.run([shutil.which("ncfmu"), "run", "mill_contour", "--stop-time", "0.5", "--out", str(tmp_path)],
                           cwd=root, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == EXIT_NOT_FINISHED, done.stderr
     after = snapshot()
     changed = sorted(p for p in before.keys() | after.keys() if before.get(p) != after.get(p))
     assert changed == []
@@ -106,5 +107,5 @@ def test_a_run_reads_its_ssp_once(project, tmp_path, monkeypatch):
     monkeypatch.setattr(project_module, "read_ssp", counted)
     from conftest import ROOT
     archive = ROOT / "ssp" / "lathe_taper.ssp"
-    assert main(["run", str(archive), "--stop-time", "0.2", "--out", str(tmp_path)]) == 0
+    assert main(["run", str(archive), "--stop-time", "0.2", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     assert len(reads) == 1

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
+
 pytest.importorskip("matplotlib")     # the plot extra; the test extra installs it (CI runs these)
 
 
@@ -107,6 +109,37 @@ def test_plot_sweep_writes_the_png(tmp_path):
         csv.writer(f).writerows([HEADER, *ROWS])
     png = plot_sweep(summary, tmp_path / "sw.png")
     assert png.read_bytes()[:4] == b"\x89PNG" and _longest_blank_band(png) < 0.05
+
+
+def test_a_sweep_of_part_programs_plots_with_numbered_values_and_its_rejected_variants(tmp_path):
+    """A program text as a sweep value: numbered on the axis and listed under the panels (as tick labels the
+    texts overlapped into one smear); a variant out of tolerance is drawn, marked as rejected."""
+    import csv
+
+    import matplotlib.pyplot as plt
+
+    from ncfmu.cli import main
+    from ncfmu.plots import sweep_figure
+    programs = ["M0: X+D3F7; M1: X+D2F1; M2: X+D5F2; M3: T1; M4: X-D4F7; M5: END",
+                "M0: X+D3F7\nM1: X+D2F7; M2: X+D5F2; M3: T1; M4: X-D4F7; M5: END"]
+    header = ["key", "feed.program", "status", "error", "rows", "sim_time", "wall_time", "max_gouge_mm"]
+    rows = [["a", programs[0], "ok", "", "100", "31.0", "0.5", "0.000003"],
+            ["b", programs[1], "out_of_tolerance", "part out of tolerance 0.01 mm: gouge 0.66 mm", "100", "31.0",
+             "0.5", "0.66"]]
+    fig = sweep_figure([dict(zip(header, r)) for r in rows], "sweep sw")
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["#1", "#2"]
+    assert ax.get_xlabel() == "feed.program (values listed below)"
+    key = "\n".join(t.get_text() for t in fig.texts)
+    assert f"#1: {programs[0]}" in key and "#2: M0: X+D3F7 | M1: X+D2F7" in key     # a program's lines on one
+    rejected = {line.get_label(): line for line in ax.get_lines()}["out of tolerance: the part rejected"]
+    assert list(rejected.get_xdata()) == [1.0] and list(rejected.get_ydata()) == [0.66]
+    assert ax.get_title() == "sweep sw: 1 ok, 1 out_of_tolerance"
+    plt.close(fig)
+    summary = tmp_path / "summary.csv"
+    with open(summary, "w", newline="") as f:
+        csv.writer(f).writerows([header, *rows])
+    assert main(["plot", str(summary)]) == 0 and (tmp_path / "summary.png").stat().st_size > 10_000
 
 
 # -- the ServoAxis Bode plot ------------------------------------------------------------------------------
@@ -222,8 +255,8 @@ def _plane_lines(result) -> dict[str, list[np.ndarray]]:
     return lines
 
 
-def _plotted_planes(monkeypatch, argv: list[str]) -> list[dict[str, list[np.ndarray]]]:
-    """Run ``ncfmu`` with ``argv``; the plane lines of every result it plotted."""
+def _plotted_planes(monkeypatch, argv: list[str], status: int = 0) -> list[dict[str, list[np.ndarray]]]:
+    """Run ``ncfmu`` with ``argv`` (exiting with ``status``); the plane lines of every result it plotted."""
     from ncfmu import plots
     from ncfmu.cli import main
     planes: list[dict[str, list[np.ndarray]]] = []
@@ -232,7 +265,7 @@ def _plotted_planes(monkeypatch, argv: list[str]) -> list[dict[str, list[np.ndar
         planes.append(_plane_lines(result))
         return _plot(result, path)
     monkeypatch.setattr(plots, "plot_result", plotted)
-    assert main(argv) == 0
+    assert main(argv) == status
     return planes
 
 
@@ -245,7 +278,7 @@ def test_the_offline_plot_of_a_part_program_run_draws_its_profile_as_plot_did(pr
     program = (ROOT / "docs" / "examples" / "lathe_shaft.ngc").read_text()
     out = tmp_path / "out"
     [live] = _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "1", "--out", str(out),
-                                           "--set", f"seq.program={program}", "--plot"])
+                                           "--set", f"seq.program={program}", "--plot"], EXIT_NOT_FINISHED)
     assert (out / "lathe_roughing.run.json").is_file()
     [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv"), "--png",
                                               str(tmp_path / "offline.png")])
@@ -266,7 +299,7 @@ def test_the_offline_plot_of_a_part_program_run_draws_its_profile_as_plot_did(pr
 def test_the_offline_plot_draws_the_stock_of_a_runs_set_registers(project, tmp_path, monkeypatch, capsys):
     out = tmp_path / "out"
     _plotted_planes(monkeypatch, ["run", "lathe_roughing", "--stop-time", "0.5", "--out", str(out),
-                                  "--set", "seq.block[1].Xf=2.5"])
+                                  "--set", "seq.block[1].Xf=2.5"], EXIT_NOT_FINISHED)
     [offline] = _plotted_planes(monkeypatch, ["plot", str(out / "lathe_roughing.csv")])
     assert "stock outline X = 27.5" in offline                # 30 - 2.5 (the system's own: X = 29)
     # a CSV moved away from its run record is plotted with the system's parameter sets, as before

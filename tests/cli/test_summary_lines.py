@@ -7,6 +7,7 @@ import re
 import pytest
 
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 from ncfmu.systems import SYSTEMS, get_system
 
 
@@ -18,7 +19,7 @@ def _line(out: str, start: str) -> str:
 def test_the_lathe_limiter_alarm_names_the_blocked_direction_and_the_bits(project, capsys, tmp_path):
     # a cut lengthened into the chuck zone (Z <= -45) at 40 mm/s: Z- is blocked at the boundary
     assert main(["run", "lathe_roughing", "--stop-time", "4", "--set", "seq.block[1].Zp=50", "--set",
-                 "seq.block[1].feed=40", "--out", str(tmp_path)]) == 0
+                 "seq.block[1].feed=40", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     line = _line(capsys.readouterr().out, "area limiter:")
     m = re.fullmatch(r"area limiter: ALARM from t = (\d+\.\d{3}) s, blocked z_axis - \(blocked mask 2; bits "
                      r"1 z_axis \+, 2 z_axis -, 4 x_axis \+, 8 x_axis -\)", line)
@@ -33,7 +34,7 @@ def test_the_grinder_limiter_alarm_names_its_own_axes(project, capsys, tmp_path)
     """The table sent back into the headstock zone with the wheel in: Y- (the reference, the table) blocked."""
     program = "M0: Y+D1F7; M1: X+D2F7; M2: Y-D6F7; M3: END; M41: XF7S1; M42: YF7S1; M43: END; M45: END"
     assert main(["run", "grinder_envelope", "--stop-time", "9", "--set", f"feed.program={program}",
-                 "--set", "feed.D6=250", "--out", str(tmp_path)]) == 0
+                 "--set", "feed.D6=250", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     line = _line(capsys.readouterr().out, "area limiter:")
     assert re.fullmatch(r"area limiter: ALARM from t = \d+\.\d{3} s, blocked y_axis - \(blocked mask 2; bits "
                         r"1 y_axis \+, 2 y_axis -, 4 x_axis \+, 8 x_axis -\)", line), line
@@ -74,7 +75,7 @@ def test_a_program_in_diameters_gets_its_x_as_diameters_too(project, capsys, tmp
     from conftest import ROOT
     pockets = (ROOT / "docs" / "examples" / "lathe_pockets.ngc").read_text()     # G7: X as diameter, X60 Z2
     assert main(["run", "lathe_roughing", "--stop-time", "3", "--set", f"seq.program={pockets}",
-                 "--out", str(tmp_path)]) == 0
+                 "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     out = capsys.readouterr().out
     smallest = float(re.search(r"smallest X during the cuts: (\d+\.\d{4}) mm", out)[1])
     end = re.search(r"tool at X (\d+\.\d{4}),", out)[1]
@@ -92,7 +93,7 @@ def test_a_program_in_radii_and_a_register_run_say_so(project, capsys, tmp_path)
     from conftest import ROOT
     shaft = (ROOT / "docs" / "examples" / "lathe_shaft.ngc").read_text()         # G8: X as radius
     assert main(["run", "lathe_roughing", "--stop-time", "1", "--set", f"seq.program={shaft}",
-                 "--out", str(tmp_path)]) == 0
+                 "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     assert _line(capsys.readouterr().out, "X above") == "X above is a radius, as the program writes it"
-    assert main(["run", "lathe_roughing", "--stop-time", "1", "--out", str(tmp_path)]) == 0
+    assert main(["run", "lathe_roughing", "--stop-time", "1", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     assert "X above" not in capsys.readouterr().out                   # the registers: radii, no program

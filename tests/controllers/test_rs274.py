@@ -206,10 +206,12 @@ def test_the_column_names_the_offending_word(text, line, column):
     assert (err.line_no, err.column) == (line, column)
 
 
-def test_only_newlines_end_a_line():
-    """A form feed (or NEL, U+2028) inside a comment is not a line break: line numbers follow the newlines."""
-    assert len(parse("G1 F60 X1 (page\x0cbreak)\nM2", O)) == 1
-    assert refused("G1 F60 X1\x85Y2\nG1 Z1\nM2").line_no == 2
+def test_what_ends_a_line():
+    """NEL (and CR, U+2028, U+2029: tests/controllers/test_line_ends.py) ends a line as LF does; a form feed is no
+    line end and no blank, even inside a comment: refused, where it stands (issue 45)."""
+    err = refused("G1 F60 X1 (page\x0cbreak)\nM2")
+    assert (err.line_no, err.column) == (1, 16) and "a form feed (U+000C)" in str(err)
+    assert refused("G1 F60 X1\x85Y2\nG1 Z1\nM2").line_no == 3
 
 
 def test_only_ascii_digits_are_numbers():

@@ -19,6 +19,7 @@ from ncfmu.cosim import master as master_module
 from ncfmu.cosim.record import CsvSink, MemorySink
 from ncfmu.cosim.result import csv_bytes
 from ncfmu.errors import SimulationTimeout, SystemDefinitionError
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 from ncfmu.project import OpenSystem, simulate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,17 +44,29 @@ def test_the_streamed_csv_is_the_in_memory_csv_byte_for_byte(project, tmp_path, 
     args = ["run", system, "--stop-time", str(stop), "--out", str(tmp_path), *extra]
     if record:
         args += ["--record", *record]
-    assert main(args) == 0
+    # none finishes its work: the lathe and the mill stop at the limit, the grinder's EMB aborts its only part
+    assert main(args) == EXIT_NOT_FINISHED
     printed = capsys.readouterr().out
     start_values = {"panel.emergency_at": 20} if "--set" in extra else None
-    expected, result = in_memory_csv(system, stop, record, every, start_values=start_values)
     streamed = (tmp_path / f"{system}.csv").read_bytes()
+    # the grinder's run ended where its work did (the emergency return's end), within a second; the others at the
+    # limit's last row: in memory to there
+    end = float(streamed.rsplit(b"\n", 2)[-2].split(b",")[0])
+    if system == "grinder_feed":
+        ended = float(printed.split("cycle ended: ")[1].split(" s")[0])
+        assert 20.0 < ended < end <= ended + 1.0
+    else:
+        assert end == pytest.approx(int(round(stop / 0.001)) // every * every * 0.001)
+    expected, result = in_memory_csv(system, round(end, 9), record, every, start_values=start_values)
     assert streamed == expected
     assert not (tmp_path / f"{system}.csv.partial").exists()
     # the summary computed as the run went is the one from the whole trajectory
     from ncfmu.cli import _summary
     # (less the lines naming the files it wrote: the CSV and the part check's record)
-    summary = [line for line in printed.splitlines()[1:] if not line.startswith(("  results:", "  part check:"))]
+    # and the lines of how the run ended and came out: the in-memory run knows neither)
+    summary = [line for line in printed.splitlines()[1:] if not line.startswith(("  results:", "  part check:",
+                                                                                  "  ended:"))
+               and "(exit status" not in line]
     assert summary == _summary(result).splitlines()[1:]
     if every > 1:
         assert len(read_csv(str(tmp_path / f"{system}.csv"))) == int(stop / 0.001) // every + 1
@@ -134,7 +147,7 @@ def test_only_what_is_kept_in_memory_is_refused(project):
 
 def test_a_csv_that_cannot_fit_on_the_disk_is_refused_before_the_run(project, tmp_path):
     """Streaming lifts the memory limit, not every limit: a billion seconds would not fit on any disk."""
-    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--out", str(tmp_path)]) == 0   # fits
+    assert main(["run", "lathe_taper", "--stop-time", "0.1", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED  # fits
     with pytest.raises(SystemDefinitionError, match=r"stop time 1e\+09 s at a step of 0.001 s: 1000000000001 rows "
                                                     r"of \d+ columns: the CSV may need up to .* GiB"):
         simulate("lathe_taper", stop_time=1e9, keep=False,

@@ -8,6 +8,7 @@ build gives the same trajectory, bit for bit.
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import pickle
@@ -218,6 +219,7 @@ def test_the_compile_is_cached_once_per_runtime(project, monkeypatch):
     def no_compile(*args, **kwargs):
         raise AssertionError(f"compiled again: {args}")
     monkeypatch.setattr(builder.subprocess, "run", no_compile)
+    monkeypatch.setattr(builder.subprocess, "Popen", no_compile)
     cached = compiled_runtime()
     assert cached is not None and (cached / "COMPLETE").is_file()
     assert cached.parent.name == builder.runtime_digest()
@@ -240,9 +242,19 @@ def test_a_failed_compile_falls_back_to_pure_and_caches_nothing(monkeypatch, tmp
     """mypyc refusing the sources: one warning with its message, no cache entry (the next build tries again)."""
     monkeypatch.setenv("NCFMU_CACHE", str(tmp_path))
 
-    def refuses(cmd, **kwargs):
-        return subprocess.CompletedProcess(cmd, 1, "", "ncfmu_x/ports.py:1: error: deliberate")
-    monkeypatch.setattr(builder.subprocess, "run", refuses)
+    class Refuses:              # the compile's child process, as subprocess.Popen: its log, then exit status 1
+        def __init__(self, cmd, **kwargs):
+            self.stdout = io.StringIO("ncfmu_x/ports.py:1: error: deliberate\n")
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def wait(self):
+            return 1
+    monkeypatch.setattr(builder.subprocess, "Popen", Refuses)
     with caplog.at_level(logging.WARNING, logger=builder.__name__):
         assert compiled_runtime() is None
     assert len(caplog.records) == 1 and "deliberate" in caplog.records[0].getMessage()

@@ -94,8 +94,8 @@ def test_a_serialized_state_is_the_slaves_bytes_and_its_time(fmus):
     data, phase, time = contract.split_state(blob)
     assert data.startswith(b'{"format":"ncfmu-fmu-state"') and phase == contract.PHASE["STEP"] and time == 6e-3 + 1e-3
     with pytest.raises(SimulationError, match="dut: fmi2DeSerializeFMUstate returned fmi2Error"):
-        slave.deserialize_state(data)                                 # no trailer: refused (our error, not fmpy's)
-    slave.set_state(slave.deserialize_state(contract.join_state(data, 0.5)))
+        slave.deserialize_state(data)                                 # no seal: refused (our error, not fmpy's)
+    slave.set_state(slave.deserialize_state(contract.join_state(data, 0.5, model="CutSequencer")))
     slave.do_step(0.5, 1e-3)                                          # goes on from the state's time
     slave.terminate()
     unpacked.cleanup()

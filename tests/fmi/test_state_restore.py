@@ -28,6 +28,7 @@ from ncfmu.controllers.contour import ContourInterpolator
 from ncfmu.errors import ConfigError
 from ncfmu.fmi import state
 from ncfmu.fmi.contract import split_state
+from ncfmu.fmi.sealed_state import unseal
 from ncfmu.project import OpenSystem, system_archive
 
 CLASSES = {c.MODEL_NAME: c for c in (CutSequencer, AreaLimiter, ProgrammableFeed, ContourInterpolator,
@@ -66,7 +67,7 @@ def collect_states(system: str, start_values: dict, times, step: float | None = 
                 handle = slave.get_state()
                 blob = slave.serialize_state(handle)
                 slave.free_state(handle)
-                if blob.startswith(b"{"):                 # the Python FMUs (the servo's format is its own)
+                if unseal(blob).payload.startswith(b"{"):   # the Python FMUs (the servo's format is its own)
                     out.append((system, slave.name, t, split_state(blob)[0]))   # the JSON, without the time
     return out
 
@@ -350,8 +351,8 @@ HOST = textwrap.dedent('''
             return fmu
 
         def restore(fmu, blob):
-            # the JSON with the shim's time trailer: the state continues at this host's next step
-            st = fmu.deSerializeFMUstate(join_state(blob.encode(), t[0] + dt))
+            # the JSON with the shim's time trailer, sealed: the state continues at this host's next step
+            st = fmu.deSerializeFMUstate(join_state(blob.encode(), t[0] + dt, model=md.coSimulation.modelIdentifier))
             fmu.setFMUstate(st)
             fmu.freeFMUstate(st)
 

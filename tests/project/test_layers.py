@@ -19,6 +19,7 @@ SRC = ROOT / "src" / "ncfmu"
 #: layer -> the ncfmu layers it may import (besides itself). Top-level modules are their own layer.
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
+    "exitcodes": set(),
     "files": set(),
     "ports": {"errors"},
     "controllers": {"errors", "ports"},
@@ -28,7 +29,8 @@ ALLOWED: dict[str, set[str]] = {
     "cosim": {"errors", "ports", "files"},
     "checks": {"errors", "ports", "controllers", "cosim"},
     "machining": {"errors"},
-    "systems": {"errors", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue", "machining"},
+    "systems": {"errors", "exitcodes", "ports", "files", "controllers", "servo", "cosim", "checks", "catalogue",
+                "machining"},
 }
 #: The front end: what nothing below it may import. Each front module may import every layer of ALLOWED and the
 #: front modules named here (``__init__`` is the package root: ``ncfmu.serve``).

@@ -35,8 +35,8 @@ def test_a_crash_is_an_event_a_node_and_the_state_crashed(ncfmu_serve, tmp_path,
     """At --speed 0 each part check is waited for; above, the check runs beside the simulation, a hand-over of
     rows behind: the halt may come a hand-over later, the crash (time, line, depth) is the same rows'."""
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", str(speed), "--out", out, "--set", "panel.start_at=-1",
-                         "--set", f"seq.program={RAPID_INTO_STOCK}")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", str(speed), "--out", out,
+                         "--set", "panel.start_at=-1", "--set", f"seq.program={RAPID_INTO_STOCK}")
     events = Events()
 
     async def plc():

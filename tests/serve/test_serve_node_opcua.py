@@ -84,7 +84,7 @@ def node_opcua(tmp_path_factory) -> NodeOpcua:
 # -- a PLC's requests: Write results per node, unknown nodes, method arguments -----------------------------------
 @pytest.mark.slow
 def test_node_opcua_gets_a_result_per_node_and_per_argument(ncfmu_serve, node_opcua):
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
     got = node_opcua.script("write_call.js", served)
     # (a) a batch [override 0.8, override 9.0]: the good one applied, the bad one says why
     assert got["batch"] == ["Good", "BadOutOfRange"]

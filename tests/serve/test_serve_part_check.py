@@ -83,6 +83,8 @@ class Check:
 
 
 class Report:
+    parts: tuple = ()           # no part of ncfmu's: no program end to give a verdict at
+
     def __init__(self, cost: float = 0.0, crash_at: float = float("inf")) -> None:
         self.cost, self.crash_at = cost, crash_at
         self.made: list[Check] = []
@@ -169,3 +171,50 @@ def test_a_part_check_that_fails_fails_the_simulation():
             return check
     runner, _, state = served(Broken(), speed=1.0, until=lambda r: r.state == "failed")
     assert state == "failed" and "the part check broke" in runner.reason
+
+
+def test_a_verdict_at_each_program_end_across_hand_overs(monkeypatch):
+    """A grinder's program ends when its RUN falls, a lathe's when its done rises -- also at a hand-over's
+    first row (the edge from the row before); each end gives one verdict, the summary line as judged then."""
+    import ncfmu.systems.part as part
+    from ncfmu.systems.part import GrindPart, LathePart
+
+    class Judged:
+        def summary(self):
+            return [f"  part: {len(seen)} rows judged"]
+
+    seen: list[float] = []
+
+    class Acc:
+        crashes: list = []
+
+        def open(self, columns): pass
+
+        def write(self, rows):
+            seen.extend(rows["time"])
+
+        def close(self, *args): pass
+
+    class Both:
+        parts = (GrindPart(feed="feed", x="x_axis"), LathePart(seq="seq", x="x_axis", z="z_axis", limiter="lim"))
+
+        def accumulator(self, parameters):
+            return Acc()
+    monkeypatch.setattr(part, "verdict_of", lambda acc: Judged())
+    dtype = [("time", np.float64), ("feed.run", np.float64), ("seq.done", np.float64)]
+    watch = CrashWatch(Both(), None)
+    watch.wait_every_time = True
+    acc = watch.accumulator
+
+    def hand_over(*rows):
+        watch.hand_over(acc, np.array(list(rows), dtype=dtype))
+    try:
+        hand_over((0.0, 0, 0), (0.1, 1, 0), (0.2, 1, 0))
+        hand_over((0.3, 0, 0), (0.4, 0, 0))          # RUN falls at a hand-over's first row: a grinder's end
+        hand_over((0.5, 1, 0), (0.6, 1, 1), (0.7, 0, 1))      # done rises at 0.6, RUN falls at 0.7: one verdict
+        hand_over((0.8, 0, 1))                       # nothing ends: done stays, RUN stays down
+        assert watch.verdicts() == [(0.3, "part: 5 rows judged"), (0.7, "part: 8 rows judged")]
+        watch.new_accumulator()                      # a Reset: a new run, no verdict yet
+        assert watch.verdicts() == []
+    finally:
+        watch.close()

@@ -33,7 +33,8 @@ def motion_segments(t, m):
 def test_grinder_plc_answers_every_m_word_and_the_cycle_completes(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
     sets = [f"feed.program={M_PROGRAM}", "panel.start_at=-1"]
-    served = ncfmu_serve("grinder_feed", "--speed", "0", "--out", out, *(x for s in sets for x in ("--set", s)))
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "0", "--out", out,
+                         *(x for s in sets for x in ("--set", s)))
 
     async def plc():
         async with connect(served) as p:
@@ -76,7 +77,7 @@ def test_grinder_plc_answers_every_m_word_and_the_cycle_completes(ncfmu_serve, t
 @pytest.mark.slow
 def test_grinder_emb_from_the_client_returns_the_wheel_to_the_feed_origin(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
-    served = ncfmu_serve("grinder_feed", "--speed", "4", "--out", out)
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "4", "--out", out)
 
     async def plc():
         async with connect(served) as p:
@@ -105,7 +106,7 @@ def test_grinder_emb_from_the_client_returns_the_wheel_to_the_feed_origin(ncfmu_
 def test_lathe_started_feed_held_mid_cut_and_released_by_the_client(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
     sets = ["panel.start_at=-1"]
-    served = ncfmu_serve("lathe_roughing", "--speed", "0", "--out", out, "--set", sets[0])
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "0", "--out", out, "--set", sets[0])
 
     async def plc():
         async with connect(served) as p:

@@ -32,7 +32,7 @@ D = ua.VariantType.Double
 def test_a_batch_write_applies_its_good_values_and_answers_each_node(ncfmu_serve):
     """OPC UA Part 4 5.11.4: each WriteValue gets its own StatusCode and the good ones are applied -- a bad value
     in a batch is not a ServiceFault for all of it."""
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -110,7 +110,7 @@ def o6_read(endpoint: str, *nodes: str) -> list:
 @pytest.mark.slow
 def test_open62541_gets_a_result_per_node_and_per_argument(ncfmu_serve):
     """The same with a second stack: open62541's client (PyPI o6)."""
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def namespace():
         async with connect(served) as p:
@@ -130,7 +130,7 @@ def test_open62541_gets_a_result_per_node_and_per_argument(ncfmu_serve):
 # -- Call: argument errors -----------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_method_argument_errors_have_their_own_status_and_per_argument_results(ncfmu_serve):
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -163,7 +163,7 @@ def test_method_argument_errors_have_their_own_status_and_per_argument_results(n
 # -- the Simulation's state, the writes' count across a Reset ----------------------------------------------------
 @pytest.mark.slow
 def test_the_state_reads_paused_once_pause_returned_and_a_reset_keeps_the_write_count(ncfmu_serve, tmp_path):
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--out", tmp_path / "served")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--out", tmp_path / "served")
 
     async def plc():
         async with connect(served) as p:
@@ -186,7 +186,7 @@ def test_the_state_reads_paused_once_pause_returned_and_a_reset_keeps_the_write_
 @pytest.mark.slow
 def test_a_session_without_writes_replays(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_taper", "--speed", "0", "--stop-time", "1.5", "--out", out)
+    served = ncfmu_serve("lathe_taper", "--no-cnc", "--speed", "0", "--stop-time", "1.5", "--out", out)
     assert served.wait(60) == 0, served.output
     assert_same_trajectory(Result.from_csv(out / "lathe_taper.csv"),
                            replay("lathe_taper", out / "lathe_taper.csv", out / "session_inputs.csv", tmp_path))
@@ -202,7 +202,7 @@ def test_a_refused_tunable_write_leaves_the_run_and_its_replay_identical(ncfmu_s
     writes gives the recorded run bit for bit."""
     out = tmp_path / "served"
     sets = ["panel.start_at=0"]
-    served = ncfmu_serve("lathe_roughing", "--speed", "4", "--out", out, "--set", sets[0])
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "4", "--out", out, "--set", sets[0])
 
     async def plc():
         async with connect(served) as p:
@@ -243,6 +243,15 @@ def test_a_port_out_of_range_and_a_certificate_that_is_none_are_one_line(project
     assert err.startswith("ncfmu serve: --certificate = ") and err.count("\n") == 1, err
 
 
+def test_on_lost_needs_a_watchdog_and_is_hold_or_release(capsys):
+    assert main(["serve", "grinder_feed", "--on-lost", "release"]) == 2
+    err = capsys.readouterr().err
+    assert err == "ncfmu serve: --on-lost release: needs --watchdog S (what tells that a client is lost)\n", err
+    with pytest.raises(SystemExit) as exit_:
+        main(["serve", "grinder_feed", "--watchdog", "1", "--on-lost", "ignore"])
+    assert exit_.value.code == 2 and "--on-lost: invalid choice: 'ignore'" in capsys.readouterr().err
+
+
 # -- forces a PLC can live with: Simulation.forced and the watchdog -----------------------------------------------
 #: A PLC that forces an input (subscribed, as PLCs are: asyncua keeps a session with subscriptions past its
 #: connection), says so, then reads the time every 0.2 s until killed -- or, with "close", disconnects properly.
@@ -272,8 +281,10 @@ FORCING_PLC = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve, tmp_path):
+    """``--on-lost release``: a lost session's forces fall back (the HMI's feed hold is lifted)."""
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--watchdog", "1.0", "--out", out)
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--watchdog", "1.0", "--on-lost", "release",
+                         "--out", out)
 
     def plc(node: str, how: str) -> subprocess.Popen:
         proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, how],
@@ -325,6 +336,78 @@ def test_the_watchdog_releases_what_a_dead_or_closed_session_forced(ncfmu_serve,
     assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "release"]
 
 
+def _forcing_plc(served, node: str) -> subprocess.Popen:
+    """An HMI process that forced ``node`` true and lives (subscribed) until killed."""
+    proc = subprocess.Popen([sys.executable, "-c", FORCING_PLC, served.endpoint, served.namespace, node, "live"],
+                            stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "forced"
+    return proc
+
+
+@pytest.mark.slow
+def test_a_lost_hmi_leaves_the_machine_in_feed_hold_until_a_client_resumes(ncfmu_serve, tmp_path):
+    """``--on-lost hold`` (the default): a CNC that loses its HMI stops. The HMI's feed hold stays, the state
+    says why, the held inputs cannot be released one by one; a new client's Resume releases them and the axes
+    move on."""
+    out = tmp_path / "served"
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--watchdog", "1.0", "--out", out)
+    axes = ("x_axis.pos", "z_axis.pos")
+
+    async def positions(p) -> list[float]:
+        return [await p.read(a) for a in axes]
+
+    async def operator():
+        loop = asyncio.get_running_loop()
+        async with connect(served) as p:
+            await p.wait_until("seq.busy", lambda v: v is True, timeout=30)         # the cycle runs (START 0.1 s)
+            hmi = await loop.run_in_executor(None, _forcing_plc, served, "seq.feed_hold")
+            try:
+                assert await p.read("seq.feed_hold") is True
+                hmi.kill()                                  # the HMI dies with its feed hold on
+                await loop.run_in_executor(None, hmi.wait, 10)
+            finally:
+                if hmi.poll() is None:
+                    hmi.kill()
+            killed = time.monotonic()
+            await p.wait_until("Simulation.state", lambda s: s == "held", timeout=10)
+            assert time.monotonic() - killed < 5.0
+            reason = await p.read("Simulation.reason")
+            assert reason.startswith("client lost: session ") and "silent for 1 s" in reason, reason
+            assert "feed hold on seq.feed_hold" in reason and "Resume" in reason, reason
+            assert await p.read("Simulation.forced") == ["seq.feed_hold"]
+            # held: the simulation runs on (the spindle turns, time goes on), the axes stay put (from 0.5 s
+            # after the hold was seen: at rest then, the feed hold's deceleration long over)
+            held = await p.time()
+            await p.wait_until("Simulation.time", lambda t: t > held + 0.5, timeout=20)
+            t0, at = await p.time(), await positions(p)
+            await p.wait_until("Simulation.time", lambda t: t > t0 + 1.0, timeout=20)
+            assert await positions(p) == pytest.approx(at, abs=1e-3)
+            assert await p.read("Simulation.state") == "held"
+            # a held input is released by Resume only (not by Release, nor by writing it)
+            for attempt in (p.call("Release", "seq.feed_hold"), p.write("seq.feed_hold", False),
+                            p.write("seq.feed_hold.forced", False), p.call("Pause")):
+                with pytest.raises(ua.UaStatusCodeError) as err:
+                    await attempt
+                assert err.value.code == ua.StatusCodes.BadInvalidState
+            assert await p.read("seq.feed_hold.forced") is True
+            await p.call("Resume")                           # the new client acknowledges: cycle start
+            assert await p.read("Simulation.state") == "running" and await p.read("Simulation.reason") == ""
+            assert await p.read("Simulation.forced") == [] and await p.read("seq.feed_hold.forced") is False
+            await p.wait_until("seq.feed_hold", lambda v: v is False, timeout=5)     # the panel's again, off
+            end = time.monotonic() + 10
+            while max(abs(a - b) for a, b in zip(await positions(p), at)) < 0.1:    # the axes move again
+                assert time.monotonic() < end, "the axes did not move after Resume"
+                await asyncio.sleep(0.05)
+            await p.call("Stop")
+    run(operator())
+    assert served.wait(30) == 0, served.output
+    assert "watchdog: session" in served.output and "client lost" in served.output
+    writes = (out / "session_inputs.csv").read_text().splitlines()
+    hold = writes[0].split(",").index('"seq.feed_hold"')
+    # the HMI's force, the hold's (the same value: true), Resume's release
+    assert [row.split(",")[hold] for row in writes[1:] if row.split(",")[hold]] == ["1", "1", "release"]
+
+
 # -- security: certificates, a trust list, who the server says it is ---------------------------------------------
 def _client_certificate(folder, name: str):
     """A client's key and self-signed certificate (application URI urn:ncfmu-test:NAME), as a PLC or UaExpert has."""
@@ -362,7 +445,7 @@ def test_a_trust_list_rejects_an_unknown_client_certificate_and_accepts_a_truste
     plc = _client_certificate(clients, "plc")
     stranger = _client_certificate(clients, "stranger")
     (trusted_dir / "plc.der").write_bytes(plc[0].read_bytes())
-    served = ncfmu_serve("grinder_feed", "--speed", "1", "--certificate", server_cert,
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "1", "--certificate", server_cert,
                          "--private-key", server_dir / "ncfmu-key.pem", "--trust", trusted_dir)
 
     async def session(client_cert, key, uri):

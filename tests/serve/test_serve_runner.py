@@ -189,3 +189,41 @@ def test_each_time_it_falls_behind_is_one_overrun():
     # each stall leaves several chunks late while it catches up; an overrun is the stall, not each chunk
     # (a loaded machine may add stalls of its own)
     assert 2 <= runner.stats.overruns < late_chunks and runner.stats.max >= 0.04
+
+
+def _answered(runner: Runner, command: _Command) -> str | None:
+    """Submit ``command`` and wait for the simulation thread's answer (None: applied)."""
+    answers: list = []
+    done = threading.Event()
+    command.done = lambda refusal: (answers.append(refusal), done.set())
+    runner.submit(command)
+    assert done.wait(5)
+    return answers[0]
+
+
+def test_a_hold_without_a_feed_hold_input_halts_until_resume_releases_what_it_kept():
+    # --on-lost hold on a system without a feed-hold input: a stop. The lost client's force stays, nothing
+    # releases or re-forces it but Resume (the simulation's time stands meanwhile); Resume releases it, time runs
+    session = Session()
+    runner = Runner(session, POINTS, speed=0.0)
+    assert runner.feed_holds == []
+    runner.start()
+    try:
+        assert _answered(runner, _Command("force", "a.u", 0.5)) is None
+        assert _answered(runner, _Command("hold", value=("client lost: session s silent for 1 s", ("a.u",)))) is None
+        assert (runner.state, runner.reason) == ("held", "client lost: session s silent for 1 s")
+        halted = session.time
+        for refused in (_Command("release", "a.u"), _Command("force", "a.u", 2.0), _Command("pause")):
+            assert _answered(runner, refused) == "the simulation is held: client lost: session s silent for 1 s"
+        time.sleep(0.05)
+        assert session.time == halted and session.forced_u == 0.5
+        assert _answered(runner, _Command("resume")) is None
+        assert (runner.state, runner.reason, session.forced_u) == ("running", "", None)
+        deadline = time.monotonic() + 5
+        while session.time <= halted:
+            assert time.monotonic() < deadline, "the simulation did not run on after Resume"
+            time.sleep(0.005)
+    finally:
+        runner.stop()
+        runner.thread.join(5)
+    assert [w[2] for w in session.writes] == [0.5, None]          # the force, Resume's release: nothing else

@@ -23,7 +23,7 @@ from ncfmu.cli import main
 # -- the address space --------------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_units_descriptions_and_types_are_browsable(ncfmu_serve):
-    served = ncfmu_serve("lathe_roughing", "--speed", "0")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "0")
 
     async def plc():
         async with connect(served) as p:
@@ -56,7 +56,7 @@ def test_units_descriptions_and_types_are_browsable(ncfmu_serve):
 def test_subscription_delivers_x_axis_pos_changes(ncfmu_serve):
     """grinder_feed at real time: the wheel roughs from X 4.0 to 4.2 at 0.02 mm/s for 10 s; a 10 ms subscription
     sees it move every publication."""
-    served = ncfmu_serve("grinder_feed", "--speed", "1")
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "1")
 
     class Handler:
         def __init__(self):
@@ -102,7 +102,7 @@ BAD_WRITES = [
 
 @pytest.mark.slow
 def test_bad_writes_get_the_status_that_says_why_and_change_nothing(ncfmu_serve):
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -129,7 +129,7 @@ def test_bad_writes_get_the_status_that_says_why_and_change_nothing(ncfmu_serve)
 @pytest.mark.slow
 def test_forcing_a_connected_input_and_releasing_it(ncfmu_serve):
     """seq.feed_override is driven by the panel's dial (1.0): forced to 0.25 it holds, released it follows again."""
-    served = ncfmu_serve("lathe_roughing", "--speed", "2")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "2")
 
     async def plc():
         async with connect(served) as p:
@@ -160,7 +160,7 @@ def test_forcing_a_connected_input_and_releasing_it(ncfmu_serve):
 @pytest.mark.slow
 def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
     out = tmp_path / "served"
-    served = ncfmu_serve("lathe_roughing", "--speed", "1", "--out", out)
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1", "--out", out)
 
     async def plc():
         async with connect(served) as p:
@@ -203,10 +203,10 @@ def test_pause_resume_reset_stop(ncfmu_serve, tmp_path):
 
 @pytest.mark.slow
 def test_stop_time_and_sigterm_exit_zero(ncfmu_serve):
-    served = ncfmu_serve("lathe_taper", "--speed", "0", "--stop-time", "2")
+    served = ncfmu_serve("lathe_taper", "--no-cnc", "--speed", "0", "--stop-time", "2")
     assert served.wait(60) == 0, served.output
     assert "stopped at t = 2.000 s (stop time 2 s reached)" in served.output
-    served = ncfmu_serve("lathe_taper", "--speed", "1")
+    served = ncfmu_serve("lathe_taper", "--no-cnc", "--speed", "1")
     time.sleep(0.5)
     assert served.stop() == 0, served.output
     assert "stopped at t = " in served.output
@@ -235,7 +235,7 @@ ROGUE = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_a_hung_client_and_a_flooding_client_killed_mid_session_do_not_stall_the_simulation(ncfmu_serve):
-    served = ncfmu_serve("lathe_roughing", "--speed", "1")
+    served = ncfmu_serve("lathe_roughing", "--no-cnc", "--speed", "1")
     import socket
     hung = socket.create_connection(("127.0.0.1", int(served.endpoint.rsplit(":", 1)[1].split("/")[0])))
     hung.sendall(b"HELF\x40\x00\x00")      # the start of a Hello, then nothing: a client that hangs
@@ -267,7 +267,7 @@ def test_a_hung_client_and_a_flooding_client_killed_mid_session_do_not_stall_the
 
 @pytest.mark.slow
 def test_three_clients_at_once(ncfmu_serve):
-    served = ncfmu_serve("grinder_feed", "--speed", "2")
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "2")
 
     async def client(k: int):
         async with connect(served) as p:
@@ -299,7 +299,7 @@ def test_another_address_than_the_loopback_needs_a_user(project, capsys):
 
 @pytest.mark.slow
 def test_with_users_only_users_connect_and_write(ncfmu_serve):
-    served = ncfmu_serve("grinder_feed", "--speed", "1", "--user", "plc:secret")
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "1", "--user", "plc:secret")
 
     async def anonymous():
         c = Client(served.endpoint, timeout=5)

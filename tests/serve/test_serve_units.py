@@ -108,7 +108,7 @@ def test_basic256sha256_with_a_user(ncfmu_serve, tmp_path):
             await setup_self_signed_certificate(tmp_path / f"{who}.pem", tmp_path / f"{who}.der",
                                                 f"urn:ncfmu:test:{who}", "localhost", [use], {"commonName": who})
     asyncio.run(certificates())
-    served = ncfmu_serve("grinder_feed", "--speed", "1", "--user", "plc:secret",
+    served = ncfmu_serve("grinder_feed", "--no-cnc", "--speed", "1", "--user", "plc:secret",
                          "--certificate", tmp_path / "server.der", "--private-key", tmp_path / "server.pem")
 
     async def plain():
@@ -150,7 +150,7 @@ def test_the_python_api_serves_and_returns_a_summary(project, tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     script = (f"import ncfmu; s = ncfmu.serve('lathe_taper', endpoint='opc.tcp://127.0.0.1:{port}/ncfmu', "
-              f"speed=0, stop_time=1.5, out={str(tmp_path)!r}, record=['x_axis.pos', 'seq.subcycle']); "
+              f"speed=0, stop_time=1.5, out={str(tmp_path)!r}, record=['x_axis.pos', 'seq.subcycle'], cnc=False); "
               "print(s.state, s.time, s.overruns, "
               "[p.name for p in s.files])")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)

@@ -15,6 +15,7 @@ import pytest
 from lathe_oracle import BORE, BORE_OPTIONS, SHAFT, fanuc
 
 from ncfmu.cli import main
+from ncfmu.exitcodes import EXIT_PART_REJECTED
 from ncfmu.machining.removal import TOUCH
 from ncfmu.systems.part import LathePart
 
@@ -88,11 +89,19 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
     assert r.part.within_tolerance is False
     code = main(["run", "lathe_roughing", "--stop-time", "2", "--set", f"seq.program={text}", "--out",
                  str(tmp_path)])
-    assert code == 3
+    assert code == EXIT_PART_REJECTED
     out = capsys.readouterr().out
     assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong} (N52): rapid into the stock, 5" in out
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
+    # without a --stop-time the crash halts the machine: the run ends as soon as the rows reach the part check (a
+    # record window, a few seconds), long before the program would have
+    assert main(["run", "lathe_roughing", "--set", f"seq.program={text}", "--out", str(tmp_path)]) \
+        == EXIT_PART_REJECTED
+    out = capsys.readouterr().out
+    assert f"  ended: crash at t = {crashes[0].t:.3f} s" in out
+    last = float((tmp_path / "lathe_roughing.csv").read_text().rstrip("\n").rsplit("\n", 1)[1].split(",")[0])
+    assert crashes[0].t < last < 10.0
 
 
 @pytest.mark.slow

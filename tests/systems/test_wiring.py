@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import pytest
 
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 from ncfmu.project import simulate
 from ncfmu.systems import MODELS, SYSTEMS, get_system
 from ncfmu.systems.report import _ended
@@ -145,7 +146,7 @@ def test_run_warns_of_settings_that_reach_no_connected_port(project, capsys, tmp
     rc = main(["run", "lathe_taper", "--stop-time", "0.2", "--out", str(tmp_path),
                "--set", "panel.emergency_at=0.1", "--set", "panel.override=0.5", "--set", "panel.pulse=0.02",
                "--set", "seq.block[2].Xd=0.2", "--set", "seq.block[1].Xd=0.4", "--set", "limiter.region[3].lim_min=1"])
-    assert rc == 0
+    assert rc == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == [
         "[warning] --set panel.emergency_at=0.1: panel.emergency_at acts only on panel.emergency, which no "
         "connection of lathe_taper reads: it changes nothing in this system",
@@ -160,16 +161,17 @@ def test_run_warns_per_system_and_the_count_as_the_run_sets_it(project, capsys, 
     from ncfmu.cli import main
     # the grinder reads the panel's override and hold now, and its emergency: no warning
     assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "panel.override=0.5",
-                 "--set", "panel.hold_at=0.1", "--set", "panel.emergency_at=0.15"]) == 0
+                 "--set", "panel.hold_at=0.1", "--set", "panel.emergency_at=0.15"]) == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == []
     # a second block is read once n_blocks says so
     assert main(["run", "lathe_taper", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "seq.n_blocks=2",
                  "--set", "seq.block[2].Xd=0.2", "--set", "seq.block[2].N=1", "--set", "seq.block[2].Zp=42",
-                 "--set", "seq.block[2].Xf=4", "--set", "seq.block[2].feed=2", "--set", "seq.block[2].rapid=50"]) == 0
+                 "--set", "seq.block[2].Xf=4", "--set", "seq.block[2].feed=2", "--set", "seq.block[2].rapid=50"]) \
+        == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == []
     # the mill has no EMB and no M words: the panel's MFIN delay reaches nothing
     assert main(["run", "mill_contour", "--stop-time", "0.2", "--out", str(tmp_path),
-                 "--set", "panel.mfin_delay=1"]) == 0
+                 "--set", "panel.mfin_delay=1"]) == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == [
         "[warning] --set panel.mfin_delay=1: panel.mfin_delay acts only on panel.mfin, which no connection of "
         "mill_contour reads: it changes nothing in this system"]
@@ -199,7 +201,7 @@ def test_a_count_that_is_no_number_leaves_the_warnings_alone(project, capsys, tm
     """The variant with n_blocks = 'two' fails (its own error); the warning rule does not crash on it."""
     from ncfmu.cli import main
     assert main(["sweep", "lathe_taper", "--vary", "seq.n_blocks=two,1", "--vary", "seq.block[2].Xd=0.2",
-                 "--stop-time", "0.1", "--workers", "0", "--out", str(tmp_path)]) == 1
+                 "--stop-time", "0.1", "--workers", "0", "--out", str(tmp_path)]) == EXIT_NOT_FINISHED
     out = capsys.readouterr().out
     assert "failed: seq.n_blocks=two, seq.block[2].Xd=0.2" in out
     assert _warnings(out) == ["[warning] --vary seq.block[2].Xd=0.2: seq reads block[1..1] only (n_blocks = 1): "
@@ -210,7 +212,8 @@ def test_settings_a_program_leaves_unread_are_warned(project, capsys, tmp_path):
     from ncfmu.cli import main
     # the seed's program names D1..D5, F1, F2, F7 and T1: D6, F3, T2 are switches nothing reads
     assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set", "feed.D6=1",
-                 "--set", "feed.F3=1", "--set", "feed.T2=3", "--set", "feed.T1=2", "--set", "feed.D3=3.5"]) == 0
+                 "--set", "feed.F3=1", "--set", "feed.T2=3", "--set", "feed.T1=2", "--set", "feed.D3=3.5"]) \
+        == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == [
         "[warning] --set feed.D6=1: feed reads D1, D2, D3, D4, D5 only (the D settings its program names): "
         "feed.D6 changes nothing",
@@ -220,12 +223,12 @@ def test_settings_a_program_leaves_unread_are_warned(project, capsys, tmp_path):
     # a program of the run's own that names T2 reads it
     program = "M0: X+D3F7; M1: T2; M2: X-D3F7; M3: END; M41: XF7S1; M42: END; M43: END"
     assert main(["run", "grinder_feed", "--stop-time", "0.2", "--out", str(tmp_path), "--set",
-                 f"feed.program={program}", "--set", "feed.T2=3"]) == 0
+                 f"feed.program={program}", "--set", "feed.T2=3"]) == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == []
     # a part program replaces the contour's point path: its points, side and feed are read no more
     assert main(["run", "mill_contour", "--stop-time", "0.2", "--out", str(tmp_path), "--set",
                  "contour.program=G01 X5 Y-10 F300\nM02", "--set", "contour.side=1", "--set", "contour.point[2].x=50",
-                 "--set", "contour.diameter_delta=0.2"]) == 0
+                 "--set", "contour.diameter_delta=0.2"]) == EXIT_NOT_FINISHED
     assert _warnings(capsys.readouterr().out) == [
         "[warning] --set contour.side=1: contour runs its program (program is set), not the point path: "
         "contour.side changes nothing",

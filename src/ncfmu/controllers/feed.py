@@ -47,6 +47,7 @@ from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from .base import int_param, real_param, servo_ports
 from .cycle import Button, CycleController, cycle_ports
+from .gcode import program_lines
 from .motion import LinearMove
 from .mypyc_compat import mypyc_attr
 
@@ -88,7 +89,7 @@ _CODE = re.compile(r"([DFST])([0-9])")
 def parse_program(text: str) -> dict[int, Word]:
     """Parse ``ADDRESS: WORD`` lines (newline or ``;`` separated); raise :class:`ProgramError`."""
     program: dict[int, Word] = {}
-    lines = [seg for raw in text.splitlines() for seg in raw.split(";")]
+    lines = [seg for raw in program_lines(text) for seg in raw.split(";")]
     for n, raw in enumerate(lines, start=1):
         if not raw.strip() or raw.strip().startswith("#"):
             continue

@@ -100,10 +100,12 @@ class Segment:
     pass_no: int            # pass of the cycle (0 outside a cycle)
     sigma_x: float          # depth of the pass below the cycle's start point, mm
     line: int               # program line being executed (1-based)
-    cycle: int              # 71, 70 or 0
+    cycle: int              # 71, 70, 76, 92, 32 (a G32 thread) or 0
     dwell: float = 0.0      # s to wait at the move's end (G04)
     stop: int = 0           # at the move's end wait for START: 1 always (M00), 2 with the optional stop on (M01)
     modal: Modal = NO_MODAL
+    lead: float = 0.0       # a thread (G32/G92/G76): mm of Z per spindle revolution, Z following the spindle
+    continues: bool = False  # a thread continuing the one before it (no new wait for the one-revolution marker)
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -193,7 +195,19 @@ class Home:
     home: tuple[float | None, float | None]
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class Thread:
+    """A thread: G32's cut, a G92 pass or a whole G76 (:mod:`.thread_cycles`), its moves planned in the program's
+    coordinates; the tool ends at ``end``."""
+
+    line: int
+    code: int                       # 32, 92, 76
+    segments: tuple[Segment, ...]
+    end: Point
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -684,6 +698,10 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
+        elif isinstance(op, Thread):
+            out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
+                    for g in op.segments]
+            here = op.end
         elif isinstance(op, State):
             before = axes(here)
             modal = op.modal
@@ -706,7 +724,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
         out.append(still(out[-1].line))
     for g in out:
         m = g.modal
-        if g.feed and m.per_rev and not (m.spindle and (m.css or m.s > 0)):
+        if g.feed and m.per_rev and not (m.spindle and m.s > 0):
             raise ProgramError(g.line, 1, f"line {g.line}", "a feed per revolution (G99) with the spindle stopped: "
                                                             "give S and M03/M04 first")
     return out

@@ -124,6 +124,23 @@ def strip_comments(text: str, line_no: int) -> str:
     return "".join(out)
 
 
+#: G codes of Fanuc's controls that no dialect here takes, named in the refusal as the manuals name them (a
+#: programmer reading "G112: not in the subset (polar interpolation)" knows what the line asked for).
+NAMED_G = {107: "cylindrical interpolation", 112: "polar interpolation", 113: "polar interpolation cancel",
+           68: "coordinate rotation", 69: "coordinate rotation cancel", 10: "programmable data input"}
+
+#: Fanuc's direct drawing dimension input: a comma word after a move's end point (``,C1.`` a chamfer, ``,R2.`` a
+#: corner radius, ``,A30.`` the move's angle), as the Fanuc manuals name them.
+DIRECT_DRAWING = {"C": "chamfer", "R": "corner radius", "A": "angle"}
+
+
+def _direct_drawing(word: str) -> str:
+    """Why a comma word is refused: ``,C: not in the subset (chamfer by direct drawing dimensions)``."""
+    what = DIRECT_DRAWING.get(word[1:2].upper())
+    return (f"{word.upper()}: not in the subset ({what} by direct drawing dimensions)" if what else
+            f"{word!r}: a comma word (direct drawing dimensions) is not in the subset")
+
+
 def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
     """(letter, value, spelled number, column) of every word of a comment-free line."""
     found, col = [], 0
@@ -135,7 +152,8 @@ def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
         if not m or not m.group(1):
             ch = text[col]
             reason = ("parameters and expressions are not in the subset" if ch in "#[]=" else
-                      "block delete '/' is not in the subset" if ch == "/" else f"unexpected character {ch!r}")
+                      "block delete '/' is not in the subset" if ch == "/" else
+                      _direct_drawing(text[col:col + 2]) if ch == "," else f"unexpected character {ch!r}")
             raise ProgramError(line_no, col + 1, text.strip(), reason)
         letter = m.group(1).upper()
         if m.group(2) is None:
@@ -151,12 +169,31 @@ def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
     return found
 
 
+#: What ends a line of a program, all alike: LF, CR LF, CR alone (old Macs, tape punch formats), NEL (U+0085) and
+#: Unicode's line and paragraph separators (U+2028, U+2029). A program reads the same, with the same line numbers,
+#: whatever wrote it; a CR followed by an LF is one line end.
+LINE_END = re.compile("\r\n|[\n\r\x85\u2028\u2029]")
+#: What str.splitlines (and tools built on it) also takes for a line end and this reader does not: a program
+#: holding one would read as other lines elsewhere, so it is refused wherever it stands, naming the character.
+NOT_LINE_ENDS = {"\x0b": "a vertical tab (U+000B)", "\x0c": "a form feed (U+000C)",
+                 "\x1c": "a file separator (U+001C)", "\x1d": "a group separator (U+001D)",
+                 "\x1e": "a record separator (U+001E)"}
+_NOT_LINE_END = re.compile("[\x0b\x0c\x1c\x1d\x1e]")
+
+
 def program_lines(text: str) -> list[str]:
-    """A program's lines, after its length check: only newlines end a line (str.splitlines would also split at
-    form feeds, U+2028 ...), a trailing CR is dropped."""
+    """A program's lines, after its length check, split at every :data:`LINE_END`; ProgramError at the first of
+    :data:`NOT_LINE_ENDS` (its line and column)."""
     if len(text) > MAX_PROGRAM_CHARS:
         raise ProgramError(1, 1, f"<{len(text)} characters>", f"longer than {MAX_PROGRAM_CHARS} characters")
-    return [line[:-1] if line.endswith("\r") else line for line in text.split("\n")]
+    lines = LINE_END.split(text)
+    if _NOT_LINE_END.search(text):
+        for n, line in enumerate(lines, start=1):
+            found = _NOT_LINE_END.search(line)
+            if found:
+                raise ProgramError(n, found.start() + 1, line.strip(), f"{NOT_LINE_ENDS[found.group()]} is neither a "
+                                   "line end (LF, CR LF, CR, NEL, U+2028, U+2029) nor a blank in a program")
+    return lines
 
 
 def check_once(seen: dict[str, int], i: int, letter: str, col: int, n: int, raw: str) -> None:
@@ -182,6 +219,9 @@ def check(b: Block, dialect: Dialect) -> None:
                 raise b.err(col, f"N{spelled}: a block number is a whole number >= 0")
             b.n = int(value)
         elif letter == "G":
+            named = int(value) in NAMED_G and int(value) not in dialect.groups and int(value) not in dialect.refused_g
+            if value == int(value) and named:
+                raise b.err(col, f"{word}: not in the subset ({NAMED_G[int(value)]})")
             if value != int(value) or value > 99:
                 raise b.err(col, f"{word} is not in the subset")
             g = int(value)

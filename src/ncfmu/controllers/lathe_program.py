@@ -53,6 +53,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Segment,
     State,
     Stop,
+    Thread,
     Tool,
     check_profile,
     finish_path,
@@ -76,14 +77,17 @@ from .gcode import (
 from .geometry import Arc, CornerError, Element, Line, Point
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
+from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
 
 _MOTION = {0, 1, 2, 3}
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
+_THREAD_MOTION = (32, 92)
 LATHE = Dialect(
     name="lathe",
-    groups={**{g: "motion (G00-G03)" for g in _MOTION}, 18: "plane (G18)", 21: "units (G21)",
+    groups={**{g: "motion (G00-G03, G32, G92)" for g in (*_MOTION, *_THREAD_MOTION)}, 18: "plane (G18)",
+            21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
-            70: "canned cycle (G70/G71)", 71: "canned cycle (G70/G71)",
+            **{g: "canned cycle (G70/G71/G76)" for g in (70, 71, 76)},
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
             **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
             97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
@@ -91,7 +95,7 @@ LATHE = Dialect(
                20: "inch units are not in the subset: write the program in mm (G21)",
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
                73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G40-G42, G50, G70, G71, G90, G91, G96-G99",
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G70, G71, G76, G90, G91, G92, G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
     coordinates="XZIKRUWPQSTO",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
@@ -124,6 +128,12 @@ class _Modes:
     machine: Modal = field(default_factory=Modal)
     comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
+    lead: float = 0.0       # a thread block's F (G32/G92/G76): the lead, mm; modal among thread blocks
+    g92_end: Point | None = None    # the modal G92's thread end (z, x) and taper R: a block with X alone repeats it
+    g92_taper: float = 0.0
+    g92_pass: int = 0       # passes of the modal G92 so far
+    g76: G76Setup | None = None     # G76's first block
+    thread_moves: int = 0   # the threads' planned moves so far (at most MAX_SEGMENTS in a program)
 
 
 def _r_centre(b: Block, start: Point, end: Point, r: float, ccw: bool) -> Point:
@@ -164,6 +174,8 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
     if motion is None:
         raise b.err(xz_col, "a move with no motion mode: give G00, G01, G02 or G03 first")
     move_col = motion_col or xz_col
+    if motion in _THREAD_MOTION:
+        raise b.err(move_col, f"G{motion} (a thread) inside a profile: the profile's moves are G00-G03")
     if motion != 0 and modes.feed == 0.0 and not profile:   # a profile's feed is its cycle's (checked there)
         raise b.err(move_col, f"G{motion:02d} with no feed: give F (mm/min) first")
     scale = 0.5 if modes.diameter else 1.0
@@ -213,6 +225,8 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             modes.diameter = g == 7
         elif g in (70, 71):
             cycle = g
+        elif g in _THREAD_MOTION or g == 76:
+            raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
         elif g in (40, 41, 42) and not profile:
             modes.comp = {40: 0, 41: 1, 42: -1}[g]
     if "F" in values:
@@ -263,6 +277,9 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
         m = replace(m, css=True)
     elif 97 in codes:
         m = replace(m, css=False)
+    if m.css and "S" in v and v["S"] <= 0:
+        raise b.err(b.col("S"), f"S{v['S']:g} under G96: a surface speed of 0 m/min stands the spindle still (a "
+                                "feed per revolution would never move): give S > 0")
     if 98 in codes or 99 in codes:
         m = replace(m, per_rev=99 in codes)
     if "T" in v:
@@ -324,6 +341,164 @@ def _home(b: Block, modes: _Modes, here: Point, setup: Setup) -> Home:
           if "X" in v else x)
     return Home(b.line, (vz, vx), (setup.home[0] if "Z" in v or "W" in v else None,
                                    setup.home[1] if "X" in v or "U" in v else None))
+
+
+# -- threads: G32, G92, G76 (:mod:`.thread_cycles`) ------------------------------------------------------
+#: G codes a thread block may hold besides its own: the modes that only say how its X and Z are read.
+_THREAD_BLOCK_G = frozenset({7, 8, 18, 21, 90, 91})
+
+
+def _thread_kind(b: Block, modes: _Modes) -> int:
+    """32, 92 or 76 when the block is a thread's (its own G code, or X/U or Z/W under a modal G32 or G92)."""
+    codes = [g for g, _ in b.g]
+    if 76 in codes:
+        return 76
+    for g in codes:
+        if g in _MOTION:
+            return 0
+        if g in _THREAD_MOTION:
+            return g
+    if modes.motion in _THREAD_MOTION and any(k in b.values for k in "XZUW"):
+        return modes.motion or 0
+    return 0
+
+
+def _check_thread_words(b: Block, kind: int) -> None:
+    """The spindle cannot change during a thread (Z follows it): no S, T, G96/G97, M03/M04/M05 in its block."""
+    for k in "ST":
+        if k in b.values:
+            raise b.err(b.col(k), f"{k} in a thread block (G{kind}): the spindle speed and the tool cannot change "
+                                  "during a thread (give G97 S, M03/M04 and T in the blocks before it)")
+    for g, col in b.g:
+        if g != kind and g not in _THREAD_BLOCK_G:
+            raise b.err(col, f"G{g:02d} in a thread block (G{kind}): give it a block of its own")
+    for code, col in b.m:
+        if code in (3, 4, 5):
+            raise b.err(col, f"M{code:02d} in a thread block (G{kind}): the spindle cannot change during a thread")
+
+
+def _target(b: Block, modes: _Modes, here: Point, z_default: float | None = None) -> Point:
+    """The end point of a thread block's X/U and Z/W ((z, x), X a diameter as the X mode says); Z stays
+    ``z_default`` (else where the tool is) when the block has no Z/W."""
+    v = b.values
+    for absolute, incremental in (("X", "U"), ("Z", "W")):
+        if absolute in v and incremental in v:
+            raise b.err(b.col(incremental), f"{absolute} and {incremental} in one block: give the end point as "
+                                            f"{absolute} (absolute) or {incremental} (incremental)")
+    scale = 0.5 if modes.diameter else 1.0
+    z, x = here
+    if "W" in v or (modes.incremental and "Z" in v):
+        tz = z + v.get("W", v.get("Z", 0.0))
+    else:
+        tz = v["Z"] if "Z" in v else (z_default if z_default is not None else z)
+    if "U" in v or (modes.incremental and "X" in v):
+        tx = x + scale * v.get("U", v.get("X", 0.0))
+    else:
+        tx = scale * v["X"] if "X" in v else x
+    if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
+        raise b.err(1, f"the thread ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
+    return (tz, tx)
+
+
+def _microns(b: Block, letter: str, what: str) -> float:
+    """A G76 word in um (Fanuc writes it without a decimal point), as mm."""
+    if letter not in b.values:
+        raise b.err(1, f"G76 X Z P Q F: {letter} ({what}, um) is missing")
+    value = b.values[letter]
+    if value != int(value) or value <= 0:
+        raise b.err(b.col(letter), f"{letter}{value:g}: {what} is a whole number of um > 0 (P1227: 1.227 mm)")
+    return value / 1000.0
+
+
+def _thread(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    """A thread block: G76's first block sets the cycle up; a thread's block adds its :class:`.g7x.Thread`.
+    Returns where the tool ends."""
+    end = _thread_op(b, kind, modes, here, ops)
+    if ops and isinstance(ops[-1], Thread) and ops[-1].line == b.line:
+        modes.thread_moves += len(ops[-1].segments)
+        if modes.thread_moves > MAX_SEGMENTS:
+            raise b.err(1, f"more than {MAX_SEGMENTS} planned thread moves in the program (a least depth Q or "
+                           "first depth too small for the thread's height?)")
+    return end
+
+
+def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    v = b.values
+    for g, _ in b.g:
+        if g in (90, 91):
+            modes.incremental = g == 91
+        elif g in (7, 8):
+            modes.diameter = g == 7
+    try:
+        if kind == 76 and not any(k in v for k in "XZUW"):
+            for k in "FIK":
+                if k in v:
+                    raise b.err(b.col(k), f"{k}: G76's first block takes P(m)(r)(a), Q (least depth, um) and R "
+                                          "(finishing allowance, mm)")
+            missing = [k for k in "PQR" if k not in v]
+            if missing:
+                raise b.err(1, f"G76's first block gives P(m)(r)(a), Q(least depth, um) and R(finishing allowance, "
+                               f"mm): {', '.join(missing)} missing")
+            modes.g76 = g76_setup(v["P"], v["Q"], v["R"])
+            return here
+        for k in "IK" + ("PQR" if kind == 32 else "PQ" if kind == 92 else ""):
+            if k in v:
+                raise b.err(b.col(k), f"{k}: G{kind} takes " + {32: "X/U, Z/W and F (the lead)",
+                                                                92: "X/U, Z/W, R (taper, radius) and F (the lead)",
+                                                                76: "X/U, Z/W, R, P, Q and F"}[kind])
+        if modes.comp:
+            raise b.err(b.col("G"), f"G{kind} with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose "
+                                    "radius compensation (G40) before a thread")
+        m = modes.machine
+        if m.css:
+            raise b.err(b.col("G"), f"G{kind} with G96 (constant surface speed) in force: a thread needs a constant "
+                                    "spindle speed, give G97 S<rev/min> before it")
+        if not m.spindle or m.s <= 0:
+            raise b.err(b.col("G"), f"G{kind}: a thread with the spindle stopped (Z follows the spindle): give G97 "
+                                    "S<rev/min> and M03/M04 before it")
+        if "F" in v:
+            modes.lead = v["F"]
+        if modes.lead <= 0:
+            raise b.err(1, f"G{kind} with no lead: give F (the lead, mm per revolution)")
+        if kind == 32:
+            end = _target(b, modes, here)
+            last = ops[-1] if ops else None
+            continues = isinstance(last, Thread) and last.code == 32 and math.dist(last.end, here) <= EPS
+            ops.append(Thread(b.line, 32, (plan_g32(here, end, modes.lead, m, b.line, continues),), end))
+            modes.motion = 32
+            return end
+        if kind == 92:
+            if "X" not in v and "U" not in v:
+                raise b.err(1, "G92: each pass gives the thread's X (or U)")
+            new = 92 in {g for g, _ in b.g} or modes.motion != 92
+            if not new and modes.g92_end is None:
+                raise b.err(1, "X alone repeats a G92 pass: give G92 X Z F first")
+            z_end = None if new or modes.g92_end is None else modes.g92_end[0]
+            if new and "Z" not in v and "W" not in v:
+                raise b.err(b.col("G"), "G92 gives the thread's end Z (or W)")
+            end = _target(b, modes, here, z_end)
+            if "R" in v:
+                modes.g92_taper = v["R"]
+            elif new:
+                modes.g92_taper = 0.0
+            modes.g92_end = end
+            modes.g92_pass = 1 if new else modes.g92_pass + 1
+            segs = plan_g92(here, end, modes.g92_taper, modes.lead, m, 0.0, modes.g92_pass, b.line)
+            ops.append(Thread(b.line, 92, tuple(segs), here))
+            modes.motion = 92
+            return here
+        if modes.g76 is None:
+            raise b.err(b.col("G"), "G76 X Z P Q F needs G76's first block (G76 P(m)(r)(a) Q(least depth) "
+                                    "R(finishing allowance)) before it")
+        if not any(k in v for k in "XU") or not any(k in v for k in "ZW"):
+            raise b.err(b.col("G"), "G76's second block gives the thread's root X (or U) and its end Z (or W)")
+        height, first = _microns(b, "P", "the thread height"), _microns(b, "Q", "the first depth of cut")
+        end = _target(b, modes, here)
+        segs = plan_g76(here, end, v.get("R", 0.0), height, first, modes.lead, modes.g76, m, 0.0, b.line)
+        ops.append(Thread(b.line, 76, tuple(segs), here))
+        return here
+    except ThreadError as err:
+        raise b.err(b.col(err.word), err.reason) from None
 
 
 # -- the program ------------------------------------------------------------------------------------
@@ -411,6 +586,9 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     while i < len(blocks):
         b = blocks[i]
         i += 1
+        thread = _thread_kind(b, modes)
+        if thread:
+            _check_thread_words(b, thread)
         before = modes.machine
         _machine(b, modes, setup)
         if modes.machine != before:
@@ -434,6 +612,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 dz, dx = modes.machine.offset           # the reference is the axes': the programmed point is off
                 here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
                         home.home[1] - dx if home.home[1] is not None else home.via[1])
+        elif thread:
+            here = _thread(b, thread, modes, here, ops)
         else:
             comp_before = modes.comp
             element, end, rapid, cycle = _interpret(b, modes, here)

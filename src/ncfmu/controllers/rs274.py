@@ -6,7 +6,7 @@ Words (one block per line, letters in either case, spaces allowed between a lett
     G17 XY plane   G21 mm   G90 absolute   G91 incremental                 (modal)
     G40 compensation off   G41 left of travel   G42 right of travel        (modal)
     X Y end point   I J arc centre relative to the arc's start (always incremental)
-    F feed in mm/min (modal)   N block number (ignored)   M02 / M30 program end
+    F feed in mm/min (modal)   N block number (ignored)   O program number (ignored)   M02 / M30 program end
     ( comment )   ; comment to the end of the line   a line holding only % is skipped
 
 Cutter compensation as LinuxCNC and Fanuc: G41/G42 takes effect with the next move, a straight lead-in
@@ -49,11 +49,11 @@ MILL = Dialect(
                43: "tool length offsets are not in the subset"},
     g_list="G00-G03, G17, G21, G40-G42, G90, G91",
     m_codes=frozenset({2, 30}), m_list="M02, M30",
-    coordinates="XYIJ",
+    coordinates="XYIJO",            # O: the program number, read and ignored (as the lathe's, lathe_program.py)
     refused_letters={"R": "R-format arcs are not in the subset: give the centre with I and J",
                      "Z": "only the XY plane is in the subset (no Z)",
                      "D": "the offset is diameter_delta / 2, not a D word"},
-    letter_list="G, M, X, Y, I, J, F, N",
+    letter_list="G, M, N, O, X, Y, I, J, F",
 )
 
 

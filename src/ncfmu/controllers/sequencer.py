@@ -43,6 +43,7 @@ and the restart (from the program's start, after the safe approach) work as for 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -50,7 +51,7 @@ from typing import Any
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import POSITION_LIMIT, int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, SPEED_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
@@ -61,6 +62,8 @@ MAX_BLOCKS = 8
 MAX_TOOLS = 8
 #: A dwell whose time left is below this is over (s): steps of dt do not sum exactly to its time.
 DWELL_EPS = 1e-9
+#: A thread's Z may fall back this far (mm) as the spindle's encoder jitters; more is a spindle turning backwards.
+THREAD_BACKLASH = 1e-9
 
 IDLE, SC1, SC2, SC3, SC4 = 0, 1, 2, 3, 4
 #: Phase before SC1 when the command is not at STP on start (reported as sub-cycle 0 while busy).
@@ -155,7 +158,7 @@ def _tool_shape_ports():
     return tuple(ports)
 
 
-_PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout"}
+_PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout", "thread_shift"}
 
 
 @mypyc_attr(allow_interpreted_subclasses=True, serializable=True)
@@ -194,11 +197,13 @@ class CutSequencer(CycleController):
         # last, so the value references of the ports before them stay what they were
         string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
                "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
-               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F) and G70 "
-               "finishing (G70 P Q F), one block per line, starting at x_start/z_start; G00 and the cycles' rapid "
+               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F), G70 "
+               "finishing (G70 P Q F) and threads (G32, G92, G76 following the spindle), one block per line, "
+               "starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
-        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 0 none"),
+        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 76 multiple "
+                "threading, 92 thread cutting, 32 a G32 thread, 0 none"),
         # the Fanuc 0i-T dialect of a program (appended: the value references before stay what they were)
         boolean("x_diameter", "parameter", True, "program: X and U are diameters until G7/G8, as on Fanuc's lathes; "
                 "false: radii (the axes and every other length are radii)"),
@@ -232,6 +237,12 @@ class CutSequencer(CycleController):
         # appended: the block-delete switch
         boolean("block_delete", "input", False, "block-delete switch: a program's blocks starting with / are "
                 "skipped when it is on at START (the program is read, buffered, whole when it starts)"),
+        # appended: threads (G32, G92, G76) follow the spindle's encoder
+        real("revolutions", "input", 0.0, "rev", "actual spindle angle in revolutions, signed, continuous (the "
+             "spindle drive's encoder): a thread starts at its one-revolution marker and Z follows it"),
+        real("thread_shift", "parameter", 0.0, "deg", "a thread starts this far after the spindle's one-revolution "
+             "marker (a multi-start thread: 360/starts apart)", min=0.0, max=360.0),
+        boolean("threading", "output", None, "a thread pass follows the spindle (from its marker to its end)"),
         # appended: the tool table's shapes (the part check's)
         *_tool_shape_ports(),
     )
@@ -290,6 +301,7 @@ class CutSequencer(CycleController):
             require(not (width > 0.0 and nose > width / 2.0), f"{p}.nose_radius", nose,
                     f"must be <= half the grooving blade's width {p}.width {width:g}")
         self.spindle_band = real_param(values, "spindle_band")
+        self.thread_shift = real_param(values, "thread_shift")
         self.spindle_timeout = real_param(values, "spindle_timeout")
         tools = tuple(Tool(x_offset=real_param(values, f"tool[{k}].x_offset"),
                            z_offset=real_param(values, f"tool[{k}].z_offset"),
@@ -344,6 +356,12 @@ class CutSequencer(CycleController):
         self._optional_stop = False
         self._block_delete = False
         self._pressed = False
+        self.threading = False               # a thread pass follows the spindle
+        self.thread_armed = False            # a thread waits for its marker: thread_last is the angle seen before
+        self.thread_last = 0.0               # turns (from the marker + thread_shift) of the last step, waiting
+        self.thread_rev0 = 0.0               # turns at which the present thread segment started
+        self.thread_travel = 0.0             # mm of Z the present thread segment has commanded
+        self.thread_speed = 0.0              # mm/s along the path the thread commanded in its last step
         self._publish()
 
     # -- the cycle ------------------------------------------------------------------------------
@@ -379,7 +397,9 @@ class CutSequencer(CycleController):
         self.dwell_left = seg.dwell
         self.stop_wait = seg.stop == 1 or (seg.stop == 2 and self._optional_stop)
         turning = seg.modal.spindle and seg.modal.rpm(self.x_cmd - seg.modal.offset[1]) > 0
-        self.spindle_wait = 0.0 if seg.feed and turning else None
+        self.spindle_wait = 0.0 if seg.feed and turning and not seg.continues else None
+        self.threading = self.thread_armed = False
+        self.thread_travel = self.thread_speed = 0.0
         assert isinstance(self.move, ElementMove)
         self.move.begin_element(seg.element, seg.rate)
 
@@ -447,7 +467,11 @@ class CutSequencer(CycleController):
 
     # -- the hooks of the NC cycle (controllers/cycle.py owns the order of a step) -----------------
     def halt(self) -> None:
-        """The present move comes to a controlled stop along its path; the cycle ends."""
+        """The present move comes to a controlled stop along its path; the cycle ends. A thread stops from the
+        speed the spindle gave it (its Z no longer follows the spindle: the thread is spoilt, as on a machine)."""
+        if self.threading:
+            self.move.v = self.thread_speed
+        self.threading = self.thread_armed = False
         self.move.halt()
         self.phase = IDLE
         self.busy = False
@@ -502,6 +526,8 @@ class CutSequencer(CycleController):
         arrive at speed (held: the move neither starts nor ends); a feed per revolution follows the actual
         spindle speed. Returns the feed scale and whether the move is held."""
         seg = self.plan[self.segment]
+        if seg.lead:
+            return self._thread(t, dt, inputs, seg)
         if self.dwell_left > DWELL_EPS:
             self.dwell_left = max(self.dwell_left - dt, 0.0)
             return 0.0, True
@@ -509,20 +535,81 @@ class CutSequencer(CycleController):
             self.stop_wait = not self._pressed
             return 0.0, True
         actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
-        if self.spindle_wait is not None:
-            wanted = seg.modal.rpm(self.x_cmd - seg.modal.offset[1])
-            if abs(actual - wanted) <= self.spindle_band * wanted:
-                self.spindle_wait = None
-            else:
-                self.spindle_wait += dt
-                if self.spindle_wait > self.spindle_timeout:
-                    self.stop(t, f"spindle: {actual:.1f} rev/min, not within {self.spindle_band:g} of the commanded "
-                                 f"{wanted:.1f} rev/min {self.spindle_timeout:g} s after the cut on line {seg.line} "
-                                 "was to begin (speed arrival)")
-                return 0.0, True
+        if self.spindle_wait is not None and not self._speed_arrived(t, dt, actual, seg):
+            return 0.0, True
         if seg.feed and seg.modal.per_rev:
             self.move.rate = ElementMove.rate_on(seg.element, seg.rate * actual, self.accel)
         return scale, False
+
+    def _speed_arrived(self, t: float, dt: float, actual: float, seg: Segment) -> bool:
+        """A cut waits for the spindle to arrive at speed (Fanuc's SAR); an alarm ``spindle_timeout`` later."""
+        wanted = seg.modal.rpm(self.x_cmd - seg.modal.offset[1])
+        if abs(actual - wanted) <= self.spindle_band * wanted:
+            self.spindle_wait = None
+            return True
+        wait = (self.spindle_wait or 0.0) + dt
+        self.spindle_wait = wait
+        if wait > self.spindle_timeout:
+            self.stop(t, f"spindle: {actual:.1f} rev/min, not within {self.spindle_band:g} of the commanded "
+                         f"{wanted:.1f} rev/min {self.spindle_timeout:g} s after the cut on line {seg.line} "
+                         "was to begin (speed arrival)")
+        return False
+
+    def _thread(self, t: float, dt: float, inputs: Mapping[str, object], seg: Segment) -> tuple[float, bool]:
+        """A thread segment: after the speed arrival it waits for the spindle's one-revolution marker (+
+        ``thread_shift``), then commands Z from the **actual** spindle angle, z = z0 - lead * (turns - turns0),
+        X following Z along the segment; no velocity feed-forward (the servo's lag is the machine's). Feed
+        override does not apply; feed hold holds the start and acts at the thread block's end (as on a Fanuc).
+        Always held for :meth:`advance`: this moves the command itself."""
+        move = self.move
+        if move.done:                          # the command reached the thread's end: the in-position check
+            self.threading = self.thread_armed = False
+            if self.arrival(t, dt, True, inputs):
+                self._next_phase()
+            return 0.0, True
+        rev = float(inputs.get("revolutions", 0.0))  # type: ignore[arg-type]
+        if not abs(rev) <= POSITION_LIMIT:        # false for NaN too
+            self.stop(t, f"revolutions = {rev!r}: the spindle's encoder angle must be finite, within "
+                         f"{POSITION_LIMIT:g} rev (the thread on line {seg.line})")
+            return 0.0, True
+        turns = rev * seg.modal.spindle - self.thread_shift / 360.0
+        if not self.threading:
+            if self.spindle_wait is not None:
+                actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
+                if not self._speed_arrived(t, dt, actual, seg):
+                    return 0.0, True
+            if not self.thread_armed or inputs["feed_hold"] or math.floor(turns) <= math.floor(self.thread_last):
+                self.thread_armed = not inputs["feed_hold"]
+                self.thread_last = turns
+                return 0.0, True
+            self.thread_rev0 = float(math.floor(turns))        # the marker passed within this step
+            self.thread_travel = 0.0
+            self.threading = True
+        z0, z1 = seg.element.start[0], seg.element.end[0]
+        length_z = abs(z1 - z0)
+        travel = seg.lead * (turns - self.thread_rev0)
+        step = travel - self.thread_travel
+        if step < -THREAD_BACKLASH or step > SPEED_LIMIT * dt:
+            self.stop(t, f"revolutions = {rev!r}: the spindle's angle moved {step / seg.lead:+.4g} rev in one step "
+                         f"during the thread on line {seg.line} (backwards, or faster than any axis follows)")
+            return 0.0, True
+        if travel >= length_z:
+            nxt = self.segment + 1
+            if nxt < len(self.plan) and self.plan[nxt].continues:
+                rev0 = self.thread_rev0 + length_z / seg.lead
+                self._begin_segment(nxt)
+                self.threading, self.thread_rev0 = True, rev0
+                return self._thread(t, dt, inputs, self.plan[nxt])
+            self.thread_speed = 0.0
+            move.s, move.v, move.done = move.length, 0.0, True
+            self.threading = self.thread_armed = False
+            if self.arrival(t, dt, True, inputs):
+                self._next_phase()
+            return 0.0, True
+        self.thread_speed = max(step, 0.0) / dt * move.length / length_z
+        self.thread_travel = travel
+        move.s = travel * move.length / length_z
+        return 0.0, True
 
     def _per_rev_now(self) -> bool:
         """The present move is a program's feed per revolution (G99): its rate follows the spindle."""
@@ -545,6 +632,7 @@ class CutSequencer(CycleController):
         out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         out["rapid"] = self.rapid and (self.busy or not self.move.done)
+        out["threading"] = self.threading
         seg = self.plan[self.segment] if self.plan and self.program_started else None
         modal = seg.modal if seg is not None else NO_MODAL
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
@@ -608,9 +696,15 @@ class CutSequencer(CycleController):
         seg = self.plan[self.segment]
         if not (type(self.dwell_left) is float and 0.0 <= self.dwell_left <= seg.dwell):
             return f"dwell_left = {self.dwell_left!r}: not within the move's dwell 0..{seg.dwell:g} s"
-        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop", "_block_delete"):
+        for flag in ("stop_wait", "program_started", "_pressed", "_optional_stop", "_block_delete", "threading",
+                     "thread_armed"):
             if type(getattr(self, flag)) is not bool:
                 return f"{flag} = {getattr(self, flag)!r}: not a bool"
+        for name in ("thread_last", "thread_rev0", "thread_travel", "thread_speed"):
+            if not (type(getattr(self, name)) is float and abs(getattr(self, name)) <= POSITION_LIMIT):
+                return f"{name} = {getattr(self, name)!r}: not a finite float"
+        if (self.threading or self.thread_armed) and not (seg.lead and self.busy):
+            return f"threading = {self.threading!r}: the program's move {self.segment} is no thread"
         if self.stop_wait and not seg.stop:
             return f"stop_wait = True: the program's move {self.segment} is no stop (M00/M01)"
         if self.spindle_wait is not None and not (type(self.spindle_wait) is float

@@ -36,6 +36,7 @@ from .native_loop import Fmi2Functions
 from .slave import KINDS, Variable
 from .ssp import MAX_UNPACKED, is_link
 from .units import unit_from_fmpy, variable_unit
+from .value_references import check_value_references
 
 _T = TypeVar("_T")
 
@@ -203,14 +204,19 @@ class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 
     def __init__(self, path: Path, workdir: Path | None = None) -> None:
+        """``path``: the FMU archive, or the folder it was unpacked to already (where an isolated FMU's process
+        loads the master's copy from, :mod:`~ncfmu.cosim.isolated`)."""
         self.path = Path(path)
-        if not self.path.is_file():
-            raise SystemDefinitionError(f"FMU not found: {self.path}")
         self._tmp = None
-        if workdir is None:
-            self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
-            workdir = Path(self._tmp)
-        self.directory = safe_extract(self.path, Path(workdir))
+        if self.path.is_dir():
+            self.directory = self.path
+        else:
+            if not self.path.is_file():
+                raise SystemDefinitionError(f"FMU not found: {self.path}")
+            if workdir is None:
+                self._tmp = tempfile.mkdtemp(prefix=f"ncfmu_{self.path.stem}_")
+                workdir = Path(self._tmp)
+            self.directory = safe_extract(self.path, Path(workdir))
         try:
             self.model_description = read_model_description(str(self.path))
         except Exception as err:                         # fmpy's own errors name the schema problem
@@ -223,6 +229,7 @@ class UnpackedFmu:
             raise SystemDefinitionError(f"{self.path.name}: a model-exchange-only FMU; ncfmu's master runs FMI 2.0 "
                                         "and 3.0 co-simulation FMUs only (no solver for model exchange)")
         self.fmi3 = md.fmiVersion == "3.0"
+        check_value_references(self.path.name, md.modelVariables, self.fmi3)
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
             if self.fmi3:
@@ -319,8 +326,11 @@ class FmuSlave:
         errors = [msg for lvl, msg in recent if lvl == "error"]
         said = "; ".join(errors) if errors else "; ".join(f"[{lvl}] {msg}" for lvl, msg in recent
                                                               if lvl in ("fatal", "warning"))
-        return SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
-                               + (f": {said}" if said else ""))
+        error = SimulationError(f"{self.name}: {what} returned fmi2{_STATUS.get(status, str(status)).capitalize()}"
+                                + (f": {said}" if said else ""))
+        if errors and "Initialization" in what:
+            error.refusal = "; ".join(errors)
+        return error
 
     def _asks_to_terminate(self) -> bool:
         """After fmi2Discard from fmi2DoStep: fmi2GetBooleanStatus(fmi2Terminated) says whether the FMU asks to end
@@ -470,6 +480,10 @@ class FmuSlave:
 
     def read_outputs(self) -> None:
         self._transfer(self._reads, "Get")
+
+    def read_kind(self, kind: str) -> None:
+        """Fill the bound outputs of ``kind`` alone (an isolated FMU's process names each call before it makes it)."""
+        self._transfer([call for call in self._reads if call[4] == kind], "Get")
 
     def get(self, name: str) -> object:
         """Read one variable (for checks outside the loop)."""

@@ -52,8 +52,11 @@ class Fmu3Slave:
         if status >= 4:
             self._alive = False
         errors = [msg for lvl, msg in self.messages[-5:] if lvl in ("error", "fatal")]
-        return SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
-                               + (f": {'; '.join(errors)}" if errors else ""))
+        error = SimulationError(f"{self.name}: {what} returned fmi3{_STATUS.get(status, str(status)).capitalize()}"
+                                + (f": {'; '.join(errors)}" if errors else ""))
+        if errors and "Initialization" in what:
+            error.refusal = "; ".join(errors)
+        return error
 
     def _call(self, what: str, call: Callable[..., _T], *args: object) -> _T:
         try:
@@ -104,6 +107,12 @@ class Fmu3Slave:
     def read_outputs(self) -> None:
         for kind, vrs, buffer in self._reads:
             buffer[:] = self._call(f"fmi3G{_GET[kind][1:]}", getattr(self.fmu, _GET[kind]), vrs)
+
+    def read_kind(self, kind: str) -> None:
+        """Fill the bound outputs of ``kind`` alone (an isolated FMU's process names each call before it makes it)."""
+        for bound, vrs, buffer in self._reads:
+            if bound == kind:
+                buffer[:] = self._call(f"fmi3G{_GET[kind][1:]}", getattr(self.fmu, _GET[kind]), vrs)
 
     def get(self, name: str) -> object:
         v = self.variables[name]

@@ -50,6 +50,11 @@ __all__ = ["MAX_RECORD_BYTES", "MODES", "Execution", "InputTable", "Interrupted"
 #: The record window of a run that keeps nothing in memory: about this many bytes of rows.
 WINDOW_BYTES = 2 ** 20
 
+#: How often (s of simulated time) a run looks at its watched outputs (``Master.run``'s ``watch``: a done signal, an
+#: alarm) to ask whether it should end: it stops at most this long after one changed (looked at between chunks of
+#: steps, not in them).
+CHECK_INTERVAL = 0.5
+
 #: Steps a run counts at most (whole numbers in a double): a stop time beyond is a mistake, not a run.
 MAX_STEPS = 2.0 ** 53
 
@@ -154,7 +159,9 @@ class Master:
             start_values: Mapping[str, object] | None = None, inputs: InputTable | None = None,
             start_time: float = 0.0, progress: Callable[[float], None] | None = None,
             deadline: float | None = None, record: Sequence[str] | None = None,
-            output_interval: float | None = None, sinks: Sequence[RecordSink] = (), keep: bool = True) -> Result:
+            output_interval: float | None = None, sinks: Sequence[RecordSink] = (), keep: bool = True,
+            until: Callable[[], str] | None = None, check_interval: float | None = None,
+            watch: Sequence[str] = ()) -> Result:
         """Initialise every slave, step to ``stop_time`` and return the recorded outputs.
 
         ``record`` names the outputs recorded (default: every output), ``output_interval`` records every so
@@ -163,6 +170,10 @@ class Master:
         Result has no rows (only its span, messages and parameters). An interrupted run (an exception,
         Ctrl-C) closes the sinks as incomplete with every row of the finished chunks, then raises.
         ``deadline`` (a ``time.perf_counter()`` value): past it the run stops with :class:`SimulationTimeout`.
+        ``until`` (with ``keep`` False): asked once the sinks have every row so far -- e.g. "is the work done?" --
+        whenever the record window is full, and when one of the ``watch`` outputs (a done signal, an alarm) changed,
+        looked at every ``check_interval`` s of simulated time (default ``CHECK_INTERVAL``); its first non-empty
+        answer ends the run there, a complete run (``Result.ended_by`` says why).
         """
         if stop_time is not None and not math.isfinite(float(stop_time)):
             raise SystemDefinitionError(f"stop time = {stop_time!r}: a run needs a finite stop time "
@@ -170,7 +181,11 @@ class Master:
         session = self.open_session(stop_time, step_size, start_values, inputs, start_time, record,
                                     output_interval, sinks, keep=keep)
         try:
-            session.run_to_stop(progress, deadline)
+            every = 0
+            if until is not None:
+                every = max(1, int(round((CHECK_INTERVAL if check_interval is None else check_interval)
+                                         / session.step_size)))
+            work_ended = session.run_to_stop(progress, deadline, until, every, watch)
         except TerminationRequested as ended:
             # an FMU asked to end (fmi2Discard + terminateSimulation): the run ends cleanly at the last whole step
             # (the execution has made the step whole where the FMU had: Execution._end_where_asked)
@@ -181,6 +196,10 @@ class Master:
         except BaseException as err:
             session.close(complete=False, reason=str(err) or type(err).__name__)
             raise
+        if work_ended:
+            result = session.close(reason=work_ended)
+            result.ended_by = work_ended
+            return result
         return session.close()
 
     def open_session(self, stop_time: float | None = None, step_size: float | None = None,

@@ -107,15 +107,35 @@ class Session:
         leaves the session failed (close it)."""
         self._advance(n)
 
-    def run_to_stop(self, progress: Callable[[float], None] | None = None, deadline: float | None = None) -> None:
+    def run_to_stop(self, progress: Callable[[float], None] | None = None, deadline: float | None = None,
+                    until: Callable[[], str] | None = None, check_every: int = 0,
+                    watch: Sequence[str] = ()) -> str:
         """Run to the stop time; ``progress(fraction)`` is called as it goes, and past ``deadline`` (a
-        ``time.perf_counter()`` value) the run stops with :class:`~ncfmu.errors.SimulationTimeout`."""
+        ``time.perf_counter()`` value) the run stops with :class:`~ncfmu.errors.SimulationTimeout`.
+
+        ``until`` (a session that keeps no rows): asked after the sinks got every row so far -- whenever the record
+        window is full, and when one of the ``watch`` outputs (``INSTANCE.VARIABLE``) changed, looked at every
+        ``check_every`` steps; its first non-empty answer ends the run there, and is returned ("": the run reached
+        the stop time)."""
         if self.run.n_steps is None:
             raise SystemDefinitionError("run_to_stop(): this session has no stop time (advance it instead)")
-        self._advance(self.run.n_steps - self.run.step, progress, deadline)
+        if until is not None and (self.keep or check_every < 1):
+            raise SystemDefinitionError("run_to_stop(until=...): needs a session that keeps no rows (its sinks read "
+                                        f"them) and check_every >= 1 step, got keep={self.keep}, "
+                                        f"check_every={check_every}")
+        slots = []
+        for name in watch:
+            kind = next((k for k in KINDS if name in self.run.record_names[k]), None)
+            if kind is None:
+                raise SystemDefinitionError(f"run_to_stop(watch=...): {name!r} is not an output of "
+                                            f"{self.master.system.name}")
+            slots.append((kind, self.run.record_names[kind].index(name)))
+        self._advance(self.run.n_steps - self.run.step, progress, deadline, until, check_every, slots)
+        return self.run.ended
 
     def _advance(self, n: int, progress: Callable[[float], None] | None = None,
-                 deadline: float | None = None) -> None:
+                 deadline: float | None = None, until: Callable[[], str] | None = None,
+                 check_every: int = 0, watch: Sequence[tuple[str, int]] = ()) -> None:
         self._usable()
         n = int(n)
         if n < 0:
@@ -125,7 +145,7 @@ class Session:
             raise SystemDefinitionError(f"advance({n}): {run.n_steps - run.step} steps are left before the stop "
                                         f"time {run.stop_time:g} s")
         try:
-            self.wall_time += run.steps(run.step, run.step + n, progress, deadline)
+            self.wall_time += run.steps(run.step, run.step + n, progress, deadline, until, check_every, watch)
         except BaseException as err:
             self.failed = err
             raise

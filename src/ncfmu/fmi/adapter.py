@@ -86,7 +86,7 @@ class ControllerSlave(Fmi2Slave):
         try:
             self.logic = self.logic_class.from_parameters(self.parameters)
         except Exception as err:               # ConfigError names the rule; anything else is a value no rule foresaw
-            text = str(err) if isinstance(err, ConfigError) else f"the parameters cannot be used: {err!r}"
+            text = err.in_words() if isinstance(err, ConfigError) else f"the parameters cannot be used: {err!r}"
             self.log(f"{self.instance_name}: parameter refused: {text}", Fmi2Status.error)
             return STATUS["ERROR"]             # the instance lives on: the host may reset and try again
         self.out = self.logic.outputs()

@@ -87,20 +87,26 @@ HEADER_NAME = "ncfmu_contract.h"
 
 
 def split_state(serialized: bytes) -> tuple[bytes, int, float]:
-    """An FMU's serialized state -> (the slave's bytes, the state's phase, its time); ValueError without the
-    trailer."""
+    """An FMU's serialized state -> (the slave's bytes, the state's phase, its time); ValueError when its seal
+    (:mod:`ncfmu.fmi.sealed_state`) does not hold or the trailer is missing."""
     import struct
-    data, trailer = bytes(serialized[:-STATE_TRAILER_SIZE]), bytes(serialized[-STATE_TRAILER_SIZE:])
-    if len(serialized) < STATE_TRAILER_SIZE or not trailer.startswith(STATE_TRAILER):
+
+    from .sealed_state import unseal
+    inner = unseal(serialized).payload
+    data, trailer = inner[:-STATE_TRAILER_SIZE], inner[-STATE_TRAILER_SIZE:]
+    if len(inner) < STATE_TRAILER_SIZE or not trailer.startswith(STATE_TRAILER):
         raise ValueError("not a state serialized by an ncfmu Python FMU (no trailer)")
     phase, time = struct.unpack("=id", trailer[len(STATE_TRAILER):])
     return data, phase, time
 
 
-def join_state(data: bytes, time: float, phase: int = PHASE["STEP"]) -> bytes:
-    """The inverse of :func:`split_state` (for tests that edit a state's bytes)."""
+def join_state(data: bytes, time: float, phase: int = PHASE["STEP"], *, model: str, fmi: int = 2) -> bytes:
+    """The inverse of :func:`split_state`, sealed as the FMI ``fmi`` build of ``model`` seals it (for tests that
+    edit a state's bytes)."""
     import struct
-    return bytes(data) + STATE_TRAILER + struct.pack("=id", phase, time)
+
+    from .sealed_state import seal
+    return seal(bytes(data) + STATE_TRAILER + struct.pack("=id", phase, time), model, fmi)
 
 
 def entry(macro: str) -> Entry:

@@ -6,7 +6,11 @@
      "parameters": {...}, "inputs": {...}, "logic": {<attribute>: <value>, ...} | null}
 
 ``build`` is the digest of the ncfmu copy the FMU carries (``resources/ncfmu_<digest>``), so a state
-is accepted only by the same model of the same build. Values are JSON; what JSON cannot say is tagged:
+is accepted only by the same model of the same build. The FMU's binary appends the state's phase and time
+(:mod:`.contract`) and seals the whole as every ncfmu FMU state is (:mod:`.sealed_state`: a format version, the
+FMI version and the model that made it, a CRC-32): what reaches :func:`loads` passed the seal.
+
+Values are JSON; what JSON cannot say is tagged:
 ``{"f": "nan"|"inf"|"-inf"}`` for non-finite floats, ``{"t": [...]}`` for tuples, ``{"d": [[k, v], ...]}``
 for dicts whose keys are not all strings, ``{"a": [...], "dtype": ..., "shape": [...]}`` for numpy arrays
 and ``{"o": "controllers.motion:LinearMove", "v": {...}}`` for objects of ncfmu's own classes.

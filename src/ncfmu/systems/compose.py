@@ -9,6 +9,10 @@ from ..controllers.base import Controller
 from ..cosim.ssp import Component, Connection
 from ..errors import ConfigError, SystemDefinitionError
 
+#: The operator panel's parameter that repeats its buttons (a soak): a system with it > 0 is never done
+#: (:attr:`~ncfmu.systems.report.Report.repeats`).
+REPEATS = "panel.repeat_every"
+
 #: Model name -> its logic class (the catalogue: every model ncfmu builds).
 MODELS: dict[str, type[Controller]] = models()
 

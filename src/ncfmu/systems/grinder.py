@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..cosim.ssp import System
-from .compose import component, table, wire
+from .compose import REPEATS, component, table, wire
 from .part import GrindPart
 from .report import Axes, Envelope, FeedCycle, Plane, Report
 
@@ -23,7 +23,7 @@ ENVELOPE_PROGRAM = ("M0: Y+D1F7; M1: X+D2F7; M2: X+D3F1; M3: T1; M4: X-D4F7; M5:
                     "M41: XF7S1; M42: YF7S1; M43: END; M45: X+D5F2S4; M46: END")
 
 FEED_REPORT = Report((FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"), Axes(("x_axis",)),
-                      GrindPart(feed="feed", x="x_axis")))
+                      GrindPart(feed="feed", x="x_axis")), repeats=REPEATS)
 ENVELOPE_REPORT = Report(
     (FeedCycle(feed="feed", x="x_axis", hold="panel.feed_hold"),
      Envelope(limiter="limiter", ref="y_axis", lim="x_axis", region_names=("dresser", "headstock", "work",
@@ -31,7 +31,8 @@ ENVELOPE_REPORT = Report(
      Axes(("x_axis", "y_axis")),
      GrindPart(feed="feed", x="x_axis")),
     Plane(horizontal="y_axis", vertical="x_axis", title="wheel path in the Y-X plane with the limit envelope",
-          xlabel="Y (table) [mm]", ylabel="X (infeed) [mm]", path_label="wheel (actual)"))
+          xlabel="Y (table) [mm]", ylabel="X (infeed) [mm]", path_label="wheel (actual)"),
+    repeats=REPEATS)
 
 _PANEL_TO_FEED = ("panel.start -> feed.start", "panel.wear_start -> feed.wear_start",
                   "panel.emergency -> feed.emergency", "panel.feed_hold -> feed.feed_hold",

@@ -1,11 +1,11 @@
 """The lathe systems: operator panel -> cut sequencer -> area limiter -> X and Z servos; the sequencer's spindle
 commands (a program's S, M03/M04/M05, G96) drive the spindle, whose actual speed the sequencer reads back (the
-speed-arrival wait, feed per revolution)."""
+speed-arrival wait, feed per revolution) and whose encoder angle a thread's Z follows (spindle.revolutions)."""
 
 from __future__ import annotations
 
 from ..cosim.ssp import System
-from .compose import blocks, component, table, wire
+from .compose import REPEATS, blocks, component, table, wire
 from .part import LathePart
 from .report import Axes, Envelope, LatheCycle, Plane, Report
 
@@ -22,7 +22,8 @@ REPORT = Report(
      Axes(("x_axis", "z_axis")),
      LathePart(seq="seq", x="x_axis", z="z_axis", limiter="limiter", spindle="spindle")),
     Plane(horizontal="z_axis", vertical="x_axis", title="tool path in the X-Z plane", xlabel="Z [mm]",
-          ylabel="X (radius) [mm]"))
+          ylabel="X (radius) [mm]"),
+    repeats=REPEATS)
 
 
 def _lathe(name: str, description: str, stop_time: float, program: dict[str, object]) -> System:
@@ -50,7 +51,7 @@ def _lathe(name: str, description: str, stop_time: float, program: dict[str, obj
             "z_axis.pos -> seq.z_pos", "z_axis.in_position -> seq.z_in_position",
             "x_axis.pos -> limiter.lim_pos", "z_axis.pos -> limiter.ref_pos",
             "seq.s_cmd -> spindle.speed_cmd", "seq.spindle_dir -> spindle.direction",
-            "spindle.speed -> seq.spindle_speed",
+            "spindle.speed -> seq.spindle_speed", "spindle.revolutions -> seq.revolutions",
         ),
         stop_time=stop_time,
     )

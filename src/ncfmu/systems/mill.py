@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..cosim.ssp import System
-from .compose import component, points, wire
+from .compose import REPEATS, component, points, wire
 from .part import MillPart
 from .report import Axes, ContourCycle, Plane, Report
 
@@ -14,7 +14,8 @@ REPORT = Report(
     (ContourCycle(contour="contour", x="x_axis", y="y_axis"), Axes(("x_axis", "y_axis")),
      MillPart(contour="contour", x="x_axis", y="y_axis")),
     Plane(horizontal="x_axis", vertical="y_axis", title="contour in the X-Y plane", xlabel="X [mm]",
-          ylabel="Y [mm]", path_label="cutter centre (actual)", equal_aspect=True))
+          ylabel="Y [mm]", path_label="cutter centre (actual)", equal_aspect=True),
+    repeats=REPEATS)
 
 
 def mill_contour() -> System:

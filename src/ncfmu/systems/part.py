@@ -48,6 +48,7 @@ from ..machining import (
 from ..machining.removal import BLADE, INSERT_ANGLE, Forbidden
 from ..ports import to_float, to_int
 from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
+from .threads import ThreadJudge, ThreadResult, thread_judge
 
 #: The default tolerance of the part against the programmed part (mm): ``--tolerance``.
 TOLERANCE = 0.01
@@ -78,6 +79,8 @@ class PartSettings:
     tolerance: float = TOLERANCE
     nose_radius: float | None = None
     max_depth: float | None = None
+    drawing: Any = None       # the part drawn (a systems.drawing.Drawing, --drawing): judged against in place of
+                              # the programmed part
 
 
 @dataclass
@@ -98,6 +101,7 @@ class PartVerdict:
     numbers: dict[int, int] = field(default_factory=dict, repr=False)   # text line -> its block's N number
     made: Any = field(default=None, repr=False)          # the part as made (a shapely geometry), for the plot
     programmed: Any = field(default=None, repr=False)    # the programmed part
+    threads: list[ThreadResult] = field(default_factory=list)   # the program's threads (systems/threads.py)
 
     @property
     def crashed(self) -> bool:
@@ -106,7 +110,7 @@ class PartVerdict:
     @property
     def within_tolerance(self) -> bool | None:
         """False on a crash or a part out of tolerance; None when the part was not judged (and nothing crashed)."""
-        if self.crashed:
+        if self.crashed or any(t.cross_threaded for t in self.threads):
             return False
         if self.judged:
             return None
@@ -121,7 +125,8 @@ class PartVerdict:
                 "max_left_mm": number(self.max_left_mm), "max_gouge_mm": number(self.max_gouge_mm),
                 "tolerance_mm": self.tolerance_mm, "within_tolerance": self.within_tolerance,
                 "left_at": self._where(self.left_at, self.left_line),
-                "gouge_at": self._where(self.gouge_at, self.gouge_line), "not_judged": self.judged or None}
+                "gouge_at": self._where(self.gouge_at, self.gouge_line), "not_judged": self.judged or None,
+                "threads": [t.as_json() for t in self.threads]}
 
     def _where(self, at: tuple[float, float] | None, line: int) -> dict[str, object] | None:
         if at is None:
@@ -162,7 +167,7 @@ class PartVerdict:
             gouge = (f"gouge {self.max_gouge_mm:.4f} mm{self._place(self.gouge_at, self.gouge_line)}"
                      if self.max_gouge_mm > self.tolerance_mm else f"gouge <= {self.max_gouge_mm:.4f} mm")
             lines.append(f"  part: OUT OF TOLERANCE {tol}: {left}, {gouge}")
-        return lines
+        return lines + [t.summary() for t in self.threads]
 
     def metrics(self) -> dict[str, float]:
         within = self.within_tolerance
@@ -214,6 +219,7 @@ class _PartCheckAccumulator(_Judging):
         self.setup = part.setup(parameters)
         self.done = FirstTime()
         self._verdict: PartVerdict | None = None
+        self.threads = part.threads(parameters)
 
     def write(self, rows: np.ndarray) -> None:
         super().write(rows)
@@ -225,11 +231,15 @@ class _PartCheckAccumulator(_Judging):
         standing = p.standing(rows) if self.setup.spindle_checked else None
         self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing, p.tools(rows))
         self.done.write(rows["time"], rows[p.done_column()])
+        if self.threads is not None:
+            self.threads.write(rows)
         self._verdict = None
 
     def verdict(self) -> PartVerdict:
         if self._verdict is None:
             self._verdict = self.part.judge(self.setup, finished=not math.isnan(self.done.value))
+            if self.threads is not None:
+                self._verdict.threads = self.threads.results()
         return self._verdict
 
 
@@ -265,6 +275,10 @@ class MachinedPart(PartCheck):
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _PartCheckAccumulator(self, parameters)
+
+    def threads(self, parameters: Parameters) -> ThreadJudge | None:
+        """The judge of the program's threads (systems/threads.py); None: nothing threads."""
+        return None
 
     def judge(self, setup: Setup, finished: bool) -> PartVerdict:
         m = setup.removal
@@ -314,12 +328,20 @@ class LathePart(MachinedPart):
 
     def variables(self) -> tuple[str, ...]:
         spindle = (f"{self.spindle}.speed", f"{self.seq}.s_cmd", f"{self.seq}.spindle_dir") if self.spindle else ()
+        threads = (f"{self.seq}.threading", f"{self.spindle}.revolutions") if self.spindle else ()
         return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done", "tool")), f"{self.x}.pos", f"{self.z}.pos",
-                *spindle)
+                *spindle, *threads)
 
     def tools(self, rows: np.ndarray) -> np.ndarray | None:
         """The turret station at work (the sequencer's ``tool`` output: the T word in force)."""
         return rows[f"{self.seq}.tool"]
+
+    def threads(self, parameters: Parameters) -> ThreadJudge | None:
+        if self.spindle is None:
+            return None
+        from ..controllers.sequencer import CutSequencer
+        seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
+        return thread_judge(seq, self.seq, self.x, self.z, self.spindle, self.settings.tolerance)
 
     def standing(self, rows: np.ndarray) -> np.ndarray | None:
         """The spindle stands: |actual speed| below STANDSTILL_RPM and below STANDSTILL_FRACTION of the speed
@@ -404,10 +426,19 @@ class LathePart(MachinedPart):
         default = cutters.pop(0)
         removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        if program.strip() and not profiles:
+        if program.strip() and not profiles and self.settings.drawing is None:
             return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                          spindle_checked=spindle, numbers=numbers)
         programmed, lines = programmed_lathe_part(stock, seq, profiles, inside)
+        if self.settings.drawing is not None:
+            from shapely.geometry import LineString
+
+            from ..controllers.gcode import Move
+            from .drawing import lathe_part
+            programmed = lathe_part(self.settings.drawing, stock)
+            if program.strip() and not lines:       # no profile: where the part is off, the nearest cut's line
+                lines = [(LineString(_elements_polyline([op.element])), op.line) for op in ops
+                         if isinstance(op, Move) and not op.rapid]
         return Setup(removal, programmed, anchor, lines, spindle_checked=spindle, numbers=numbers)
 
 
@@ -553,6 +584,8 @@ class MillPart(MachinedPart):
         outline = _elements_polyline(elements) if elements else []
         closed = len(outline) > 3 and math.dist(outline[0], outline[-1]) < 1e-6
         part = Polygon(outline).buffer(0) if closed else None
+        if self.settings.drawing is not None:
+            part = self.settings.drawing.outline
         if part is None or part.is_empty:
             xs = [p[0] for p in outline] or [c.x_start]
             ys = [p[1] for p in outline] or [c.y_start]

@@ -8,7 +8,8 @@ instances of other models are not judged):
   ``wear_start_at`` on ``wear_start``, ``emergency_at`` on ``emergency``, ``hold_at`` and ``release_at`` on
   ``feed_hold``, ``override`` on ``feed_override``, ``mfin_delay`` (and the input ``m_active``) on ``mfin``,
   ``pulse`` on the three push buttons. When no connection starts at any of those outputs, the setting
-  reaches nothing (``panel.emergency_at`` in a lathe system, whose sequencer has no EMB input).
+  reaches nothing (``panel.emergency_at`` in a lathe system, whose sequencer has no EMB input). A system of one
+  instance (a bare FMU run alone) records what its outputs say: they are the result, each one read.
 - A parameter its model's ``unread`` names for the run's parameter set (the system's, with the run's
   settings on top) reaches nothing: an entry ``<head>[k].<field>`` of a counted table beyond its count
   ``n_<head>s`` (the CutSequencer's ``block[k]``, the AreaLimiter's ``region[k]``, the ContourInterpolator's
@@ -45,6 +46,8 @@ def unreached(system: System, values: Mapping[str, object]) -> dict[str, str]:
             if why:
                 out[qualified] = f"{inst} {why}: {qualified} changes nothing"
                 continue
+        if len(instances) == 1:
+            continue            # a bare FMU run alone: its outputs are the run's result, so each one is read
         outputs = logic.ACTS_ON.get(var, tuple(p.name for p in logic.ports("output")))
         if not any((inst, o) in read for o in outputs):
             acts = ", ".join(f"{inst}.{o}" for o in outputs)

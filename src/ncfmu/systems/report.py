@@ -148,6 +148,12 @@ class Part:
         """The part's alarm output, if it has one."""
         return None
 
+    @property
+    def done(self) -> str | None:
+        """The output that says the part's cycle is done (its accumulator's :meth:`PartAccumulator.finished` reads
+        it; a run ends there, :func:`~ncfmu.systems.outcome.halted`); None: the part has no cycle."""
+        return None
+
     def alarmed(self, result) -> bool:
         return self.alarm is not None and bool(result[self.alarm].any())
 
@@ -222,6 +228,12 @@ class LatheCycle(Part):
     @property
     def alarm(self) -> str | None:
         return f"{self.seq}.alarm"
+
+    @property
+    def done(self) -> str | None:
+        """The sequencer's ``done``: set when the last block (the registers' last pass) or the program (M30/M02)
+        has finished."""
+        return f"{self.seq}.done"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _LatheAccumulator(self, self.x_written(parameters))
@@ -302,7 +314,7 @@ class _LatheAccumulator(PartAccumulator):
             self.cut = True
             self.x_cut = float(np.minimum(self.x_cut, x[cut].min()))
             self.z_cut = float(np.minimum(self.z_cut, z[cut].min()))
-        self.done.write(rows["time"], rows[f"{p.seq}.done"])
+        self.done.write(rows["time"], rows[p.done])
         self.sub, self.x, self.z = int(sub[-1]), float(x[-1]), float(z[-1])
 
     def summary(self) -> list[str]:
@@ -344,6 +356,12 @@ class FeedCycle(Part):
     @property
     def alarm(self) -> str | None:
         return f"{self.feed}.alarm"
+
+    @property
+    def done(self) -> str | None:
+        """The feed's ``run`` (RUN): the cycle is done when RUN -- and the emergency return, if one ran -- fell
+        after it ran (the program's END after the return)."""
+        return f"{self.feed}.run"
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         from ..controllers.feed import ProgrammableFeed
@@ -396,7 +414,7 @@ class _FeedAccumulator(PartAccumulator):
         p = self.part
         x = rows[f"{p.x}.pos"]
         self.deepest = float(np.maximum(self.deepest, x.max()))
-        run, emergency = rows[f"{p.feed}.run"].astype(bool), rows[f"{p.feed}.emergency_active"].astype(bool)
+        run, emergency = rows[p.done].astype(bool), rows[f"{p.feed}.emergency_active"].astype(bool)
         self.ended.write(rows["time"], run | emergency)
         self.x, self.counter = float(x[-1]), float(rows[f"{p.feed}.return_counter_x"][-1])
         self.emergencies += int(np.count_nonzero(emergency & ~np.concatenate(([self.emergency], emergency[:-1]))))
@@ -553,6 +571,11 @@ class ContourCycle(Part):
     def alarm(self) -> str | None:
         return f"{self.contour}.alarm"
 
+    @property
+    def done(self) -> str | None:
+        """The interpolator's ``done``: set at the contour's end (the last segment or program line finished)."""
+        return f"{self.contour}.done"
+
     def interpolator(self, parameters: Parameters):
         """The interpolator the run used (its tool path and contour), from the run's parameters."""
         from ..controllers.contour import ContourInterpolator
@@ -607,7 +630,7 @@ class _ContourAccumulator(PartAccumulator):
             self.on = True
             best = path_distance(rows[f"{p.x}.pos"][on], rows[f"{p.y}.pos"][on], self.path)
             self.error = float(np.maximum(self.error, best.max()))
-        self.done.write(rows["time"], rows[f"{p.contour}.done"])
+        self.done.write(rows["time"], rows[p.done])
         self.segment = int(segment[-1])
 
     def summary(self) -> list[str]:
@@ -697,6 +720,22 @@ class Report:
 
     parts: tuple[Part, ...]
     plane: Plane | None = None
+    #: the parameter (INSTANCE.VARIABLE) that, when > 0, starts the cycle again and again (a soak's
+    #: ``panel.repeat_every``): such a run is never done, it runs to its stop time
+    repeats: str = ""
+
+    def done_signals(self) -> tuple[str, ...]:
+        """The outputs that say this system's work is done (every part's with a cycle); (): none, the run goes to
+        its stop time."""
+        return tuple(p.done for p in self.parts if p.done is not None)
+
+    def ends_when_done(self, parameters: Parameters) -> bool:
+        """A run with ``parameters`` ends where its work ends: the system has a done signal and does not repeat."""
+        if not self.done_signals():
+            return False
+        instance, _, name = self.repeats.partition(".")
+        period = parameters.get(instance, {}).get(name) if self.repeats else None
+        return period is None or not to_float(period) > 0
 
     @property
     def axes(self) -> tuple[str, ...]:

@@ -22,6 +22,7 @@
 #include "fmi2Functions.h"
 #include "fmi2_machine.h"
 #include "fmi2_model.h"
+#define FMU_FMI_MAJOR 2                 /* the FMI version its serialized states are sealed with */
 #include "fmu_instance.h"
 
 _Static_assert(sizeof(fmi2Integer) == sizeof(int) && sizeof(fmi2Boolean) == sizeof(int)

@@ -18,6 +18,7 @@
 #include "fmi3Functions.h"
 #include "fmi2_machine.h"
 #include "fmi2_model.h"
+#define FMU_FMI_MAJOR 3                 /* the FMI version its serialized states are sealed with */
 #include "fmu_instance.h"
 
 _Static_assert((int)fmi3OK == FMU_OK && (int)fmi3Warning == FMU_WARNING && (int)fmi3Error == FMU_ERROR

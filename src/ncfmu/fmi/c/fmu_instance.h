@@ -313,6 +313,126 @@ static FMI2_UNUSED int fmu_free_state(void *c, const char *call, void **s)
     return FMU_OK;
 }
 
+/* ---- serialized FMU states: the model's bytes, sealed ------------------------------------------------
+ * Whatever a model serializes (native_model.c's plain data, python_model.c's JSON from fmi/state.py) leaves the
+ * FMU sealed by this layer, and comes back only through the seal:
+ *
+ *   "ncfmu-st" | u32 seal format version | u32 FMI major version (2, 3) | model identifier [64], NUL-padded |
+ *   u64 size of the model's bytes | the model's bytes | u32 CRC-32 of every byte before it
+ *
+ * integers little-endian; the CRC-32 is IEEE 802.3's (reflected polynomial 0xEDB88320, as zlib's crc32, which
+ * src/ncfmu/fmi/sealed_state.py uses for the same format). The CRC finds every single-bit flip and every burst
+ * of up to 32 bits; it is computed at serialization and deserialization only, never per step. A state is refused
+ * (the call returns Error, naming why) when its seal format version, checksum, model or FMI version is not this
+ * FMU's: a state made by the FMI 2.0 build of a model is not one of its FMI 3.0 build (their modelDescriptions,
+ * state machines and calls differ), and they do not exchange states. */
+#ifndef FMU_FMI_MAJOR
+#error "the FMI layer defines FMU_FMI_MAJOR (2 or 3) before it includes fmu_instance.h"
+#endif
+#define FMU_SEAL_MAGIC "ncfmu-st"
+#define FMU_SEAL_MAGIC_SIZE 8
+#define FMU_SEAL_VERSION 1u
+#define FMU_SEAL_MODEL_SIZE 64
+#define FMU_SEAL_HEADER_SIZE (FMU_SEAL_MAGIC_SIZE + 4 + 4 + FMU_SEAL_MODEL_SIZE + 8)
+#define FMU_SEAL_SIZE (FMU_SEAL_HEADER_SIZE + 4)        /* what the seal adds to the model's bytes */
+
+static uint32_t fmu_crc_table[256];
+static pthread_once_t fmu_crc_once = PTHREAD_ONCE_INIT;
+
+static void fmu_crc_init(void)
+{
+    for (uint32_t n = 0; n < 256; n++) {
+        uint32_t c = n;
+        for (int k = 0; k < 8; k++) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+        fmu_crc_table[n] = c;
+    }
+}
+
+/* The CRC-32 of ``n`` bytes (zlib's crc32(bytes)). */
+static FMI2_UNUSED uint32_t fmu_crc32(const unsigned char *bytes, size_t n)
+{
+    pthread_once(&fmu_crc_once, fmu_crc_init);
+    uint32_t c = 0xFFFFFFFFu;
+    for (size_t k = 0; k < n; k++) c = fmu_crc_table[(c ^ bytes[k]) & 0xFFu] ^ (c >> 8);
+    return c ^ 0xFFFFFFFFu;
+}
+
+static void fmu_put_le(unsigned char *at, uint64_t x, int bytes)
+{
+    for (int k = 0; k < bytes; k++) at[k] = (unsigned char)(x >> (8 * k));
+}
+
+static uint64_t fmu_get_le(const unsigned char *at, int bytes)
+{
+    uint64_t x = 0;
+    for (int k = 0; k < bytes; k++) x |= (uint64_t)at[k] << (8 * k);
+    return x;
+}
+
+/* The seal's header of this FMU for ``payload`` bytes of the model's. */
+static void fmu_seal_header(unsigned char *h, uint64_t payload)
+{
+    memset(h, 0, FMU_SEAL_HEADER_SIZE);
+    memcpy(h, FMU_SEAL_MAGIC, FMU_SEAL_MAGIC_SIZE);
+    fmu_put_le(h + 8, FMU_SEAL_VERSION, 4);
+    fmu_put_le(h + 12, FMU_FMI_MAJOR, 4);
+    snprintf((char *)h + 16, FMU_SEAL_MODEL_SIZE, "%s", FMU_MODEL_IDENTIFIER);
+    fmu_put_le(h + 16 + FMU_SEAL_MODEL_SIZE, payload, 8);
+}
+
+/* The model's bytes of a sealed state, or NULL with ``why`` (text for the log, in ``buf``) when the seal is not
+ * this FMU's: too short, not sealed, another seal format, its size, its checksum, another model, another FMI
+ * version -- checked in this order (the magic and the format version say how to read the rest). */
+static const unsigned char *fmu_unseal(const unsigned char *b, size_t size, size_t *payload, char *buf,
+                                       size_t buf_size)
+{
+    if (size < FMU_SEAL_SIZE) {
+        snprintf(buf, buf_size, "too short to be an FMU state of this FMU (a sealed state has at least %d bytes)",
+                 FMU_SEAL_SIZE);
+        return NULL;
+    }
+    if (memcmp(b, FMU_SEAL_MAGIC, FMU_SEAL_MAGIC_SIZE) != 0) {
+        snprintf(buf, buf_size, "not an ncfmu FMU state (no \"" FMU_SEAL_MAGIC "\" seal)");
+        return NULL;
+    }
+    uint64_t version = fmu_get_le(b + 8, 4), fmi = fmu_get_le(b + 12, 4);
+    uint64_t n = fmu_get_le(b + 16 + FMU_SEAL_MODEL_SIZE, 8);
+    if (version != FMU_SEAL_VERSION) {
+        snprintf(buf, buf_size, "seal format version %llu; this FMU reads version %u", (unsigned long long)version,
+                 FMU_SEAL_VERSION);
+        return NULL;
+    }
+    if (n != size - FMU_SEAL_SIZE) {
+        snprintf(buf, buf_size, "its seal holds %llu bytes of state, the bytes given %zu", (unsigned long long)n,
+                 size - FMU_SEAL_SIZE);
+        return NULL;
+    }
+    uint32_t stored = (uint32_t)fmu_get_le(b + size - 4, 4), computed = fmu_crc32(b, size - 4);
+    if (stored != computed) {
+        snprintf(buf, buf_size, "checksum mismatch (CRC-32 %08x stored, %08x computed): the bytes were changed "
+                 "after they were serialized", stored, computed);
+        return NULL;
+    }
+    const char *model = (const char *)b + 16;
+    size_t len = strnlen(model, FMU_SEAL_MODEL_SIZE);
+    int named = len > 0 && len < FMU_SEAL_MODEL_SIZE;
+    for (size_t k = 0; k < len && named; k++)
+        named = (model[k] >= 'A' && model[k] <= 'Z') || (model[k] >= 'a' && model[k] <= 'z')
+                || (model[k] >= '0' && model[k] <= '9') || model[k] == '_';
+    if (!named || strcmp(model, FMU_MODEL_IDENTIFIER) != 0) {
+        snprintf(buf, buf_size, "a state of model %.*s, not of this %s FMU", named ? (int)len : 18,
+                 named ? model : "(not a model name)", FMU_MODEL_IDENTIFIER);
+        return NULL;
+    }
+    if (fmi != FMU_FMI_MAJOR) {
+        snprintf(buf, buf_size, "a state of the FMI %llu.0 build of %s; this is its FMI %d.0 build (states do not "
+                 "cross FMI versions)", (unsigned long long)fmi, FMU_MODEL_IDENTIFIER, FMU_FMI_MAJOR);
+        return NULL;
+    }
+    *payload = (size_t)n;
+    return b + FMU_SEAL_HEADER_SIZE;
+}
+
 static FMI2_UNUSED int fmu_state_size(void *c, const char *call, void *s, size_t *size)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
@@ -322,7 +442,10 @@ static FMI2_UNUSED int fmu_state_size(void *c, const char *call, void *s, size_t
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the size pointer is NULL", call);
         return FMU_ERROR;
     }
-    return fmu_model_serialize(i->model, call, state->model, state->phase, state->time, size) ? FMU_OK : FMU_ERROR;
+    size_t payload = 0;
+    if (!fmu_model_serialize(i->model, call, state->model, state->phase, state->time, &payload)) return FMU_ERROR;
+    *size = payload + FMU_SEAL_SIZE;
+    return FMU_OK;
 }
 
 static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigned char b[], size_t size)
@@ -330,16 +453,19 @@ static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigne
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
     if (!state) return FMU_ERROR;
-    size_t needed = 0;
+    size_t payload = 0;
     const unsigned char *bytes = fmu_model_serialize(i->model, call, state->model, state->phase, state->time,
-                                                     &needed);
+                                                     &payload);
     if (!bytes) return FMU_ERROR;
+    size_t needed = payload + FMU_SEAL_SIZE;
     if (!b || size < needed) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %s (%zu bytes given, %zu needed)", call,
                  !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
         return FMU_ERROR;
     }
-    memcpy(b, bytes, needed);
+    fmu_seal_header(b, payload);
+    memcpy(b + FMU_SEAL_HEADER_SIZE, bytes, payload);
+    fmu_put_le(b + needed - 4, fmu_crc32(b, needed - 4), 4);
     return FMU_OK;
 }
 
@@ -352,9 +478,17 @@ static FMI2_UNUSED int fmu_deserialize(void *c, const char *call, const unsigned
                  !s ? "FMU-state pointer" : "byte array");
         return FMU_ERROR;
     }
+    char why[256];
+    size_t payload = 0;
+    const unsigned char *bytes = fmu_unseal(b, size, &payload, why, sizeof why);
+    if (!bytes) {
+        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
+        *s = NULL;
+        return FMU_ERROR;
+    }
     int phase = -1;
     double time = 0.0;
-    void *model = fmu_model_deserialize(i->model, call, b, size, &phase, &time);
+    void *model = fmu_model_deserialize(i->model, call, bytes, payload, &phase, &time);
     if (!model) { *s = NULL; return FMU_ERROR; }   /* refused: the reason is in the log */
     if (phase != P_INSTANTIATED && phase != P_INIT && phase != P_STEP && phase != P_TERMINATED) {
         FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the state's phase (%d) is not one a state is taken in",
