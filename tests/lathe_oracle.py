@@ -236,10 +236,11 @@ RECORD = ("x_cmd", "z_cmd", "x_vff", "z_vff", "subcycle", "pass_no", "sigma_x", 
 
 
 def run_ideal(seq, dt: float = 1e-3, limit: int = 1_000_000, events=None) -> dict[str, np.ndarray]:
-    """Press START and step the sequencer until done (the axes stand where commanded, always in position).
-    ``events(k, inputs)`` may change the inputs before step ``k``. Returns every output per step, and ``t``."""
+    """Press START and step the sequencer until done (the axes stand where commanded, always in position; the
+    spindle turns at the speed commanded). ``events(k, inputs)`` may change the inputs before step ``k``. Returns
+    every output per step, and ``t``."""
     inputs = {"start": True, "feed_hold": False, "feed_override": 1.0, "x_pos": seq.x_cmd, "z_pos": seq.z_cmd,
-              "x_in_position": True, "z_in_position": True, "alarm_in": False}
+              "x_in_position": True, "z_in_position": True, "alarm_in": False, "spindle_speed": 0.0}
     rows = []
     for k in range(limit):
         if events is not None:
@@ -247,6 +248,7 @@ def run_ideal(seq, dt: float = 1e-3, limit: int = 1_000_000, events=None) -> dic
         out = seq.step(k * dt, dt, inputs)
         inputs["start"] = False
         inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+        inputs["spindle_speed"] = out["s_cmd"] * out["spindle_dir"]
         rows.append(tuple(out[name] for name in RECORD))
         if out["done"]:
             break

@@ -763,8 +763,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="the part check's tolerance of the part made against the programmed part, mm (default "
                         "0.01); exit status 3 on a crash or a part out of tolerance")
     p.add_argument("--nose-radius", type=_real_option, default=None, metavar="MM",
-                   help="the lathe tool's nose radius for the part check, mm (default: the tool table's "
-                        "seq.tool[k].nose_radius of the program's first T word, else 0: a sharp point)")
+                   help="the lathe tools' nose radius for the part check, every tool's, mm (default: each tool's "
+                        "seq.tool[k].nose_radius, the row its T word names, else 0: a sharp corner)")
     p.add_argument("--max-depth", type=_real_option, default=None, metavar="MM",
                    help="the deepest cut (radial engagement) the lathe tool may take, mm (default: the tool "
                         "table's seq.tool[k].max_depth, else no limit)")

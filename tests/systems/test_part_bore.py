@@ -91,7 +91,7 @@ def test_a_rapid_into_the_bores_wall_is_a_crash_named_by_its_line(ncfmu_run, tmp
                  str(tmp_path)])
     assert code == EXIT_PART_REJECTED
     out = capsys.readouterr().out
-    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong}: rapid into the stock, 5" in out
+    assert f"  part: CRASH at t = {crashes[0].t:.3f} s, line {wrong} (N52): rapid into the stock, 5" in out
     written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
     assert written["within_tolerance"] is False and written["crashes"][0]["line"] == wrong
     # without a --stop-time the crash halts the machine: the run ends as soon as the rows reach the part check (a
@@ -157,7 +157,8 @@ def test_the_stock_of_a_bore_is_a_tube_from_its_start_x_and_what_is_not_judged()
     assert s.removal.stock.bounds == pytest.approx((-80.0, HOLE, 0.0, 29.0))
     assert [f.what for f in s.removal.forbidden] == ["boring bar into the far wall of the bore"]
     # the tool mirrored: the (point) tip on top, the bar a hole's radius below it
-    assert s.removal.tool_xy[:, 1].max() == 0.0 and s.removal.tool_xy[:, 1].min() == pytest.approx(-HOLE)
+    tool = s.removal.cutter(0).outline
+    assert tool[:, 1].max() == 0.0 and tool[:, 1].min() == pytest.approx(-HOLE)
     # a bore from X0 has no hole; a program with a bore and an outside profile is not judged (one kind at a time)
     zero = part.setup({"seq": {"program": PROGRAM.replace("N5 G00 X20.", "N5 G00 X0."), **BAR}})
     assert zero.programmed is None and zero.why_not.startswith("the bore's cycle starts at X 0 (radius)")

@@ -111,7 +111,6 @@ def test_a_roughing_only_program_leaves_the_allowance(ncfmu_run):
     ("lathe_roughing", None, {}),
     ("lathe_taper", None, {}),
     ("lathe_shaft.ngc", 100.0, {"seq.program": SHAFT}),
-    ("lathe_pockets.ngc", 110.0, {"seq.program": POCKETS}),
     ("mill_contour", None, {}),
     ("arc_part.ngc", 75.0, {"contour.program": ARC_PART, "contour.diameter_delta": 4.0}),
 ])
@@ -123,6 +122,39 @@ def test_the_examples_are_within_a_hundredth(ncfmu_run, name, stop, values):
     assert p.crashes == [] and p.judged == ""
     assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01
     assert p.within_tolerance is True
+
+
+def test_the_pockets_example_is_beyond_an_80_degree_insert(ncfmu_run):
+    """lathe_pockets.ngc's second groove falls toward the chuck (the convex radius of its line 14) steeper than
+    the default tool can follow: an 80-degree insert set square, its end edge rising 10 degrees from Z behind its
+    tip, cuts into the radius behind it while G70 finishes. (Until issue 51 the tool was a point and the part
+    "within".) The oracle: the deepest point of the insert's two edges inside the programmed part over the
+    finishing pass's actual positions, from the drawing's part (tests/lathe_oracle.py) alone."""
+    import shapely
+    from lathe_oracle import POCKETS as DRAWN
+    from shapely.geometry import Polygon, box
+
+    r = ncfmu_run("lathe_roughing", stop_time=110.0, start_values={"seq.program": POCKETS})
+    p = r.part
+    assert p.crashes == [] and p.judged == ""
+    profile = DRAWN.points(0.01)
+    # the part: below the profile, within the bar (radius 29, its face at Z 0)
+    part = Polygon([*map(tuple, profile), (profile[-1][0], 0.0), (profile[0][0], 0.0)]).buffer(0).intersection(
+        box(-80.0, 0.0, 0.0, 29.0))
+    g70 = r["seq.canned_cycle"] == 70
+    tip = np.column_stack([r["z_axis.pos"][g70][::20], r["x_axis.pos"][g70][::20]])
+    s = np.arange(0.0, 12.0, 0.05)
+    deepest = 0.0
+    for direction in (np.radians(10.0), np.radians(90.0)):        # the end edge, the side edge
+        edge = np.column_stack([np.cos(direction) * s, np.sin(direction) * s])
+        pts = (tip[:, None, :] + edge[None, :, :]).reshape(-1, 2)
+        inside = pts[shapely.contains_xy(part, pts[:, 0], pts[:, 1])]
+        if len(inside):
+            deepest = max(deepest, float(shapely.distance(shapely.points(inside), part.boundary).max()))
+    print(f"pockets: gouge {p.max_gouge_mm:.4f} mm at {p.gouge_at} (line {p.gouge_line}), oracle {deepest:.4f} mm")
+    assert deepest > 2.0
+    assert deepest - 0.005 <= p.max_gouge_mm <= deepest + 0.05     # the oracle samples every 20th row
+    assert p.gouge_line == 14 and p.max_left_mm < 0.01 and p.within_tolerance is False
 
 
 def gouge_oracle(r, values, fine: bool = False) -> float:

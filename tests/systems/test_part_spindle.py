@@ -63,8 +63,46 @@ def test_the_same_program_without_m05_cuts_at_speed_and_does_not_crash(ncfmu_run
     assert r.part.crashes == []
 
 
-def test_a_program_that_never_starts_the_spindle_is_not_judged_by_it(ncfmu_run):
-    # the registers' cycles command no spindle (the operator's): their cuts are no crash
+def test_the_registers_cycles_are_not_judged_by_the_spindle(ncfmu_run):
+    # the registers' cycles command no spindle (the seed's sequencer has no spindle words: the operator runs it):
+    # their cuts are no crash
     r = ncfmu_run("lathe_taper")
     assert np.abs(r["spindle.speed"]).max() < STANDSTILL_RPM
     assert r.part.crashes == [] and r.part.within_tolerance is True
+
+
+#: A G71/G70 part program that never starts the spindle (G98: its feeds move without it), numbered by tens.
+NO_SPINDLE = """%
+O2002 (A WHOLE PART, NO M03)
+N10 G18 G21 G90 G8 G98
+N20 G00 X30 Z2
+N30 G71 U1.5 R0.5
+N40 G71 P50 Q70 U0.2 W0.1 F300
+N50 G00 X26
+N60 G01 Z-10
+N70 X30
+N80 G70 P50 Q70 F300
+N90 M30
+%
+"""
+
+
+def test_a_program_that_never_starts_the_spindle_crashes_at_its_first_cut_named_by_line_and_n(ncfmu_run, tmp_path,
+                                                                                            capsys):
+    """Before issue 51 the spindle rule held only for programs that started the spindle: this whole part was
+    'within 0.0100 mm', exit 0."""
+    import json
+
+    from ncfmu.cli import main
+    code = main(["run", "lathe_roughing", "--stop-time", "12", "--set", f"seq.program={NO_SPINDLE}",
+                 "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 3
+    first_cut = NO_SPINDLE.splitlines().index("N40 G71 P50 Q70 U0.2 W0.1 F300") + 1      # text line 6: G71 cuts
+    written = json.loads((tmp_path / "lathe_roughing.part.json").read_text())
+    crashes = written["crashes"]
+    assert crashes and {c["what"] for c in crashes} == {STANDING}
+    assert crashes[0]["line"] == first_cut and crashes[0]["n"] == 40
+    assert f"line {first_cut} (N40): {STANDING}" in out
+    assert "within" not in "".join(line for line in out.splitlines() if "part:" in line)
+    assert written["within_tolerance"] is False

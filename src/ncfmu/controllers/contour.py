@@ -176,6 +176,10 @@ class ContourInterpolator(CycleController):
         real("stock_margin", "parameter", 5.0, "mm", "the plate stock: the contour's bounding box grown by this "
              "much on every side (the part check's material; the interpolator does not read it)", min=0.0,
              max=POSITION_LIMIT),
+        # appended: which side of the closed contour the part is (the part check's; the interpolator does not read it)
+        boolean("pocket", "parameter", False, "the part check's part: false, the part is inside the closed "
+                "contour (milled around); true, the part is the plate around it (a pocket, the cutter starting "
+                "inside it)"),
     )
 
     #: What only the point path reads: a program replaces it (its own G41/G42, F and path).

@@ -141,6 +141,23 @@ def _tool_ports():
     return tuple(ports)
 
 
+def _tool_shape_ports():
+    """The tool table's shapes: what the part check sweeps (read by the host's part check, not by the cycle)."""
+    ports = []
+    for k in range(1, MAX_TOOLS + 1):
+        p = f"tool[{k}]"
+        ports += [
+            real(f"{p}.insert_angle", "parameter", 80.0, "deg", f"tool offset {k}: corner angle of the turning "
+                 "insert (80: rhombic C, 55: D, 35: V, 60: triangular, 90: square; the part check's tool)",
+                 min=0.0, min_exclusive=True, max=90.0),
+            real(f"{p}.width", "parameter", 0.0, "mm", f"tool offset {k}: width of a grooving or parting blade "
+                 "(0: not one; its programmed point is the corner the tip names, 3: toward the chuck)", min=0.0),
+            real(f"{p}.drill_diameter", "parameter", 0.0, "mm", f"tool offset {k}: diameter of a drill on the "
+                 "spindle axis, programmed at its point (0: not one)", min=0.0),
+        ]
+    return tuple(ports)
+
+
 _PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout", "thread_shift"}
 
 
@@ -226,6 +243,8 @@ class CutSequencer(CycleController):
         real("thread_shift", "parameter", 0.0, "deg", "a thread starts this far after the spindle's one-revolution "
              "marker (a multi-start thread: 360/starts apart)", min=0.0, max=360.0),
         boolean("threading", "output", None, "a thread pass follows the spindle (from its marker to its end)"),
+        # appended: the tool table's shapes (the part check's)
+        *_tool_shape_ports(),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -271,6 +290,16 @@ class CutSequencer(CycleController):
             stps.append(stp)
         self.stps = stps
         self.program = str(values["program"])
+        for k in range(1, MAX_TOOLS + 1):
+            # a row is one tool: a grooving blade, a drill, or else a turning insert
+            p = f"tool[{k}]"
+            width, drill = real_param(values, f"{p}.width"), real_param(values, f"{p}.drill_diameter")
+            require(not (width > 0.0 and drill > 0.0), f"{p}.drill_diameter", drill,
+                    f"must be 0 while {p}.width is {width:g}: a row of the tool table is one tool (a grooving "
+                    "blade or a drill)")
+            nose = real_param(values, f"{p}.nose_radius")
+            require(not (width > 0.0 and nose > width / 2.0), f"{p}.nose_radius", nose,
+                    f"must be <= half the grooving blade's width {p}.width {width:g}")
         self.spindle_band = real_param(values, "spindle_band")
         self.thread_shift = real_param(values, "thread_shift")
         self.spindle_timeout = real_param(values, "spindle_timeout")

@@ -6,6 +6,20 @@ systems or controllers' ports: :mod:`ncfmu.systems.part` builds its stock, tool,
 part from a run's parameters and reads the recorded signals.
 """
 
-from .removal import Crash, Deviation, MaterialRemoval, Move, deviation, lathe_tool, mill_cutter
+from .removal import (
+                      Crash,
+                      Cutter,
+                      Deviation,
+                      MaterialRemoval,
+                      Move,
+                      deviation,
+                      drill,
+                      grooving_insert,
+                      lathe_tool,
+                      mill_cutter,
+                      placed,
+                      turning_insert,
+)
 
-__all__ = ["Crash", "Deviation", "MaterialRemoval", "Move", "deviation", "lathe_tool", "mill_cutter"]
+__all__ = ["Crash", "Cutter", "Deviation", "MaterialRemoval", "Move", "deviation", "drill", "grooving_insert",
+           "lathe_tool", "mill_cutter", "placed", "turning_insert"]

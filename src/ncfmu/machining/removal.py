@@ -30,7 +30,7 @@ cut (so its vertex count stays bounded however often a surface is recut): the pa
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -58,6 +58,14 @@ REFINE = 16
 
 #: The lathe tool's blade above its nose (the insert and its holder in the half-section), mm high.
 BLADE = 100.0
+#: A turning insert's cutting edges, mm long from its corner (a CNMG 12: 12.9 mm edges, inscribed circle 12.7).
+INSERT = 12.0
+#: The default turning insert's corner angle (degrees): an 80-degree rhombic insert (ISO C).
+INSERT_ANGLE = 80.0
+#: Beyond any tool (mm): the extent of the box a tool's outline is clipped to.
+FAR_TOOL = 1e4
+#: A drill's point angle (degrees).
+DRILL_POINT = 118.0
 
 
 def _circle_segments(radius: float) -> int:
@@ -73,16 +81,13 @@ def _disc(centre: tuple[float, float], radius: float) -> BaseGeometry:
 
 
 def lathe_tool(nose_radius: float, blade: float = BLADE) -> np.ndarray:
-    """The turning tool in the half-section ``(z, x)`` around its programmed point at the origin: the vertices of
-    its convex outline.
+    """A turning tool of nose radius ``nose_radius`` whose cutting edges run along Z and X (a square corner):
+    the vertices of its convex outline in the half-section ``(z, x)`` around its programmed point at the origin.
 
     The programmed point is the imaginary tool tip (no nose radius compensation, as the programs are written):
     the nose circle's centre is ``(r, r)``, so the tool's lowest point is at x = 0 and its leftmost at z = 0.
-    Above the nose stands the blade (the insert and its holder), as wide as the nose, ``blade`` mm up: what the
-    tool passes under is cut away (the chip), whatever the direction -- along Z, into a groove, up a face.
-    ``nose_radius`` 0 is a sharp point under a blade of no width (a segment: it cuts by moving in Z, and a move
-    in X alone removes nothing, though a rapid one into the stock is still a crash).
-    """
+    Above the nose stands the blade, as wide as the nose, ``blade`` mm up. (The part check sweeps the real
+    insert, :func:`turning_insert`; this is the engine's plain default.)"""
     r = float(nose_radius)
     if r <= 0.0:
         return np.array([[0.0, 0.0], [0.0, blade]])
@@ -90,6 +95,95 @@ def lathe_tool(nose_radius: float, blade: float = BLADE) -> np.ndarray:
     outline = shapely.union_all([nose, shapely.box(0.0, r, 2 * r, r + blade)]).convex_hull
     return np.asarray(outline.exterior.coords)[:-1]
 
+
+def _hull(parts: list[BaseGeometry]) -> np.ndarray:
+    outline = shapely.union_all(parts).convex_hull
+    return np.asarray(outline.exterior.coords)[:-1]
+
+
+def turning_insert(nose_radius: float, angle: float = INSERT_ANGLE, blade: float = BLADE) -> np.ndarray:
+    """A turning tool with a rhombic (or triangular, square) insert of corner ``angle`` degrees (0 < angle <= 90)
+    and nose radius ``nose_radius``, in its canonical placement (Fanuc's imaginary tip 3: an OD tool cutting
+    toward the chuck): the vertices of its convex outline in the half-section ``(z, x)`` around its programmed
+    point at the origin (the imaginary tip: the nose circle's centre is ``(r, r)``, its lowest point at x = 0
+    and its leftmost at z = 0).
+
+    The tool is set square to the Z axis (a 90-degree holder): its side edge runs along +X from the nose, its
+    end edge ``angle`` degrees below that (an 80-degree insert: 10 degrees above the Z axis; a 35-degree one: 55
+    degrees -- it may profile down a slope that steep). Why square: a pass toward the chuck ends on a wall
+    along X, and the usual retract straight up X (G00 X after G01 Z) leaves it as it is -- a side edge leaning
+    past X (a 95-degree holder's) would leave a wedge that very retract cuts at rapid, 0.09 mm a millimetre of
+    shoulder, and the check would cry crash at a move every program makes. Both edges are :data:`INSERT` mm
+    long, the holder stands on them up to ``blade`` mm above the tip (the tool's height: a boring bar fits its
+    hole): what the tool passes under is cut away,
+    whatever the direction -- along Z, a plunge in X, a face. ``nose_radius`` 0 is a sharp corner."""
+    r = float(nose_radius)
+    side = math.pi / 2.0
+    end = side - math.radians(float(angle))
+    length = INSERT
+    c = np.array([r, r])
+    # the edges leave the nose circle where they touch it: the end edge below the body, the side edge left of it
+    t_end = c + r * np.array([math.sin(end), -math.cos(end)])
+    t_side = c + r * np.array([-math.sin(side), math.cos(side)])
+    e_end = t_end + length * np.array([math.cos(end), math.sin(end)])
+    e_side = t_side + length * np.array([math.cos(side), math.sin(side)])
+    ends = np.array([e_end, e_side, (e_end[0], blade), (e_side[0], blade), t_end, t_side])
+    parts: list[BaseGeometry] = [shapely.multipoints(ends)]
+    if r > 0.0:
+        parts.append(_disc((r, r), r))
+    # ``blade`` high in all (a boring bar fits its hole)
+    outline = shapely.convex_hull(shapely.union_all(parts)).intersection(shapely.box(-FAR_TOOL, -FAR_TOOL, FAR_TOOL,
+                                                                                       blade))
+    return np.asarray(outline.exterior.coords)[:-1]
+
+
+def grooving_insert(width: float, nose_radius: float = 0.0, blade: float = BLADE) -> np.ndarray:
+    """A grooving (or parting) blade ``width`` mm wide with corners of radius ``nose_radius`` (at most
+    ``width / 2``), in its canonical placement (imaginary tip 3: the programmed point is its corner toward the
+    chuck, -Z, at its cutting edge): the vertices of its convex outline in ``(z, x)``, the blade ``width`` wide
+    along +Z from the programmed point and ``blade`` mm up. A plunge in X cuts a groove of its width; the
+    retract along the same path finds nothing more to cut."""
+    w, r = float(width), min(float(nose_radius), float(width) / 2.0)
+    parts: list[BaseGeometry] = [shapely.multipoints(np.array([[0.0, blade], [w, blade]]))]
+    if r > 0.0:
+        parts += [_disc((r, r), r), _disc((w - r, r), r)]
+    else:
+        parts.append(shapely.multipoints(np.array([[0.0, 0.0], [w, 0.0]])))
+    return _hull(parts)
+
+
+def drill(diameter: float, length: float = BLADE) -> np.ndarray:
+    """A twist drill of ``diameter`` mm on the spindle axis pointing -Z, its programmed point the tip of its
+    :data:`DRILL_POINT` point: the vertices of its outline in ``(z, x)`` -- the whole section, both sides of the
+    axis (``length`` mm of it along +Z)."""
+    h = float(diameter) / 2.0
+    cone = h / math.tan(math.radians(DRILL_POINT / 2.0))
+    return _hull([shapely.multipoints(np.array([[0.0, 0.0], [cone, h], [cone, -h], [cone + length, h],
+                                                [cone + length, -h]]))])
+
+
+#: Fanuc's imaginary tool-nose numbers as the quadrant a tool's body lies in from its programmed point, as the
+#: mirror of the canonical placement (tip 3: body toward +Z and +X): (z factor, x factor). The sides (5..8) lie
+#: between two corners: a side tip places the body as the corner named (5 as 4, 6 as 2, 7 and 8 as 3).
+TIP_MIRROR: dict[int, tuple[float, float]] = {1: (-1.0, -1.0), 2: (1.0, -1.0), 3: (1.0, 1.0), 4: (-1.0, 1.0),
+                                              5: (-1.0, 1.0), 6: (1.0, -1.0), 7: (1.0, 1.0), 8: (1.0, 1.0)}
+
+
+def placed(outline: np.ndarray, tip: int, nose_radius: float = 0.0) -> np.ndarray:
+    """A lathe tool ``outline`` in its canonical placement (tip 3) placed as Fanuc's imaginary tool-nose number
+    ``tip`` says (1..8; 0 and 9 -- the nose centre programmed -- are the caller's to map to a corner). A corner
+    tip (1..4) mirrors it, the nose centre at ``r`` from the programmed point along both axes; a side tip (5..8)
+    mirrors it as its corner and moves it so that the programmed point is the nose's extreme point along the
+    side (the nose centre at ``r`` from it along that one axis)."""
+    fz, fx = TIP_MIRROR[tip]
+    out = np.asarray(outline, dtype=float) * np.array([fz, fx])
+    if tip >= 5:
+        r = float(nose_radius)
+        # the canonical centre (r, r) mirrored; a side tip's centre lies at r along the side's axis only
+        centre = np.array([fz * r, fx * r])
+        wanted = {5: (-r, 0.0), 6: (0.0, -r), 7: (r, 0.0), 8: (0.0, r)}[tip]
+        out = out + (np.array(wanted) - centre)
+    return out
 
 def mill_cutter(radius: float) -> np.ndarray:
     """The milling cutter in ``(x, y)`` around its centre at the origin: the vertices of its outline. A radius
@@ -100,11 +194,26 @@ def mill_cutter(radius: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Forbidden:
-    """A region the tool must not enter deeper than ``threshold`` mm; ``what`` names the crash."""
+    """A region the tool must not enter deeper than ``threshold`` mm; ``what`` names the crash. ``across_axis``:
+    the region is the far side of a lathe's spindle axis, which a tool symmetric about the axis (a drill,
+    :attr:`Cutter.on_axis`) reaches by its own half there -- not a crash for it."""
 
     what: str
     region: BaseGeometry
     threshold: float = TOUCH
+    across_axis: bool = False
+
+
+@dataclass(frozen=True)
+class Cutter:
+    """A tool the engine sweeps: the vertices of its convex outline around its reference point (the axes'
+    position: its programmed point less its offsets), (m, 2) -- two vertices, a segment; the deepest chip a
+    cutting move may take with it (mm, inf: no limit); ``on_axis``: a tool symmetric about a lathe's spindle
+    axis (a drill), which may reach across it."""
+
+    outline: np.ndarray
+    max_depth: float = math.inf
+    on_axis: bool = False
 
 
 @dataclass(frozen=True)
@@ -132,6 +241,7 @@ class Move:
     rapid: bool
     line: int
     standing: bool = False
+    tool: int = 0
 
 
 def depth_in(piece: BaseGeometry, outline: BaseGeometry, refine: bool = False) -> tuple[float, tuple[float, float]]:
@@ -187,22 +297,26 @@ class MaterialRemoval:
         the material at the start (a polygon in the machine plane).
     tool
         the vertices of the tool's convex outline around its reference point (the origin), (m, 2); two
-        vertices: a segment.
+        vertices: a segment. The tool of every row whose tool number ``tools`` does not hold.
     forbidden
         regions the tool must not enter (chuck jaws, the axis, a part's finished contour).
     max_depth
-        deepest chip a cutting move may take (mm); ``inf``: no limit.
+        deepest chip a cutting move of ``tool`` may take (mm); ``inf``: no limit.
+    tools
+        the tools by their number (a lathe's turret station): :meth:`write`'s ``tool`` column picks, row by row,
+        the one at work (a tool change ends a move).
     """
 
     def __init__(self, stock: BaseGeometry, tool: np.ndarray, forbidden: Sequence[Forbidden] = (),
-                 max_depth: float = math.inf) -> None:
+                 max_depth: float = math.inf, tools: Mapping[int, Cutter] | None = None) -> None:
         self.stock: BaseGeometry = stock
         self.initial = stock
-        self.tool_xy = np.asarray(tool, dtype=float).reshape(-1, 2)          # (m, 2), convex
+        self.default = Cutter(np.asarray(tool, dtype=float).reshape(-1, 2), float(max_depth))
+        self.tools = {int(k): replace(c, outline=np.asarray(c.outline, dtype=float).reshape(-1, 2))
+                      for k, c in (tools or {}).items()}
         self.forbidden = list(forbidden)
         for f in self.forbidden:
             shapely.prepare(f.region)
-        self.max_depth = float(max_depth)
         self.crashes: list[Crash] = []
         self.crash_count = 0
         self.removed_area = 0.0
@@ -210,21 +324,23 @@ class MaterialRemoval:
         self._last: tuple[float, float, float] | None = None         # (t, u, v) of the last row fed
         # the move that ended the last chunk, and the stock's outline where it began: a move that goes on into the
         # next chunk measures its chip's depth from that outline, not from the face its first part just cut
-        self._open: tuple[bool, int, bool] | None = None
+        self._open: tuple[bool, int, bool, int] | None = None
         self._outline_before: BaseGeometry = stock.boundary
         # the crashes the open move has been reported for (once per move): what -> its index in crashes
         self._reported: dict[str, int | None] = {}
 
     # -- feeding ---------------------------------------------------------------------------------------
     def write(self, t: np.ndarray, u: np.ndarray, v: np.ndarray, rapid: np.ndarray, line: np.ndarray,
-              standing: np.ndarray | None = None) -> None:
+              standing: np.ndarray | None = None, tool: np.ndarray | None = None) -> None:
         """One chunk of rows in time order: time, the tool's two coordinates, whether the move is at rapid, the
-        program line, and (optional) whether the work stands still (a lathe's spindle stopped: a cut then is a
-        crash). Rows with a position that is not finite are left out."""
+        program line, (optional) whether the work stands still (a lathe's spindle stopped: a cut then is a
+        crash) and (optional) the number of the tool at work (:attr:`tools`; else the default tool). Rows with
+        a position that is not finite are left out."""
         stand = np.zeros(len(t), dtype=bool) if standing is None else np.asarray(standing, dtype=bool)
+        tools = np.zeros(len(t), dtype=np.int64) if tool is None else np.asarray(tool).astype(np.int64)
         ok = np.isfinite(u) & np.isfinite(v)
         if not ok.all():
-            t, u, v, rapid, line, stand = t[ok], u[ok], v[ok], rapid[ok], line[ok], stand[ok]
+            t, u, v, rapid, line, stand, tools = t[ok], u[ok], v[ok], rapid[ok], line[ok], stand[ok], tools[ok]
         if not len(t):
             return
         rapid = np.asarray(rapid, dtype=bool)
@@ -237,38 +353,43 @@ class MaterialRemoval:
             rapid = np.concatenate((rapid[:1], rapid))
             line = np.concatenate((line[:1], line))
             stand = np.concatenate((stand[:1], stand))
+            tools = np.concatenate((tools[:1], tools))
             first = 1
         else:
             first = 0
         self._last = (float(t[-1]), float(u[-1]), float(v[-1]))
         xy = np.column_stack((u, v))
         change = np.flatnonzero((rapid[first + 1:] != rapid[first:-1]) | (line[first + 1:] != line[first:-1])
-                                | (stand[first + 1:] != stand[first:-1]))
+                                | (stand[first + 1:] != stand[first:-1]) | (tools[first + 1:] != tools[first:-1]))
         bounds = [first, *(change + first + 1).tolist(), len(t)]
         for a, b in zip(bounds, bounds[1:]):
             if b > a:
-                move = Move(a, b, bool(rapid[a]), int(line[a]), bool(stand[a]))
-                key = (move.rapid, move.line, move.standing)
+                move = Move(a, b, bool(rapid[a]), int(line[a]), bool(stand[a]), int(tools[a]))
+                key = (move.rapid, move.line, move.standing, move.tool)
                 if not (a == first == 1 and self._open == key):
                     self._outline_before = self.stock.boundary
                     self._reported = {}
                 self._move(t, xy, move)
                 self._open = key
 
-    def _swept(self, path: np.ndarray) -> BaseGeometry:
-        """The tool swept along ``path`` ((n, 2) positions)."""
+    def cutter(self, number: int) -> Cutter:
+        """The tool of that number (the default tool when there is none of it)."""
+        return self.tools.get(number, self.default)
+
+    def _swept(self, path: np.ndarray, tool_xy: np.ndarray) -> BaseGeometry:
+        """The tool ``tool_xy`` swept along ``path`` ((n, 2) positions)."""
         if len(path) > 2:
             path = shapely.get_coordinates(shapely.LineString(path).simplify(RESOLUTION, preserve_topology=False))
         steps = np.flatnonzero(np.any(np.diff(path, axis=0) != 0.0, axis=1))
         if not len(steps):
-            return shapely.convex_hull(shapely.multipoints(self.tool_xy + path[0]))
+            return shapely.convex_hull(shapely.multipoints(tool_xy + path[0]))
         ends = np.stack((path[steps], path[steps + 1]), axis=1)               # (k, 2, 2)
-        corners = ends[:, :, None, :] + self.tool_xy[None, None, :, :]        # (k, 2, m, 2)
+        corners = ends[:, :, None, :] + tool_xy[None, None, :, :]             # (k, 2, m, 2)
         hulls = shapely.convex_hull(shapely.multipoints(corners.reshape(len(steps), -1, 2)))
         return shapely.union_all(hulls)
 
-    def _tools_at(self, xy: np.ndarray) -> np.ndarray:
-        return shapely.convex_hull(shapely.multipoints(xy[:, None, :] + self.tool_xy[None, :, :]))
+    def _tools_at(self, xy: np.ndarray, tool_xy: np.ndarray) -> np.ndarray:
+        return shapely.convex_hull(shapely.multipoints(xy[:, None, :] + tool_xy[None, :, :]))
 
     def _first_entry(self, t: np.ndarray, xy: np.ndarray, move: Move, piece: BaseGeometry,
                      depth: float) -> tuple[float, tuple[float, float]]:
@@ -280,7 +401,8 @@ class MaterialRemoval:
         if deep.is_empty:
             deep = piece
         shapely.prepare(deep)
-        hits = np.flatnonzero(shapely.intersects(deep, self._tools_at(xy[a:move.stop])))
+        hits = np.flatnonzero(shapely.intersects(deep, self._tools_at(xy[a:move.stop],
+                                                                       self.cutter(move.tool).outline)))
         i = a + (int(hits[0]) if len(hits) else move.stop - 1 - a)
         return float(t[i]), (float(xy[i, 0]), float(xy[i, 1]))
 
@@ -300,8 +422,11 @@ class MaterialRemoval:
 
     def _move(self, t: np.ndarray, xy: np.ndarray, move: Move) -> None:
         path = xy[max(move.start - 1, 0):move.stop]
-        swept = self._swept(path)
+        cutter = self.cutter(move.tool)
+        swept = self._swept(path, cutter.outline)
         for f in self.forbidden:
+            if f.across_axis and cutter.on_axis:
+                continue
             if shapely.intersects(f.region, swept):
                 inside = swept.intersection(f.region)
                 depth, _ = depth_in(inside, f.region.boundary)
@@ -316,8 +441,8 @@ class MaterialRemoval:
             self._crash(t, xy, move, "rapid into the stock", inside, depth)
         elif not move.rapid:
             self.deepest_cut = max(self.deepest_cut, depth)
-            if depth > self.max_depth + TOUCH:
-                self._crash(t, xy, move, f"cut deeper than the tool's max_depth {self.max_depth:g} mm", inside,
+            if depth > cutter.max_depth + TOUCH:
+                self._crash(t, xy, move, f"cut deeper than the tool's max_depth {cutter.max_depth:g} mm", inside,
                             depth)
             if move.standing and depth > TOUCH:
                 self._crash(t, xy, move, STANDING, inside, depth)

@@ -25,14 +25,27 @@ not finish is not judged (its crashes still count).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from ..controllers.base import POSITION_LIMIT
-from ..machining import Crash, Deviation, MaterialRemoval, deviation, lathe_tool, mill_cutter
-from ..machining.removal import Forbidden
+from ..machining import (
+    Crash,
+    Cutter,
+    Deviation,
+    MaterialRemoval,
+    deviation,
+    drill,
+    grooving_insert,
+    lathe_tool,
+    mill_cutter,
+    placed,
+    turning_insert,
+)
+from ..machining.removal import BLADE, INSERT_ANGLE, Forbidden
 from ..ports import to_float, to_int
 from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
 from .threads import ThreadJudge, ThreadResult, thread_judge
@@ -58,28 +71,16 @@ STANDSTILL_FRACTION = 0.01
 
 @dataclass(frozen=True)
 class PartSettings:
-    """How the part is judged: ``tolerance`` (mm), and the lathe tool's ``nose_radius`` (mm, 0: a point) and
-    ``max_depth`` (mm, the deepest radial engagement it may take; inf: no limit). None: the tool table's
-    (``seq.tool[k].nose_radius``, ``seq.tool[k].max_depth`` of the offset the program's first T word names), else
-    0 and no limit."""
+    """How the part is judged: ``tolerance`` (mm), and the lathe tools' ``nose_radius`` (mm, 0: a sharp corner)
+    and ``max_depth`` (mm, the deepest radial engagement a tool may take; inf: no limit). None: each tool's from
+    the tool table (``seq.tool[k].nose_radius``, ``seq.tool[k].max_depth`` of the row its T word names), else 0
+    and no limit; given, they stand for every tool's."""
 
     tolerance: float = TOLERANCE
     nose_radius: float | None = None
     max_depth: float | None = None
     drawing: Any = None       # the part drawn (a systems.drawing.Drawing, --drawing): judged against in place of
                               # the programmed part
-
-
-def first_tool_offset(program: str) -> int:
-    """The offset row (1-based) of a lathe program's first T word (``T0101``: tool 1, offset 1); 0: none."""
-    import re
-    for raw in program.splitlines():
-        text = re.sub(r"\([^)]*\)", " ", raw.split(";")[0])
-        found = re.search(r"[Tt]\s*(\d+)", text)
-        if found:
-            digits = found.group(1)
-            return int(digits[-2:]) if len(digits) >= 3 else int(digits)
-    return 0
 
 
 @dataclass
@@ -97,6 +98,7 @@ class PartVerdict:
     left_line: int = 0
     gouge_line: int = 0
     axes: tuple[str, str] = ("u", "v")    # the names of the plane's coordinates (Z, X or X, Y)
+    numbers: dict[int, int] = field(default_factory=dict, repr=False)   # text line -> its block's N number
     made: Any = field(default=None, repr=False)          # the part as made (a shapely geometry), for the plot
     programmed: Any = field(default=None, repr=False)    # the programmed part
     threads: list[ThreadResult] = field(default_factory=list)   # the program's threads (systems/threads.py)
@@ -118,7 +120,8 @@ class PartVerdict:
         def number(v: float) -> float | None:
             return None if math.isnan(v) else v
 
-        return {"crashes": [c.as_dict() for c in self.crashes], "crash_count": self.crash_count,
+        return {"crashes": [{**c.as_dict(), "n": self.numbers.get(c.line)} for c in self.crashes],
+                "crash_count": self.crash_count,
                 "max_left_mm": number(self.max_left_mm), "max_gouge_mm": number(self.max_gouge_mm),
                 "tolerance_mm": self.tolerance_mm, "within_tolerance": self.within_tolerance,
                 "left_at": self._where(self.left_at, self.left_line),
@@ -128,22 +131,33 @@ class PartVerdict:
     def _where(self, at: tuple[float, float] | None, line: int) -> dict[str, object] | None:
         if at is None:
             return None
-        return {self.axes[0]: at[0], self.axes[1]: at[1], "line": line}
+        return {self.axes[0]: at[0], self.axes[1]: at[1], "line": line, "n": self.numbers.get(line)}
+
+    def line_name(self, line: int) -> str:
+        """A program line as a user finds it: the text's line, and its block's N number where it has one
+        (``line 7 (N70)``)."""
+        n = self.numbers.get(line)
+        return f"line {line}" + (f" (N{n})" if n is not None else "")
 
     def _place(self, at: tuple[float, float] | None, line: int) -> str:
         if at is None:
             return ""
         return (f" at {self.axes[0]} {at[0]:.3f} {self.axes[1]} {at[1]:.3f}"
-                + (f" (line {line})" if line else ""))
+                + (f" ({self.line_name(line)})" if line else ""))
 
     def summary(self) -> list[str]:
-        lines = [f"  part: CRASH at t = {c.t:.3f} s, line {c.line}: {c.what}, {c.depth_mm:.3g} mm deep"
+        lines = [f"  part: CRASH at t = {c.t:.3f} s, {self.line_name(c.line)}: {c.what}, {c.depth_mm:.3g} mm deep"
                  for c in self.crashes[:CRASH_LINES]]
         if self.crash_count > CRASH_LINES:
             lines.append(f"  part: ... {self.crash_count - CRASH_LINES} more crashes (OUT/<system>.part.json)")
         tol = f"{self.tolerance_mm:.4f} mm"
         if self.judged:
             lines.append(f"  part: not judged: {self.judged}")
+        elif self.crashed and self.max_left_mm <= self.tolerance_mm and self.max_gouge_mm <= self.tolerance_mm:
+            # the shape came out right, but a crashed part is no good part: never "within" after a crash
+            crashes = f"{self.crash_count} crash{'es' if self.crash_count != 1 else ''}"
+            lines.append(f"  part: REJECTED, it crashed ({crashes}); its shape: left <= {self.max_left_mm:.4f} mm, "
+                         f"gouge <= {self.max_gouge_mm:.4f} mm")
         elif self.max_left_mm <= self.tolerance_mm and self.max_gouge_mm <= self.tolerance_mm:
             lines.append(f"  part: within {tol}: left <= {self.max_left_mm:.4f} mm, "
                          f"gouge <= {self.max_gouge_mm:.4f} mm")
@@ -172,7 +186,8 @@ class Setup:
     lines: list[tuple[Any, int]]          # (shapely geometry of a programmed element, its program line)
     why_not: str = ""                     # why the part cannot be judged at all
     rapid_lines: tuple[int, ...] | None = None     # the program lines at rapid, when no output says so
-    spindle_checked: bool = False         # a cut while the spindle stands is a crash (the program drives it)
+    spindle_checked: bool = False         # a cut while the spindle stands is a crash (a program drives it)
+    numbers: dict[int, int] = field(default_factory=dict)   # text line -> its block's N number
 
 
 class PartCheck(Part):
@@ -214,7 +229,7 @@ class _PartCheckAccumulator(_Judging):
         rapid = (rows[p.rapid_column()] if self.setup.rapid_lines is None
                  else np.isin(line, np.array(self.setup.rapid_lines, dtype=np.int64)))
         standing = p.standing(rows) if self.setup.spindle_checked else None
-        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing)
+        self.setup.removal.write(rows["time"], rows[u], rows[v], rapid, line, standing, p.tools(rows))
         self.done.write(rows["time"], rows[p.done_column()])
         if self.threads is not None:
             self.threads.write(rows)
@@ -254,6 +269,10 @@ class MachinedPart(PartCheck):
         """Per row: the work stands (a cut is a crash); None: nothing turns the work."""
         return None
 
+    def tools(self, rows: np.ndarray) -> np.ndarray | None:
+        """Per row: the number of the tool at work (the engine's ``tools``); None: the one tool."""
+        return None
+
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _PartCheckAccumulator(self, parameters)
 
@@ -263,7 +282,8 @@ class MachinedPart(PartCheck):
 
     def judge(self, setup: Setup, finished: bool) -> PartVerdict:
         m = setup.removal
-        verdict = PartVerdict(list(m.crashes), m.crash_count, self.settings.tolerance, "", axes=self.axes)
+        verdict = PartVerdict(list(m.crashes), m.crash_count, self.settings.tolerance, "", axes=self.axes,
+                              numbers=setup.numbers)
         if setup.programmed is None:
             verdict.judged = setup.why_not or "no programmed part to judge against"
             return verdict
@@ -309,8 +329,12 @@ class LathePart(MachinedPart):
     def variables(self) -> tuple[str, ...]:
         spindle = (f"{self.spindle}.speed", f"{self.seq}.s_cmd", f"{self.seq}.spindle_dir") if self.spindle else ()
         threads = (f"{self.seq}.threading", f"{self.spindle}.revolutions") if self.spindle else ()
-        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done")), f"{self.x}.pos", f"{self.z}.pos", *spindle,
-                *threads)
+        return (*(f"{self.seq}.{v}" for v in ("rapid", "line", "done", "tool")), f"{self.x}.pos", f"{self.z}.pos",
+                *spindle, *threads)
+
+    def tools(self, rows: np.ndarray) -> np.ndarray | None:
+        """The turret station at work (the sequencer's ``tool`` output: the T word in force)."""
+        return rows[f"{self.seq}.tool"]
 
     def threads(self, parameters: Parameters) -> ThreadJudge | None:
         if self.spindle is None:
@@ -340,8 +364,7 @@ class LathePart(MachinedPart):
         return f"{self.seq}.rapid"
 
     def setup(self, parameters: Parameters) -> Setup:
-        import shapely
-        from shapely.geometry import LineString, Polygon, box
+        from shapely.geometry import Polygon, box
 
         from ..controllers.sequencer import CutSequencer
         seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
@@ -349,8 +372,10 @@ class LathePart(MachinedPart):
         length = to_float(seq["stock_length"])
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
-        profiles: dict[int, Any] = {}
+        profiles: list[Any] = []
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
+        numbers = block_numbers(program, "lathe")
+        spindle = self.spindle is not None and bool(program.strip())
         if program.strip():
             from ..controllers.g7x import Tool
             from ..controllers.lathe_program import Finish, Rough, parse
@@ -364,30 +389,32 @@ class LathePart(MachinedPart):
                               home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
-            profiles = {id(op.profile): op.profile for op in cycles}
+            profiles = list({id(op.profile): op.profile for op in cycles}.values())
             bores = [op.start[1] for op in cycles if op.profile.inside]
             if bores:
+                why = ""
                 if len(bores) < len(cycles):
-                    return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
-                                 Polygon(), [], "the program has both inside and outside G71/G70 profiles: the "
-                                 "part check judges one kind at a time",
-                                 spindle_checked=self._drives_spindle(program))
+                    why = ("the program has both inside and outside G71/G70 profiles: the part check judges one "
+                           "kind at a time")
                 # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
                 # the boring bar enters the hole at its radius and roughs outward from it)
-                hole = min(bores)
-                if hole <= 0.0:
+                elif min(bores) <= 0.0:
+                    why = (f"the bore's cycle starts at X {min(bores):g} (radius): no drilled hole to bore from "
+                           "(the start point's X is the hole's)")
+                else:
+                    hole = min(bores)
+                if why:
                     return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
-                                 Polygon(), [], f"the bore's cycle starts at X {hole:g} (radius): no drilled hole "
-                                 "to bore from (the start point's X is the hole's)",
-                                 spindle_checked=self._drives_spindle(program))
+                                 Polygon(), [], why, spindle_checked=spindle, numbers=numbers)
         inside = hole > 0.0
         stock = box(face - length, hole, face, radius)
         if inside:
             # a boring bar lies in the hole, along the axis: it may reach below the axis; what it must not do is
             # reach through the hole into the wall on the far side (the tube below -hole in the full section)
-            forbidden = [Forbidden("boring bar into the far wall of the bore", box(face - length, -FAR, face, -hole))]
+            forbidden = [Forbidden("boring bar into the far wall of the bore", box(face - length, -FAR, face, -hole),
+                                   across_axis=True)]
         else:
-            forbidden = [Forbidden("tool across the spindle axis", box(-FAR, -FAR, FAR, 0.0))]
+            forbidden = [Forbidden("tool across the spindle axis", box(-FAR, -FAR, FAR, 0.0), across_axis=True)]
         if self.limiter is not None and self.limiter in parameters:
             lower = -FAR
             for ref_max, lim_min, _lim_max in table_of(parameters[self.limiter]):
@@ -395,77 +422,128 @@ class LathePart(MachinedPart):
                 if abs(lim_min) < POSITION_LIMIT and top > lower:
                     forbidden.append(Forbidden("tool into the chuck jaws", box(lower, -1.0, top, lim_min)))
                 lower = top
-        # the tool: its nose and deepest cut as set, else the tool table's row of the program's first T word; the
-        # axes stand at the programmed point plus that row's offsets, so the tool's tip is there less them
-        k = first_tool_offset(program) if program.strip() else 0
-        row = f"tool[{k}]."
-        has_row = row + "nose_radius" in seq
-        nose = self.settings.nose_radius
-        if nose is None:
-            nose = to_float(seq[row + "nose_radius"]) if has_row else 0.0
-        depth_limit = self.settings.max_depth
-        if depth_limit is None:
-            depth_limit = to_float(seq[row + "max_depth"]) if has_row else 0.0
-            depth_limit = depth_limit if depth_limit > 0 else math.inf
-        shift = np.array([to_float(seq[row + "z_offset"]), to_float(seq[row + "x_offset"])]) if has_row else 0.0
-        if inside:
-            # a boring tool: the lathe tool mirrored (the nose on top, the insert and bar below it, toward the
-            # axis), a hole's radius high: the bar fits the hole, and its lowest point reaches the far wall only
-            # when the tip goes below X = the nose radius (about the axis)
-            tool = lathe_tool(nose, blade=hole) * np.array([1.0, -1.0])
-        else:
-            tool = lathe_tool(nose)
-        removal = MaterialRemoval(stock, tool - shift, forbidden, depth_limit)
+        cutters = lathe_cutters(seq, program, self.settings, hole)
+        default = cutters.pop(0)
+        removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        removed: list[Any] = []
-        lines: list[tuple[Any, int]] = []
-        if program.strip():
-            if not profiles and self.settings.drawing is None:
-                return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
-                             spindle_checked=self._drives_spindle(program))
-            # what the profile cuts away: outside, all above it; inside (a bore), all below it down to the hole
-            far = -FAR if inside else FAR
-            for profile in profiles.values():
-                outline = _elements_polyline(profile.elements)
-                (za, _), (ze, _) = outline[0], outline[-1]
-                removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
-                lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-        else:
-            stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
-            for k in range(1, to_int(seq["n_blocks"]) + 1):
-                b = f"block[{k}]."
-                if seq.get(b + "own_stp"):
-                    stp = (to_float(seq[b + "x_stp"]), to_float(seq[b + "z_stp"]))
-                x0, z0 = stp
-                depth = to_float(seq[b + "Xf"]) + to_int(seq[b + "N"]) * to_float(seq[b + "Xd"])
-                xp, zp = to_float(seq[b + "Xp"]), to_float(seq[b + "Zp"])
-                # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
-                removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
-        programmed = stock.difference(shapely.union_all(removed))
+        if program.strip() and not profiles and self.settings.drawing is None:
+            return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
+                         spindle_checked=spindle, numbers=numbers)
+        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside)
         if self.settings.drawing is not None:
+            from shapely.geometry import LineString
+
             from ..controllers.gcode import Move
             from .drawing import lathe_part
             programmed = lathe_part(self.settings.drawing, stock)
             if program.strip() and not lines:       # no profile: where the part is off, the nearest cut's line
                 lines = [(LineString(_elements_polyline([op.element])), op.line) for op in ops
                          if isinstance(op, Move) and not op.rapid]
-        return Setup(removal, programmed, anchor, lines, spindle_checked=self._drives_spindle(program))
+        return Setup(removal, programmed, anchor, lines, spindle_checked=spindle, numbers=numbers)
 
-    def _drives_spindle(self, program: str) -> bool:
-        """The program starts the spindle (M03 or M04): then a cut while it stands is a crash. The registers'
-        cycles and a program without M03/M04 leave the spindle to the operator (the sequencer commands none):
-        what turns the bar then is not in the run, and no cut is judged by the spindle."""
-        if self.spindle is None or not program.strip():
-            return False
+
+def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSettings,
+                  hole: float = 0.0) -> dict[int, Cutter]:
+    """The tools a lathe run sweeps, by turret station (the sequencer's ``tool`` output; 0: before any T word, and
+    the registers' cycles): each the shape of the tool table's row its program's T words give it
+    (``T0102``: station 1 with the row of offset 2 -- a station given several rows keeps the first; station 0,
+    the row 0: no offset, a turning insert), placed at the axes' position less that row's offsets.
+
+    A row is a drill (``drill_diameter`` > 0: :func:`~ncfmu.machining.drill`), a grooving or parting blade
+    (``width`` > 0: :func:`~ncfmu.machining.grooving_insert`) or else a turning insert of ``insert_angle``
+    (:func:`~ncfmu.machining.turning_insert`), with the row's nose radius (``settings.nose_radius`` when given:
+    every tool's) placed as its imaginary tip says (``tip``; 0 and 9 -- the nose centre programmed -- as 3, an
+    OD tool cutting toward the chuck, and in a bore of radius ``hole`` as 2, the boring bar: its body a
+    hole's radius high); max_depth the row's (``settings.max_depth`` when given), 0 none."""
+    rows: dict[int, int] = {0: 0}
+    if program.strip():
         from ..controllers.gcode import read
         from ..controllers.lathe_program import LATHE
-        return any(code in (3, 4) for b in read(program, LATHE) for code, _ in b.m)
+        for b in read(program, LATHE):
+            if "T" in b.values:
+                station, row = divmod(int(b.values["T"]), 100)
+                rows.setdefault(station, row)
+    blade = hole if hole > 0.0 else BLADE
+    cutters: dict[int, Cutter] = {}
+    for station, k in rows.items():
+        def value(name: str, default: float = 0.0, k: int = k) -> float:
+            key = f"tool[{k}].{name}"
+            return to_float(seq[key]) if k and key in seq else default
+
+        nose = value("nose_radius") if settings.nose_radius is None else settings.nose_radius
+        depth = value("max_depth") if settings.max_depth is None else settings.max_depth
+        tip = int(value("tip"))
+        if tip in (0, 9):
+            tip = 2 if hole > 0.0 else 3
+        if value("drill_diameter") > 0.0:
+            outline, on_axis = drill(value("drill_diameter")), True
+        else:
+            width = value("width")
+            shape = (grooving_insert(width, nose, blade) if width > 0.0
+                     else turning_insert(nose, value("insert_angle", INSERT_ANGLE), blade))
+            outline, on_axis = placed(shape, tip, nose), False
+        shift = np.array([value("z_offset"), value("x_offset")])
+        cutters[station] = Cutter(outline - shift, depth if depth > 0 else math.inf, on_axis)
+    return cutters
+
+
+def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
+                          inside: bool) -> tuple[Any, list[tuple[Any, int]]]:
+    """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
+    ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
+    all above a profile; ``inside``, a bore: all below it down to the hole) -- or, for the registers (no
+    profiles), what each block's deepest pass cuts away; and the programmed elements with their program lines
+    (for naming the line nearest to a deviation)."""
+    import shapely
+    from shapely.geometry import LineString, Polygon
+
+    removed: list[Any] = []
+    lines: list[tuple[Any, int]] = []
+    if profiles:
+        far = -FAR if inside else FAR
+        for profile in profiles:
+            outline = _elements_polyline(profile.elements)
+            (za, _), (ze, _) = outline[0], outline[-1]
+            removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
+            lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
+    else:
+        stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
+        for k in range(1, to_int(seq["n_blocks"]) + 1):
+            b = f"block[{k}]."
+            if seq.get(b + "own_stp"):
+                stp = (to_float(seq[b + "x_stp"]), to_float(seq[b + "z_stp"]))
+            x0, z0 = stp
+            depth = to_float(seq[b + "Xf"]) + to_int(seq[b + "N"]) * to_float(seq[b + "Xd"])
+            xp, zp = to_float(seq[b + "Xp"]), to_float(seq[b + "Zp"])
+            # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
+            removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
+    return stock.difference(shapely.union_all(removed)), lines
+
+
+def block_numbers(program: str, dialect: str) -> dict[int, int]:
+    """The N number of each of a program's text lines that has one (line -> N), read as the controller reads
+    it (``dialect``: "lathe" or "mill"); {} for no program or one that does not read (the run refuses it)."""
+    if not program.strip():
+        return {}
+    from ..controllers.gcode import read
+    from ..errors import NcfmuError
+    if dialect == "lathe":
+        from ..controllers.lathe_program import LATHE as DIALECT
+    else:
+        from ..controllers.rs274 import MILL as DIALECT
+    try:
+        return {b.line: b.n for b in read(program, DIALECT) if b.n is not None}
+    except NcfmuError:
+        return {}
 
 
 @dataclass(frozen=True)
 class MillPart(MachinedPart):
-    """A ContourInterpolator milling around a closed contour with the axes ``x`` and ``y``: the contour is the
-    part's outline (milled outside); the cutter's radius is the compensation's."""
+    """A ContourInterpolator milling along a closed contour with the axes ``x`` and ``y``: the contour is the
+    part's outline -- the part inside it (milled around), or with ``contour.pocket`` the plate around it (a
+    pocket's wall, milled from inside); the cutter's radius is the compensation's. A compensation to the side
+    that puts the cutter into the part is a gouge; a corner of the pocket the round cutter cannot reach is
+    material left. Nothing turns the work here (the mill system has no spindle drive): no spindle rule."""
 
     contour: str
     x: str
@@ -513,13 +591,21 @@ class MillPart(MachinedPart):
             ys = [p[1] for p in outline] or [c.y_start]
             plate = box(min(xs) - margin, min(ys) - margin, max(xs) + margin, max(ys) + margin)
             return Setup(MaterialRemoval(plate, cutter), None, plate, [], "the contour is not closed: no part outline",
-                         tuple(rapid_lines))
+                         tuple(rapid_lines), numbers=block_numbers(c.program, "mill"))
         x0, y0, x1, y1 = part.bounds
         plate = box(x0 - margin, y0 - margin, x1 + margin, y1 + margin)
-        gouge = Forbidden("cutter into the part's finished contour (gouge)", part, self.settings.tolerance)
         lines = [(LineString(_elements_polyline([e])), line) for e, line in zip(elements, labels)]
+        if bool(values["pocket"]):
+            # a pocket: the part is the plate around the contour; the cutter must stay inside the contour (what
+            # it must not enter reaches far beyond the plate, so the plate's own edge is no wall of it)
+            wall = box(x0 - FAR, y0 - FAR, x1 + FAR, y1 + FAR).difference(part)
+            part = plate.difference(part)
+        else:
+            wall = part
+        gouge = Forbidden("cutter into the part's finished contour (gouge)", wall, self.settings.tolerance)
         shapely.prepare(part)
-        return Setup(MaterialRemoval(plate, cutter, [gouge]), part, part, lines, "", tuple(rapid_lines))
+        return Setup(MaterialRemoval(plate, cutter, [gouge]), part, part, lines, "", tuple(rapid_lines),
+                     numbers=block_numbers(c.program, "mill"))
 
 
 def with_part_settings(report: Report, settings: PartSettings) -> Report:
