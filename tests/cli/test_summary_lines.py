@@ -50,9 +50,10 @@ def test_validate_says_what_it_checked(project, capsys):
     assert n_fmus == 7 and len(SYSTEMS) == 5
     assert out[0].startswith(f"checked {n_fmus} FMUs (") and "with fmpy.validation: modelDescription.xml against " \
         "the FMI 2.0 schema" in out[0]
-    assert out[1].startswith(f"checked {len(SYSTEMS)} systems (")
-    assert "SystemStructure.ssd against the SSP 1.0 schema" in out[1]
-    assert f"their {n_ssv} .ssv parameter sets against the SSP 1.0 parameter-values schema" in out[1]
+    assert out[1].startswith(f"checked {n_fmus} FMI 3.0 FMUs (") and "against the FMI 3.0 schema" in out[1]
+    assert out[2].startswith(f"checked {len(SYSTEMS)} systems (")
+    assert "SystemStructure.ssd against the SSP 1.0 schema" in out[2]
+    assert f"their {n_ssv} .ssv parameter sets against the SSP 1.0 parameter-values schema" in out[2]
     assert out[-1] == "all FMUs and SSPs valid"
 
 

@@ -97,7 +97,7 @@ def test_a_refused_program_fails_initialisation(ncfmu_project):
     from ncfmu.project import simulate
 
     bad = EXAMPLE.read_text().replace("G71 U1.5 R0.5", "G71 U0 R0.5")
-    with pytest.raises(NcfmuError, match=r"line 6, column 5: U0: the depth of cut must be > 0"):
+    with pytest.raises(NcfmuError, match=r"program: line 6: U0: the depth of cut must be > 0"):
         simulate("lathe_roughing", stop_time=0.01, start_values={"seq.program": bad})
 
 
