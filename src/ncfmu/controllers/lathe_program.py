@@ -77,6 +77,7 @@ from .gcode import (
 from .geometry import Arc, CornerError, Element, Line, Point
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
+from .subprograms import run_order
 from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
 
 _MOTION = {0, 1, 2, 3}
@@ -96,13 +97,15 @@ LATHE = Dialect(
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
                73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
     g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G70, G71, G76, G90, G91, G92, G96-G99",
-    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
-    coordinates="XZIKRUWPQSTO",
+    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
+    m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
+    coordinates="XZIKRUWPQSTOL",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
                      "D": "tool nose radius compensation is not in the subset"},
-    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
+    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q, L",
     unique_numbers=True,
     block_delete=True,
+    subprograms=True,
 )
 
 
@@ -575,7 +578,7 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         the first error of conversion.
     """
     setup = setup or Setup()
-    blocks = read(text, LATHE, setup.block_delete)
+    blocks = run_order(read(text, LATHE, setup.block_delete))
     modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
     here: Point = (start[1], start[0])
     ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []

@@ -1,0 +1,101 @@
+"""A shop's lathe program beyond G71/G70 and threads (issue 46), as Fanuc's 0i-T manual defines it (plain-Python
+planner, no FMU): M98/M99 subprograms (repeats, nesting, the return to the calling block, the text's lines),
+G54..G59 work offsets, the G90/G94 single cycles, direct drawing dimensions (,C ,R A) -- and the refusals,
+naming the line."""
+
+from __future__ import annotations
+
+import pytest
+
+from ncfmu.controllers import lathe_program
+from ncfmu.controllers.subprograms import MAX_NESTING
+from ncfmu.errors import ProgramError, ProgramErrors
+
+
+def _plan(text: str, start: tuple[float, float] = (50.0, 5.0), setup: lathe_program.Setup | None = None):
+    return lathe_program.plan(text, start, 100.0, setup)
+
+
+def _ends(segs) -> list[tuple[int, float, float]]:
+    """(line, X diameter, Z) at the end of each move."""
+    return [(g.line, round(2 * g.element.end[1], 9), round(g.element.end[0], 9)) for g in segs]
+
+
+def _refusals(text: str, setup: lathe_program.Setup | None = None) -> list[ProgramError]:
+    with pytest.raises((ProgramError, ProgramErrors)) as info:
+        _plan(text, setup=setup)
+    err = info.value
+    return err.errors if isinstance(err, ProgramErrors) else [err]
+
+
+# -- M98 / M99 ---------------------------------------------------------------------------------------------
+GROOVES = """O0001
+G00 X40. Z2.
+M98 P30100 (three times O0100)
+G00 X50. Z5.
+M30
+O0100
+G00 W-5.
+G01 U-4. F60
+G00 U4.
+M99
+"""
+
+
+def test_m98_repeats_a_subprogram_and_returns_to_the_block_after_the_call() -> None:
+    ends = _ends(_plan(GROOVES))
+    # each run: W-5 at X40, down to X36 (U-4 on the diameter), back up; the shift accumulates (incremental W)
+    expected = [(2, 40.0, 2.0)]
+    for k in range(1, 4):
+        expected += [(7, 40.0, 2.0 - 5 * k), (8, 36.0, 2.0 - 5 * k), (9, 40.0, 2.0 - 5 * k)]
+    expected.append((4, 50.0, 5.0))        # the block after the call, after the third return
+    assert ends == expected
+
+
+def test_m98_p_l_form_and_p_alone_are_once_or_l_times() -> None:
+    once = _ends(_plan(GROOVES.replace("M98 P30100", "M98 P100")))
+    assert [e for e in once if e[0] == 8] == [(8, 36.0, -3.0)]
+    twice = _ends(_plan(GROOVES.replace("M98 P30100", "M98 P0100 L2")))
+    assert [e for e in twice if e[0] == 8] == [(8, 36.0, -3.0), (8, 36.0, -8.0)]
+
+
+def _nested(depth: int) -> str:
+    """The main program calling O1, O1 calling O2, ... O<depth>: each moves W-1 before its call."""
+    subs = "".join(f"O{k}\nG01 W-1. F60\n" + (f"M98 P{k + 1}\n" if k < depth else "") + "M99\n"
+                   for k in range(1, depth + 1))
+    return f"G00 X40. Z2.\nM98 P1\nG00 X50.\nM30\n{subs}"
+
+
+def test_calls_nest_four_deep_each_returning_to_its_caller() -> None:
+    segs = _plan(_nested(MAX_NESTING))
+    # the main's line 2 calls O1 (its W-1 on line 6), O1 calls O2 (line 9), ...: each subprogram's block reports
+    # its own text line, 4 lines apart
+    assert _ends(segs) == [(1, 40.0, 2.0)] + [(6 + 4 * k, 40.0, 1.0 - k) for k in range(4)] + [(3, 50.0, -2.0)]
+
+
+def test_nesting_five_deep_is_refused_at_the_call() -> None:
+    text = _nested(MAX_NESTING + 1)
+    [err] = _refusals(text)
+    call = text.splitlines().index("M98 P5") + 1
+    assert err.line_no == call and "nested 5 deep, at most 4" in str(err)
+
+
+def test_a_call_to_a_program_not_held_is_refused_naming_the_line() -> None:
+    errs = _refusals(GROOVES.replace("M98 P30100", "M98 P30200").replace("G00 X50. Z5.", "M98 P300"))
+    assert [(e.line_no, "O0200" in str(e) or "O0300" in str(e)) for e in errs] == [(3, True), (4, True)]
+    assert "holds" in str(errs[0]) or "hold" in str(errs[0])
+
+
+def test_m99_p_in_the_main_program_jumps_forward_to_that_block() -> None:
+    text = "G00 X40. Z2.\nM99 P30\nG00 X30.\nN30 G00 X45.\nM30\n"
+    assert _ends(_plan(text)) == [(1, 40.0, 2.0), (4, 45.0, 2.0)]
+    [back] = _refusals("N10 G00 X40. Z2.\nM99 P10\nM30\n")
+    assert back.line_no == 2 and "endlessly" in str(back)
+
+
+def test_subprogram_refusals_name_their_lines() -> None:
+    text = GROOVES.replace("M99\n", "M30\n")
+    errs = _refusals(text)
+    assert errs[0].line_no == 10 and "a subprogram ends with M99" in str(errs[0])
+    [after] = _refusals("G00 X40.\nM30\nG00 X30.\n")
+    assert after.line_no == 3 and "a subprogram starts with O" in str(after)
