@@ -99,3 +99,29 @@ def test_subprogram_refusals_name_their_lines() -> None:
     assert errs[0].line_no == 10 and "a subprogram ends with M99" in str(errs[0])
     [after] = _refusals("G00 X40.\nM30\nG00 X30.\n")
     assert after.line_no == 3 and "a subprogram starts with O" in str(after)
+
+
+# -- G54..G59 ----------------------------------------------------------------------------------------------
+#: Work offsets (z, x radius): G54 shifts Z by -100, G55 by -150 and X by 2 (radius), the rest 0.
+WORKS = ((-100.0, 0.0), (-150.0, 2.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (7.0, -1.0))
+
+
+def test_work_offsets_shift_the_axes_with_the_tool_offset_on_top() -> None:
+    setup = lathe_program.Setup(works=WORKS, tools=(lathe_program.Tool(x_offset=0.5, z_offset=3.0),) * 8)
+    text = "G00 X40. Z2.\nT0101\nG00 X40. Z2.\nG55\nG00 X40. Z2.\nG59 X30.\nG54 G01 Z-5. F60\nM30\n"
+    # the tool starts at the axes' (x 50, z 5): under the power-on G54 that is the programmed Z 105
+    ends = _ends(_plan(text, (50.0, 5.0), setup))
+    assert ends == [(1, 40.0, -98.0),                   # G54: Z 2 - 100
+                    (2, 41.0, -95.0),                   # T0101 taken up where it stands: + 0.5 radius, + 3
+                    (4, 45.0, -145.0),                  # G55 taken up (line 3 is where the tool is: no move)
+                    (6, 39.0, 12.0),                    # G59 taken up first (Z 2 + 7 + 3, X 20 - 1 + 0.5) ...
+                    (6, 29.0, 12.0),                    # ... then X30 on the diameter: 15 - 1 + 0.5 = 14.5 radius
+                    (7, 31.0, -95.0),                   # G54 taken up (X 15 + 0.5) ...
+                    (7, 31.0, -102.0)]                  # ... then Z -5 - 100 + 3
+    assert [g.feed for g in _plan(text, (50.0, 5.0), setup)][-2:] == [False, True]
+
+
+def test_work_offset_refused_inside_a_profile() -> None:
+    text = "G00 X40. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100\nN10 G00 X20.\nG55 G01 Z-10.\nN20 X40.\nM30\n"
+    [err] = _refusals(text)
+    assert err.line_no == 5 and "G55 inside the profile" in str(err)

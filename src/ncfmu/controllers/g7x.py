@@ -66,7 +66,7 @@ class Modal:
     spindle, the feed mode, the coolant."""
 
     tool: int = 0                        # turret station of T<tool><offset> (0: none)
-    offset: Point = (0.0, 0.0)           # the active tool offset (z, x radius): axes = programmed point + offset
+    offset: Point = (0.0, 0.0)           # the active work + tool offset (z, x radius): axes = programmed point + it
     spindle: int = 0                     # +1 M03, -1 M04, 0 M05
     s: float = 0.0                       # S: rev/min (G97) or the surface speed in m/min (G96)
     css: bool = False                    # G96 constant surface speed
@@ -168,6 +168,7 @@ class State:
 
     line: int
     modal: Modal
+    power_on: bool = False  # the state the program starts in: its offset is where the axes already are
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -706,6 +707,8 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
             before = axes(here)
             modal = op.modal
             dz, dx = modal.offset
+            if op.power_on:                     # a power-on work offset (G54): the tool stands where it is
+                here = (before[0] - dz, before[1] - dx)
             if math.dist(before, axes(here)) > EPS:             # the new offset taken up at the rapid rate
                 out.append(Segment(Line(before, axes(here)), rapid, False, 0, 0, 0.0, op.line, 0, modal=modal))
         elif isinstance(op, Dwell):

@@ -35,6 +35,7 @@ positions, arcs by I/K or R) and reads the profile of each cycle; the cycles' ge
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
@@ -81,6 +82,7 @@ from .subprograms import run_order
 from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
 
 _MOTION = {0, 1, 2, 3}
+_WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
@@ -91,12 +93,13 @@ LATHE = Dialect(
             **{g: "canned cycle (G70/G71/G76)" for g in (70, 71, 76)},
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
             **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
-            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
+            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)",
+            **{g: "work offset (G54-G59)" for g in range(54, 60)}},
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
                73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G70, G71, G76, G90, G91, G92, G96-G99",
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G76, G90, G91, G92, G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
     m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
     coordinates="XZIKRUWPQSTOL",
@@ -119,6 +122,7 @@ class Setup:
     tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
     block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
+    works: tuple[Point, ...] = ((0.0, 0.0),) * 6   # the work offsets G54..G59 (z, x radius) (seq.work[1..6])
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -131,6 +135,7 @@ class _Modes:
     machine: Modal = field(default_factory=Modal)
     comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
+    work: Point = (0.0, 0.0)    # the active work offset (z, x radius): G54..G59
     lead: float = 0.0       # a thread block's F (G32/G92/G76): the lead, mm; modal among thread blocks
     g92_end: Point | None = None    # the modal G92's thread end (z, x) and taper R: a block with X alone repeats it
     g92_taper: float = 0.0
@@ -295,8 +300,12 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
             raise b.err(b.col("T"), f"T{t:g}: T<tool><offset> with tool and offset 0..{len(setup.tools)} (T0101: "
                                     "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
         row_tool = setup.tools[row - 1] if row else Tool()
-        m = replace(m, tool=tool, offset=(row_tool.z_offset, row_tool.x_offset))
+        m = replace(m, tool=tool, offset=(row_tool.z_offset + modes.work[0], row_tool.x_offset + modes.work[1]))
         modes.row = row_tool
+    selected = [g for g in codes if g in _WORK]
+    if selected:
+        modes.work = setup.works[selected[0] - 54]
+        m = replace(m, offset=(modes.row.z_offset + modes.work[0], modes.row.x_offset + modes.work[1]))
     for code, _ in b.m:
         if code in _BEFORE_MOVE:
             m = replace(m, spindle=_BEFORE_MOVE[code])
@@ -535,7 +544,7 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
         machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
-        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, 96, 97, 98, 99)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99)]
         if machine:
             raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
                                                   "part's outline (moves, F), give it before G71/G70")
@@ -579,9 +588,12 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     """
     setup = setup or Setup()
     blocks = run_order(read(text, LATHE, setup.block_delete))
-    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
-    here: Point = (start[1], start[0])
-    ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
+    if len(setup.works) != len(_WORK):
+        raise ValueError(f"Setup.works: {len(setup.works)} work offsets, G54..G59 take {len(_WORK)}")
+    work = setup.works[0]                                   # G54 at power-on
+    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev, offset=work), work=work)
+    here: Point = (start[1] - work[0], start[0] - work[1])  # the programmed point where the tool stands
+    ops: list[Op] = [State(blocks[0].line, modes.machine, power_on=True)] if modes.machine != NO_MODAL else []
     profiles: dict[tuple[int, int], Profile] = {}
     noses: dict[int, Nose] = {}             # index of a move under G41/G42 in ops -> its nose
     g71_first: tuple[float, float] | None = None
@@ -785,6 +797,20 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
                 out.append(ops[k])
         i = last + 1
     return out
+
+
+def first_work_offset(text: str) -> int:
+    """The work offset (1..6: G54..G59) the program's first G54..G59 selects, 1 (G54, power-on) when none does."""
+    for b in read(text, LATHE):
+        for g, _ in b.g:
+            if g in _WORK:
+                return g - 53
+    return 1
+
+
+def work_offsets(value: Callable[[str], float]) -> tuple[Point, ...]:
+    """Setup.works from the sequencer's parameters ``seq.work[k].x`` / ``.z``, ``value(name)`` giving each."""
+    return tuple((value(f"work[{k}].z"), value(f"work[{k}].x")) for k in range(1, len(_WORK) + 1))
 
 
 def has_block_delete(text: str) -> bool:

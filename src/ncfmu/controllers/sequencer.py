@@ -60,6 +60,7 @@ from .mypyc_compat import mypyc_attr
 MAX_BLOCKS = 8
 #: Rows of the tool table (T<tool><offset>: tool and offset 1..8).
 MAX_TOOLS = 8
+WORK_OFFSETS = 6            # G54..G59
 #: A dwell whose time left is below this is over (s): steps of dt do not sum exactly to its time.
 DWELL_EPS = 1e-9
 #: A thread's Z may fall back this far (mm) as the spindle's encoder jitters; more is a spindle turning backwards.
@@ -137,6 +138,19 @@ def _tool_ports():
                     min=0, max=9),
             real(f"{p}.max_depth", "parameter", 0.0, "mm", f"tool offset {k}: deepest cut the insert takes (0: not "
                  "given)", min=0.0),
+        ]
+    return tuple(ports)
+
+
+def _work_ports():
+    ports = []
+    for k in range(1, WORK_OFFSETS + 1):
+        p, g = f"work[{k}]", 53 + k
+        ports += [
+            real(f"{p}.x", "parameter", 0.0, "mm", f"work offset {k} (G{g}; G54 at power-on): X (radius, like the tool "
+                 "offsets) of the axes at the part's programmed X 0, before the tool offset"),
+            real(f"{p}.z", "parameter", 0.0, "mm", f"work offset {k} (G{g}): Z of the axes at the part's programmed "
+                 "Z 0, before the tool offset"),
         ]
     return tuple(ports)
 
@@ -226,6 +240,8 @@ class CutSequencer(CycleController):
         real("thread_shift", "parameter", 0.0, "deg", "a thread starts this far after the spindle's one-revolution "
              "marker (a multi-start thread: 360/starts apart)", min=0.0, max=360.0),
         boolean("threading", "output", None, "a thread pass follows the spindle (from its marker to its end)"),
+        # appended: the work offsets G54..G59
+        *_work_ports(),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -238,7 +254,7 @@ class CutSequencer(CycleController):
                     out[p.name] = "runs its program (program is set), not the registers"
         else:
             for p in cls.ports("parameter"):
-                if p.name.startswith("tool[") or p.name in _PROGRAM_ONLY:
+                if p.name.startswith(("tool[", "work[")) or p.name in _PROGRAM_ONLY:
                     out[p.name] = "runs the registers (program is empty): only a program reads it"
         return out
 
@@ -279,8 +295,10 @@ class CutSequencer(CycleController):
                            nose_radius=real_param(values, f"tool[{k}].nose_radius"),
                            tip=int_param(values, f"tool[{k}].tip"),
                            max_depth=real_param(values, f"tool[{k}].max_depth")) for k in range(1, MAX_TOOLS + 1))
+        works = lathe_program.work_offsets(lambda name: real_param(values, name))
         setup = lathe_program.Setup(diameter=bool(values["x_diameter"]), feed_per_rev=bool(values["feed_per_rev"]),
-                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")))
+                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")),
+                                    works=works)
         # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
         self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
                                                        setup) if self.program.strip() else [])

@@ -353,7 +353,7 @@ class LathePart(MachinedPart):
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         if program.strip():
             from ..controllers.g7x import Tool
-            from ..controllers.lathe_program import Finish, Rough, parse
+            from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
             from ..controllers.lathe_program import Setup as Reading
             # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
             tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
@@ -361,7 +361,8 @@ class LathePart(MachinedPart):
                                nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
                                tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
             reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
-                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
+                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])),
+                              works=work_offsets(lambda name: to_float(seq[name])))
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
             profiles = {id(op.profile): op.profile for op in cycles}
@@ -408,6 +409,10 @@ class LathePart(MachinedPart):
             depth_limit = to_float(seq[row + "max_depth"]) if has_row else 0.0
             depth_limit = depth_limit if depth_limit > 0 else math.inf
         shift = np.array([to_float(seq[row + "z_offset"]), to_float(seq[row + "x_offset"])]) if has_row else 0.0
+        if program.strip():         # and the program's first work offset (G54..G59; G54 at power-on)
+            from ..controllers.lathe_program import first_work_offset
+            work = f"work[{first_work_offset(program)}]."
+            shift = shift + np.array([to_float(seq[work + "z"]), to_float(seq[work + "x"])])
         if inside:
             # a boring tool: the lathe tool mirrored (the nose on top, the insert and bar below it, toward the
             # axis), a hole's radius high: the bar fits the hole, and its lowest point reaches the far wall only
