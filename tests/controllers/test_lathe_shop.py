@@ -5,6 +5,8 @@ naming the line."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from ncfmu.controllers import lathe_program
@@ -125,3 +127,57 @@ def test_work_offset_refused_inside_a_profile() -> None:
     text = "G00 X40. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100\nN10 G00 X20.\nG55 G01 Z-10.\nN20 X40.\nM30\n"
     [err] = _refusals(text)
     assert err.line_no == 5 and "G55 inside the profile" in str(err)
+
+
+# -- G90 / G94 ---------------------------------------------------------------------------------------------
+def _passes(segs, code: int) -> list[list[tuple[int, int, bool, float, float]]]:
+    """Each pass of a single cycle: (sub-cycle, pass, feed, X diameter, Z) at each move's end."""
+    out: dict[tuple[int, int], list] = {}
+    for g in segs:
+        if g.cycle == code:
+            out.setdefault((g.line, g.pass_no), []).append(
+                (g.subcycle, g.pass_no, g.feed, round(2 * g.element.end[1], 9), round(g.element.end[0], 9)))
+    return list(out.values())
+
+
+def test_g90_turns_in_four_moves_and_repeats_with_x_alone() -> None:
+    text = "G00 X52. Z2.\nG90 X46. Z-30. F120\nX42.\nX38. R-1.\nG00 X60.\nM30\n"
+    segs = _plan(text, (60.0, 10.0))
+    passes = _passes(segs, 90)
+    # SC1 X in at rapid, SC2 the cut to Z-30 at F, SC3 X out to the start point's X at F, SC4 Z back at rapid
+    assert passes[0] == [(1, 1, False, 46.0, 2.0), (2, 1, True, 46.0, -30.0), (3, 1, True, 52.0, -30.0),
+                         (4, 1, False, 52.0, 2.0)]
+    assert passes[1] == [(1, 2, False, 42.0, 2.0), (2, 2, True, 42.0, -30.0), (3, 2, True, 52.0, -30.0),
+                         (4, 2, False, 52.0, 2.0)]
+    # R-1 (radius): the cut starts 1 mm (radius) below its end's X: a taper from X36 at Z2 to X38 at Z-30
+    assert passes[2][:2] == [(1, 3, False, 36.0, 2.0), (2, 3, True, 38.0, -30.0)]
+    cut = [g for g in segs if g.cycle == 90 and g.subcycle == 2]
+    assert all(math.isclose(g.rate, 2.0) for g in cut)          # F120 mm/min
+    assert segs[-1].cycle == 0 and 2 * segs[-1].element.end[1] == 60.0   # G00 ends the modal cycle
+
+
+def test_g94_faces_in_four_moves_and_repeats_with_z_alone() -> None:
+    text = "G00 X52. Z2.\nG94 X10. Z-1. F60\nZ-2.\nW-5. R-1.\nM30\n"
+    passes = _passes(_plan(text, (60.0, 10.0)), 94)
+    # SC1 Z in at rapid, SC2 the face cut in X at F, SC3 Z out to the start point's Z at F, SC4 X back at rapid
+    assert passes[0] == [(1, 1, False, 52.0, -1.0), (2, 1, True, 10.0, -1.0), (3, 1, True, 10.0, 2.0),
+                         (4, 1, False, 52.0, 2.0)]
+    assert passes[1][1] == (2, 2, True, 10.0, -2.0)
+    # W-5 from the start point (Z-3), R-1: the face starts at Z-4 at X52 and ends at Z-3 at X10
+    assert passes[2][:2] == [(1, 3, False, 52.0, -4.0), (2, 3, True, 10.0, -3.0)]
+
+
+def test_g90_alone_is_still_the_absolute_mode() -> None:
+    text = "G18 G21 G90 G8\nG91 G00 X-5. Z-3.\nG90\nG00 X20. Z1.\nM30\n"
+    assert _ends(_plan(text, (30.0, 5.0))) == [(2, 50.0, 2.0), (4, 40.0, 1.0)]
+
+
+def test_single_cycle_refusals_name_their_lines() -> None:
+    assert "X (or U) and Z (or W)" in str(_refusals("G00 X52. Z2.\nG90 X46. F100\nM30\n")[0])
+    err = _refusals("G00 X52. Z2.\nG90 X46. Z-30. R4. F100\nM30\n")[0]     # the cut would start above S
+    assert err.line_no == 2 and "R4" in str(err)
+    err = _refusals("G00 X52. Z2.\nG42\nG90 X46. Z-30. F100\nM30\n")[0]
+    assert err.line_no == 3 and "G40" in str(err)
+    text = "G00 X52. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100\nN10 G00 X20.\nG94 X10. Z-10.\nN20 X40.\nM30\n"
+    err = _refusals(text)[0]
+    assert err.line_no == 5 and "inside a profile" in str(err)

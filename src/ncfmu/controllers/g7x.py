@@ -100,7 +100,7 @@ class Segment:
     pass_no: int            # pass of the cycle (0 outside a cycle)
     sigma_x: float          # depth of the pass below the cycle's start point, mm
     line: int               # program line being executed (1-based)
-    cycle: int              # 71, 70, 76, 92, 32 (a G32 thread) or 0
+    cycle: int              # 71, 70, 76, 92, 32 (a G32 thread), 90, 94 or 0
     dwell: float = 0.0      # s to wait at the move's end (G04)
     stop: int = 0           # at the move's end wait for START: 1 always (M00), 2 with the optional stop on (M01)
     modal: Modal = NO_MODAL
@@ -208,7 +208,19 @@ class Thread:
     end: Point
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class SingleCycle:
+    """A G90 or G94 pass (:mod:`.single_cycles`), its moves planned in the program's coordinates; the tool ends at
+    ``end`` (the start point)."""
+
+    line: int
+    code: int                       # 90, 94
+    segments: tuple[Segment, ...]
+    end: Point
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -699,7 +711,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
-        elif isinstance(op, Thread):
+        elif isinstance(op, (Thread, SingleCycle)):
             out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
                     for g in op.segments]
             here = op.end

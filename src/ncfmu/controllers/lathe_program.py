@@ -52,6 +52,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Profile,
     Rough,
     Segment,
+    SingleCycle,
     State,
     Stop,
     Thread,
@@ -78,6 +79,7 @@ from .gcode import (
 from .geometry import Arc, CornerError, Element, Line, Point
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
+from .single_cycles import CycleError, plan_single
 from .subprograms import run_order
 from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
 
@@ -87,7 +89,7 @@ _WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
     name="lathe",
-    groups={**{g: "motion (G00-G03, G32, G92)" for g in (*_MOTION, *_THREAD_MOTION)}, 18: "plane (G18)",
+    groups={**{g: "motion (G00-G03, G32, G92, G94)" for g in (*_MOTION, *_THREAD_MOTION, 94)}, 18: "plane (G18)",
             21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
             **{g: "canned cycle (G70/G71/G76)" for g in (70, 71, 76)},
@@ -98,8 +100,10 @@ LATHE = Dialect(
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
-               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G76, G90, G91, G92, G96-G99",
+               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are",
+               74: "G74 (face peck drilling) is not in the subset", 75: "G75 (grooving cycle) is not in the subset"},
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G76, G90, G91, G92, G94, "
+           "G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
     m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
     coordinates="XZIKRUWPQSTOL",
@@ -137,9 +141,10 @@ class _Modes:
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
     work: Point = (0.0, 0.0)    # the active work offset (z, x radius): G54..G59
     lead: float = 0.0       # a thread block's F (G32/G92/G76): the lead, mm; modal among thread blocks
-    g92_end: Point | None = None    # the modal G92's thread end (z, x) and taper R: a block with X alone repeats it
-    g92_taper: float = 0.0
-    g92_pass: int = 0       # passes of the modal G92 so far
+    cycle_end: Point | None = None  # the modal G92/G90/G94's end (z, x) and taper R: a block with X (or Z) alone
+                                    # repeats it
+    cycle_taper: float = 0.0
+    cycle_pass: int = 0     # passes of the modal G92/G90/G94 so far
     g76: G76Setup | None = None     # G76's first block
     thread_moves: int = 0   # the threads' planned moves so far (at most MAX_SEGMENTS in a program)
 
@@ -235,6 +240,8 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             cycle = g
         elif g in _THREAD_MOTION or g == 76:
             raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
+        elif g == 94 or (g == 90 and profile and _single_kind(b, modes) == 90):
+            raise b.err(col, f"G{g} (a single cycle) inside a profile: the profile's moves are G00-G03")
         elif g in (40, 41, 42) and not profile:
             modes.comp = {40: 0, 41: 1, 42: -1}[g]
     if "F" in values:
@@ -375,8 +382,15 @@ def _thread_kind(b: Block, modes: _Modes) -> int:
     return 0
 
 
-def _check_thread_words(b: Block, kind: int) -> None:
-    """The spindle cannot change during a thread (Z follows it): no S, T, G96/G97, M03/M04/M05 in its block."""
+def _check_thread_words(b: Block, kind: int, spindle: bool = True) -> None:
+    """The spindle cannot change during a thread (Z follows it): no S, T, G96/G97, M03/M04/M05 in its block; no
+    other G code in a thread's or single cycle's block (``spindle`` False: a single cycle's, which may hold S, T
+    and M words)."""
+    for g, col in b.g:
+        if not spindle and g != kind and g not in _THREAD_BLOCK_G:
+            raise b.err(col, f"G{g:02d} in a G{kind} block: give it a block of its own")
+    if not spindle:
+        return
     for k in "ST":
         if k in b.values:
             raise b.err(b.col(k), f"{k} in a thread block (G{kind}): the spindle speed and the tool cannot change "
@@ -483,19 +497,19 @@ def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -
             if "X" not in v and "U" not in v:
                 raise b.err(1, "G92: each pass gives the thread's X (or U)")
             new = 92 in {g for g, _ in b.g} or modes.motion != 92
-            if not new and modes.g92_end is None:
+            if not new and modes.cycle_end is None:
                 raise b.err(1, "X alone repeats a G92 pass: give G92 X Z F first")
-            z_end = None if new or modes.g92_end is None else modes.g92_end[0]
+            z_end = None if new or modes.cycle_end is None else modes.cycle_end[0]
             if new and "Z" not in v and "W" not in v:
                 raise b.err(b.col("G"), "G92 gives the thread's end Z (or W)")
             end = _target(b, modes, here, z_end)
             if "R" in v:
-                modes.g92_taper = v["R"]
+                modes.cycle_taper = v["R"]
             elif new:
-                modes.g92_taper = 0.0
-            modes.g92_end = end
-            modes.g92_pass = 1 if new else modes.g92_pass + 1
-            segs = plan_g92(here, end, modes.g92_taper, modes.lead, m, 0.0, modes.g92_pass, b.line)
+                modes.cycle_taper = 0.0
+            modes.cycle_end = end
+            modes.cycle_pass = 1 if new else modes.cycle_pass + 1
+            segs = plan_g92(here, end, modes.cycle_taper, modes.lead, m, 0.0, modes.cycle_pass, b.line)
             ops.append(Thread(b.line, 92, tuple(segs), here))
             modes.motion = 92
             return here
@@ -511,6 +525,63 @@ def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -
         return here
     except ThreadError as err:
         raise b.err(b.col(err.word), err.reason) from None
+
+
+# -- single cycles: G90, G94 (:mod:`.single_cycles`) ---------------------------------------------------
+def _single_kind(b: Block, modes: _Modes) -> int:
+    """90 or 94 when the block is a single cycle's pass: G94; G90 with X/U or Z/W and no G00-G03 (G90 alone, or with
+    a motion code, is RS274's absolute mode); or X/U or Z/W alone under a modal G90/G94."""
+    codes = [g for g, _ in b.g]
+    moves = any(k in b.values for k in "XZUW")
+    if 94 in codes:
+        return 94
+    if any(g in _MOTION or g in _THREAD_MOTION or g == 76 for g in codes):
+        return 0
+    if 90 in codes and moves:
+        return 90
+    if modes.motion in (90, 94) and moves:
+        return modes.motion or 0
+    return 0
+
+
+def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    """A G90/G94 pass from where the tool stands (the start point); it ends there again."""
+    v = b.values
+    for g, _ in b.g:
+        if g in (90, 91):
+            modes.incremental = g == 91
+        elif g in (7, 8):
+            modes.diameter = g == 7
+    for k in "IKPQ":
+        if k in v:
+            raise b.err(b.col(k), f"{k}: G{kind} takes X/U, Z/W, R (the taper) and F")
+    if modes.comp:
+        raise b.err(b.col("G"), f"G{kind} with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose radius "
+                                "compensation (G40) before a single cycle")
+    new = kind in {g for g, _ in b.g} or modes.motion != kind
+    if new and not (any(k in v for k in "XU") and any(k in v for k in "ZW")):
+        raise b.err(b.col("G"), f"G{kind} gives the cut's end point: X (or U) and Z (or W)")
+    previous = here if new or modes.cycle_end is None else modes.cycle_end
+    end = _target(b, modes, here, previous[0])
+    if not any(k in v for k in "XU"):
+        end = (end[0], previous[1])
+    if "R" in v:
+        modes.cycle_taper = v["R"]                 # radius values (G90) or along Z (G94), as Fanuc
+    elif new:
+        modes.cycle_taper = 0.0
+    if "F" in v:
+        modes.feed = v["F"] / 60.0
+    if modes.feed == 0.0:
+        raise b.err(b.col("G"), f"G{kind} with no feed: give F first")
+    modes.cycle_end = end
+    modes.cycle_pass = 1 if new else modes.cycle_pass + 1
+    try:
+        segs = plan_single(kind, here, end, modes.cycle_taper, modes.feed, modes.cycle_pass, b.line)
+    except CycleError as err:
+        raise b.err(b.col(err.word), err.reason) from None
+    ops.append(SingleCycle(b.line, kind, tuple(segs), here))
+    modes.motion = kind
+    return here
 
 
 # -- the program ------------------------------------------------------------------------------------
@@ -601,7 +672,10 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     while i < len(blocks):
         b = blocks[i]
         i += 1
-        thread = _thread_kind(b, modes)
+        single = _single_kind(b, modes)
+        thread = 0 if single else _thread_kind(b, modes)
+        if single:
+            _check_thread_words(b, single, spindle=False)
         if thread:
             _check_thread_words(b, thread)
         before = modes.machine
@@ -627,6 +701,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 dz, dx = modes.machine.offset           # the reference is the axes': the programmed point is off
                 here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
                         home.home[1] - dx if home.home[1] is not None else home.via[1])
+        elif single:
+            here = _single(b, single, modes, here, ops)
         elif thread:
             here = _thread(b, thread, modes, here, ops)
         else:
