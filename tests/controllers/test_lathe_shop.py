@@ -181,3 +181,69 @@ def test_single_cycle_refusals_name_their_lines() -> None:
     text = "G00 X52. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100\nN10 G00 X20.\nG94 X10. Z-10.\nN20 X40.\nM30\n"
     err = _refusals(text)[0]
     assert err.line_no == 5 and "inside a profile" in str(err)
+
+
+# -- ,C ,R A -----------------------------------------------------------------------------------------------
+def _points(segs, line: int | None = None) -> list[tuple[float, float]]:
+    """(X diameter, Z) at each move's end (rounded to 1 nm)."""
+    return [(round(2 * g.element.end[1], 6), round(g.element.end[0], 6)) for g in segs
+            if line is None or g.line == line]
+
+
+def test_chamfer_cuts_the_corner_c_from_it_along_each_move() -> None:
+    # face down to X30 at Z0 with ,C2, then turn along Z: a 2 x 45 degree chamfer (Fanuc's C2)
+    text = "G00 X20. Z1.\nG01 Z0. F60\nX30. ,C2.\nZ-20.\nM30\n"
+    segs = _plan(text, (50.0, 5.0))
+    assert _points(segs)[1:] == [(20.0, 0.0), (26.0, 0.0), (30.0, -2.0), (30.0, -20.0)]
+    chamfer = segs[3]
+    assert chamfer.line == 3 and chamfer.feed and math.isclose(chamfer.element.length, 2 * math.sqrt(2))
+
+
+def test_corner_radius_is_tangent_to_both_moves() -> None:
+    text = "G00 X20. Z1.\nG01 Z0. F60\nX30. ,R2.\nZ-20.\nM30\n"
+    segs = _plan(text, (50.0, 5.0))
+    arc = segs[3].element
+    # a right angle: the arc's ends r from the corner (X30 Z0), its centre at X26 (radius 13) Z-2
+    assert _points(segs)[1:] == [(20.0, 0.0), (26.0, 0.0), (30.0, -2.0), (30.0, -20.0)]
+    assert segs[3].line == 3 and math.isclose(arc.radius, 2.0)
+    assert math.isclose(arc.center[0], -2.0, abs_tol=1e-12) and math.isclose(arc.center[1], 13.0)
+    assert math.isclose(arc.sweep, math.pi / 2)                 # up, then toward the chuck: a G03 turn
+    # on a 45 degree corner the ends stand r tan(22.5 deg) from it
+    text = "G00 X20. Z1.\nG01 Z0. F60\nX30. Z-5. ,R3.\nZ-20.\nM30\n"
+    segs = _plan(text, (50.0, 5.0))
+    t = 3 * math.tan(math.pi / 8)
+    assert math.isclose(segs[4].element.start[0], -5.0 - t)     # the arc's end on the Z move
+    assert math.isclose(segs[4].element.end[0], -20.0)
+
+
+def test_angle_a_fixes_the_other_coordinate() -> None:
+    # A150: toward the chuck and up at 30 degrees: from X20 Z0 to X30 (radius +5) over Z -5/tan(30)
+    segs = _plan("G00 X20. Z0.\nG01 X30. A150. F60\nG01 Z-20. A180.\nM30\n", (50.0, 5.0))
+    x, z = _points(segs, 2)[0]
+    assert x == 30.0 and math.isclose(z, -5.0 / math.tan(math.radians(30.0)), abs_tol=1e-6)
+    assert _points(segs, 3) == [(30.0, -20.0)]
+
+
+def test_direct_dimension_refusals_name_their_lines() -> None:
+    [arc] = _refusals("G00 X20. Z1.\nG01 Z0. F60\nG02 X30. Z-5. R5. ,C1.\nZ-20.\nM30\n")
+    assert arc.line_no == 3 and ",C1 on an arc" in str(arc)
+    [to_arc] = _refusals("G00 X20. Z1.\nG01 Z0. F60\nX30. ,C1.\nG02 X40. Z-5. R5.\nM30\n")
+    assert to_arc.line_no == 3 and "the next block (line 4) is an arc" in str(to_arc)
+    [big] = _refusals("G00 X20. Z1.\nG01 Z0. F60\nX30. ,C6.\nZ-20.\nM30\n")     # the X move is 5 mm (radius)
+    assert big.line_no == 3 and "larger than this move" in str(big)
+    [big_r] = _refusals("G00 X20. Z1.\nG01 Z0. F60\nX30. ,R3.\nZ-2.\nM30\n")    # the Z move is 2 mm
+    assert big_r.line_no == 3 and "larger than the next move" in str(big_r)
+    [none] = _refusals("G00 X20. Z1.\nG01 Z0. F60\nX30. ,C1.\nM30\n")
+    assert none.line_no == 3 and "no move" in str(none)
+    [angle] = _refusals("G00 X20. Z1.\nG01 X30. Z-3. A150. F60\nM30\n")
+    assert angle.line_no == 2 and "one of them" in str(angle)
+    [thread] = _refusals("G97 S500 M03\nG00 X32. Z5.\nG92 X29. Z-20. F2. ,C1.\nM30\n")
+    assert thread.line_no == 3 and "belong to G01 moves" in str(thread)
+
+
+def test_chamfer_inside_a_g71_profile() -> None:
+    text = ("G00 X42. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0. W0. F100\nN10 G00 X30.\nG01 Z-10. ,C1.\n"
+            "X40.\nN20 Z-20.\nM30\n")
+    profile = [op for op in lathe_program.parse(text, (50.0, 5.0)) if isinstance(op, lathe_program.Rough)][0].profile
+    ends = [(round(2 * m.element.end[1], 6), round(m.element.end[0], 6), m.line) for m in profile.blocks]
+    assert ends == [(30.0, -9.0, 5), (32.0, -10.0, 5), (40.0, -10.0, 6), (40.0, -20.0, 7)]

@@ -39,6 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
+from .direct_dimensions import DimensionError, angled_end, corner
 from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
     EPS,
     MAX_SEGMENTS,
@@ -106,13 +107,14 @@ LATHE = Dialect(
            "G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
     m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
-    coordinates="XZIKRUWPQSTOL",
+    coordinates="XZIKRUWPQSTOLA",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
                      "D": "tool nose radius compensation is not in the subset"},
-    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q, L",
+    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q, L, A, ,C, ,R",
     unique_numbers=True,
     block_delete=True,
     subprograms=True,
+    comma_letters="CR",
 )
 
 
@@ -181,6 +183,12 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(b.col("I") if "I" in values else b.col("K"), "I and K belong to G02/G03 arcs")
     if "R" in values and motion not in (2, 3):
         raise b.err(b.col("R"), "R outside G71 is an arc radius: it belongs to G02/G03")
+    if "A" in values:
+        if motion != 1:
+            raise b.err(b.col("A"), f"A{values['A']:g} (the move's angle) belongs to G01 moves")
+        if ("X" in values) == ("Z" in values):
+            raise b.err(b.col("A"), f"A{values['A']:g}: give X (or U) or Z (or W) with the angle, one of them (the "
+                                    "angle fixes the other)")
     if not (has_end or has_centre or "R" in values):
         return None, here
     xz_col = min((b.col(k if k in b.values else {"X": "U", "Z": "W"}[k]) for k in "XZ" if k in values), default=1)
@@ -196,6 +204,11 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
     tz = z + values.get("Z", 0.0) if modes.incremental or "Z" in relative else values.get("Z", z)
     tx = (x + scale * values.get("X", 0.0) if modes.incremental or "X" in relative else
           (scale * values["X"] if "X" in values else x))
+    if "A" in values:
+        try:
+            tz, tx = angled_end(here, values["A"], tx if "X" in values else None, tz if "Z" in values else None)
+        except DimensionError as err:
+            raise b.err(b.col(err.word), err.reason) from None
     if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
         raise b.err(xz_col, f"the move ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
     end = (tz, tx)
@@ -250,7 +263,7 @@ def _interpret(b: Block, modes: _Modes, here: Point,
         if new_motion is not None:
             raise b.err(motion_col or 1, f"G{new_motion:02d} and G{cycle} in one block: a canned cycle moves by "
                                          "itself")
-        for k in "XZIK":
+        for k in ("X", "Z", "I", "K", *_DIMENSION_WORDS):
             if k in values:
                 raise b.err(b.col(k), f"{k}: G{cycle} takes P, Q, U, W, R and F (the profile is in N<P>..N<Q>)")
         return None, here, False, _Cycle(cycle, b, values)
@@ -584,6 +597,53 @@ def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> P
     return here
 
 
+# -- direct drawing dimensions: ,C ,R A (:mod:`.direct_dimensions`) ---------------------------------------
+_DIMENSION_WORDS = (",C", ",R", "A")
+
+
+def _corner_word(b: Block) -> str:
+    """",C" or ",R" when the block chamfers or rounds its corner with the next move, else ""."""
+    found = [k for k in (",C", ",R") if k in b.values]
+    if len(found) > 1:
+        raise b.err(b.col(found[1]), ",C and ,R in one block: a corner is chamfered or rounded, not both")
+    return found[0] if found else ""
+
+
+def _no_dimensions(b: Block, what: str) -> None:
+    for k in _DIMENSION_WORDS:
+        if k in b.values:
+            raise b.err(b.col(k), f"{k}{b.values[k]:g} in {what}: ,C, ,R and A belong to G01 moves")
+
+
+def _check_corner_move(b: Block, word: str, element: Element | None, rapid: bool) -> None:
+    """The block that chamfers or rounds (``word``) is itself a G01 move."""
+    if word and (element is None or rapid or not isinstance(element, Line)):
+        what = "an arc" if isinstance(element, Arc) else "a rapid (G00)" if rapid and element else "no move"
+        raise b.err(b.col(word), f"{word}{b.values[word]:g} on {what}: {word} stands between two G01 moves")
+
+
+def _move_at(ops: list[Op], k: int) -> Move:
+    m = ops[k]
+    assert isinstance(m, Move)
+    return m
+
+
+def _round_corner(pb: Block, word: str, prev: Move, b: Block, element: Element | None,
+                  rapid: bool) -> tuple[Move | None, Move, Element | None]:
+    """The corner of ``pb`` (``word``) between its move ``prev`` and the next block ``b``'s ``element``: the first
+    move shortened (None: nothing left), the chamfer or arc (a move of ``pb``), the next element shortened."""
+    if element is None or rapid or not isinstance(element, Line) or not isinstance(prev.element, Line):
+        what = ("an arc" if isinstance(element, Arc) else "a rapid (G00)" if rapid and element else
+                "no move (the move must follow directly)")
+        raise pb.err(pb.col(word), f"{word}{pb.values[word]:g}: the next block (line {b.line}) is {what}: {word} "
+                                   "stands between two G01 moves")
+    try:
+        before, middle, after = corner(prev.element, element, word, pb.values[word])
+    except DimensionError as err:
+        raise pb.err(pb.col(err.word), err.reason) from None
+    return (replace(prev, element=before) if before is not None else None), replace(prev, element=middle), after
+
+
 # -- the program ------------------------------------------------------------------------------------
 def _whole(b: Block, values: dict[str, float], letter: str, code: int) -> int:
     if letter not in values:
@@ -609,6 +669,7 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
     here = start
     front: Element | None = None
     pieces: list[Move] = []
+    pending: tuple[Block, str] | None = None    # the block whose ,C or ,R waits for the next move
     j = i
     while True:
         blk = blocks[j]
@@ -622,6 +683,19 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         element, end, rapid, cycle = _interpret(blk, modes, here, profile=True)
         if cycle is not None:
             raise blk.err(blk.col("G"), f"G{cycle.code} inside the profile N{p}..N{q}")
+        word = _corner_word(blk)
+        _check_corner_move(blk, word, element, rapid)
+        if pending is not None:
+            first, middle, element = _round_corner(pending[0], pending[1], pieces[-1], blk, element, rapid)
+            pieces[-1:] = [first, middle] if first is not None else [middle]
+            pending = None
+        if word:
+            if j == i:
+                raise blk.err(blk.col(word), f"{word} on the profile's first block N{p} (the move from the start "
+                                             "point): give it on the profile's own moves")
+            if element is None:
+                raise blk.err(blk.col(word), f"{word}: the corner before takes this whole move")
+            pending = (blk, word)
         if j == i:
             if element is None or isinstance(element, Arc) or end[0] > start[0] + EPS:
                 raise blk.err(1, f"the profile's first block N{p} moves in a straight line from the start point "
@@ -635,6 +709,9 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         here = end
         j += 1
         if blk.n == q:
+            if pending is not None:
+                raise blk.err(blk.col(pending[1]), f"{pending[1]} on the profile's last block N{q}: no move after it "
+                                                   "in the profile")
             break
     modes.motion, modes.incremental, modes.diameter, modes.feed = (saved.motion, saved.incremental,
                                                                    saved.diameter, saved.feed)
@@ -668,6 +745,7 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     profiles: dict[tuple[int, int], Profile] = {}
     noses: dict[int, Nose] = {}             # index of a move under G41/G42 in ops -> its nose
     g71_first: tuple[float, float] | None = None
+    pending: tuple[int, Block, str] | None = None   # the move (its index in ops) whose ,C or ,R waits for the next
     i = 0
     while i < len(blocks):
         b = blocks[i]
@@ -684,6 +762,10 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             ops.append(State(b.line, modes.machine))
         codes = {g for g, _ in b.g}
         cycle = None
+        if single or thread or codes & {4, 28, 50}:
+            _no_dimensions(b, f"a G{single or thread or min(codes & {4, 28, 50}):02d} block")
+            if pending is not None:
+                _round_corner(pending[1], pending[2], _move_at(ops, pending[0]), b, None, False)   # raises: no G01 next
         if codes & {4, 28, 50}:
             for g, col in b.g:
                 if g not in (4, 28, 50, 40):
@@ -708,10 +790,28 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         else:
             comp_before = modes.comp
             element, end, rapid, cycle = _interpret(b, modes, here)
+            word = _corner_word(b)
+            _check_corner_move(b, word, element, rapid)
+            if pending is not None:
+                at, corner_block, corner_word = pending
+                first, middle, element = _round_corner(corner_block, corner_word, _move_at(ops, at), b, element,
+                                                       rapid)
+                if first is None:
+                    ops[at] = middle
+                else:
+                    ops[at] = first
+                    ops.append(middle)
+                    if at in noses:
+                        noses[len(ops) - 1] = noses[at]
+                pending = None
             if element is not None:
                 ops.append(Move(element, rapid, modes.feed, b.line, comp_before, modes.comp, raw=b.raw.strip()))
                 if modes.comp:
                     noses[len(ops) - 1] = Nose(modes.comp, modes.row.nose_radius, modes.row.tip)
+            if word:
+                if element is None:
+                    raise b.err(b.col(word), f"{word}: the corner before takes this whole move")
+                pending = (len(ops) - 1, b, word)
             here = end
         after = _after_move(b, modes)
         if after is not None:
@@ -798,6 +898,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                                     f"the start point's X {here[1]:g} (its {'highest' if profile.inside else 'lowest'}"
                                     f" X {low:g}): nothing to rough, and G70 would take the whole depth in one pass")
         ops.append(rough)
+    if pending is not None:
+        _round_corner(pending[1], pending[2], _move_at(ops, pending[0]), blocks[-1], None, False)   # raises
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
     return _compensate(ops, noses) if noses else ops
