@@ -17,8 +17,14 @@ Words (one block per line, letters in either case; the README has the table)::
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
                                                 (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
+    G90 X/U Z/W [R] F | G94 X/U Z/W [R] F       single cycles: turning / facing, one pass (:mod:`.single_cycles`);
+                                                G90 with X/Z and no G00-G03 in its block (else the absolute mode)
+    G32 / G92 / G76                               threads (:mod:`.thread_cycles`)
+    G54..G59 work offsets (Setup.works, seq.work[k])   M98 P<repeats><program> [L] / M99 [P]  subprograms
+                                                (:mod:`.subprograms`: O programs after M30, ending with M99)
+    ,C<chamfer> ,R<radius> between two G01 moves; A<angle> on G01   (:mod:`.direct_dimensions`)
 
-Positions are the programmed tool tip; the axes carry the active tool offset (:func:`.g7x.plan_ops`). The
+Positions are the programmed tool tip; the axes carry the active work and tool offsets (:func:`.g7x.plan_ops`). The
 machine words become :class:`.g7x.State` operations: each planned move runs with its :class:`.g7x.Modal`.
 
 Geometry: elements (:class:`.geometry.Line`, :class:`.geometry.Arc`) in the **(z, x) plane** -- first
