@@ -8,8 +8,12 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from ncfmu.controllers import lathe_program
+from ncfmu.controllers.direct_dimensions import corner
+from ncfmu.controllers.geometry import Arc, Line
 from ncfmu.errors import ProgramError, ProgramErrors
 
 
@@ -250,3 +254,30 @@ def test_chamfer_inside_a_g71_profile() -> None:
     profile = [op for op in lathe_program.parse(text, (50.0, 5.0)) if isinstance(op, lathe_program.Rough)][0].profile
     ends = [(round(2 * m.element.end[1], 6), round(m.element.end[0], 6), m.line) for m in profile.blocks]
     assert ends == [(30.0, -9.0, 5), (32.0, -10.0, 5), (40.0, -10.0, 6), (40.0, -20.0, 7)]
+
+
+@given(st.floats(0.0, 2 * math.pi), st.floats(0.05, 3.0), st.floats(2.0, 20.0), st.floats(2.0, 20.0),
+       st.floats(0.01, 1.0), st.sampled_from([",C", ",R"]))
+def test_corner_geometry_for_any_turn(heading, turn_size, len1, len2, fraction, word) -> None:
+    """Any corner turning by 0.05..3 rad either way: a chamfer's ends c from the virtual corner along both moves;
+    a radius tangent to both (its centre r from both lines, its ends on them), the path continuous."""
+    for sign in (1.0, -1.0):
+        turn = sign * turn_size
+        b = (1.0, 2.0)
+        u1 = (math.cos(heading), math.sin(heading))
+        u2 = (math.cos(heading + turn), math.sin(heading + turn))
+        first = Line((b[0] - len1 * u1[0], b[1] - len1 * u1[1]), b)
+        second = Line(b, (b[0] + len2 * u2[0], b[1] + len2 * u2[1]))
+        reach = min(len1, len2) * fraction      # how far from the corner the corner's ends may come
+        size = reach if word == ",C" else reach / math.tan(turn_size / 2)
+        before, middle, after = corner(first, second, word, size)
+        assert math.dist(middle.start, b) == pytest.approx(reach, abs=1e-9)
+        assert math.dist(middle.end, b) == pytest.approx(reach, abs=1e-9)
+        assert before is None or math.dist(before.end, middle.start) < 1e-9
+        assert after is None or math.dist(after.start, middle.end) < 1e-9
+        if word == ",R":
+            assert isinstance(middle, Arc) and middle.radius == pytest.approx(size)
+            for p, u in ((middle.start, u1), (middle.end, u2)):     # the radius to each end is normal to its move
+                r = (p[0] - middle.center[0], p[1] - middle.center[1])
+                assert abs(r[0] * u[0] + r[1] * u[1]) < 1e-7 * max(1.0, size)
+            assert middle.sweep == pytest.approx(turn)
