@@ -719,7 +719,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
             before = axes(here)
             modal = op.modal
             dz, dx = modal.offset
-            if op.power_on:                     # a power-on work offset (G54): the tool stands where it is
+            if op.power_on and start is not None:   # a power-on work offset (G54): the axes stand at start
                 here = (before[0] - dz, before[1] - dx)
             if math.dist(before, axes(here)) > EPS:             # the new offset taken up at the rapid rate
                 out.append(Segment(Line(before, axes(here)), rapid, False, 0, 0, 0.0, op.line, 0, modal=modal))
