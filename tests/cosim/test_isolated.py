@@ -2,8 +2,8 @@
 (:mod:`ncfmu.cosim.isolated`), and its crash -- SIGSEGV, abort(), exit(3), in fmi2DoStep, fmi2GetReal or
 fmi3DoStep -- ends the run with a message naming the instance, the call and the simulated time, every whole row
 before it on disk: ``ncfmu run`` exits 4 (not finished), a sweep's variant is ``failed`` and the sweep goes on, a
-served run is faulted (Simulation.state) with its rows kept. The crashing FMUs are tests/foreign/crashing_axis.c (``CrashingAxis``,
-``CrashingAxis3``: PlantAxis with a bug).
+served run is faulted (Simulation.state) with its rows kept. The crashing FMUs are
+tests/foreign/crashing_axis.c (``CrashingAxis``, ``CrashingAxis3``: PlantAxis with a bug).
 
 Each crash runs in a subprocess: on a master that runs foreign FMUs in its own process, the crash kills it.
 """

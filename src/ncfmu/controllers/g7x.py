@@ -66,7 +66,7 @@ class Modal:
     spindle, the feed mode, the coolant."""
 
     tool: int = 0                        # turret station of T<tool><offset> (0: none)
-    offset: Point = (0.0, 0.0)           # the active tool offset (z, x radius): axes = programmed point + offset
+    offset: Point = (0.0, 0.0)           # the active work + tool offset (z, x radius): axes = programmed point + it
     spindle: int = 0                     # +1 M03, -1 M04, 0 M05
     s: float = 0.0                       # S: rev/min (G97) or the surface speed in m/min (G96)
     css: bool = False                    # G96 constant surface speed
@@ -100,7 +100,7 @@ class Segment:
     pass_no: int            # pass of the cycle (0 outside a cycle)
     sigma_x: float          # depth of the pass below the cycle's start point, mm
     line: int               # program line being executed (1-based)
-    cycle: int              # 71, 70, 76, 92, 32 (a G32 thread) or 0
+    cycle: int              # 71, 70, 76, 92, 32 (a G32 thread), 90, 94 or 0
     dwell: float = 0.0      # s to wait at the move's end (G04)
     stop: int = 0           # at the move's end wait for START: 1 always (M00), 2 with the optional stop on (M01)
     modal: Modal = NO_MODAL
@@ -168,6 +168,7 @@ class State:
 
     line: int
     modal: Modal
+    power_on: bool = False  # the state the program starts in: its offset is where the axes already are
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -207,7 +208,19 @@ class Thread:
     end: Point
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class SingleCycle:
+    """A G90 or G94 pass (:mod:`.single_cycles`), its moves planned in the program's coordinates; the tool ends at
+    ``end`` (the start point)."""
+
+    line: int
+    code: int                       # 90, 94
+    segments: tuple[Segment, ...]
+    end: Point
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -698,7 +711,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
-        elif isinstance(op, Thread):
+        elif isinstance(op, (Thread, SingleCycle)):
             out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
                     for g in op.segments]
             here = op.end
@@ -706,6 +719,8 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
             before = axes(here)
             modal = op.modal
             dz, dx = modal.offset
+            if op.power_on and start is not None:   # a power-on work offset (G54): the axes stand at start
+                here = (before[0] - dz, before[1] - dx)
             if math.dist(before, axes(here)) > EPS:             # the new offset taken up at the rapid rate
                 out.append(Segment(Line(before, axes(here)), rapid, False, 0, 0, 0.0, op.line, 0, modal=modal))
         elif isinstance(op, Dwell):

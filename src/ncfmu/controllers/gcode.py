@@ -58,6 +58,8 @@ class Dialect:
     letter_list: str                     # the letters taken, for messages
     unique_numbers: bool = False         # N numbers name blocks (G70/G71 P and Q): each at most once
     block_delete: bool = False           # a block may start with '/' (block delete, skipped with the switch on)
+    subprograms: bool = False            # after the main program's end, further O programs ending with M99
+    comma_letters: str = ""              # letters also taken after a comma (Fanuc's ,C ,R): the word is ",C"
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -141,21 +143,23 @@ def _direct_drawing(word: str) -> str:
             f"{word!r}: a comma word (direct drawing dimensions) is not in the subset")
 
 
-def words(text: str, line_no: int) -> list[tuple[str, float, str, int]]:
-    """(letter, value, spelled number, column) of every word of a comment-free line."""
+def words(text: str, line_no: int, comma_letters: str = "") -> list[tuple[str, float, str, int]]:
+    """(letter, value, spelled number, column) of every word of a comment-free line; a comma before one of
+    ``comma_letters`` makes a word of its own (letter ",C")."""
     found, col = [], 0
     while col < len(text):
         if text[col].isspace():
             col += 1
             continue
-        m = _WORD.match(text, col)
+        comma = text[col] == "," and text[col + 1:col + 2].upper() in comma_letters and col + 1 < len(text)
+        m = _WORD.match(text, col + 1 if comma else col)
         if not m or not m.group(1):
             ch = text[col]
             reason = ("parameters and expressions are not in the subset" if ch in "#[]=" else
                       "block delete '/' is not in the subset" if ch == "/" else
                       _direct_drawing(text[col:col + 2]) if ch == "," else f"unexpected character {ch!r}")
             raise ProgramError(line_no, col + 1, text.strip(), reason)
-        letter = m.group(1).upper()
+        letter = ("," if comma else "") + m.group(1).upper()
         if m.group(2) is None:
             nxt = text[m.end(1):].lstrip()[:1]
             reason = ("parameters and expressions are not in the subset" if nxt in ("#", "[") else
@@ -243,7 +247,7 @@ def check(b: Block, dialect: Dialect) -> None:
             if not value > 0:
                 raise b.err(col, f"{word}: the feed must be > 0 mm/min")
             b.values["F"] = value
-        elif letter in dialect.coordinates:
+        elif letter in dialect.coordinates or (letter[0] == "," and letter[1:] in dialect.comma_letters):
             if abs(value) > COORDINATE_LIMIT:
                 raise b.err(col, f"{word}: beyond {COORDINATE_LIMIT:g} mm, no machine is that large")
             b.values[letter] = value
@@ -278,22 +282,26 @@ def read(text: str, dialect: Dialect, block_delete: bool = False) -> list[Block]
     lines = program_lines(text)
     out: list[Block] = []
     errors: list[ProgramError] = []
-    numbered: dict[int, int] = {}           # block number -> line
+    numbered: dict[int, int] = {}           # block number -> line (of the program it is in)
     ended_at = 0
+    sub_at = 0                              # the line of the subprogram being read (0: the main program)
     for n, raw in enumerate(lines, start=1):
         if raw.strip() == "%":
             continue
         try:
             clean = strip_comments(raw, n)
             if ended_at:
-                if clean.strip():
+                if not clean.strip():
+                    continue
+                if not (dialect.subprograms and clean.lstrip()[:1].upper() == "O"):
                     raise ProgramError(n, len(clean) - len(clean.lstrip()) + 1, raw.strip(),
-                                       f"text after the program end (line {ended_at})")
-                continue
+                                       f"text after the program end (line {ended_at})" +
+                                       (": a subprogram starts with O<number>" if dialect.subprograms else ""))
+                ended_at, sub_at, numbered = 0, n, {}
             deleted = False
             if dialect.block_delete:
                 clean, deleted = _slash(clean, n, raw)
-            found = words(clean, n)
+            found = words(clean, n, dialect.comma_letters)
             if not found:
                 continue
             b = Block(n, raw, found)
@@ -309,12 +317,18 @@ def read(text: str, dialect: Dialect, block_delete: bool = False) -> list[Block]
                                                 "names one block: G70/G71 P and Q find the profile by it)"))
                 continue
             numbered[b.n] = n
-        if b.ends:
+        if sub_at and b.ends:
+            errors.append(b.err(b.col("M"), f"M02/M30 in the subprogram of line {sub_at}: a subprogram ends with "
+                                            "M99 (return to the calling block)"))
+            continue
+        if b.ends or (sub_at and any(code == 99 for code, _ in b.m)):
             ended_at = n
         out.append(b)
     if not ended_at:
         last = max((n for n, line in enumerate(lines, start=1) if line.strip()), default=1)
-        errors.append(ProgramError(last, 1, lines[last - 1].strip(), "the program does not end with M02 or M30"))
+        errors.append(ProgramError(last, 1, lines[last - 1].strip(),
+                                   f"the subprogram of line {sub_at} does not end with M99" if sub_at else
+                                   "the program does not end with M02 or M30"))
     if len(errors) == 1:
         raise errors[0]
     if errors:

@@ -17,8 +17,14 @@ Words (one block per line, letters in either case; the README has the table)::
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
                                                 (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
+    G90 X/U Z/W [R] F | G94 X/U Z/W [R] F       single cycles: turning / facing, one pass (:mod:`.single_cycles`);
+                                                G90 with X/Z and no G00-G03 in its block (else the absolute mode)
+    G32 / G92 / G76                               threads (:mod:`.thread_cycles`)
+    G54..G59 work offsets (Setup.works, seq.work[k])   M98 P<repeats><program> [L] / M99 [P]  subprograms
+                                                (:mod:`.subprograms`: O programs after M30, ending with M99)
+    ,C<chamfer> ,R<radius> between two G01 moves; A<angle> on G01   (:mod:`.direct_dimensions`)
 
-Positions are the programmed tool tip; the axes carry the active tool offset (:func:`.g7x.plan_ops`). The
+Positions are the programmed tool tip; the axes carry the active work and tool offsets (:func:`.g7x.plan_ops`). The
 machine words become :class:`.g7x.State` operations: each planned move runs with its :class:`.g7x.Modal`.
 
 Geometry: elements (:class:`.geometry.Line`, :class:`.geometry.Arc`) in the **(z, x) plane** -- first
@@ -35,9 +41,11 @@ positions, arcs by I/K or R) and reads the profile of each cycle; the cycles' ge
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 from ..errors import ProgramError
+from .direct_dimensions import DimensionError, angled_end, corner
 from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe program's operations)
     EPS,
     MAX_SEGMENTS,
@@ -51,6 +59,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Profile,
     Rough,
     Segment,
+    SingleCycle,
     State,
     Stop,
     Thread,
@@ -77,32 +86,41 @@ from .gcode import (
 from .geometry import Arc, CornerError, Element, Line, Point
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
+from .single_cycles import CycleError, plan_single
+from .subprograms import run_order
 from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
 
 _MOTION = {0, 1, 2, 3}
+_WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
     name="lathe",
-    groups={**{g: "motion (G00-G03, G32, G92)" for g in (*_MOTION, *_THREAD_MOTION)}, 18: "plane (G18)",
+    groups={**{g: "motion (G00-G03, G32, G92, G94)" for g in (*_MOTION, *_THREAD_MOTION, 94)}, 18: "plane (G18)",
             21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
             **{g: "canned cycle (G70/G71/G76)" for g in (70, 71, 76)},
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
             **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
-            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)"},
+            97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)",
+            **{g: "work offset (G54-G59)" for g in range(54, 60)}},
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
-               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G70, G71, G76, G90, G91, G92, G96-G99",
-    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30}), m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30",
-    coordinates="XZIKRUWPQSTO",
+               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are",
+               74: "G74 (face peck drilling) is not in the subset", 75: "G75 (grooving cycle) is not in the subset"},
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G76, G90, G91, G92, G94, "
+           "G96-G99",
+    m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
+    m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
+    coordinates="XZIKRUWPQSTOLA",
     refused_letters={"Y": "the lathe subset has no Y axis (XZ plane)",
                      "D": "tool nose radius compensation is not in the subset"},
-    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q",
+    letter_list="G, M, N, O, X, Z, U, W, I, K, R, F, S, T, P, Q, L, A, ,C, ,R",
     unique_numbers=True,
     block_delete=True,
+    subprograms=True,
+    comma_letters="CR",
 )
 
 
@@ -116,6 +134,7 @@ class Setup:
     tools: tuple[Tool, ...] = (Tool(),) * 8   # the tool table, offset k = tools[k - 1] (seq.tool[1..8])
     home: Point | None = None             # the machine reference (z, x) for G28 (seq.z_home, seq.x_home)
     block_delete: bool = False            # the block-delete switch: blocks starting with '/' are skipped
+    works: tuple[Point, ...] = ((0.0, 0.0),) * 6   # the work offsets G54..G59 (z, x radius) (seq.work[1..6])
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -128,10 +147,12 @@ class _Modes:
     machine: Modal = field(default_factory=Modal)
     comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
+    work: Point = (0.0, 0.0)    # the active work offset (z, x radius): G54..G59
     lead: float = 0.0       # a thread block's F (G32/G92/G76): the lead, mm; modal among thread blocks
-    g92_end: Point | None = None    # the modal G92's thread end (z, x) and taper R: a block with X alone repeats it
-    g92_taper: float = 0.0
-    g92_pass: int = 0       # passes of the modal G92 so far
+    cycle_end: Point | None = None  # the modal G92/G90/G94's end (z, x) and taper R: a block with X (or Z) alone
+                                    # repeats it
+    cycle_taper: float = 0.0
+    cycle_pass: int = 0     # passes of the modal G92/G90/G94 so far
     g76: G76Setup | None = None     # G76's first block
     thread_moves: int = 0   # the threads' planned moves so far (at most MAX_SEGMENTS in a program)
 
@@ -168,6 +189,12 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(b.col("I") if "I" in values else b.col("K"), "I and K belong to G02/G03 arcs")
     if "R" in values and motion not in (2, 3):
         raise b.err(b.col("R"), "R outside G71 is an arc radius: it belongs to G02/G03")
+    if "A" in values:
+        if motion != 1:
+            raise b.err(b.col("A"), f"A{values['A']:g} (the move's angle) belongs to G01 moves")
+        if ("X" in values) == ("Z" in values):
+            raise b.err(b.col("A"), f"A{values['A']:g}: give X (or U) or Z (or W) with the angle, one of them (the "
+                                    "angle fixes the other)")
     if not (has_end or has_centre or "R" in values):
         return None, here
     xz_col = min((b.col(k if k in b.values else {"X": "U", "Z": "W"}[k]) for k in "XZ" if k in values), default=1)
@@ -183,6 +210,11 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
     tz = z + values.get("Z", 0.0) if modes.incremental or "Z" in relative else values.get("Z", z)
     tx = (x + scale * values.get("X", 0.0) if modes.incremental or "X" in relative else
           (scale * values["X"] if "X" in values else x))
+    if "A" in values:
+        try:
+            tz, tx = angled_end(here, values["A"], tx if "X" in values else None, tz if "Z" in values else None)
+        except DimensionError as err:
+            raise b.err(b.col(err.word), err.reason) from None
     if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
         raise b.err(xz_col, f"the move ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
     end = (tz, tx)
@@ -227,6 +259,8 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             cycle = g
         elif g in _THREAD_MOTION or g == 76:
             raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
+        elif g == 94 or (g == 90 and profile and _single_kind(b, modes) == 90):
+            raise b.err(col, f"G{g} (a single cycle) inside a profile: the profile's moves are G00-G03")
         elif g in (40, 41, 42) and not profile:
             modes.comp = {40: 0, 41: 1, 42: -1}[g]
     if "F" in values:
@@ -235,7 +269,7 @@ def _interpret(b: Block, modes: _Modes, here: Point,
         if new_motion is not None:
             raise b.err(motion_col or 1, f"G{new_motion:02d} and G{cycle} in one block: a canned cycle moves by "
                                          "itself")
-        for k in "XZIK":
+        for k in ("X", "Z", "I", "K", *_DIMENSION_WORDS):
             if k in values:
                 raise b.err(b.col(k), f"{k}: G{cycle} takes P, Q, U, W, R and F (the profile is in N<P>..N<Q>)")
         return None, here, False, _Cycle(cycle, b, values)
@@ -292,8 +326,12 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
             raise b.err(b.col("T"), f"T{t:g}: T<tool><offset> with tool and offset 0..{len(setup.tools)} (T0101: "
                                     "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
         row_tool = setup.tools[row - 1] if row else Tool()
-        m = replace(m, tool=tool, offset=(row_tool.z_offset, row_tool.x_offset))
+        m = replace(m, tool=tool, offset=(row_tool.z_offset + modes.work[0], row_tool.x_offset + modes.work[1]))
         modes.row = row_tool
+    selected = [g for g in codes if g in _WORK]
+    if selected:
+        modes.work = setup.works[selected[0] - 54]
+        m = replace(m, offset=(modes.row.z_offset + modes.work[0], modes.row.x_offset + modes.work[1]))
     for code, _ in b.m:
         if code in _BEFORE_MOVE:
             m = replace(m, spindle=_BEFORE_MOVE[code])
@@ -363,8 +401,15 @@ def _thread_kind(b: Block, modes: _Modes) -> int:
     return 0
 
 
-def _check_thread_words(b: Block, kind: int) -> None:
-    """The spindle cannot change during a thread (Z follows it): no S, T, G96/G97, M03/M04/M05 in its block."""
+def _check_thread_words(b: Block, kind: int, spindle: bool = True) -> None:
+    """The spindle cannot change during a thread (Z follows it): no S, T, G96/G97, M03/M04/M05 in its block; no
+    other G code in a thread's or single cycle's block (``spindle`` False: a single cycle's, which may hold S, T
+    and M words)."""
+    for g, col in b.g:
+        if not spindle and g != kind and g not in _THREAD_BLOCK_G:
+            raise b.err(col, f"G{g:02d} in a G{kind} block: give it a block of its own")
+    if not spindle:
+        return
     for k in "ST":
         if k in b.values:
             raise b.err(b.col(k), f"{k} in a thread block (G{kind}): the spindle speed and the tool cannot change "
@@ -471,19 +516,19 @@ def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -
             if "X" not in v and "U" not in v:
                 raise b.err(1, "G92: each pass gives the thread's X (or U)")
             new = 92 in {g for g, _ in b.g} or modes.motion != 92
-            if not new and modes.g92_end is None:
+            if not new and modes.cycle_end is None:
                 raise b.err(1, "X alone repeats a G92 pass: give G92 X Z F first")
-            z_end = None if new or modes.g92_end is None else modes.g92_end[0]
+            z_end = None if new or modes.cycle_end is None else modes.cycle_end[0]
             if new and "Z" not in v and "W" not in v:
                 raise b.err(b.col("G"), "G92 gives the thread's end Z (or W)")
             end = _target(b, modes, here, z_end)
             if "R" in v:
-                modes.g92_taper = v["R"]
+                modes.cycle_taper = v["R"]
             elif new:
-                modes.g92_taper = 0.0
-            modes.g92_end = end
-            modes.g92_pass = 1 if new else modes.g92_pass + 1
-            segs = plan_g92(here, end, modes.g92_taper, modes.lead, m, 0.0, modes.g92_pass, b.line)
+                modes.cycle_taper = 0.0
+            modes.cycle_end = end
+            modes.cycle_pass = 1 if new else modes.cycle_pass + 1
+            segs = plan_g92(here, end, modes.cycle_taper, modes.lead, m, 0.0, modes.cycle_pass, b.line)
             ops.append(Thread(b.line, 92, tuple(segs), here))
             modes.motion = 92
             return here
@@ -499,6 +544,110 @@ def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -
         return here
     except ThreadError as err:
         raise b.err(b.col(err.word), err.reason) from None
+
+
+# -- single cycles: G90, G94 (:mod:`.single_cycles`) ---------------------------------------------------
+def _single_kind(b: Block, modes: _Modes) -> int:
+    """90 or 94 when the block is a single cycle's pass: G94; G90 with X/U or Z/W and no G00-G03 (G90 alone, or with
+    a motion code, is RS274's absolute mode); or X/U or Z/W alone under a modal G90/G94."""
+    codes = [g for g, _ in b.g]
+    moves = any(k in b.values for k in "XZUW")
+    if 94 in codes:
+        return 94
+    if any(g in _MOTION or g in _THREAD_MOTION or g == 76 for g in codes):
+        return 0
+    if 90 in codes and moves:
+        return 90
+    if modes.motion in (90, 94) and moves:
+        return modes.motion or 0
+    return 0
+
+
+def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    """A G90/G94 pass from where the tool stands (the start point); it ends there again."""
+    v = b.values
+    for g, _ in b.g:
+        if g in (90, 91):
+            modes.incremental = g == 91
+        elif g in (7, 8):
+            modes.diameter = g == 7
+    for k in "IKPQ":
+        if k in v:
+            raise b.err(b.col(k), f"{k}: G{kind} takes X/U, Z/W, R (the taper) and F")
+    if modes.comp:
+        raise b.err(b.col("G"), f"G{kind} with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose radius "
+                                "compensation (G40) before a single cycle")
+    new = kind in {g for g, _ in b.g} or modes.motion != kind
+    if new and not (any(k in v for k in "XU") and any(k in v for k in "ZW")):
+        raise b.err(b.col("G"), f"G{kind} gives the cut's end point: X (or U) and Z (or W)")
+    previous = here if new or modes.cycle_end is None else modes.cycle_end
+    end = _target(b, modes, here, previous[0])
+    if not any(k in v for k in "XU"):
+        end = (end[0], previous[1])
+    if "R" in v:
+        modes.cycle_taper = v["R"]                 # radius values (G90) or along Z (G94), as Fanuc
+    elif new:
+        modes.cycle_taper = 0.0
+    if "F" in v:
+        modes.feed = v["F"] / 60.0
+    if modes.feed == 0.0:
+        raise b.err(b.col("G"), f"G{kind} with no feed: give F first")
+    modes.cycle_end = end
+    modes.cycle_pass = 1 if new else modes.cycle_pass + 1
+    try:
+        segs = plan_single(kind, here, end, modes.cycle_taper, modes.feed, modes.cycle_pass, b.line)
+    except CycleError as err:
+        raise b.err(b.col(err.word), err.reason) from None
+    ops.append(SingleCycle(b.line, kind, tuple(segs), here))
+    modes.motion = kind
+    return here
+
+
+# -- direct drawing dimensions: ,C ,R A (:mod:`.direct_dimensions`) ---------------------------------------
+_DIMENSION_WORDS = (",C", ",R", "A")
+
+
+def _corner_word(b: Block) -> str:
+    """",C" or ",R" when the block chamfers or rounds its corner with the next move, else ""."""
+    found = [k for k in (",C", ",R") if k in b.values]
+    if len(found) > 1:
+        raise b.err(b.col(found[1]), ",C and ,R in one block: a corner is chamfered or rounded, not both")
+    return found[0] if found else ""
+
+
+def _no_dimensions(b: Block, what: str) -> None:
+    for k in _DIMENSION_WORDS:
+        if k in b.values:
+            raise b.err(b.col(k), f"{k}{b.values[k]:g} in {what}: ,C, ,R and A belong to G01 moves")
+
+
+def _check_corner_move(b: Block, word: str, element: Element | None, rapid: bool) -> None:
+    """The block that chamfers or rounds (``word``) is itself a G01 move."""
+    if word and (element is None or rapid or not isinstance(element, Line)):
+        what = "an arc" if isinstance(element, Arc) else "a rapid (G00)" if rapid and element else "no move"
+        raise b.err(b.col(word), f"{word}{b.values[word]:g} on {what}: {word} stands between two G01 moves")
+
+
+def _move_at(ops: list[Op], k: int) -> Move:
+    m = ops[k]
+    assert isinstance(m, Move)
+    return m
+
+
+def _round_corner(pb: Block, word: str, prev: Move, b: Block, element: Element | None,
+                  rapid: bool) -> tuple[Move | None, Move, Element | None]:
+    """The corner of ``pb`` (``word``) between its move ``prev`` and the next block ``b``'s ``element``: the first
+    move shortened (None: nothing left), the chamfer or arc (a move of ``pb``), the next element shortened."""
+    if element is None or rapid or not isinstance(element, Line) or not isinstance(prev.element, Line):
+        what = ("an arc" if isinstance(element, Arc) else "a rapid (G00)" if rapid and element else
+                "no move (the move must follow directly)")
+        raise pb.err(pb.col(word), f"{word}{pb.values[word]:g}: the next block (line {b.line}) is {what}: {word} "
+                                   "stands between two G01 moves")
+    try:
+        before, middle, after = corner(prev.element, element, word, pb.values[word])
+    except DimensionError as err:
+        raise pb.err(pb.col(err.word), err.reason) from None
+    return (replace(prev, element=before) if before is not None else None), replace(prev, element=middle), after
 
 
 # -- the program ------------------------------------------------------------------------------------
@@ -526,19 +675,33 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
     here = start
     front: Element | None = None
     pieces: list[Move] = []
+    pending: tuple[Block, str] | None = None    # the block whose ,C or ,R waits for the next move
     j = i
     while True:
         blk = blocks[j]
         if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
         machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
-        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, 96, 97, 98, 99)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99)]
         if machine:
             raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
                                                   "part's outline (moves, F), give it before G71/G70")
         element, end, rapid, cycle = _interpret(blk, modes, here, profile=True)
         if cycle is not None:
             raise blk.err(blk.col("G"), f"G{cycle.code} inside the profile N{p}..N{q}")
+        word = _corner_word(blk)
+        _check_corner_move(blk, word, element, rapid)
+        if pending is not None:
+            first, middle, element = _round_corner(pending[0], pending[1], pieces[-1], blk, element, rapid)
+            pieces[-1:] = [first, middle] if first is not None else [middle]
+            pending = None
+        if word:
+            if j == i:
+                raise blk.err(blk.col(word), f"{word} on the profile's first block N{p} (the move from the start "
+                                             "point): give it on the profile's own moves")
+            if element is None:
+                raise blk.err(blk.col(word), f"{word}: the corner before takes this whole move")
+            pending = (blk, word)
         if j == i:
             if element is None or isinstance(element, Arc) or end[0] > start[0] + EPS:
                 raise blk.err(1, f"the profile's first block N{p} moves in a straight line from the start point "
@@ -552,6 +715,9 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         here = end
         j += 1
         if blk.n == q:
+            if pending is not None:
+                raise blk.err(blk.col(pending[1]), f"{pending[1]} on the profile's last block N{q}: no move after it "
+                                                   "in the profile")
             break
     modes.motion, modes.incremental, modes.diameter, modes.feed = (saved.motion, saved.incremental,
                                                                    saved.diameter, saved.feed)
@@ -575,18 +741,25 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         the first error of conversion.
     """
     setup = setup or Setup()
-    blocks = read(text, LATHE, setup.block_delete)
-    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev))
-    here: Point = (start[1], start[0])
-    ops: list[Op] = [State(blocks[0].line, modes.machine)] if modes.machine != NO_MODAL else []
+    blocks = run_order(read(text, LATHE, setup.block_delete))
+    if len(setup.works) != len(_WORK):
+        raise ValueError(f"Setup.works: {len(setup.works)} work offsets, G54..G59 take {len(_WORK)}")
+    work = setup.works[0]                                   # G54 at power-on
+    modes = _Modes(diameter=setup.diameter, machine=Modal(per_rev=setup.feed_per_rev, offset=work), work=work)
+    here: Point = (start[1] - work[0], start[0] - work[1])  # the programmed point where the tool stands
+    ops: list[Op] = [State(blocks[0].line, modes.machine, power_on=True)] if modes.machine != NO_MODAL else []
     profiles: dict[tuple[int, int], Profile] = {}
     noses: dict[int, Nose] = {}             # index of a move under G41/G42 in ops -> its nose
     g71_first: tuple[float, float] | None = None
+    pending: tuple[int, Block, str] | None = None   # the move (its index in ops) whose ,C or ,R waits for the next
     i = 0
     while i < len(blocks):
         b = blocks[i]
         i += 1
-        thread = _thread_kind(b, modes)
+        single = _single_kind(b, modes)
+        thread = 0 if single else _thread_kind(b, modes)
+        if single:
+            _check_thread_words(b, single, spindle=False)
         if thread:
             _check_thread_words(b, thread)
         before = modes.machine
@@ -595,6 +768,10 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             ops.append(State(b.line, modes.machine))
         codes = {g for g, _ in b.g}
         cycle = None
+        if single or thread or codes & {4, 28, 50}:
+            _no_dimensions(b, f"a G{single or thread or min(codes & {4, 28, 50}):02d} block")
+            if pending is not None:
+                _round_corner(pending[1], pending[2], _move_at(ops, pending[0]), b, None, False)   # raises: no G01 next
         if codes & {4, 28, 50}:
             for g, col in b.g:
                 if g not in (4, 28, 50, 40):
@@ -612,15 +789,35 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 dz, dx = modes.machine.offset           # the reference is the axes': the programmed point is off
                 here = (home.home[0] - dz if home.home[0] is not None else home.via[0],
                         home.home[1] - dx if home.home[1] is not None else home.via[1])
+        elif single:
+            here = _single(b, single, modes, here, ops)
         elif thread:
             here = _thread(b, thread, modes, here, ops)
         else:
             comp_before = modes.comp
             element, end, rapid, cycle = _interpret(b, modes, here)
+            word = _corner_word(b)
+            _check_corner_move(b, word, element, rapid)
+            if pending is not None:
+                at, corner_block, corner_word = pending
+                first, middle, element = _round_corner(corner_block, corner_word, _move_at(ops, at), b, element,
+                                                       rapid)
+                if first is None:
+                    ops[at] = middle
+                else:
+                    ops[at] = first
+                    ops.append(middle)
+                    if at in noses:
+                        noses[len(ops) - 1] = noses[at]
+                pending = None
             if element is not None:
                 ops.append(Move(element, rapid, modes.feed, b.line, comp_before, modes.comp, raw=b.raw.strip()))
                 if modes.comp:
                     noses[len(ops) - 1] = Nose(modes.comp, modes.row.nose_radius, modes.row.tip)
+            if word:
+                if element is None:
+                    raise b.err(b.col(word), f"{word}: the corner before takes this whole move")
+                pending = (len(ops) - 1, b, word)
             here = end
         after = _after_move(b, modes)
         if after is not None:
@@ -707,6 +904,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                                     f"the start point's X {here[1]:g} (its {'highest' if profile.inside else 'lowest'}"
                                     f" X {low:g}): nothing to rough, and G70 would take the whole depth in one pass")
         ops.append(rough)
+    if pending is not None:
+        _round_corner(pending[1], pending[2], _move_at(ops, pending[0]), blocks[-1], None, False)   # raises
     if not ops:
         raise ProgramError(blocks[-1].line, 1, blocks[-1].raw.strip(), "the program has no moves")
     return _compensate(ops, noses) if noses else ops
@@ -782,6 +981,20 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
                 out.append(ops[k])
         i = last + 1
     return out
+
+
+def first_work_offset(text: str) -> int:
+    """The work offset (1..6: G54..G59) the program's first G54..G59 selects, 1 (G54, power-on) when none does."""
+    for b in read(text, LATHE):
+        for g, _ in b.g:
+            if g in _WORK:
+                return g - 53
+    return 1
+
+
+def work_offsets(value: Callable[[str], float]) -> tuple[Point, ...]:
+    """Setup.works from the sequencer's parameters ``seq.work[k].x`` / ``.z``, ``value(name)`` giving each."""
+    return tuple((value(f"work[{k}].z"), value(f"work[{k}].x")) for k in range(1, len(_WORK) + 1))
 
 
 def has_block_delete(text: str) -> bool:

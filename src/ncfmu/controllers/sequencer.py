@@ -60,6 +60,7 @@ from .mypyc_compat import mypyc_attr
 MAX_BLOCKS = 8
 #: Rows of the tool table (T<tool><offset>: tool and offset 1..8).
 MAX_TOOLS = 8
+WORK_OFFSETS = 6            # G54..G59
 #: A dwell whose time left is below this is over (s): steps of dt do not sum exactly to its time.
 DWELL_EPS = 1e-9
 #: A thread's Z may fall back this far (mm) as the spindle's encoder jitters; more is a spindle turning backwards.
@@ -158,6 +159,19 @@ def _tool_shape_ports():
     return tuple(ports)
 
 
+def _work_ports():
+    ports = []
+    for k in range(1, WORK_OFFSETS + 1):
+        p, g = f"work[{k}]", 53 + k
+        ports += [
+            real(f"{p}.x", "parameter", 0.0, "mm", f"work offset {k} (G{g}; G54 at power-on): X (radius, like the tool "
+                 "offsets) of the axes at the part's programmed X 0, before the tool offset"),
+            real(f"{p}.z", "parameter", 0.0, "mm", f"work offset {k} (G{g}): Z of the axes at the part's programmed "
+                 "Z 0, before the tool offset"),
+        ]
+    return tuple(ports)
+
+
 _PROGRAM_ONLY = {"x_diameter", "feed_per_rev", "x_home", "z_home", "spindle_band", "spindle_timeout", "thread_shift"}
 
 
@@ -197,13 +211,14 @@ class CutSequencer(CycleController):
         # last, so the value references of the ports before them stay what they were
         string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
                "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
-               "M00-M05, M08/M09, M30, G7/G8, G90/G91) with G71 stock removal (G71 U R / G71 P Q U W F), G70 "
-               "finishing (G70 P Q F) and threads (G32, G92, G76 following the spindle), one block per line, "
+               "M00-M05, M08/M09, M30, G7/G8, G90/G91, G54-G59 (work[k]), M98/M99 subprograms, ,C ,R A) with G71 "
+               "stock removal (G71 U R / G71 P Q U W F), G70 finishing (G70 P Q F), G90/G94 single cycles and "
+               "threads (G32, G92, G76 following the spindle), one block per line, "
                "starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
         integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 76 multiple "
-                "threading, 92 thread cutting, 32 a G32 thread, 0 none"),
+                "threading, 92 thread cutting, 32 a G32 thread, 90 turning, 94 facing (single cycles), 0 none"),
         # the Fanuc 0i-T dialect of a program (appended: the value references before stay what they were)
         boolean("x_diameter", "parameter", True, "program: X and U are diameters until G7/G8, as on Fanuc's lathes; "
                 "false: radii (the axes and every other length are radii)"),
@@ -245,6 +260,8 @@ class CutSequencer(CycleController):
         boolean("threading", "output", None, "a thread pass follows the spindle (from its marker to its end)"),
         # appended: the tool table's shapes (the part check's)
         *_tool_shape_ports(),
+        # appended: the work offsets G54..G59
+        *_work_ports(),
     )
 
     # -- parameters -----------------------------------------------------------------------------
@@ -257,7 +274,7 @@ class CutSequencer(CycleController):
                     out[p.name] = "runs its program (program is set), not the registers"
         else:
             for p in cls.ports("parameter"):
-                if p.name.startswith("tool[") or p.name in _PROGRAM_ONLY:
+                if p.name.startswith(("tool[", "work[")) or p.name in _PROGRAM_ONLY:
                     out[p.name] = "runs the registers (program is empty): only a program reads it"
         return out
 
@@ -308,8 +325,10 @@ class CutSequencer(CycleController):
                            nose_radius=real_param(values, f"tool[{k}].nose_radius"),
                            tip=int_param(values, f"tool[{k}].tip"),
                            max_depth=real_param(values, f"tool[{k}].max_depth")) for k in range(1, MAX_TOOLS + 1))
+        works = lathe_program.work_offsets(lambda name: real_param(values, name))
         setup = lathe_program.Setup(diameter=bool(values["x_diameter"]), feed_per_rev=bool(values["feed_per_rev"]),
-                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")))
+                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")),
+                                    works=works)
         # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
         self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
                                                        setup) if self.program.strip() else [])

@@ -378,7 +378,7 @@ class LathePart(MachinedPart):
         spindle = self.spindle is not None and bool(program.strip())
         if program.strip():
             from ..controllers.g7x import Tool
-            from ..controllers.lathe_program import Finish, Rough, parse
+            from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
             from ..controllers.lathe_program import Setup as Reading
             # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
             tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
@@ -386,7 +386,8 @@ class LathePart(MachinedPart):
                                nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
                                tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
             reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
-                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])))
+                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])),
+                              works=work_offsets(lambda name: to_float(seq[name])))
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
             profiles = list({id(op.profile): op.profile for op in cycles}.values())
@@ -454,7 +455,9 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
     (:func:`~ncfmu.machining.turning_insert`), with the row's nose radius (``settings.nose_radius`` when given:
     every tool's) placed as its imaginary tip says (``tip``; 0 and 9 -- the nose centre programmed -- as 3, an
     OD tool cutting toward the chuck, and in a bore of radius ``hole`` as 2, the boring bar: its body a
-    hole's radius high); max_depth the row's (``settings.max_depth`` when given), 0 none."""
+    hole's radius high); max_depth the row's (``settings.max_depth`` when given), 0 none. The axes stand at the
+    programmed point plus the row's offsets and the program's first work offset (a program that changes its work
+    offset is judged with its first)."""
     rows: dict[int, int] = {0: 0}
     if program.strip():
         from ..controllers.gcode import read
@@ -463,6 +466,12 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
             if "T" in b.values:
                 station, row = divmod(int(b.values["T"]), 100)
                 rows.setdefault(station, row)
+    work = np.zeros(2)          # and the program's first work offset (G54..G59; G54 at power-on)
+    if program.strip():
+        from ..controllers.lathe_program import first_work_offset
+        w = f"work[{first_work_offset(program)}]."
+        if w + "z" in seq:
+            work = np.array([to_float(seq[w + "z"]), to_float(seq[w + "x"])])
     blade = hole if hole > 0.0 else BLADE
     cutters: dict[int, Cutter] = {}
     for station, k in rows.items():
@@ -482,7 +491,7 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
             shape = (grooving_insert(width, nose, blade) if width > 0.0
                      else turning_insert(nose, value("insert_angle", INSERT_ANGLE), blade))
             outline, on_axis = placed(shape, tip, nose), False
-        shift = np.array([value("z_offset"), value("x_offset")])
+        shift = np.array([value("z_offset"), value("x_offset")]) + work
         cutters[station] = Cutter(outline - shift, depth if depth > 0 else math.inf, on_axis)
     return cutters
 

@@ -264,7 +264,7 @@ class LatheCycle(Part):
         if program.strip() and "x_start" in seq:
             # a part program: the finished profile of each cycle and the planned passes, from the program itself
             from ..controllers.geometry import sample
-            from ..controllers.lathe_program import Finish, Rough, Setup, parse, plan_ops
+            from ..controllers.lathe_program import Finish, Rough, Setup, parse, plan_ops, work_offsets
             start = (to_float(seq["x_start"]), to_float(seq["z_start"]))
             from ..controllers.g7x import Tool
             tools = tuple(Tool(x_offset=to_float(seq.get(f"tool[{k}].x_offset", 0.0)),
@@ -272,7 +272,8 @@ class LatheCycle(Part):
                                nose_radius=to_float(seq.get(f"tool[{k}].nose_radius", 0.0)),
                                tip=to_int(seq.get(f"tool[{k}].tip", 0))) for k in range(1, 9))
             setup = Setup(diameter=bool(seq.get("x_diameter", True)), feed_per_rev=bool(seq.get("feed_per_rev", False)),
-                          tools=tools, home=(to_float(seq.get("z_home", 50.0)), to_float(seq.get("x_home", 50.0))))
+                          tools=tools, home=(to_float(seq.get("z_home", 50.0)), to_float(seq.get("x_home", 50.0))),
+                          works=work_offsets(lambda name: to_float(seq.get(name, 0.0))))
             ops = parse(program, start, setup)          # the planned moves in the axes' coordinates
             for k, seg in enumerate(plan_ops(ops, 1.0, (start[1], start[0]))):
                 ax.plot(*zip(*sample([seg.element], 0.2)), color="tab:green", lw=0.5, alpha=0.6,

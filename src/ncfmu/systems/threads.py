@@ -199,7 +199,7 @@ def thread_judge(seq_values: Mapping[str, object], seq: str, x: str, z: str, spi
     """The judge of the threads of the program in a sequencer's parameters ``seq_values`` (every parameter, the
     defaults filled in), read as the sequencer reads it; None: no program, or one without threads."""
     from ..controllers.g7x import Tool
-    from ..controllers.lathe_program import Setup, parse, plan_ops
+    from ..controllers.lathe_program import Setup, parse, plan_ops, work_offsets
     from ..ports import to_float, to_int
     program = str(seq_values.get("program") or "")
     if not program.strip() or not any(g in program.upper() for g in ("G32", "G92", "G76")):
@@ -209,7 +209,8 @@ def thread_judge(seq_values: Mapping[str, object], seq: str, x: str, z: str, spi
                        nose_radius=to_float(seq_values[f"tool[{k}].nose_radius"]),
                        tip=to_int(seq_values[f"tool[{k}].tip"])) for k in range(1, 9))
     reading = Setup(diameter=bool(seq_values["x_diameter"]), feed_per_rev=bool(seq_values["feed_per_rev"]),
-                    tools=tools, home=(to_float(seq_values["z_home"]), to_float(seq_values["x_home"])))
+                    tools=tools, home=(to_float(seq_values["z_home"]), to_float(seq_values["x_home"])),
+                    works=work_offsets(lambda name: to_float(seq_values[name])))
     start = (to_float(seq_values["x_start"]), to_float(seq_values["z_start"]))
     segments = plan_ops(parse(program, start, reading), to_float(seq_values["block[1].rapid"]), (start[1], start[0]))
     passes = planned_passes(segments)
