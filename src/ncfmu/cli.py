@@ -328,7 +328,10 @@ def _run_streamed(args, start_values: dict[str, object]):
                 # one without (a bare FMU) to --stop-time, default the system's
                 report = opened.report()
                 report = without_part_check(report) if args.no_part_check else with_part_settings(report, settings)
-                to_done = report.ends_when_done(start_parameters(system.components, start_values))
+                # an input CSV with its --stop-time (a served session's replay) follows the input's timeline: what
+                # came after a done -- a restart, a second part -- is replayed too; a crash or an alarm still halts
+                replay = args.input is not None and args.stop_time is not None
+                to_done = not replay and report.ends_when_done(start_parameters(system.components, start_values))
                 stop = default_stop_time(system.stop_time, to_done) if args.stop_time is None else args.stop_time
                 rows = None
                 # the CSV's size checked against the disk for the whole span -- for a run to done, only for a limit
@@ -354,7 +357,7 @@ def _run_streamed(args, start_values: dict[str, object]):
                 # at most that long after the work ended
                 row_time = steps_per_row(args.output_interval, step) * step
                 result = opened.run(stop_time=stop, step_size=args.step, start_values=start_values,
-                                    inputs=inputs, keep=False, until=lambda: halted(accumulator),
+                                    inputs=inputs, keep=False, until=lambda: halted(accumulator, at_done=to_done),
                                     check_interval=row_time * max(1, round(CHECK_INTERVAL / row_time)),
                                     watch=watched(accumulator), **how.run_arguments())
                 if not result.ended_by and to_done:

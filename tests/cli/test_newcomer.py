@@ -11,6 +11,7 @@ import pytest
 
 from ncfmu.cli import main
 from ncfmu.errors import NcfmuError, ProgramErrors
+from ncfmu.exitcodes import EXIT_NOT_FINISHED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,7 +63,7 @@ def test_program_from_a_file_on_the_mill_with_tape_marks_and_a_program_number(pr
     part.write_text(MILL_PART)
     rc = main(["run", "mill_contour", "--program", str(part), "--stop-time", "0.05", "--no-part-check",
                "--out", str(tmp_path)])
-    assert rc == 0, capsys.readouterr().err
+    assert rc == EXIT_NOT_FINISHED, capsys.readouterr().err    # read and run: 0.05 s is short of the contour's end
     assert _run_record(tmp_path, "mill_contour")["contour"]["program"] == MILL_PART
 
 
@@ -70,7 +71,7 @@ def test_program_from_standard_input_on_the_lathe(project, tmp_path, capsys, mon
     monkeypatch.setattr("sys.stdin", io.StringIO(LATHE_PART))
     rc = main(["run", "lathe_roughing", "--program", "-", "--stop-time", "0.05", "--no-part-check",
                "--out", str(tmp_path)])
-    assert rc == 0, capsys.readouterr().err
+    assert rc == EXIT_NOT_FINISHED, capsys.readouterr().err    # read and run: 0.05 s is short of its M30
     assert _run_record(tmp_path, "lathe_roughing")["seq"]["program"] == LATHE_PART
 
 
@@ -192,8 +193,17 @@ def test_program_for_every_variant_of_a_sweep(project, tmp_path, capsys):
     rc = main(["sweep", "mill_contour", "--program", str(part), "--vary", "contour.diameter_delta=0.4,0.8",
                "--workers", "0", "--stop-time", "0.05", "--out", str(tmp_path / "sw")])
     out = capsys.readouterr().out
-    assert rc == 1, out                        # 0.05 s: the cycle is running, not refused
+    assert rc == EXIT_NOT_FINISHED, out        # 0.05 s: the cycle is running, not refused
     with open(tmp_path / "sw" / "summary.csv") as f:
         rows = list(csv.DictReader(f))
     assert [r["status"] for r in rows] == ["unfinished", "unfinished"]
-    assert all(r["contour.program"] == MILL_PART for r in rows)
+    # the program is one value every variant shares (as --set): a program the reader refuses fails every variant,
+    # naming its line
+    bad = tmp_path / "bad.nc"
+    bad.write_text(MILL_PART.replace("G01 X10.", "G112 X10."))
+    rc = main(["sweep", "mill_contour", "--program", str(bad), "--vary", "contour.diameter_delta=0.4,0.8",
+               "--workers", "0", "--stop-time", "0.05", "--out", str(tmp_path / "bad")])
+    with open(tmp_path / "bad" / "summary.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rc == EXIT_NOT_FINISHED and [r["status"] for r in rows] == ["failed", "failed"]
+    assert all("G112" in r["error"] for r in rows), rows

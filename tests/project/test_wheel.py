@@ -2,6 +2,7 @@
 checkout builds its FMUs into the user cache and runs a system closed loop."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -42,7 +43,11 @@ def test_wheel_in_a_fresh_venv_runs_a_system_outside_the_checkout(tmp_path):
     # the run itself: the seed's cycle ground to 4.3 mm (rapid 4.0, rough 0.2, fine 0.1) and returned
     lines = done.stdout.splitlines()
     assert lines[0].startswith("system grinder_feed: simulated")
-    assert "deepest X: 4.3000 mm" in done.stdout and "X at the end 0.0000 mm" in done.stdout
+    assert "deepest X: 4.3000 mm" in done.stdout
+    # the run ends at the cycle's end (RUN falls: the return commanded to the origin), the axis settling within its
+    # in-position band (5 um) -- a fraction of a micrometre from 0
+    at_end = re.search(r"X at the end (-?\d+\.\d+) mm", done.stdout)
+    assert at_end is not None and abs(float(at_end.group(1))) <= 0.001, done.stdout
     assert "alarm: no" in done.stdout
     assert not any(line.startswith("--") for line in lines)            # no build chatter among the summary
     assert (work / "out" / "grinder_feed.csv").is_file()

@@ -55,16 +55,16 @@ def watched(accumulator: ReportAccumulator) -> list[str]:
     return list(dict.fromkeys([*done, *(p.alarm for p in report.parts if p.alarm is not None)]))
 
 
-def halted(accumulator: ReportAccumulator) -> str:
+def halted(accumulator: ReportAccumulator, at_done: bool = True) -> str:
     """Why the run should end now, from the rows fed so far ("": go on): a crash, an alarm, or -- for a system that
-    :func:`ends_when_done` -- the work done."""
+    :func:`ends_when_done`, unless ``at_done`` is false (a replay follows its input's timeline) -- the work done."""
     crashes = crashes_so_far(accumulator)
     if crashes:
         return f"crash at t = {crashes[0].t:.3f} s"
     alarmed = _alarmed(accumulator)
     if alarmed:
         return f"alarm ({alarmed})"
-    if ends_when_done(accumulator) and accumulator.finished():
+    if at_done and ends_when_done(accumulator) and accumulator.finished():
         return f"done (seen at t = {accumulator.last_time:.3f} s)"
     return ""
 
