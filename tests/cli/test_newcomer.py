@@ -39,7 +39,7 @@ LATHE_ALARMS = """%
 O1002
 N10 G00 X60. Z2.
 N30 G112
-N40 G01 X50. Z-10.,C1.
+N40 G01 X50. Z-10.,A30.
 N50 M30
 %
 """
@@ -87,13 +87,14 @@ def test_program_on_a_system_without_one_is_refused(project, tmp_path, capsys):
 
 def test_program_alarms_in_a_cncs_words_every_one_at_once(project, tmp_path, capsys, monkeypatch):
     """One line: each error by its line and block number, the G code named as Fanuc names it, the comma word as
-    direct drawing dimensions; no FMI call or status (the FMU's log keeps those)."""
+    direct drawing dimensions the lathe does not take; no FMI call or status (the FMU's log keeps those)."""
     monkeypatch.setattr("sys.stdin", io.StringIO(LATHE_ALARMS))
     assert main(["run", "lathe_roughing", "--program", "-", "--stop-time", "0.05", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert "line 4 (N30): G112: not in the subset (polar interpolation)" in err
-    assert "line 5 (N40): ,C: not in the subset (chamfer by direct drawing dimensions)" in err
+    # (,C and ,R are taken on the lathe since issue 46; ,A -- the angle written as a comma word -- is not)
+    assert "line 5 (N40): ,A: not in the subset (angle by direct drawing dimensions)" in err
     assert "fmi2" not in err and "fmi3" not in err and "unexpected character" not in err
     from ncfmu.project import simulate
     with pytest.raises(NcfmuError) as raised:     # the API's exception keeps the call and status

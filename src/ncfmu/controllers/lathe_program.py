@@ -92,6 +92,9 @@ from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76,
 
 _MOTION = {0, 1, 2, 3}
 _WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
+#: The G codes a G70/G71 profile may not hold (the machine's state, not the part's outline). A set made once:
+#: mypyc (the compiled controllers) cannot compile a starred range inside a tuple display.
+_NOT_IN_PROFILE = frozenset({4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99})
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
@@ -682,7 +685,7 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
         if blk.ends:
             raise blk.err(blk.col("M"), f"the program ends inside the profile N{p}..N{q}")
         machine = [k for k in "MST" if k in blk.values or (k == "M" and blk.m)]
-        machine += [f"G{g:02d}" for g, _ in blk.g if g in (4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99)]
+        machine += [f"G{g:02d}" for g, _ in blk.g if g in _NOT_IN_PROFILE]
         if machine:
             raise blk.err(blk.col(machine[0][0]), f"{machine[0]} inside the profile N{p}..N{q}: the profile is the "
                                                   "part's outline (moves, F), give it before G71/G70")
