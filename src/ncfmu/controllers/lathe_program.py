@@ -470,13 +470,19 @@ def _thread(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> P
     return end
 
 
-def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
-    v = b.values
+def _distance_and_x_modes(b: Block, modes: _Modes) -> None:
+    """The G90/G91 (absolute/incremental) and G7/G8 (X a diameter/radius) of a cycle's block, read before its
+    words as a plain move reads them."""
     for g, _ in b.g:
         if g in (90, 91):
             modes.incremental = g == 91
         elif g in (7, 8):
             modes.diameter = g == 7
+
+
+def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    v = b.values
+    _distance_and_x_modes(b, modes)
     try:
         if kind == 76 and not any(k in v for k in "XZUW"):
             for k in "FIK":
@@ -569,11 +575,7 @@ def _single_kind(b: Block, modes: _Modes) -> int:
 def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     """A G90/G94 pass from where the tool stands (the start point); it ends there again."""
     v = b.values
-    for g, _ in b.g:
-        if g in (90, 91):
-            modes.incremental = g == 91
-        elif g in (7, 8):
-            modes.diameter = g == 7
+    _distance_and_x_modes(b, modes)
     for k in "IKPQ":
         if k in v:
             raise b.err(b.col(k), f"{k}: G{kind} takes X/U, Z/W, R (the taper) and F")
