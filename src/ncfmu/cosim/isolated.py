@@ -31,6 +31,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -80,10 +81,12 @@ class _Pipe:
         self._buffer = buffer[end:]
         return buffer[4:end]
 
-    def close(self) -> None:
+    def close(self, _close: Callable[[int], None] = os.close) -> None:
+        # os.close bound at definition: a proxy's __del__ may close its pipes at interpreter exit, when this
+        # module's globals (os) are already gone
         if not self.closed:
             self.closed = True
-            os.close(self.fd)
+            _close(self.fd)
 
 
 class _Repr:
