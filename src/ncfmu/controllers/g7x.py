@@ -219,6 +219,12 @@ class SingleCycle:
     segments: tuple[Segment, ...]
     end: Point
 
+    def removed(self) -> tuple[Point, ...]:
+        """The region this pass cuts away by its definition: the quadrilateral its four moves enclose -- the start
+        point, the cut's start (R's taper included), the cut's end, the corner straight out from it ((z, x), X a
+        radius, the program's coordinates: work and tool offsets not applied)."""
+        return tuple(g.element.start for g in self.segments)
+
 
 Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle
 

@@ -373,6 +373,7 @@ class LathePart(MachinedPart):
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
         profiles: list[Any] = []
+        regions: list[tuple[Any, int]] = []   # (what an op cuts away by its definition, its line): G90/G94 passes
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         numbers = block_numbers(program, "lathe")
         spindle = self.spindle is not None and bool(program.strip())
@@ -391,6 +392,7 @@ class LathePart(MachinedPart):
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
             profiles = list({id(op.profile): op.profile for op in cycles}.values())
+            regions = [(op.removed(), op.line) for op in ops if hasattr(op, "removed")]
             bores = [op.start[1] for op in cycles if op.profile.inside]
             if bores:
                 why = ""
@@ -427,10 +429,10 @@ class LathePart(MachinedPart):
         default = cutters.pop(0)
         removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        if program.strip() and not profiles and self.settings.drawing is None:
+        if program.strip() and not profiles and not regions and self.settings.drawing is None:
             return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                          spindle_checked=spindle, numbers=numbers)
-        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside)
+        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside, regions)
         if self.settings.drawing is not None:
             from shapely.geometry import LineString
 
@@ -496,13 +498,15 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
     return cutters
 
 
-def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
-                          inside: bool) -> tuple[Any, list[tuple[Any, int]]]:
+def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any], inside: bool,
+                          regions: Sequence[tuple[Sequence[tuple[float, float]], int]] = ()
+                          ) -> tuple[Any, list[tuple[Any, int]]]:
     """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
     ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
-    all above a profile; ``inside``, a bore: all below it down to the hole) -- or, for the registers (no
-    profiles), what each block's deepest pass cuts away; and the programmed elements with their program lines
-    (for naming the line nearest to a deviation)."""
+    all above a profile; ``inside``, a bore: all below it down to the hole) and what its other operations cut
+    away by their definition (``regions``: each op's ``removed()`` polygon and its line -- a G90/G94 pass's
+    quadrilateral) -- or, for the registers (no program), what each block's deepest pass cuts away; and the
+    programmed elements with their program lines (for naming the line nearest to a deviation)."""
     import shapely
     from shapely.geometry import LineString, Polygon
 
@@ -515,7 +519,10 @@ def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Seque
             (za, _), (ze, _) = outline[0], outline[-1]
             removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
             lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-    else:
+    for region, line in regions:
+        removed.append(Polygon(region).buffer(0))
+        lines.append((LineString([*region, region[0]]), line))
+    if not profiles and not regions:
         stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
         for k in range(1, to_int(seq["n_blocks"]) + 1):
             b = f"block[{k}]."
