@@ -80,3 +80,101 @@ def test_grooves_by_a_subprogram_under_g54_with_a_chamfer_are_the_part_drawn(ncf
                     drawing=_drawing(tmp_path / "off.dxf", shifted)).part
     assert off.within_tolerance is False and off.max_gouge_mm == pytest.approx(1.0, abs=0.01)
     assert GROOVE_LINE in (off.gouge_line, off.left_line)
+
+
+#: G94 facing and G90 turning passes (the last a taper, R-1: X48 at Z2 rising to X50 at Z-15) under G54, judged
+#: by the passes' own definition (no profile, no drawing): the bar faced 2 mm deep down to X40, turned over 15 mm.
+PASSES = """G21 G40 G98
+G54
+T0101
+G97 S800 M03
+G00 X64. Z2.
+G94 X40. Z-1. F600
+Z-2.
+G00 X60. Z2.
+G90 X54. Z-15. F600
+X50. R-1.
+G00 X64. Z5.
+M05
+M30
+"""
+#: The face pass to Z-2 and the taper pass (text lines).
+FACE_LINE, TAPER_LINE = 7, 10
+#: G54 (z, x radius) and tool 1's offsets: the axes stand at the programmed point + both.
+PASS_WORK = (-3.0, 0.5)
+PASS_TOOL = (-1.0, 0.25)
+
+
+@pytest.mark.slow
+def test_g90_g94_passes_under_g54_are_judged_by_their_definition_at_the_offset_axes(ncfmu_run, tmp_path, capsys):
+    from ncfmu.cli import main
+    start = {"seq.program": PASSES, "seq.work[1].z": PASS_WORK[0], "seq.work[1].x": PASS_WORK[1],
+             "seq.tool[1].z_offset": PASS_TOOL[0], "seq.tool[1].x_offset": PASS_TOOL[1]}
+    r = ncfmu_run("lathe_roughing", stop_time=11.0, start_values=start)
+    assert r["seq.done"][-1], "the program did not finish in 11 s (it does at 10.3 s)"
+    dz, dx = PASS_WORK[0] + PASS_TOOL[0], PASS_WORK[1] + PASS_TOOL[1]
+    x, z, line, sub = r["x_axis.pos"], r["z_axis.pos"], r["seq.line"], r["seq.subcycle"]
+    # the face cut (SC2 of the pass to Z-2): at Z -2 + offsets, down to X40 (radius 20) + offsets
+    face = (line == FACE_LINE) & (sub == 2)
+    assert np.abs(z[face] - (-2.0 + dz)).max() < 0.002
+    assert x[face].min() == pytest.approx(20.0 + dx, abs=0.002)
+    # the taper cut (SC2, R-1): on the line from radius 24 at Z2 to 25 at Z-15, all shifted by the offsets
+    taper = (line == TAPER_LINE) & (sub == 2)
+    programmed = 24.0 + (2.0 - (z[taper] - dz)) / 17.0
+    assert np.abs(x[taper] - dx - programmed).max() < 0.005
+    assert z[taper].min() == pytest.approx(-15.0 + dz, abs=0.002)
+    p = r.part
+    assert p.judged == "" and p.crashes == []
+    assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01 and p.within_tolerance is True
+    # what a user sees: part within, exit 0
+    program = tmp_path / "passes.nc"
+    program.write_text(PASSES)
+    sets = [a for k, v in start.items() if k != "seq.program" for a in ("--set", f"{k}={v}")]
+    assert main(["run", "lathe_roughing", "--program", str(program), *sets, "--out", str(tmp_path)]) == 0
+    assert "  part: within 0.0100 mm" in capsys.readouterr().out
+
+
+#: A G71/G70 profile with a corner radius (,R3 where the X40 cylinder meets the face up to X46) and a chamfer (,C1
+#: on the X50 edge), roughed and finished with tool 1 under G54.
+CORNERS = """G21 G40 G98
+G54
+T0101
+G97 S1000 M03
+G00 X60. Z2.
+G71 U2. R0.5
+G71 P10 Q20 U0.4 W0.1 F900
+N10 G00 X40.
+G01 Z-10. ,R3.
+X50. ,C1.
+Z-20.
+N20 X60.
+G70 P10 Q20 F300
+G00 X64. Z5.
+M05
+M30
+"""
+ROUND_LINE, CHAMFER_BLOCK = 9, 10
+#: The ,R3 corner's centre (z, x radius): 3 mm from the X40 cylinder (radius 20) and from the face at Z-10.
+ROUND_CENTRE, ROUND_R = (-7.0, 23.0), 3.0
+
+
+@pytest.mark.slow
+def test_a_corner_radius_and_a_chamfer_on_the_profile_are_on_the_part(ncfmu_run):
+    start = {"seq.program": CORNERS, "seq.work[1].z": PASS_WORK[0], "seq.work[1].x": PASS_WORK[1]}
+    r = ncfmu_run("lathe_roughing", stop_time=18.0, start_values=start)
+    assert r["seq.done"][-1], "the program did not finish in 18 s (it does at 17.6 s)"
+    x, z, line, cycle = r["x_axis.pos"], r["z_axis.pos"], r["seq.line"], r["seq.canned_cycle"]
+    # G70 along the ,R block: the axes' path round the corner is an arc of radius 3 about its centre (+ G54)
+    cz, cx = ROUND_CENTRE[0] + PASS_WORK[0], ROUND_CENTRE[1] + PASS_WORK[1]
+    finishing = (cycle == 70) & (line == ROUND_LINE)
+    on_arc = finishing & (z < cz) & (x < cx)          # the quadrant the fillet sweeps (below its centre)
+    assert on_arc.sum() > 20
+    radius = np.hypot(z[on_arc] - cz, x[on_arc] - cx)
+    assert np.abs(radius - ROUND_R).max() < 0.005
+    # the chamfer: G70 on the ,C block runs along the 45-degree line from (Z-10, radius 24) to (Z-11, radius 25)
+    chamfer = (cycle == 70) & (line == CHAMFER_BLOCK) & (x > 24.0 + PASS_WORK[1] + 0.01)
+    assert chamfer.sum() > 5
+    assert np.abs((x[chamfer] - PASS_WORK[1]) - (24.0 - (z[chamfer] - PASS_WORK[0] + 10.0))).max() < 0.005
+    p = r.part
+    assert p.judged == "" and p.crashes == []
+    assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01 and p.within_tolerance is True
