@@ -174,6 +174,23 @@ def test_g94_faces_in_four_moves_and_repeats_with_z_alone() -> None:
     assert passes[2][:2] == [(1, 3, False, 52.0, -4.0), (2, 3, True, 10.0, -3.0)]
 
 
+def test_one_shot_blocks_after_a_modal_cycle_are_their_own() -> None:
+    """G28 U0 W0, G04 U1.5, G71 U R after G90/G94/G92 passes: Fanuc's group 00 codes, not the cycle's next pass (their
+    U and W are the return's intermediate point, the dwell's seconds, G71's depth of cut)."""
+    home = lathe_program.Setup(home=(50.0, 40.0))
+    for cycle in ("G90 X46. Z-30. F120", "G94 X20. Z-2. F120"):
+        segs = _plan(f"G00 X52. Z2.\n{cycle}\nG04 U1.5\nG28 U0 W0\nM30\n", (60.0, 10.0), home)
+        assert [g.dwell for g in segs if g.line == 3] == [1.5]
+        assert _ends([g for g in segs if g.line == 4]) == [(4, 80.0, 50.0)]     # to the reference (X radius 40)
+    segs = _plan("G97 S500 M03\nG00 X32. Z5.\nG92 X29. Z-20. F2.\nG28 U0 W0\nM30\n", (60.0, 10.0), home)
+    assert segs[-1].line == 4 and segs[-1].cycle == 0 and _ends(segs[-1:]) == [(4, 80.0, 50.0)]
+    # G71 after G90 passes: stock removal from where the passes left the tool
+    text = ("G00 X52. Z2.\nG90 X46. Z-30. F600\nG71 U1.5 R0.5\nG71 P10 Q20 U0.4 W0.1 F300\nN10 G00 X30.\n"
+            "G01 Z-20.\nN20 X52.\nM30\n")
+    rough = [op for op in lathe_program.parse(text, (60.0, 10.0)) if isinstance(op, lathe_program.Rough)]
+    assert [(op.line, op.depth, op.start) for op in rough] == [(4, 1.5, (2.0, 26.0))]
+
+
 def test_g90_alone_is_still_the_absolute_mode() -> None:
     text = "G18 G21 G90 G8\nG91 G00 X-5. Z-3.\nG90\nG00 X20. Z1.\nM30\n"
     assert _ends(_plan(text, (30.0, 5.0))) == [(2, 50.0, 2.0), (4, 40.0, 1.0)]

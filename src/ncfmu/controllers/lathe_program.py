@@ -95,6 +95,9 @@ _WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
 #: The G codes a G70/G71 profile may not hold (the machine's state, not the part's outline). A set made once:
 #: mypyc (the compiled controllers) cannot compile a starred range inside a tuple display.
 _NOT_IN_PROFILE = frozenset({4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99})
+#: Fanuc's group 00 codes here: one-shot, their own block's meaning -- their U/W (G28 U0 W0, G71 U1.5 R0.5, G04 U1.5)
+#: never make the next pass of a modal G90/G94/G92/G32.
+_ONE_SHOT = frozenset({4, 28, 50, 70, 71})
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
@@ -390,10 +393,13 @@ _THREAD_BLOCK_G = frozenset({7, 8, 18, 21, 90, 91})
 
 
 def _thread_kind(b: Block, modes: _Modes) -> int:
-    """32, 92 or 76 when the block is a thread's (its own G code, or X/U or Z/W under a modal G32 or G92)."""
+    """32, 92 or 76 when the block is a thread's (its own G code, or X/U or Z/W under a modal G32 or G92; a block
+    with a one-shot code never repeats the modal cycle)."""
     codes = [g for g, _ in b.g]
     if 76 in codes:
         return 76
+    if _ONE_SHOT.intersection(codes):
+        return 0
     for g in codes:
         if g in _MOTION:
             return 0
@@ -558,11 +564,14 @@ def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -
 # -- single cycles: G90, G94 (:mod:`.single_cycles`) ---------------------------------------------------
 def _single_kind(b: Block, modes: _Modes) -> int:
     """90 or 94 when the block is a single cycle's pass: G94; G90 with X/U or Z/W and no G00-G03 (G90 alone, or with
-    a motion code, is RS274's absolute mode); or X/U or Z/W alone under a modal G90/G94."""
+    a motion code, is RS274's absolute mode); or X/U or Z/W alone under a modal G90/G94 (not in a block with a
+    one-shot code: G28 U0 W0 after the passes returns home)."""
     codes = [g for g, _ in b.g]
     moves = any(k in b.values for k in "XZUW")
     if 94 in codes:
         return 94
+    if _ONE_SHOT.intersection(codes):
+        return 0
     if any(g in _MOTION or g in _THREAD_MOTION or g == 76 for g in codes):
         return 0
     if 90 in codes and moves:
