@@ -4,6 +4,8 @@ and judged by the part check against the part drawn (the program has no G71/G70 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import ezdxf
 import numpy as np
 import pytest
@@ -178,3 +180,36 @@ def test_a_corner_radius_and_a_chamfer_on_the_profile_are_on_the_part(ncfmu_run)
     p = r.part
     assert p.judged == "" and p.crashes == []
     assert p.max_left_mm < 0.01 and p.max_gouge_mm < 0.01 and p.within_tolerance is True
+
+
+#: The README's shop example: G54, T words, G94 facing, four G90 passes by a subprogram, G71/G70 with ,R and ,C.
+SHOP = Path(__file__).resolve().parents[2] / "docs" / "examples" / "lathe_shop.nc"
+
+
+def _programmed_radius(programmed, z: float) -> float:
+    """The programmed part's radius at ``z``: the top of its section there."""
+    from shapely.geometry import LineString
+    return float(programmed.intersection(LineString([(z, 0.0), (z, 100.0)])).bounds[3])
+
+
+@pytest.mark.slow
+def test_the_shop_example_runs_to_a_part_within_tolerance(project, tmp_path, capsys):
+    from ncfmu.cli import main
+    from ncfmu.controllers.sequencer import CutSequencer
+    from ncfmu.systems.lathe import STOCK, X_START, Z_START
+    from ncfmu.systems.part import LathePart
+    assert main(["run", "lathe_roughing", "--program", str(SHOP), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "  part: within 0.0100 mm" in out and "ended: done" in out
+    # judged without a drawing: the programmed part is the profile's (the ,R2 fillet, the ,C1 chamfer, X48 to
+    # Z-25) and, beyond it, the G90 passes' (X50 to Z-30) and the G94 face's (Z-1), each by its definition
+    seq = {**CutSequencer.default_parameters(), **STOCK, "x_start": X_START, "z_start": Z_START,
+           "program": SHOP.read_text()}
+    programmed = LathePart(seq="seq", x="x_axis", z="z_axis").setup({"seq": seq}).programmed
+    assert _programmed_radius(programmed, -3.0) == pytest.approx(20.0)
+    assert _programmed_radius(programmed, -7.0) == pytest.approx(22.0 - 3.0 ** 0.5, abs=0.002)   # the fillet
+    assert _programmed_radius(programmed, -8.5) == pytest.approx(23.5)                          # the chamfer
+    assert _programmed_radius(programmed, -20.0) == pytest.approx(24.0)
+    assert _programmed_radius(programmed, -27.5) == pytest.approx(25.0)                         # the G90 passes
+    assert _programmed_radius(programmed, -35.0) == pytest.approx(29.0)                         # the bar
+    assert programmed.bounds[2] == pytest.approx(-1.0)                                          # faced 1 mm
