@@ -6,6 +6,7 @@ naming the line."""
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from hypothesis import given
@@ -298,3 +299,33 @@ def test_corner_geometry_for_any_turn(heading, turn_size, len1, len2, fraction, 
                 r = (p[0] - middle.center[0], p[1] - middle.center[1])
                 assert abs(r[0] * u[0] + r[1] * u[1]) < 1e-7 * max(1.0, size)
             assert middle.sweep == pytest.approx(turn)
+
+
+# -- the README's dialect table ------------------------------------------------------------------------------
+def _dialect_table() -> list[str]:
+    """The first cells of the README's Fanuc 0i-T table (the words as a programmer writes them)."""
+    from pathlib import Path
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme.split("## Lathe part programs: the Fanuc 0i-T dialect", 1)[1].split("\n## ", 1)[0]
+    table = section.split("| word | meaning | what we do |", 1)[1].split("\n\n", 1)[0]
+    return [row.split("|")[1] for row in table.splitlines() if row.startswith("| ") and "---" not in row]
+
+
+def test_the_readme_table_lists_every_word_the_lathe_takes() -> None:
+    """Every G and M code and every address letter the reader takes has a row whose first cell writes it."""
+    cells = _dialect_table()
+    g: set[int] = set()
+    m: set[int] = set()
+    letters: set[str] = set()
+    for cell in cells:
+        for token in re.findall(r"`([^`]*)`", cell):
+            g |= {int(n) for n in re.findall(r"\bG(\d+)", token)}
+            m |= {int(n) for n in re.findall(r"\bM(\d+)", token)}
+            letters |= set(re.findall(r"(,[A-Z]|(?<![A-Z,])[A-Z])(?=[-\d.]|\b)", token))
+        for a, b in re.findall(r"`G(\d+)` \.\. `G(\d+)`", cell):      # G54 .. G59
+            g |= set(range(int(a), int(b) + 1))
+    assert set(lathe_program.LATHE.groups) - g == set()
+    assert set(lathe_program.LATHE.m_codes) - m == set()
+    taken = set(re.findall(r",?[A-Z]", lathe_program.LATHE.letter_list))      # "G, M, ..., A, ,C, ,R"
+    assert {",C", ",R", "G", "A"} <= taken
+    assert taken - letters == set()
