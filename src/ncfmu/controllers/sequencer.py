@@ -324,7 +324,10 @@ class CutSequencer(CycleController):
                            z_offset=real_param(values, f"tool[{k}].z_offset"),
                            nose_radius=real_param(values, f"tool[{k}].nose_radius"),
                            tip=int_param(values, f"tool[{k}].tip"),
-                           max_depth=real_param(values, f"tool[{k}].max_depth")) for k in range(1, MAX_TOOLS + 1))
+                           max_depth=real_param(values, f"tool[{k}].max_depth"),
+                           width=real_param(values, f"tool[{k}].width"),
+                           drill_diameter=real_param(values, f"tool[{k}].drill_diameter"))
+                      for k in range(1, MAX_TOOLS + 1))
         works = lathe_program.work_offsets(lambda name: real_param(values, name))
         setup = lathe_program.Setup(diameter=bool(values["x_diameter"]), feed_per_rev=bool(values["feed_per_rev"]),
                                     tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")),

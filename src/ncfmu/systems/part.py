@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..controllers.base import POSITION_LIMIT
+from ..controllers.peck_cycles import DRILL_POINT
 from ..machining import (
     Crash,
     Cutter,
@@ -373,23 +374,26 @@ class LathePart(MachinedPart):
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
         profiles: list[Any] = []
+        cuts: list[tuple[tuple[tuple[float, float], ...], int]] = []   # (an op's removed region, its line)
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         numbers = block_numbers(program, "lathe")
         spindle = self.spindle is not None and bool(program.strip())
         if program.strip():
             from ..controllers.g7x import Tool
-            from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
+            from ..controllers.lathe_program import Finish, PeckCycle, Rough, parse, work_offsets
             from ..controllers.lathe_program import Setup as Reading
             # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
             tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
                                z_offset=to_float(seq[f"tool[{k}].z_offset"]),
                                nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
-                               tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
+                               tip=to_int(seq[f"tool[{k}].tip"]), width=to_float(seq[f"tool[{k}].width"]),
+                               drill_diameter=to_float(seq[f"tool[{k}].drill_diameter"])) for k in range(1, 9))
             reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
                               home=(to_float(seq["z_home"]), to_float(seq["x_home"])),
                               works=work_offsets(lambda name: to_float(seq[name])))
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
+            cuts = [(op.removed(), op.line) for op in ops if isinstance(op, PeckCycle)]
             profiles = list({id(op.profile): op.profile for op in cycles}.values())
             bores = [op.start[1] for op in cycles if op.profile.inside]
             if bores:
@@ -427,10 +431,10 @@ class LathePart(MachinedPart):
         default = cutters.pop(0)
         removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        if program.strip() and not profiles and self.settings.drawing is None:
+        if program.strip() and not profiles and not cuts and self.settings.drawing is None:
             return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                          spindle_checked=spindle, numbers=numbers)
-        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside)
+        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside, cuts)
         if self.settings.drawing is not None:
             from shapely.geometry import LineString
 
@@ -485,7 +489,7 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
         if tip in (0, 9):
             tip = 2 if hole > 0.0 else 3
         if value("drill_diameter") > 0.0:
-            outline, on_axis = drill(value("drill_diameter")), True
+            outline, on_axis = drill(value("drill_diameter"), DRILL_POINT), True
         else:
             width = value("width")
             shape = (grooving_insert(width, nose, blade) if width > 0.0
@@ -496,13 +500,15 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
     return cutters
 
 
-def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
-                          inside: bool) -> tuple[Any, list[tuple[Any, int]]]:
+def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any], inside: bool,
+                          cuts: Sequence[tuple[Sequence[tuple[float, float]], int]] = ()
+                          ) -> tuple[Any, list[tuple[Any, int]]]:
     """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
     ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
-    all above a profile; ``inside``, a bore: all below it down to the hole) -- or, for the registers (no
-    profiles), what each block's deepest pass cuts away; and the programmed elements with their program lines
-    (for naming the line nearest to a deviation)."""
+    all above a profile; ``inside``, a bore: all below it down to the hole) and the regions its other cycles cut
+    away by their definition (``cuts``: each op's ``removed()`` with its program line: a drilled hole, a groove)
+    -- or, for the registers (neither), what each block's deepest pass cuts away; and the programmed elements
+    with their program lines (for naming the line nearest to a deviation; a region's outline names its op's)."""
     import shapely
     from shapely.geometry import LineString, Polygon
 
@@ -515,7 +521,7 @@ def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Seque
             (za, _), (ze, _) = outline[0], outline[-1]
             removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
             lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-    else:
+    elif not cuts:
         stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
         for k in range(1, to_int(seq["n_blocks"]) + 1):
             b = f"block[{k}]."
@@ -526,6 +532,10 @@ def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Seque
             xp, zp = to_float(seq[b + "Xp"]), to_float(seq[b + "Zp"])
             # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
             removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
+    for region, line in cuts:
+        cut = Polygon(region).buffer(0)
+        removed.append(cut)
+        lines.append((cut.boundary, line))
     return stock.difference(shapely.union_all(removed)), lines
 
 
