@@ -72,6 +72,9 @@ def plan_pecks(code: int, s: Point, end: Point, peck: float, step: float, retrac
     if relief > 0.0 and span <= EPS:
         raise PeckError("R", f"R{relief:g}: a relief at the bottom is made on the plunges after the first (the "
                              "first's would cut into the side wall): a single plunge takes none, give R0")
+    if relief > min(step, span) + EPS:
+        raise PeckError("R", f"R{relief:g}: a relief longer than the first step ({min(step, span):g} mm) reaches past "
+                             "the first plunge into the side wall")
     pecks = math.ceil(depth / peck - 1e-9)
     plunges = math.ceil(span / step - 1e-9) + 1 if span > EPS else 1
     if plunges * (2 * pecks + 2) > MAX_SEGMENTS:
