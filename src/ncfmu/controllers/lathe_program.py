@@ -285,7 +285,7 @@ def _interpret(b: Block, modes: _Modes, here: Point,
         return None, here, False, _Cycle(cycle, b, values)
     for k in "PQ":
         if k in values:
-            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71 (and P to G04)")
+            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71, G74/G75 and G76 (and P to G04)")
     element, end = _move(b, modes, here, values, new_motion, motion_col, profile)
     if new_motion is not None:
         modes.motion = new_motion
