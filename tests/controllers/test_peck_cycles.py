@@ -189,3 +189,18 @@ def test_no_commanded_point_passes_the_end_point_and_no_peck_is_deeper_than_aske
 def test_refusals_name_the_line_and_the_rule(program, line, fragment):
     err = _refusal(program)
     assert err.line_no == line and fragment in err.reason, err.reason
+
+
+def test_g75_region_puts_the_blade_where_its_tip_says_with_its_rounded_corners():
+    from ncfmu.controllers.peck_cycles import region
+    # tip 4: the programmed corner toward the tailstock, the blade 3 mm toward -Z: the groove Z -21 .. -10
+    left = region(75, (-10.0, 31.0), (-18.0, 20.0), Tool(width=3.0, tip=4, nose_radius=0.5))
+    zs, xs = [p[0] for p in left], [p[1] for p in left]
+    assert (min(zs), max(zs), min(xs)) == pytest.approx((-21.0, -10.0, 20.0))
+    # the bottom corners are the blade's: the corner's point on its bisector r (1 - 1/sqrt 2) in from each side
+    corner = min(left, key=lambda p: math.dist(p, (-21.0, 20.0)))
+    assert math.dist(corner, (-21.0, 20.0)) == pytest.approx(0.5 * (math.sqrt(2.0) - 1.0), abs=1e-3)
+    # tip 2 (inside work, a bore's groove from the hole's radius 10 out to 12): it opens toward the axis
+    inside = region(75, (-10.0, 10.0), (-14.0, 12.0), Tool(width=3.0, tip=2))
+    assert max(p[1] for p in inside) == 12.0 and min(p[1] for p in inside) <= -1e4
+    assert (min(p[0] for p in inside), max(p[0] for p in inside)) == (-14.0, -7.0)

@@ -7,7 +7,8 @@ keeps the stock left and the crashes, never the trajectory. Everything it needs 
 parameters: the bar stock (``seq.stock_diameter``, ``seq.stock_length``, ``seq.stock_face_z``) and the chuck
 jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``contour.stock_margin`` around the
 contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
-profile or the outline its registers define (the deepest pass of each block), the mill's closed contour.
+profile with what its other cycles cut away by their definition (an op's ``removed()``: G74's drilled hole, G75's
+groove) or the outline its registers define (the deepest pass of each block), the mill's closed contour.
 
 Inside work: a G71/G70 profile that rises from the start point's X (a bore, :mod:`..controllers.g7x`) is judged
 as a bore -- the stock a tube whose drilled hole's radius is the bore cycle's start point's X (no parameter: the
