@@ -57,6 +57,8 @@ class Tool:
     nose_radius: float = 0.0    # mm
     tip: int = 0                # Fanuc's imaginary tool-nose number 0..9
     max_depth: float = 0.0      # mm, the deepest cut the insert takes (0: not given)
+    width: float = 0.0          # mm, a grooving blade's width along Z (0: not one)
+    drill_diameter: float = 0.0  # mm, a drill's on the spindle axis, programmed at its point (0: not one)
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -226,7 +228,26 @@ class SingleCycle:
         return tuple(g.element.start for g in self.segments)
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class PeckCycle:
+    """A G74 (face peck drilling) or G75 (grooving) cycle (:mod:`.peck_cycles`), its moves planned in the program's
+    coordinates; the tool ends at ``end`` (the start point). ``region``: what it cuts away by its definition."""
+
+    line: int
+    code: int                       # 74, 75
+    segments: tuple[Segment, ...]
+    end: Point
+    region: tuple[Point, ...]
+
+    def removed(self) -> tuple[Point, ...]:
+        """The region this operation cuts away by its definition: a simple polygon of (Z, radius) points, mm, in the
+        program's coordinates (work and tool offsets not applied, X as a radius), large values (1e4) standing for
+        'to the outside'."""
+        return self.region
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle | PeckCycle
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -717,7 +738,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
-        elif isinstance(op, (Thread, SingleCycle)):
+        elif isinstance(op, (Thread, SingleCycle, PeckCycle)):
             out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
                     for g in op.segments]
             here = op.end

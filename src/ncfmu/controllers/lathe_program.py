@@ -23,6 +23,8 @@ Words (one block per line, letters in either case; the README has the table)::
     G54..G59 work offsets (Setup.works, seq.work[k])   M98 P<repeats><program> [L] / M99 [P]  subprograms
                                                 (:mod:`.subprograms`: O programs after M30, ending with M99)
     ,C<chamfer> ,R<radius> between two G01 moves; A<angle> on G01   (:mod:`.direct_dimensions`)
+    G74 R<retract> / G74 X/U Z/W P<step, um> Q<peck, um> R<relief> F  face peck drilling (on the axis with a drill)
+    G75 R<retract> / G75 X/U Z/W P<peck, um> Q<step, um> R<relief> F  grooving     (:mod:`.peck_cycles`)
 
 Positions are the programmed tool tip; the axes carry the active work and tool offsets (:func:`.g7x.plan_ops`). The
 machine words become :class:`.g7x.State` operations: each planned move runs with its :class:`.g7x.Modal`.
@@ -56,6 +58,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Home,
     Modal,
     Op,
+    PeckCycle,
     Profile,
     Rough,
     Segment,
@@ -86,6 +89,7 @@ from .gcode import (
 from .geometry import Arc, CornerError, Element, Line, Point
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
+from .peck_cycles import PeckError, plan_pecks, region
 from .single_cycles import CycleError, plan_single
 from .subprograms import run_order
 from .thread_cycles import G76Setup, ThreadError, g76_setup, plan_g32, plan_g76, plan_g92
@@ -105,7 +109,7 @@ LATHE = Dialect(
     groups={**{g: "motion (G00-G03, G32, G92, G94)" for g in (*_MOTION, *_THREAD_MOTION, 94)}, 18: "plane (G18)",
             21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
-            **{g: "canned cycle (G70/G71/G76)" for g in (70, 71, 76)},
+            **{g: "canned cycle (G70-G76)" for g in (70, 71, 74, 75, 76)},
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
             **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
             97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)",
@@ -113,10 +117,9 @@ LATHE = Dialect(
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
                20: "inch units are not in the subset: write the program in mm (G21)",
                72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
-               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are",
-               74: "G74 (face peck drilling) is not in the subset", 75: "G75 (grooving cycle) is not in the subset"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G76, G90, G91, G92, G94, "
-           "G96-G99",
+               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G74-G76, G90, G91, G92, "
+           "G94, G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
     m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
     coordinates="XZIKRUWPQSTOLA",
@@ -153,6 +156,7 @@ class _Modes:
     machine: Modal = field(default_factory=Modal)
     comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
+    row_no: int = 0         # that row's number k (seq.tool[k]; 0: no offset)
     work: Point = (0.0, 0.0)    # the active work offset (z, x radius): G54..G59
     lead: float = 0.0       # a thread block's F (G32/G92/G76): the lead, mm; modal among thread blocks
     cycle_end: Point | None = None  # the modal G92/G90/G94's end (z, x) and taper R: a block with X (or Z) alone
@@ -160,6 +164,7 @@ class _Modes:
     cycle_taper: float = 0.0
     cycle_pass: int = 0     # passes of the modal G92/G90/G94 so far
     g76: G76Setup | None = None     # G76's first block
+    peck_retract: float | None = None   # G74/G75's first block: the retract e after each peck (mm)
     thread_moves: int = 0   # the threads' planned moves so far (at most MAX_SEGMENTS in a program)
 
 
@@ -265,6 +270,8 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             cycle = g
         elif g in _THREAD_MOTION or g == 76:
             raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
+        elif g in _PECK:
+            raise b.err(col, f"G{g} (a peck cycle) inside a profile: the profile's moves are G00-G03")
         elif g == 94 or (g == 90 and profile and _single_kind(b, modes) == 90):
             raise b.err(col, f"G{g} (a single cycle) inside a profile: the profile's moves are G00-G03")
         elif g in (40, 41, 42) and not profile:
@@ -281,7 +288,7 @@ def _interpret(b: Block, modes: _Modes, here: Point,
         return None, here, False, _Cycle(cycle, b, values)
     for k in "PQ":
         if k in values:
-            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71 (and P to G04)")
+            raise b.err(b.col(k), f"{k}{values[k]:g}: P and Q belong to G70/G71, G74/G75 and G76 (and P to G04)")
     element, end = _move(b, modes, here, values, new_motion, motion_col, profile)
     if new_motion is not None:
         modes.motion = new_motion
@@ -333,7 +340,7 @@ def _machine(b: Block, modes: _Modes, setup: Setup) -> None:
                                     "tool 1 with the offsets of seq.tool[1]; offset 0 cancels the offset)")
         row_tool = setup.tools[row - 1] if row else Tool()
         m = replace(m, tool=tool, offset=(row_tool.z_offset + modes.work[0], row_tool.x_offset + modes.work[1]))
-        modes.row = row_tool
+        modes.row, modes.row_no = row_tool, row
     selected = [g for g in codes if g in _WORK]
     if selected:
         modes.work = setup.works[selected[0] - 54]
@@ -617,6 +624,94 @@ def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> P
     return here
 
 
+# -- peck cycles: G74, G75 (:mod:`.peck_cycles`) -------------------------------------------------------
+_PECK = (74, 75)
+
+
+def _peck_kind(b: Block) -> int:
+    """74 or 75 when the block is a G74/G75's (non-modal: its own G code)."""
+    return next((g for g, _ in b.g if g in _PECK), 0)
+
+
+def _microns_word(b: Block, letter: str, what: str) -> float:
+    """A peck cycle's P or Q: a whole number of um as Fanuc writes it, no decimal point (0 when absent), as mm."""
+    spelled = next((text for w, _, text, _ in b.words if w == letter), None)
+    if spelled is None:
+        return 0.0
+    value = b.values[letter]
+    if "." in spelled or value != int(value) or value < 0:
+        raise b.err(b.col(letter), f"{letter}{spelled}: {what} is a whole number of um >= 0 without a decimal point, "
+                                   f"as Fanuc writes it ({letter}2500: 2.5 mm)")
+    return value / 1000.0
+
+
+def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
+    """A G74/G75 block: the first (R alone) sets the retract e; the second adds the cycle's :class:`.g7x.PeckCycle`
+    from where the tool stands (the start point), where it ends again."""
+    v = b.values
+    _distance_and_x_modes(b, modes)
+    pecks_along, steps_across = ("Z", "X") if kind == 74 else ("X", "Z")
+    for k in "IK":
+        if k in v:
+            raise b.err(b.col(k), f"{k}: G{kind} takes R (the retract) in its first block, then X/U, Z/W, P, Q, R "
+                                  "(the relief) and F")
+    if modes.comp:
+        raise b.err(b.col("G"), f"G{kind} with G4{1 if modes.comp > 0 else 2} in force: cancel the tool-nose radius "
+                                "compensation (G40) before a peck cycle")
+    if not any(k in v for k in "XZUWPQ"):
+        if "R" not in v or "F" in v:
+            raise b.err(b.col("F") if "F" in v else b.col("G"),
+                        f"G{kind}'s first block gives the retract R (mm, after each peck) alone; the cut follows in "
+                        f"G{kind} X/U Z/W P Q R F")
+        if not v["R"] >= 0.0:
+            raise b.err(b.col("R"), f"R{v['R']:g}: the retract after each peck must be >= 0")
+        modes.peck_retract = v["R"]
+        return here
+    if modes.peck_retract is None:
+        raise b.err(b.col("G"), f"G{kind} X Z P Q R F needs G{kind}'s first block (G{kind} R<retract, mm>) before "
+                                "it")
+    if not any(k in v for k in ("ZW" if kind == 74 else "XU")):
+        raise b.err(b.col("G"), f"G{kind} gives the end {pecks_along} the pecks reach ({pecks_along} or "
+                                f"{'W' if kind == 74 else 'U'})")
+    p = _microns_word(b, "P", "the step in X" if kind == 74 else "the peck in X")
+    q = _microns_word(b, "Q", "the peck in Z" if kind == 74 else "the step in Z")
+    peck, step = (q, p) if kind == 74 else (p, q)
+    end = _target(b, modes, here)
+    if "F" in v:
+        modes.feed = v["F"] / 60.0
+    if modes.feed == 0.0:
+        raise b.err(b.col("G"), f"G{kind} with no feed: give F first")
+    tool, row = modes.row, modes.row_no
+    across = b.col("X" if "X" in v else "U") if any(k in v for k in "XU") else b.col("P")
+    if kind == 74 and (tool.drill_diameter > 0.0 or abs(here[1]) <= EPS):
+        if tool.drill_diameter > 0.0 and abs(here[1]) > EPS:
+            raise b.err(b.col("G"), f"G74 with a drill (tool[{row}].drill_diameter {tool.drill_diameter:g}) from X "
+                                    f"{2 * here[1] if modes.diameter else here[1]:g}: a drill drills on the spindle "
+                                    "axis, start G74 at X0")
+        if abs(end[1] - here[1]) > EPS or step > 0.0:
+            raise b.err(across, "G74 of a tool on the spindle axis steps across X: a drill makes one hole on the "
+                                "axis (omit X/U and give P0)")
+        if tool.drill_diameter <= 0.0:
+            raise b.err(b.col("G"), f"G74 on the spindle axis drills: the active offset's row (tool[{row}]) is no "
+                                    f"drill: set tool[{row}].drill_diameter" if row else
+                                    "G74 on the spindle axis drills: give a drill's offset first (T, its row's "
+                                    "tool[k].drill_diameter)")
+    if kind == 75:
+        if tool.drill_diameter > 0.0:
+            raise b.err(b.col("G"), f"G75 with a drill (tool[{row}].drill_diameter {tool.drill_diameter:g}): a drill "
+                                    "cuts along Z on the axis, G75 grooves in X")
+        if tool.width > 0.0 and step > tool.width + EPS:
+            raise b.err(b.col("Q"), f"Q{round(step * 1000)}: steps of {step:g} mm in Z wider than the blade "
+                                    f"(tool[{row}].width {tool.width:g}) leave a ridge between the plunges")
+    try:
+        segs = plan_pecks(kind, here, end, peck, step, modes.peck_retract, v.get("R", 0.0), modes.feed, b.line)
+    except PeckError as err:
+        word = err.word if err.word in v else {"X": "U", "Z": "W"}.get(err.word, err.word)
+        raise b.err(across if err.word == steps_across and word not in v else b.col(word), err.reason) from None
+    ops.append(PeckCycle(b.line, kind, tuple(segs), here, region(kind, here, end, tool)))
+    return here
+
+
 # -- direct drawing dimensions: ,C ,R A (:mod:`.direct_dimensions`) ---------------------------------------
 _DIMENSION_WORDS = (",C", ",R", "A")
 
@@ -770,10 +865,11 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     while i < len(blocks):
         b = blocks[i]
         i += 1
-        single = _single_kind(b, modes)
-        thread = 0 if single else _thread_kind(b, modes)
-        if single:
-            _check_thread_words(b, single, spindle=False)
+        peck = _peck_kind(b)
+        single = 0 if peck else _single_kind(b, modes)
+        thread = 0 if single or peck else _thread_kind(b, modes)
+        if single or peck:
+            _check_thread_words(b, single or peck, spindle=False)
         if thread:
             _check_thread_words(b, thread)
         before = modes.machine
@@ -782,8 +878,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
             ops.append(State(b.line, modes.machine))
         codes = {g for g, _ in b.g}
         cycle = None
-        if single or thread or codes & {4, 28, 50}:
-            _no_dimensions(b, f"a G{single or thread or min(codes & {4, 28, 50}):02d} block")
+        if single or thread or peck or codes & {4, 28, 50}:
+            _no_dimensions(b, f"a G{single or thread or peck or min(codes & {4, 28, 50}):02d} block")
             if pending is not None:
                 _round_corner(pending[1], pending[2], _move_at(ops, pending[0]), b, None, False)   # raises: no G01 next
         if codes & {4, 28, 50}:
@@ -805,6 +901,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                         home.home[1] - dx if home.home[1] is not None else home.via[1])
         elif single:
             here = _single(b, single, modes, here, ops)
+        elif peck:
+            here = _peck(b, peck, modes, here, ops)
         elif thread:
             here = _thread(b, thread, modes, here, ops)
         else:

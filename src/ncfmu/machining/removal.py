@@ -64,8 +64,6 @@ INSERT = 12.0
 INSERT_ANGLE = 80.0
 #: Beyond any tool (mm): the extent of the box a tool's outline is clipped to.
 FAR_TOOL = 1e4
-#: A drill's point angle (degrees).
-DRILL_POINT = 118.0
 
 
 def _circle_segments(radius: float) -> int:
@@ -152,12 +150,13 @@ def grooving_insert(width: float, nose_radius: float = 0.0, blade: float = BLADE
     return _hull(parts)
 
 
-def drill(diameter: float, length: float = BLADE) -> np.ndarray:
-    """A twist drill of ``diameter`` mm on the spindle axis pointing -Z, its programmed point the tip of its
-    :data:`DRILL_POINT` point: the vertices of its outline in ``(z, x)`` -- the whole section, both sides of the
-    axis (``length`` mm of it along +Z)."""
+def drill(diameter: float, point_angle: float, length: float = BLADE) -> np.ndarray:
+    """A twist drill of ``diameter`` mm on the spindle axis pointing -Z, its programmed point the tip of its point
+    of ``point_angle`` degrees (the controllers' ``peck_cycles.DRILL_POINT``, whose drilled hole it cuts): the
+    vertices of its outline in ``(z, x)`` -- the whole section, both sides of the axis (``length`` mm of it along
+    +Z)."""
     h = float(diameter) / 2.0
-    cone = h / math.tan(math.radians(DRILL_POINT / 2.0))
+    cone = h / math.tan(math.radians(point_angle / 2.0))
     return _hull([shapely.multipoints(np.array([[0.0, 0.0], [cone, h], [cone, -h], [cone + length, h],
                                                 [cone + length, -h]]))])
 

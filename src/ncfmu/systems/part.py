@@ -7,7 +7,8 @@ keeps the stock left and the crashes, never the trajectory. Everything it needs 
 parameters: the bar stock (``seq.stock_diameter``, ``seq.stock_length``, ``seq.stock_face_z``) and the chuck
 jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``contour.stock_margin`` around the
 contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
-profile or the outline its registers define (the deepest pass of each block), the mill's closed contour.
+profile with what its other cycles cut away by their definition (an op's ``removed()``: G74's drilled hole, G75's
+groove) or the outline its registers define (the deepest pass of each block), the mill's closed contour.
 
 Inside work: a G71/G70 profile that rises from the start point's X (a bore, :mod:`..controllers.g7x`) is judged
 as a bore -- the stock a tube whose drilled hole's radius is the bore cycle's start point's X (no parameter: the
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..controllers.base import POSITION_LIMIT
+from ..controllers.peck_cycles import DRILL_POINT
 from ..machining import (
     Crash,
     Cutter,
@@ -373,7 +375,7 @@ class LathePart(MachinedPart):
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
         profiles: list[Any] = []
-        regions: list[tuple[Any, int]] = []   # (what an op cuts away by its definition, its line): G90/G94 passes
+        regions: list[tuple[Any, int]] = []   # (what an op cuts away by its definition, its line)
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         numbers = block_numbers(program, "lathe")
         spindle = self.spindle is not None and bool(program.strip())
@@ -385,7 +387,8 @@ class LathePart(MachinedPart):
             tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
                                z_offset=to_float(seq[f"tool[{k}].z_offset"]),
                                nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
-                               tip=to_int(seq[f"tool[{k}].tip"])) for k in range(1, 9))
+                               tip=to_int(seq[f"tool[{k}].tip"]), width=to_float(seq[f"tool[{k}].width"]),
+                               drill_diameter=to_float(seq[f"tool[{k}].drill_diameter"])) for k in range(1, 9))
             reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
                               home=(to_float(seq["z_home"]), to_float(seq["x_home"])),
                               works=work_offsets(lambda name: to_float(seq[name])))
@@ -487,7 +490,7 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
         if tip in (0, 9):
             tip = 2 if hole > 0.0 else 3
         if value("drill_diameter") > 0.0:
-            outline, on_axis = drill(value("drill_diameter")), True
+            outline, on_axis = drill(value("drill_diameter"), DRILL_POINT), True
         else:
             width = value("width")
             shape = (grooving_insert(width, nose, blade) if width > 0.0
