@@ -12,7 +12,7 @@ An FMU must run the code it was built from, even in a process that has imported 
    back to the ``.py`` beside it on any other Python;
 3. rewrites the model script's ``ncfmu`` imports to that name and stores the script as the unique
    module ``<Model>_<digest>`` (the digest of everything the FMU is made from);
-4. post-processes the modelDescription (:mod:`.modeldesc`) and records that digest in its
+4. completes pythonfmu's modelDescription from the ports (:mod:`.modeldesc`) and records that digest in its
    ``version`` attribute, so a stale FMU is rebuilt.
 """
 
@@ -42,7 +42,7 @@ from pythonfmu.osutil import get_lib_extension, get_platform
 from .. import __version__
 from ..errors import BuildError
 from .contract import HEADER_NAME
-from .modeldesc import enrich
+from .modeldesc import model_description
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
@@ -460,10 +460,11 @@ def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str
     from .documentation import fmu_html
     binary = f"binaries/linux64/{cls}.so"
     with zipfile.ZipFile(src) as zin:
-        description = enrich(zin.read("modelDescription.xml"), logic, version)
-        guid = re.search(rb'\bguid="([^"]*)"', description)
+        written = zin.read("modelDescription.xml")
+        guid = re.search(rb'\bguid="([^"]*)"', written)
         if guid is None:
             raise BuildError(f"{cls}: pythonfmu's modelDescription has no guid")
+        description = model_description(logic, "2.0", guid.group(1).decode(), version, pythonfmu_xml=written)
         compiled = compile_shim(guid.group(1).decode(), module, cls)      # before anything is written
         record = python_runtime_record()
         extra = RUNTIME_HTML.format(version=".".join(map(str, sys.version_info[:2])),
