@@ -281,7 +281,7 @@ def compiled_runtime(package_dir: Path = PACKAGE_DIR) -> Path | None:
 
 
 C_LAYER = Path(__file__).with_name("c")
-#: The one FMI 2.0 layer of every ncfmu FMU, over the model interface fmi2_model.h.
+#: The one FMI 2.0 layer of every ncfmu FMU, over the model interface model.h.
 FMI2_LAYER = C_LAYER / "fmi2_functions.c"
 #: The Python runtime as a model behind that interface: the Python FMUs' model.
 PYTHON_MODEL = C_LAYER / "python_model.c"
@@ -291,7 +291,7 @@ PYTHON_MODEL = C_LAYER / "python_model.c"
 SHIM_LINK = ("-ldl", "-lm", "-lpthread")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
 #: What a Python FMU's binaries are compiled from (the FMI 2.0 one and its FMI 3.0 twin's, fmi3.py).
-PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "fmi2_model.h", C_LAYER / "fmi2_machine.h",
+PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "model.h", C_LAYER / "fmi2_machine.h",
                       C_LAYER / "fmu_instance.h", CONTRACT_HEADER,
                       C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
 

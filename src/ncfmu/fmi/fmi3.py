@@ -2,7 +2,7 @@
 
 ``ncfmu build`` writes each model's FMI 2.0 FMU to ``fmus/<Model>.fmu`` and its FMI 3.0 twin to
 ``fmus/fmi3/<Model>.fmu``. The twin is the same model behind another FMI layer: its binary is
-``fmi/c/fmi3_functions.c`` over the model interface ``fmi/c/fmi2_model.h``, compiled with the same model
+``fmi/c/fmi3_functions.c`` over the model interface ``fmi/c/model.h``, compiled with the same model
 (``python_model.c`` and the FMU's Python code in its resources, or ``native_model.c`` and the model's C file),
 the same GUID (the FMI 3.0 ``instantiationToken``) and the same resources. Its modelDescription is written from
 the model's ports by the FMI 2.0 one's writer (:mod:`.modeldesc`): a Real is a Float64, an Integer an Int32, with

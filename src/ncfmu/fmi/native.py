@@ -10,9 +10,9 @@ What is written where (one home per fact):
 - the variables, their start values and their rules come from the model's Python ports
   (:class:`~ncfmu.ports.Port`) and are generated into ``model_vars.h``;
 - the FMI layer is ``fmi/c/fmi2_functions.c`` (the one layer of every ncfmu FMU, the Python FMUs' too) with the
-  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/fmi2_model.h``, which
+  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/model.h``, which
   ``fmi/c/native_model.c`` implements for table-driven native models;
-- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``fmi2_model.h``.
+- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``model.h``.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: What a native FMU carries of the FMI layer (its sources/), beside the model's C file and model_vars.h.
 LAYER_SOURCES = ("fmi2_functions.c", "native_model.c")
-LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h", "fmu_instance.h")
+LAYER_HEADERS = ("fmi2_machine.h", "model.h", "fmu_instance.h")
 
 
 @dataclass(frozen=True)
