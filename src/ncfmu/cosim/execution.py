@@ -2,9 +2,9 @@
 and input schedule, made once by :meth:`~ncfmu.cosim.master.Master.prepare`, and the loop that steps it.
 
 The loop runs the steps in chunks that end where Python must act before the next step; each chunk runs in C
-(``loop.c``) when every slave allows it, else in Python with the master's :mod:`algorithm <.algorithm>`. Both
-make the same calls. Writes between steps (an input CSV's cells, a session's force, release and parameter) go
-through :meth:`Execution.apply`.
+(``loop.c``) when every slave allows it, else in Python; both follow the schedule of the master's
+:mod:`algorithm <.algorithm>`, so both make the same calls. Writes between steps (an input CSV's cells, a
+session's force, release and parameter) go through :meth:`Execution.apply`.
 """
 
 from __future__ import annotations
@@ -236,22 +236,7 @@ class Execution:
             for s, _gathers in plan:
                 s.forget_sent_inputs()
         k = next(n for n, (s, _gathers) in enumerate(plan) if s.name == asked)
-        if self.algorithm.jacobi:               # every input was gathered before any slave stepped
-            for s, gathers in plan[k + 1:]:
-                for buf, take, idx in gathers:
-                    take(idx, out=buf)
-                s.write_inputs()
-                s.do_step(t, h)
-            for s, _gathers in plan:
-                s.read_outputs()
-        else:
-            plan[k][0].read_outputs()
-            for s, gathers in plan[k + 1:]:
-                for buf, take, idx in gathers:
-                    take(idx, out=buf)
-                s.write_inputs()
-                s.do_step(t, h)
-                s.read_outputs()
+        self.algorithm.rest_of_step(plan, k)(t, h)
         done = i + 1
         if done % self.every == 0:
             if done // self.every - self.row_base >= self.capacity:
