@@ -18,14 +18,15 @@ SRC = ROOT / "src" / "ncfmu"
 
 #: layer -> the ncfmu layers it may import (besides itself). Top-level modules are their own layer.
 ALLOWED: dict[str, set[str]] = {
+    "version": set(),
     "errors": set(),
     "exitcodes": set(),
-    "files": set(),
+    "files": {"version"},
     "ports": {"errors"},
     "controllers": {"errors", "ports"},
     "servo": {"errors", "ports", "controllers"},
     "catalogue": {"errors", "ports", "controllers", "servo"},
-    "fmi": {"errors", "ports", "files", "controllers", "servo", "catalogue"},
+    "fmi": {"version", "errors", "ports", "files", "controllers", "servo", "catalogue"},
     "cosim": {"errors", "ports", "files"},
     "checks": {"errors", "ports", "controllers", "cosim"},
     "machining": {"errors"},

@@ -10,9 +10,9 @@ session's force, release and parameter) go through :meth:`Execution.apply`.
 from __future__ import annotations
 
 import time as _time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -20,12 +20,11 @@ from ..errors import SimulationError, SimulationTimeout, TerminationRequested
 from .algorithm import Algorithm
 from .interrupts import raise_pending
 from .native_loop import NativePlan
-from .slave import KINDS, Variable
+from .slave import KINDS, Slave, Variable
+from .ssp import System
+from .units import Conversion
 
-if TYPE_CHECKING:
-    from .master import Master
-
-__all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution"]
+__all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution", "Owner"]
 
 #: Steps run before the loop hands back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper in C).
 NATIVE_CHUNK = 10_000
@@ -52,11 +51,30 @@ class BoundInput:
     force_slot: int
 
 
+class Owner(Protocol):
+    """The master an execution belongs to (:class:`~ncfmu.cosim.master.Master`), as the execution and its session
+    use it: the layer below the master names what it asks of it, and never imports it."""
+
+    #: which loop the last run stepped in: "c" or "python"
+    loop_used: str
+
+    @property
+    def system(self) -> System: ...
+
+    @property
+    def slaves(self) -> Sequence[Slave]: ...
+
+    @property
+    def conversions(self) -> Mapping[tuple[str, str], Conversion]: ...
+
+    def variable(self, qualified: str) -> tuple[Slave, Variable]: ...
+
+
 @dataclass
 class Execution:
     """Everything one run needs inside the loop, prepared once (:meth:`~ncfmu.cosim.master.Master.prepare`)."""
 
-    master: Master
+    master: Owner
     algorithm: Algorithm
     h: float
     start_time: float

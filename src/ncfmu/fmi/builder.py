@@ -39,8 +39,8 @@ from pathlib import Path
 from pythonfmu.builder import FmuBuilder
 from pythonfmu.osutil import get_lib_extension, get_platform
 
-from .. import __version__
 from ..errors import BuildError
+from ..version import __version__
 from .contract import HEADER_NAME
 from .modeldesc import model_description
 
@@ -51,20 +51,19 @@ _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 #: What a controller FMU runs, relative to the package: the controllers and the slave adapter. Only the
 #: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
 #: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
-FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
+FMU_RUNTIME = ("__init__.py", "version.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
                "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
 
 
-#: The runtime modules compiled with mypyc (bench/README.md, issue 36 round 4): every controller, its bases
-#: and the motion they step, as mypyc **native classes** (``controllers/mypyc_compat.py``: serializable, so the
-#: FMU states deepcopy and save them as from source), and the lathe program's planner (g7x, gcode,
-#: lathe_program: run at configure, not per step). A native class's subclass must be compiled with it (an
-#: interpreted subclass's own attributes would be lost by deepcopy): tests/fmi/test_compiled.py holds this list to
-#: Controller's subclasses. The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
-#: ``geometry.py`` (a compiled ``cached_property`` does not cache into the instance's ``__dict__``, and a compiled
-#: dataclass's field types read as the erased runtime types: fmi/state.py checks a restored ``Line``, ``Arc`` or
-#: ``ToolMove`` by its declared field types), ``nose.py``, ``rs274.py``, ``mypyc_compat.py`` and ``ports.py``
-#: (configure time only).
+#: The runtime modules compiled with mypyc (bench/README.md, "the controllers compiled as mypyc native classes"): every
+#: controller, its bases and the motion they step, as mypyc **native classes** (``controllers/mypyc_compat.py``:
+#: serializable, so the FMU states deepcopy and save them as from source), and the lathe program's planner (g7x, gcode,
+#: lathe_program: run at configure, not per step). A native class's subclass must be compiled with it (an interpreted
+#: subclass's own attributes would be lost by deepcopy): tests/fmi/test_compiled.py holds this list to Controller's
+#: subclasses. The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions), ``geometry.py`` (a
+#: compiled ``cached_property`` does not cache into the instance's ``__dict__``, and a compiled dataclass's field types
+#: read as the erased runtime types: fmi/state.py checks a restored ``Line``, ``Arc`` or ``ToolMove`` by its declared
+#: field types), ``nose.py``, ``rs274.py``, ``mypyc_compat.py`` and ``ports.py`` (configure time only).
 COMPILED = ("controllers/base.py", "controllers/cycle.py", "controllers/motion.py", "controllers/sequencer.py",
             "controllers/panel.py", "controllers/limiter.py", "controllers/feed.py", "controllers/contour.py",
             "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
@@ -130,8 +129,8 @@ def compile_unavailable() -> str | None:
 
 #: How the controllers are compiled (part of the cache folder's name and of a compiled FMU's digest): mypyc's
 #: multi-file mode (one C file per module, and mypyc's runtime in its own files) with the C files compiled in
-#: parallel, one job per core. Measured (issue 47, the 11 modules): one C file 59 s of gcc CPU, serial; split,
-#: 38 s of CPU, which two jobs share.
+#: parallel, one job per core. Measured when the layout was chosen (the 11 modules, 2026-12-03): one C file 59 s
+#: of gcc CPU, serial; split, 38 s of CPU, which two jobs share.
 COMPILE_LAYOUT = "split"
 
 #: The setup script the controllers are compiled with (run in a child Python, in the staging folder): mypyc's

@@ -22,9 +22,9 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import __version__
 from ..errors import BuildError
 from ..ports import DISPLAY_UNITS, UNITS, Port
+from ..version import __version__
 
 if TYPE_CHECKING:
     from ..controllers.base import Controller

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import __version__
 from ..errors import BuildError
+from ..version import __version__
 from .modeldesc import model_description as write_model_description
 
 if TYPE_CHECKING:
