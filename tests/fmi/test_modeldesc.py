@@ -73,3 +73,18 @@ def test_pythonfmus_file_with_another_guid_is_refused():
     theirs = model_description(logic, "2.0", GUID, VERSION, native_sources=())
     with pytest.raises(BuildError, match="pythonfmu's modelDescription has guid"):
         model_description(logic, "2.0", "{other}", VERSION, pythonfmu_xml=theirs)
+
+
+def test_a_change_to_the_writer_rebuilds_every_fmu(monkeypatch, tmp_path):
+    """The writer is part of what every FMU is made from: its digest (the FMU's version) changes with it."""
+    from pathlib import Path
+
+    from ncfmu.fmi import builder, modeldesc, native
+    writer = Path(modeldesc.__file__).resolve()
+    script = tmp_path / "Model.py"
+    script.write_text("class Model: pass\n")
+    before = builder.source_digest(script), [m.digest() for m in native.native_models()]
+    read = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda p: read(p) + (b"#" if p.resolve() == writer else b""))
+    after = builder.source_digest(script), [m.digest() for m in native.native_models()]
+    assert after[0] != before[0] and all(a != b for a, b in zip(after[1], before[1], strict=True))

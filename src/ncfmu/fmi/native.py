@@ -73,9 +73,10 @@ class NativeModel:
         for name, data in sorted(self.sources().items()):
             h.update(name.encode())
             h.update(data)
-        # the FMI 3.0 twin (fmi3.py) is built from the same version: its layer is part of what it is
+        # the FMI 3.0 twin (fmi3.py) is built from the same version: its layer is part of what it is, and so is the
+        # writer of both modelDescriptions (modeldesc.py)
         fmi3 = (C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
-        for path in (*self.defined_by, Path(__file__), *fmi3):
+        for path in (*self.defined_by, Path(__file__), *fmi3, Path(__file__).with_name("modeldesc.py")):
             h.update(path.read_bytes())
         return h.hexdigest()[:12]
 
