@@ -28,7 +28,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from foreign_fmus import FOREIGN, build_one, packed, with_plant  # noqa: E402
 
-from ncfmu.cosim.fmu import UnpackedFmu, make_slave  # noqa: E402
+from ncfmu.cosim.fmu import UnpackedFmu  # noqa: E402
+from ncfmu.cosim.instances import make_slave  # noqa: E402
 from ncfmu.cosim.isolated import isolated_slave  # noqa: E402
 from ncfmu.project import OpenSystem  # noqa: E402
 

@@ -10,7 +10,9 @@ The package is layered; importing :mod:`ncfmu` itself imports nothing heavy:
 - :mod:`ncfmu.cli` -- the ``ncfmu`` command.
 """
 
-__version__ = "0.1.0"
+from .version import __version__
+
+__all__ = ["__version__", "serve"]
 
 
 def serve(*args, **kwargs):

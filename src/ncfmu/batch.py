@@ -366,7 +366,7 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
 
 
 #: dask settings of the LocalCluster a sweep starts (an existing cluster keeps its own): what a worker's process
-#: spends beside its variant, measured with bench/sweep_cpu.py (bench/README.md, "Issue 36, lever 3"): the
+#: spends beside its variant, measured with bench/sweep_cpu.py (bench/README.md, "the sweep on 2 workers"): the
 #: statistical profiler (a thread sampling the task thread's stack every 10 ms, for the dashboard nobody opens)
 #: off; the event-loop health tick every 1 s instead of 20 ms and the system monitor (psutil samples for the
 #: dashboard) every 10 s instead of 0.5 s, in each worker and in the client's scheduler.

@@ -339,8 +339,8 @@ def _run_streamed(args, start_values: dict[str, object]):
                 if step > 0 and math.isfinite(stop / step) and (not to_done or stop > RUN_LIMIT):
                     rows = int(round(stop / step)) // steps_per_row(args.output_interval, step) + 1
                 if settings.drawing is not None:        # refused for this system before any file is written
-                    from .systems.drawing import check_for
-                    check_for(opened.report(), settings.drawing)
+                    from .systems.part import check_drawing_for
+                    check_drawing_for(opened.report(), settings.drawing)
                 _run_record_path(Path(args.out) / f"{system.name}.csv").unlink(missing_ok=True)    # an earlier run's
                 csv_sink = CsvSink(Path(args.out) / f"{system.name}.csv", expected_rows=rows,
                                    run=f"stop time {stop:g} s at a step of {step:g} s")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from . import __version__
+from .version import __version__
 
 
 def write_atomic(path: Path, data: bytes) -> None:

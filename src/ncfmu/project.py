@@ -17,11 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from .cosim.connect import free_inputs
-from .cosim.fmu import UnpackedFmu, make_slave, safe_extract, unpacked_fmu
+from .cosim.fmu import UnpackedFmu, safe_extract, unpacked_fmu
+from .cosim.instances import make_slave
 from .cosim.master import InputTable, Master, Session, steps_per_row
 from .cosim.native_loop import build_library
 from .cosim.record import EveryKth, RecordSink, SelectColumns
 from .cosim.result import Result
+from .cosim.slave import ResettableSlave
 from .cosim.ssp import SSD_NAME, Component, System, fmu_path, pack, read_ssd, read_ssp, write_system
 from .errors import SystemDefinitionError
 from .files import is_checkout, project_root
@@ -200,7 +202,7 @@ class OpenSystem:
                                                 .read_bytes(), f"{self.archive}: {c.source}")
                                for c in self.system.components}
             # a foreign FMU runs in a process of its own: its crash ends the run with an error, not the process
-            self.slaves = []
+            self.slaves: list[ResettableSlave] = []
             for c in self.system.components:
                 unpacked = self.unpacked[c.model]
                 if self.identities[c.name].model or not isolate:

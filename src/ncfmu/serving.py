@@ -851,9 +851,9 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
     model current."""
     from asyncua import ua
 
-    from . import __version__
     from .catalogue import models
     from .controllers.cycle import CycleController
+    from .version import __version__
     await server.import_xml(xmlstring=cnc_types_xml())
     cnc = await server.get_namespace_index(CNC_NAMESPACE)
     start = dict(values or {})
@@ -1252,7 +1252,7 @@ class LiveServer:
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"ncfmu {self.system_name}")
-        from . import __version__
+        from .version import __version__
         server.product_uri = PRODUCT_URI
         await server.set_application_uri(APPLICATION_URI)
         await server.set_build_info(PRODUCT_URI, "ncfmu", "ncfmu", __version__, __version__,

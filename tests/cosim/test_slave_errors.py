@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from ncfmu.cosim.fmu import UnpackedFmu, make_slave
+from ncfmu.cosim.fmu import UnpackedFmu
+from ncfmu.cosim.instances import make_slave
 from ncfmu.errors import SimulationError
 
 

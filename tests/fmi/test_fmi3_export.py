@@ -17,7 +17,8 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
 from ncfmu.catalogue import models
-from ncfmu.fmi.fmi3 import PLATFORM, TIME_VR, TYPES
+from ncfmu.fmi.fmi3 import PLATFORM
+from ncfmu.fmi.modeldesc import TIME_VR, TYPES
 from ncfmu.systems import SYSTEMS, get_system
 
 MODELS = sorted(models())

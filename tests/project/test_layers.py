@@ -18,14 +18,15 @@ SRC = ROOT / "src" / "ncfmu"
 
 #: layer -> the ncfmu layers it may import (besides itself). Top-level modules are their own layer.
 ALLOWED: dict[str, set[str]] = {
+    "version": set(),
     "errors": set(),
     "exitcodes": set(),
-    "files": set(),
+    "files": {"version"},
     "ports": {"errors"},
     "controllers": {"errors", "ports"},
     "servo": {"errors", "ports", "controllers"},
     "catalogue": {"errors", "ports", "controllers", "servo"},
-    "fmi": {"errors", "ports", "files", "controllers", "servo", "catalogue"},
+    "fmi": {"version", "errors", "ports", "files", "controllers", "servo", "catalogue"},
     "cosim": {"errors", "ports", "files"},
     "checks": {"errors", "ports", "controllers", "cosim"},
     "machining": {"errors"},
@@ -156,14 +157,14 @@ def test_the_rule_catches_an_upward_import():
 #: may include (system headers <...> and the FMI standard's headers, as fmpy ships them, always).
 C_INCLUDES = {
     "fmi2_machine.h": set(),
-    "fmi2_model.h": {"fmi2_machine.h"},
-    "fmu_instance.h": {"fmi2_machine.h", "fmi2_model.h"},    # the FMI layers' instances and states, written once
-    "fmi2_functions.c": {"fmi2_machine.h", "fmi2_model.h", "fmu_instance.h"},
-    "fmi3_functions.c": {"fmi2_machine.h", "fmi2_model.h", "fmu_instance.h"},
-    "native_model.c": {"fmi2_machine.h", "fmi2_model.h", "model_vars.h"},
-    "python_model.c": {"fmi2_model.h", "ncfmu_contract.h"},
+    "model.h": {"fmi2_machine.h"},
+    "fmu_instance.h": {"fmi2_machine.h", "model.h"},    # the FMI layers' instances and states, written once
+    "fmi2_functions.c": {"fmi2_machine.h", "model.h", "fmu_instance.h"},
+    "fmi3_functions.c": {"fmi2_machine.h", "model.h", "fmu_instance.h"},
+    "native_model.c": {"fmi2_machine.h", "model.h", "model_vars.h"},
+    "python_model.c": {"model.h", "ncfmu_contract.h"},
     "ncfmu_contract.h": set(),
-    "model": {"fmi2_model.h", "model_vars.h"},        # + the model's own headers beside it
+    "model": {"model.h", "model_vars.h"},        # + the model's own headers beside it
 }
 FMI_STANDARD_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3Functions.h",
                         "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"}
@@ -183,6 +184,6 @@ def test_c_includes_follow_the_layers(path):
 
 
 def test_the_c_rule_catches_a_model_reaching_into_a_layer():
-    assert _c_includes('#include <math.h>\n#include "fmi2_model.h"\n  # include "python_model.c"\n') == [
-        "fmi2_model.h", "python_model.c"]
+    assert _c_includes('#include <math.h>\n#include "model.h"\n  # include "python_model.c"\n') == [
+        "model.h", "python_model.c"]
     assert "python_model.c" not in C_INCLUDES["model"] and "ncfmu_contract.h" not in C_INCLUDES["fmi2_functions.c"]

@@ -2,17 +2,17 @@
 and input schedule, made once by :meth:`~ncfmu.cosim.master.Master.prepare`, and the loop that steps it.
 
 The loop runs the steps in chunks that end where Python must act before the next step; each chunk runs in C
-(``loop.c``) when every slave allows it, else in Python with the master's :mod:`algorithm <.algorithm>`. Both
-make the same calls. Writes between steps (an input CSV's cells, a session's force, release and parameter) go
-through :meth:`Execution.apply`.
+(``loop.c``) when every slave allows it, else in Python; both follow the schedule of the master's
+:mod:`algorithm <.algorithm>`, so both make the same calls. Writes between steps (an input CSV's cells, a
+session's force, release and parameter) go through :meth:`Execution.apply`.
 """
 
 from __future__ import annotations
 
 import time as _time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -20,12 +20,11 @@ from ..errors import SimulationError, SimulationTimeout, TerminationRequested
 from .algorithm import Algorithm
 from .interrupts import raise_pending
 from .native_loop import NativePlan
-from .slave import KINDS, Variable
+from .slave import KINDS, Slave, Variable
+from .ssp import System
+from .units import Conversion
 
-if TYPE_CHECKING:
-    from .master import Master
-
-__all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution"]
+__all__ = ["COLUMN_DTYPES", "NATIVE_CHUNK", "Execution", "Owner"]
 
 #: Steps run before the loop hands back to Python (10 s simulated at 1 ms; ~0.3 s of lathe_taper in C).
 NATIVE_CHUNK = 10_000
@@ -52,11 +51,30 @@ class BoundInput:
     force_slot: int
 
 
+class Owner(Protocol):
+    """The master an execution belongs to (:class:`~ncfmu.cosim.master.Master`), as the execution and its session
+    use it: the layer below the master names what it asks of it, and never imports it."""
+
+    #: which loop the last run stepped in: "c" or "python"
+    loop_used: str
+
+    @property
+    def system(self) -> System: ...
+
+    @property
+    def slaves(self) -> Sequence[Slave]: ...
+
+    @property
+    def conversions(self) -> Mapping[tuple[str, str], Conversion]: ...
+
+    def variable(self, qualified: str) -> tuple[Slave, Variable]: ...
+
+
 @dataclass
 class Execution:
     """Everything one run needs inside the loop, prepared once (:meth:`~ncfmu.cosim.master.Master.prepare`)."""
 
-    master: Master
+    master: Owner
     algorithm: Algorithm
     h: float
     start_time: float
@@ -236,22 +254,7 @@ class Execution:
             for s, _gathers in plan:
                 s.forget_sent_inputs()
         k = next(n for n, (s, _gathers) in enumerate(plan) if s.name == asked)
-        if self.algorithm.jacobi:               # every input was gathered before any slave stepped
-            for s, gathers in plan[k + 1:]:
-                for buf, take, idx in gathers:
-                    take(idx, out=buf)
-                s.write_inputs()
-                s.do_step(t, h)
-            for s, _gathers in plan:
-                s.read_outputs()
-        else:
-            plan[k][0].read_outputs()
-            for s, gathers in plan[k + 1:]:
-                for buf, take, idx in gathers:
-                    take(idx, out=buf)
-                s.write_inputs()
-                s.do_step(t, h)
-                s.read_outputs()
+        self.algorithm.rest_of_step(plan, k)(t, h)
         done = i + 1
         if done % self.every == 0:
             if done // self.every - self.row_base >= self.capacity:

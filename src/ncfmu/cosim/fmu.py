@@ -192,14 +192,6 @@ def _supported_fmi3(fmu: str, v) -> None:
         raise SystemDefinitionError(f"{fmu}: variable {v.name} is clocked: FMI 3.0 clocks are not supported")
 
 
-def make_slave(unpacked: UnpackedFmu, instance_name: str):
-    """The slave of one instance of ``unpacked``: :class:`FmuSlave` for FMI 2.0, :class:`Fmu3Slave` for 3.0."""
-    if unpacked.fmi3:
-        from .fmu3 import Fmu3Slave
-        return Fmu3Slave(unpacked, instance_name)
-    return FmuSlave(unpacked, instance_name)
-
-
 class UnpackedFmu:
     """An FMU archive unpacked once and shared by all its instances (two servo axes, many variants)."""
 

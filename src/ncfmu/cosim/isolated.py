@@ -498,7 +498,7 @@ class _Child:
 
     def dispatch(self, op: str, args: list[Any], data: bytes | None) -> object:
         if op == "instantiate":
-            from .fmu import make_slave
+            from .instances import make_slave
             unpacked = UnpackedFmu(self.directory)
             self.fmi = "fmi3" if unpacked.fmi3 else "fmi2"
             self.note(f"{self.fmi}Instantiate")

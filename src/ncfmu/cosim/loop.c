@@ -1,10 +1,11 @@
 /*
- * ncfmu's master loop in C: the fixed-step Gauss-Seidel / Jacobi loop of ncfmu.cosim.master, over
- * the FMUs' own FMI 2.0 functions.
+ * ncfmu's master loop in C: the fixed-step loop of ncfmu.cosim.master, over the FMUs' own FMI 2.0
+ * functions, in the order of the master's algorithm (ncfmu.cosim.algorithm), which it is handed as its
+ * schedule: the calls of one step as (what, slave) pairs, PLAN_GATHER, PLAN_STEP or PLAN_READ.
  *
- * It does exactly what the Python loop does, call for call: per slave, gather its inputs from the
- * global output vectors (one per kind), send a kind only when its values changed since last sent,
- * fmi2DoStep, get its outputs into its slice of the global vector; after each step whose count is a
+ * It does exactly what the Python loop does, call for call: GATHER a slave's inputs from the
+ * global output vectors (one per kind); STEP: send a kind only when its values changed since last sent,
+ * then fmi2DoStep; READ its outputs into its slice of the global vector; after each step whose count is a
  * multiple of the output interval (in steps), copy the recorded prefix of every global vector into that
  * row of the record window (a bounded buffer: row r of the run goes to row r - row_base). The inputs'
  * gather indices say where each input reads from: its source's output, or a slot Python writes (an
@@ -27,6 +28,8 @@ typedef int (*get_int_fn)(void *, const unsigned int *, size_t, int *);
 typedef int (*do_step_fn)(void *, double, double, int);
 
 enum { CALL_SET = 0, CALL_DO_STEP = 1, CALL_GET = 2 };
+/* The calls of a schedule: ncfmu.cosim.algorithm's GATHER, STEP, READ. */
+enum { PLAN_GATHER = 0, PLAN_STEP = 1, PLAN_READ = 2 };
 
 typedef struct {
     void *function;             /* fmi2SetXxx (writes) or fmi2GetXxx (reads) */
@@ -64,7 +67,11 @@ typedef struct {
     int64_t step;
 } ncfmu_failure;
 
-static void gather(const ncfmu_slave *s)
+/* gather, send and read_outputs stay functions of their own (gcc would inline them into the one loop): a
+ * profile names the FMI calls each makes (bench/callgrind_step.py counts an FMU's Set and Get calls by them). */
+#define NCFMU_OWN_FRAME __attribute__((noinline))
+
+static NCFMU_OWN_FRAME void gather(const ncfmu_slave *s)
 {
     for (int32_t k = 0; k < s->n_writes; k++) {
         const ncfmu_transfer *w = &s->writes[k];
@@ -81,7 +88,7 @@ static void gather(const ncfmu_slave *s)
 }
 
 /* An FMU input keeps its value until set again: a kind is sent only when its values changed. */
-static int send(const ncfmu_slave *s, ncfmu_failure *fail)
+static NCFMU_OWN_FRAME int send(const ncfmu_slave *s, ncfmu_failure *fail)
 {
     for (int32_t k = 0; k < s->n_writes; k++) {
         const ncfmu_transfer *w = &s->writes[k];
@@ -101,7 +108,7 @@ static int send(const ncfmu_slave *s, ncfmu_failure *fail)
     return 1;
 }
 
-static int read_outputs(const ncfmu_slave *s, ncfmu_failure *fail)
+static NCFMU_OWN_FRAME int read_outputs(const ncfmu_slave *s, ncfmu_failure *fail)
 {
     for (int32_t k = 0; k < s->n_reads; k++) {
         const ncfmu_transfer *r = &s->reads[k];
@@ -134,31 +141,20 @@ static int do_step(const ncfmu_slave *s, double t, double h, ncfmu_failure *fail
  * compiled without FMA contraction) and, when (i + 1) is a multiple of every, is recorded in row
  * (i + 1) / every - row_base of the window. Python keeps the rows of a call inside the window.
  * Returns 0, or the failing call's status (details in *fail). */
-int ncfmu_loop(const ncfmu_slave *slaves, int32_t n_slaves, int32_t jacobi, double start, double h,
+int ncfmu_loop(const ncfmu_slave *slaves, const int32_t *schedule, int32_t n_calls, double start, double h,
                int64_t first, int64_t last, const ncfmu_record *records, int32_t n_records, int64_t every,
                int64_t row_base, ncfmu_failure *fail)
 {
     for (int64_t i = first; i < last; i++) {
         double t = start + h * (double)i;
         fail->step = i;
-        if (jacobi) {
-            for (int32_t s = 0; s < n_slaves; s++) gather(&slaves[s]);
-            for (int32_t s = 0; s < n_slaves; s++) {
-                fail->slave = s;
+        for (int32_t c = 0; c < n_calls; c++) {
+            int32_t what = schedule[2 * c], s = schedule[2 * c + 1];
+            fail->slave = s;
+            if (what == PLAN_GATHER) gather(&slaves[s]);
+            else if (what == PLAN_STEP) {
                 if (!send(&slaves[s], fail) || !do_step(&slaves[s], t, h, fail)) return fail->status;
-            }
-            for (int32_t s = 0; s < n_slaves; s++) {
-                fail->slave = s;
-                if (!read_outputs(&slaves[s], fail)) return fail->status;
-            }
-        } else {
-            for (int32_t s = 0; s < n_slaves; s++) {
-                fail->slave = s;
-                gather(&slaves[s]);
-                if (!send(&slaves[s], fail) || !do_step(&slaves[s], t, h, fail)
-                    || !read_outputs(&slaves[s], fail))
-                    return fail->status;
-            }
+            } else if (!read_outputs(&slaves[s], fail)) return fail->status;
         }
         if ((i + 1) % every) continue;
         size_t row = (size_t)((i + 1) / every - row_base);

@@ -313,8 +313,8 @@ class Master:
         natives = [s for s in self.slaves if isinstance(s, NativeSlave)]
         if self.native and len(natives) == len(self.slaves) and library() is not None and not self.conversions:
             records = [(rec[k], values[k][:n_rec[k]]) for k in KINDS if n_rec[k]]
-            run.native = NativePlan(natives, bindings, values, records, run.start_time, h, self.algorithm.jacobi,
-                                    every)
+            run.native = NativePlan(natives, bindings, values, records, run.start_time, h,
+                                    self.algorithm.schedule(len(natives)), every)
         return run
 
     def _span(self, stop_time: float | None, step_size: float | None, start_time: float,

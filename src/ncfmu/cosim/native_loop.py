@@ -1,5 +1,6 @@
 """The master loop in C (``loop.c``): the same steps as
-:meth:`Execution.steps <ncfmu.cosim.execution.Execution.steps>`, outside Python.
+:meth:`Execution.steps <ncfmu.cosim.execution.Execution.steps>`, outside Python, in the order of the algorithm's
+schedule (:meth:`ncfmu.cosim.algorithm.Algorithm.schedule`, handed to the loop as an array).
 
 Used when every slave offers its raw FMI 2.0 functions (:class:`NativeSlave`, i.e. every
 :class:`~ncfmu.cosim.fmu.FmuSlave`) and the library could be built; otherwise the master runs its
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..files import project_root
+from .algorithm import READ, Schedule
 from .slave import KINDS, Slave
 
 SOURCE = Path(__file__).with_name("loop.c")
@@ -134,7 +136,7 @@ def library() -> ctypes.CDLL | None:
         return None
     fn = lib.ncfmu_loop
     fn.restype = ctypes.c_int
-    fn.argtypes = [ctypes.POINTER(_Slave), ctypes.c_int32, ctypes.c_int32, ctypes.c_double, ctypes.c_double,
+    fn.argtypes = [ctypes.POINTER(_Slave), ctypes.c_void_p, ctypes.c_int32, ctypes.c_double, ctypes.c_double,
                    ctypes.c_int64, ctypes.c_int64, ctypes.POINTER(_Record), ctypes.c_int32, ctypes.c_int64,
                    ctypes.c_int64, ctypes.POINTER(_Failure)]
     return lib
@@ -144,7 +146,7 @@ class NativePlan:
     """One run's loop plan for the C loop: built from the master's bindings, kept alive with its arrays."""
 
     def __init__(self, slaves: list[NativeSlave], bindings: list[dict[str, tuple]], values: dict[str, np.ndarray],
-                 records: list[tuple[np.ndarray, np.ndarray]], start: float, h: float, jacobi: bool,
+                 records: list[tuple[np.ndarray, np.ndarray]], start: float, h: float, schedule: Schedule,
                  every: int = 1) -> None:
         """``bindings[i][kind]`` = ``(in_buf, input_vrs, gather_idx, out_view, output_vrs)`` of slave ``i``;
         ``gather_idx`` is used as it is (the master changes it in place between calls: forced inputs),
@@ -189,7 +191,12 @@ class NativePlan:
         for table, vector in records:
             assert table.flags.c_contiguous and vector.flags.c_contiguous and table.shape[1:] == vector.shape
         self._keep += [records]
-        self.start, self.h, self.jacobi, self.every = start, h, jacobi, every
+        # the algorithm's schedule, as loop.c reads it: (what, slave) pairs of int32
+        self._schedule = np.ascontiguousarray(schedule, dtype=np.int32).reshape(-1, 2)
+        assert not self._schedule.size or (self._schedule[:, 1].max() < len(slaves)
+                                           and self._schedule.min() >= 0 and self._schedule[:, 0].max() <= READ), \
+            "the schedule names only this plan's slaves and the calls GATHER, STEP, READ"
+        self.start, self.h, self.every = start, h, every
         self._failure = _Failure()
 
     def forget_sent(self) -> None:
@@ -200,7 +207,7 @@ class NativePlan:
     def run(self, first: int, last: int, row_base: int = 0) -> None:
         """Steps ``first`` .. ``last - 1``, recording into the window whose row 0 is the run's row ``row_base``;
         a failing FMI call raises the slave's SimulationError (:attr:`failed_step` is its step)."""
-        status = self._loop(self._structs, len(self.slaves), int(self.jacobi), self.start, self.h,
+        status = self._loop(self._structs, self._schedule.ctypes.data, len(self._schedule), self.start, self.h,
                             first, last, self._records, len(self._records), self.every, row_base,
                             ctypes.byref(self._failure))
         if status:

@@ -5,19 +5,15 @@ its recorded rows streamed into sinks (:mod:`.record`, the observers). Opened by
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, SimulationError, SystemDefinitionError
-from .execution import COLUMN_DTYPES, Execution, as_python, described
+from .execution import COLUMN_DTYPES, Execution, Owner, as_python, described
 from .fmu import check_range, typed_value
 from .record import RecordSink
 from .result import Result
 from .slave import KINDS, ReadableSlave, ResettableSlave
-
-if TYPE_CHECKING:
-    from .master import Master
 
 __all__ = ["Session"]
 
@@ -43,7 +39,7 @@ class Session:
     such a value at its next step, a SimulationError).
     """
 
-    def __init__(self, master: Master, run: Execution, sinks: list[RecordSink], keep: bool,
+    def __init__(self, master: Owner, run: Execution, sinks: list[RecordSink], keep: bool,
                  prepare_again: Callable[[], Execution]) -> None:
         self.master, self.run, self.sinks, self.keep = master, run, sinks, keep
         self._prepare_again = prepare_again

@@ -12,7 +12,7 @@ An FMU must run the code it was built from, even in a process that has imported 
    back to the ``.py`` beside it on any other Python;
 3. rewrites the model script's ``ncfmu`` imports to that name and stores the script as the unique
    module ``<Model>_<digest>`` (the digest of everything the FMU is made from);
-4. post-processes the modelDescription (:mod:`.modeldesc`) and records that digest in its
+4. completes pythonfmu's modelDescription from the ports (:mod:`.modeldesc`) and records that digest in its
    ``version`` attribute, so a stale FMU is rebuilt.
 """
 
@@ -39,10 +39,10 @@ from pathlib import Path
 from pythonfmu.builder import FmuBuilder
 from pythonfmu.osutil import get_lib_extension, get_platform
 
-from .. import __version__
 from ..errors import BuildError
+from ..version import __version__
 from .contract import HEADER_NAME
-from .modeldesc import enrich
+from .modeldesc import model_description
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
@@ -51,20 +51,19 @@ _IMPORT = re.compile(r"^(\s*(?:from|import)\s+)ncfmu(?=[.\s])", re.MULTILINE)
 #: What a controller FMU runs, relative to the package: the controllers and the slave adapter. Only the
 #: Python standard library (and the pythonfmu slave API pythonfmu copies into the FMU) is needed at run
 #: time; ncfmu's CLI, master, plots, servo models (numpy, scipy, control) stay out.
-FMU_RUNTIME = ("__init__.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
+FMU_RUNTIME = ("__init__.py", "version.py", "errors.py", "ports.py", "controllers/*.py", "fmi/__init__.py",
                "fmi/adapter.py", "fmi/contract.py", "fmi/state.py")
 
 
-#: The runtime modules compiled with mypyc (bench/README.md, issue 36 round 4): every controller, its bases
-#: and the motion they step, as mypyc **native classes** (``controllers/mypyc_compat.py``: serializable, so the
-#: FMU states deepcopy and save them as from source), and the lathe program's planner (g7x, gcode,
-#: lathe_program: run at configure, not per step). A native class's subclass must be compiled with it (an
-#: interpreted subclass's own attributes would be lost by deepcopy): tests/fmi/test_compiled.py holds this list to
-#: Controller's subclasses. The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions),
-#: ``geometry.py`` (a compiled ``cached_property`` does not cache into the instance's ``__dict__``, and a compiled
-#: dataclass's field types read as the erased runtime types: fmi/state.py checks a restored ``Line``, ``Arc`` or
-#: ``ToolMove`` by its declared field types), ``nose.py``, ``rs274.py``, ``mypyc_compat.py`` and ``ports.py``
-#: (configure time only).
+#: The runtime modules compiled with mypyc (bench/README.md, "the controllers compiled as mypyc native classes"): every
+#: controller, its bases and the motion they step, as mypyc **native classes** (``controllers/mypyc_compat.py``:
+#: serializable, so the FMU states deepcopy and save them as from source), and the lathe program's planner (g7x, gcode,
+#: lathe_program: run at configure, not per step). A native class's subclass must be compiled with it (an interpreted
+#: subclass's own attributes would be lost by deepcopy): tests/fmi/test_compiled.py holds this list to Controller's
+#: subclasses. The rest stay sources: ``errors.py`` (mypyc cannot subclass builtin exceptions), ``geometry.py`` (a
+#: compiled ``cached_property`` does not cache into the instance's ``__dict__``, and a compiled dataclass's field types
+#: read as the erased runtime types: fmi/state.py checks a restored ``Line``, ``Arc`` or ``ToolMove`` by its declared
+#: field types), ``nose.py``, ``rs274.py``, ``mypyc_compat.py`` and ``ports.py`` (configure time only).
 COMPILED = ("controllers/base.py", "controllers/cycle.py", "controllers/motion.py", "controllers/sequencer.py",
             "controllers/panel.py", "controllers/limiter.py", "controllers/feed.py", "controllers/contour.py",
             "controllers/gcode.py", "controllers/g7x.py", "controllers/lathe_program.py")
@@ -130,8 +129,8 @@ def compile_unavailable() -> str | None:
 
 #: How the controllers are compiled (part of the cache folder's name and of a compiled FMU's digest): mypyc's
 #: multi-file mode (one C file per module, and mypyc's runtime in its own files) with the C files compiled in
-#: parallel, one job per core. Measured (issue 47, the 11 modules): one C file 59 s of gcc CPU, serial; split,
-#: 38 s of CPU, which two jobs share.
+#: parallel, one job per core. Measured when the layout was chosen (the 11 modules, 2026-12-03): one C file 59 s
+#: of gcc CPU, serial; split, 38 s of CPU, which two jobs share.
 COMPILE_LAYOUT = "split"
 
 #: The setup script the controllers are compiled with (run in a child Python, in the staging folder): mypyc's
@@ -281,7 +280,7 @@ def compiled_runtime(package_dir: Path = PACKAGE_DIR) -> Path | None:
 
 
 C_LAYER = Path(__file__).with_name("c")
-#: The one FMI 2.0 layer of every ncfmu FMU, over the model interface fmi2_model.h.
+#: The one FMI 2.0 layer of every ncfmu FMU, over the model interface model.h.
 FMI2_LAYER = C_LAYER / "fmi2_functions.c"
 #: The Python runtime as a model behind that interface: the Python FMUs' model.
 PYTHON_MODEL = C_LAYER / "python_model.c"
@@ -290,10 +289,12 @@ PYTHON_MODEL = C_LAYER / "python_model.c"
 #: per run unload each copy.
 SHIM_LINK = ("-ldl", "-lm", "-lpthread")
 CONTRACT_HEADER = C_LAYER / HEADER_NAME
-#: What a Python FMU's binaries are compiled from (the FMI 2.0 one and its FMI 3.0 twin's, fmi3.py).
-PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "fmi2_model.h", C_LAYER / "fmi2_machine.h",
+#: What a Python FMU's binaries are compiled from (the FMI 2.0 one and its FMI 3.0 twin's, fmi3.py), and the writer
+#: of both its modelDescriptions (modeldesc.py): a change to any rebuilds it.
+PYTHON_FMU_SOURCES = (FMI2_LAYER, PYTHON_MODEL, C_LAYER / "model.h", C_LAYER / "fmi2_machine.h",
                       C_LAYER / "fmu_instance.h", CONTRACT_HEADER,
-                      C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
+                      C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"),
+                      Path(__file__).with_name("modeldesc.py"))
 
 
 @functools.lru_cache(maxsize=1)
@@ -460,10 +461,11 @@ def _rewrite(src: Path, target: Path, logic, version: str, module: str, cls: str
     from .documentation import fmu_html
     binary = f"binaries/linux64/{cls}.so"
     with zipfile.ZipFile(src) as zin:
-        description = enrich(zin.read("modelDescription.xml"), logic, version)
-        guid = re.search(rb'\bguid="([^"]*)"', description)
+        written = zin.read("modelDescription.xml")
+        guid = re.search(rb'\bguid="([^"]*)"', written)
         if guid is None:
             raise BuildError(f"{cls}: pythonfmu's modelDescription has no guid")
+        description = model_description(logic, "2.0", guid.group(1).decode(), version, pythonfmu_xml=written)
         compiled = compile_shim(guid.group(1).decode(), module, cls)      # before anything is written
         record = python_runtime_record()
         extra = RUNTIME_HTML.format(version=".".join(map(str, sys.version_info[:2])),

@@ -109,7 +109,7 @@ def fmu_html(md_xml: bytes, logic, built_with: str = "pythonfmu", extra: str = "
                                                                        "start", "range", "description")) + "</tr>"
         for r in rows)
     exp, cosim = root.find("DefaultExperiment"), root.find("CoSimulation")
-    assert exp is not None and cosim is not None, "an enriched modelDescription has both (modeldesc.enrich)"
+    assert exp is not None and cosim is not None, "every modelDescription modeldesc.model_description writes has both"
     version = html.escape(root.get("version", ""))
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{logic.MODEL_NAME}</title>

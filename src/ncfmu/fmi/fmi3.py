@@ -2,11 +2,11 @@
 
 ``ncfmu build`` writes each model's FMI 2.0 FMU to ``fmus/<Model>.fmu`` and its FMI 3.0 twin to
 ``fmus/fmi3/<Model>.fmu``. The twin is the same model behind another FMI layer: its binary is
-``fmi/c/fmi3_functions.c`` over the model interface ``fmi/c/fmi2_model.h``, compiled with the same model
+``fmi/c/fmi3_functions.c`` over the model interface ``fmi/c/model.h``, compiled with the same model
 (``python_model.c`` and the FMU's Python code in its resources, or ``native_model.c`` and the model's C file),
-the same GUID (the FMI 3.0 ``instantiationToken``) and the same resources. Its modelDescription is generated
-from the model's ports, as the FMI 2.0 one is: a Real is a Float64, an Integer an Int32, with units, ranges,
-start values and variabilities as the ports say them.
+the same GUID (the FMI 3.0 ``instantiationToken``) and the same resources. Its modelDescription is written from
+the model's ports by the FMI 2.0 one's writer (:mod:`.modeldesc`): a Real is a Float64, an Integer an Int32, with
+units, ranges, start values and variabilities as the ports say them.
 """
 
 from __future__ import annotations
@@ -15,14 +15,12 @@ import re
 import shutil
 import subprocess
 import tempfile
-import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import __version__
 from ..errors import BuildError
-from ..ports import DISPLAY_UNITS, UNITS
+from .modeldesc import TIME_VR, model_description
 
 if TYPE_CHECKING:
     from ..controllers.base import Controller
@@ -31,79 +29,6 @@ C_LAYER = Path(__file__).with_name("c")
 FMI3_LAYER = C_LAYER / "fmi3_functions.c"
 #: FMI 3.0's name of the platform the binary is built for (FMI 2.0's linux64).
 PLATFORM = "x86_64-linux"
-#: The FMI 3.0 types of the ports' types.
-TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
-#: The independent variable's value reference (FMI 3.0 wants it declared); far above any port's (a port's index).
-TIME_VR = 1_000_000_000
-_BASE_UNIT_ORDER = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-
-
-def _fmt(x: float) -> str:
-    return repr(float(x))
-
-
-def model_description(logic: type[Controller], guid: str, version: str, native: bool) -> bytes:
-    """The FMI 3.0 modelDescription of ``logic``'s model, from its ports (value reference = the port's index)."""
-    from .native import log_categories
-    root = ET.Element("fmiModelDescription", fmiVersion="3.0", modelName=logic.MODEL_NAME,
-                      instantiationToken=guid, description=logic.DESCRIPTION, version=version,
-                      generationTool=f"ncfmu {__version__}" + (" (native C)" if native else ""),
-                      variableNamingConvention="structured")
-    ET.SubElement(root, "CoSimulation", modelIdentifier=logic.MODEL_NAME, needsExecutionTool="false",
-                  canBeInstantiatedOnlyOncePerProcess="false", canGetAndSetFMUState="true",
-                  canSerializeFMUState="true", providesDirectionalDerivatives="false",
-                  providesAdjointDerivatives="false", canHandleVariableCommunicationStepSize="true",
-                  maxOutputDerivativeOrder="0", providesIntermediateUpdate="false",
-                  canReturnEarlyAfterIntermediateUpdate="false", hasEventMode="false",
-                  providesEvaluateDiscreteStates="false")
-    used_units = sorted({p.unit for p in logic.PORTS if p.unit} | {"s"})     # "s": the time's
-    if used_units:
-        defs = ET.SubElement(root, "UnitDefinitions")
-        for name in used_units:
-            spec = dict(UNITS[name])
-            unit = ET.SubElement(defs, "Unit", name=name)
-            base = {k: str(spec[k]) for k in _BASE_UNIT_ORDER if k in spec}
-            if "factor" in spec:
-                base["factor"] = repr(spec["factor"])
-            ET.SubElement(unit, "BaseUnit", base)
-            for display, factor in DISPLAY_UNITS.get(name, []):
-                ET.SubElement(unit, "DisplayUnit", name=display, factor=repr(factor))
-    categories = ET.SubElement(root, "LogCategories")
-    for name in log_categories():
-        ET.SubElement(categories, "Category", name=name)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=_fmt(logic.STOP_TIME),
-                  stepSize=_fmt(logic.PERIOD))
-    variables = ET.SubElement(root, "ModelVariables")
-    ET.SubElement(variables, "Float64", name="time", valueReference=str(TIME_VR), causality="independent",
-                  variability="continuous", unit="s", description="simulation time")
-    outputs = []
-    for vr, port in enumerate(logic.PORTS):
-        var = ET.SubElement(variables, TYPES[port.type], name=port.name, valueReference=str(vr),
-                            description=port.description, causality=port.causality,
-                            variability=port.fmi_variability)
-        if port.type == "Real" and port.unit:
-            var.set("unit", port.unit)
-        if port.type in ("Real", "Integer"):
-            for attribute, bound in (("min", port.min), ("max", port.max)):
-                if bound is not None:
-                    var.set(attribute, _fmt(bound) if port.type == "Real" else str(int(bound)))
-        if port.causality == "output":
-            outputs.append(vr)
-            continue
-        start = port.default()
-        if port.type == "String":
-            ET.SubElement(var, "Start", value=str(start))
-        elif port.type == "Boolean":
-            var.set("start", "true" if start else "false")
-        else:
-            var.set("start", _fmt(float(start)) if port.type == "Real" else str(int(start)))
-    structure = ET.SubElement(root, "ModelStructure")
-    for vr in outputs:
-        ET.SubElement(structure, "Output", valueReference=str(vr))
-    for vr in outputs:
-        ET.SubElement(structure, "InitialUnknown", valueReference=str(vr))
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
 def _compile(sources: list[Path], includes: list[Path], defines: list[str], what: str) -> bytes:
@@ -146,11 +71,13 @@ def build_fmi3(fmu2: Path, logic: type[Controller], dest_dir: Path) -> Path:
                 model_c = next(src / Path(n).name for n in names if n.startswith("sources/") and n.endswith(".c")
                                and Path(n).name not in ("fmi2_functions.c", "native_model.c"))
                 binary = _compile([FMI3_LAYER, src / "native_model.c", model_c], [src], [], name)
+                sources: tuple[str, ...] | None = ("native_model.c", model_c.name)
             else:
                 module = next((Path(n).stem for n in names
                                if re.fullmatch(rf"resources/{re.escape(name)}_[0-9a-f]{{12}}\.py", n)), None)
                 if module is None:
                     raise BuildError(f"{fmu2}: no model module resources/{name}_<digest>.py")
+                sources = None
                 binary = _compile([FMI3_LAYER, PYTHON_MODEL], [LAYER],
                                   [f"-DNCFMU_GUID={_c_string(guid)}", f"-DNCFMU_MODULE={_c_string(module)}",
                                    f"-DNCFMU_CLASS={_c_string(name)}"], name)
@@ -159,7 +86,8 @@ def build_fmi3(fmu2: Path, logic: type[Controller], dest_dir: Path) -> Path:
         target = dest_dir / f"{name}.fmu"
         partial = target.with_suffix(".fmu.part")
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as out:
-            out.writestr("modelDescription.xml", model_description(logic, guid, version, native))
+            out.writestr("modelDescription.xml", model_description(logic, "3.0", guid, version,
+                                                                   native_sources=sources))
             out.writestr(f"binaries/{PLATFORM}/{name}.so", binary)
             for info in z.infolist():
                 if info.filename.startswith(("resources/", "documentation/")) and not info.is_dir():

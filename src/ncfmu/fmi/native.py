@@ -10,9 +10,9 @@ What is written where (one home per fact):
 - the variables, their start values and their rules come from the model's Python ports
   (:class:`~ncfmu.ports.Port`) and are generated into ``model_vars.h``;
 - the FMI layer is ``fmi/c/fmi2_functions.c`` (the one layer of every ncfmu FMU, the Python FMUs' too) with the
-  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/fmi2_model.h``, which
+  state machine of ``fmi/c/fmi2_machine.h``, over the model interface ``fmi/c/model.h``, which
   ``fmi/c/native_model.c`` implements for table-driven native models;
-- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``fmi2_model.h``.
+- the equations are the model's own C file (``servo/native/servo_model.c``): section 2 of ``model.h``.
 """
 
 from __future__ import annotations
@@ -28,16 +28,15 @@ import shutil
 import sys
 import tempfile
 import uuid
-import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import __version__
 from ..errors import BuildError
-from .modeldesc import enrich
+from ..version import __version__
+from .modeldesc import model_description as write_model_description
 
 if TYPE_CHECKING:
     from ..controllers.base import Controller
@@ -46,7 +45,7 @@ C_LAYER = Path(__file__).with_name("c")
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: What a native FMU carries of the FMI layer (its sources/), beside the model's C file and model_vars.h.
 LAYER_SOURCES = ("fmi2_functions.c", "native_model.c")
-LAYER_HEADERS = ("fmi2_machine.h", "fmi2_model.h", "fmu_instance.h")
+LAYER_HEADERS = ("fmi2_machine.h", "model.h", "fmu_instance.h")
 
 
 @dataclass(frozen=True)
@@ -74,9 +73,10 @@ class NativeModel:
         for name, data in sorted(self.sources().items()):
             h.update(name.encode())
             h.update(data)
-        # the FMI 3.0 twin (fmi3.py) is built from the same version: its layer is part of what it is
+        # the FMI 3.0 twin (fmi3.py) is built from the same version: its layer is part of what it is, and so is the
+        # writer of both modelDescriptions (modeldesc.py)
         fmi3 = (C_LAYER / "fmi3_functions.c", Path(__file__).with_name("fmi3.py"))
-        for path in (*self.defined_by, Path(__file__), *fmi3):
+        for path in (*self.defined_by, Path(__file__), *fmi3, Path(__file__).with_name("modeldesc.py")):
             h.update(path.read_bytes())
         return h.hexdigest()[:12]
 
@@ -138,43 +138,10 @@ def vars_header(m: NativeModel, guid: str) -> str:
     return "\n".join(lines)
 
 
-def log_categories() -> list[str]:
-    """The log categories fmi2SetDebugLogging takes: FMI2_CATEGORIES of fmi2_machine.h, their one home."""
-    table = re.search(r"FMI2_CATEGORIES\[\][^{]*\{([^}]*)\}", (C_LAYER / "fmi2_machine.h").read_text())
-    if table is None:
-        raise BuildError("fmi2_machine.h: no FMI2_CATEGORIES table")
-    return re.findall(r'"(\w+)"', table.group(1))
-
-
-def model_description(m: NativeModel, guid: str) -> bytes:
-    """The modelDescription: variables from the ports (in value-reference order), completed by
-    :func:`~ncfmu.fmi.modeldesc.enrich` exactly as the Python FMUs' are."""
-    logic = m.logic
-    root = ET.Element("fmiModelDescription", fmiVersion="2.0", modelName=m.name, guid=guid,
-                      generationTool=f"ncfmu {__version__} (native C)", variableNamingConvention="structured",
-                      numberOfEventIndicators="0")
-    cs = ET.SubElement(root, "CoSimulation", modelIdentifier=m.name, needsExecutionTool="false",
-                       canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
-                       canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="false",
-                       canGetAndSetFMUstate="true", canSerializeFMUstate="true",
-                       providesDirectionalDerivative="false")
-    files = ET.SubElement(cs, "SourceFiles")
-    for name in (*LAYER_SOURCES, m.model_c.name):
-        ET.SubElement(files, "File", name=name)
-    categories = ET.SubElement(root, "LogCategories")          # what fmi2SetDebugLogging takes (fmi2_machine.h)
-    for name in log_categories():
-        ET.SubElement(categories, "Category", name=name)
-    ET.SubElement(root, "DefaultExperiment")
-    mv = ET.SubElement(root, "ModelVariables")
-    for vr, p in enumerate(logic.PORTS):
-        sv = ET.SubElement(mv, "ScalarVariable", name=p.name, valueReference=str(vr), causality=p.causality)
-        typed = ET.SubElement(sv, p.type)
-        if p.causality != "output":
-            start = p.default()
-            typed.set("start", "true" if start is True else "false" if start is False else
-                      repr(float(start)) if p.type == "Real" else str(int(start)))
-    ET.SubElement(root, "ModelStructure")
-    return enrich(ET.tostring(root, encoding="UTF-8", xml_declaration=True), logic, m.version())
+def model_description(m: NativeModel, guid: str, fmi_version: str = "2.0") -> bytes:
+    """The modelDescription (:func:`ncfmu.fmi.modeldesc.model_description`), naming the C sources it carries."""
+    return write_model_description(m.logic, fmi_version, guid, m.version(),
+                                   native_sources=(*LAYER_SOURCES, m.model_c.name))
 
 
 def build_description(m: NativeModel) -> str:

@@ -11,7 +11,8 @@ LWPOLYLINE entities (with bulges) of its model space, in mm, in the XY plane:
 - a mill's: the outline in XY (milled outside); closed outlines inside it are holes.
 
 The entities are chained into closed outlines end to end (endpoints within :data:`JOIN_TOLERANCE` are one point),
-arcs made polylines at the part check's spacing :data:`~.part.ARC_SPACING`; the outline is a shapely polygon.
+arcs made polylines at the part check's spacing :data:`~ncfmu.machining.removal.ARC_SPACING`; the outline is a
+shapely polygon.
 Annotations (:data:`ANNOTATIONS`: text, dimensions, leaders, hatches, points) are not the part's outline and are
 passed over; every other entity is refused. Refused, with :class:`~ncfmu.errors.DrawingError` (one line: the
 file, the entity's handle, the rule): a file ezdxf cannot read, units other than mm ($INSUNITS other than 0
@@ -29,7 +30,7 @@ from typing import Any
 
 from ..controllers.geometry import Arc, Element, Line, sample
 from ..errors import DrawingError
-from .part import ARC_SPACING
+from ..machining.removal import ARC_SPACING
 
 #: Endpoints closer than this (mm) are one point of the outline: 1 um, a tenth of the default tolerance (0.01 mm).
 JOIN_TOLERANCE = 1e-3
@@ -291,14 +292,8 @@ def _outline(name: str, loops: list[list[_Piece]]) -> Drawing:
     return Drawing(name, part, handles)
 
 
-def check_for(report: Any, drawing: Drawing) -> None:
-    """Refuse, before anything runs, a drawing the ``report``'s part check cannot take: a lathe's below the axis."""
-    from .part import LathePart
-    if any(isinstance(p, LathePart) for p in report.parts):
-        _half_section(drawing)
-
-
-def _half_section(drawing: Drawing) -> None:
+def half_section(drawing: Drawing) -> None:
+    """Refuse a lathe's drawing that reaches below the axis (it is the upper half section)."""
     x0 = drawing.outline.bounds[1]
     if x0 < -JOIN_TOLERANCE:
         raise DrawingError(drawing.path, "", f"reaches Y {x0:.4f}, below the axis: a lathe's drawing is the upper "
@@ -309,7 +304,7 @@ def lathe_part(drawing: Drawing, stock: Any) -> Any:
     """The lathe's part drawn, in the part check's (Z, X) plane: the half section's region, and toward the chuck
     -- beyond the drawing's smallest Z -- the ``stock`` as held. Refused when it reaches below the axis."""
     from shapely.geometry import box
-    _half_section(drawing)
+    half_section(drawing)
     outline = drawing.outline
     z0 = outline.bounds[0]
     sz0, _, _, sx1 = stock.bounds

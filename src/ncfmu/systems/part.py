@@ -47,7 +47,7 @@ from ..machining import (
     placed,
     turning_insert,
 )
-from ..machining.removal import BLADE, INSERT_ANGLE, Forbidden
+from ..machining.removal import ARC_SPACING, BLADE, INSERT_ANGLE, Forbidden
 from ..ports import to_float, to_int
 from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
 from .threads import ThreadJudge, ThreadResult, thread_judge
@@ -58,8 +58,6 @@ TOLERANCE = 0.01
 CRASH_LINES = 5
 #: Far enough for any machine (mm): the extent of the open sides of regions.
 FAR = 1e4
-#: Spacing of the points along a programmed profile's arcs (mm): chords within 0.1 um of an arc of 1 mm radius.
-ARC_SPACING = 0.02
 #: The spindle stands (a cut then is a crash) below the larger of these: an absolute speed (rev/min) and a
 #: fraction of the commanded speed. Why: 1 rev/min is a revolution a minute -- at the slowest feed a program
 #: writes (F 1 mm/min, G98) a chip of 1 mm a revolution, ten times what a finishing insert takes (0.05-0.3 mm/rev):
@@ -875,3 +873,11 @@ class _GrindAccumulator(_Judging):
                             max_gouge_mm=self.max_gouge if self.count else math.nan, axes=("X", "X"),
                             programmed_x_mm=x, cycles=list(self.cycles), cycle_count=self.count,
                             aborted=self.aborted, worst_error_mm=self.worst, worst_cycle=self.worst_cycle)
+
+
+def check_drawing_for(report: Report, drawing: Any) -> None:
+    """Refuse, before anything runs, a drawing (a :class:`~.drawing.Drawing`) the ``report``'s part check cannot
+    take: a lathe's below the axis."""
+    from .drawing import half_section
+    if any(isinstance(p, LathePart) for p in report.parts):
+        half_section(drawing)

@@ -1,6 +1,6 @@
 /*
  * ncfmu: the FMI 2.0 co-simulation layer of every ncfmu FMU, written once over the model interface
- * (fmi2_model.h), as the Reference-FMUs' fmi2Functions.c is over their model.c.
+ * (model.h), as the Reference-FMUs' fmi2Functions.c is over their model.c.
  *
  * Behind it stands a native model (native_model.c with the model's equations: the ServoAxis) or the Python
  * runtime (python_model.c: the controller FMUs). This file holds FMI 2.0's functions; what it keeps and checks
@@ -21,10 +21,13 @@
 
 #include "fmi2Functions.h"
 #include "fmi2_machine.h"
-#include "fmi2_model.h"
+#include "model.h"
 #define FMU_FMI_MAJOR 2                 /* the FMI version its serialized states are sealed with */
 #include "fmu_instance.h"
 
+_Static_assert((int)fmi2OK == ModelOK && (int)fmi2Warning == ModelWarning && (int)fmi2Discard == ModelDiscard
+               && (int)fmi2Error == ModelError && (int)fmi2Fatal == ModelFatal,
+               "FMI 2.0's statuses are the model interface's numbers (fmu_instance.h returns them)");
 _Static_assert(sizeof(fmi2Integer) == sizeof(int) && sizeof(fmi2Boolean) == sizeof(int)
                && sizeof(fmi2ValueReference) == sizeof(unsigned), "the model interface's types are FMI 2.0's");
 

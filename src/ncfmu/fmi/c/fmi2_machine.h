@@ -1,7 +1,7 @@
 /*
  * ncfmu: the FMI 2.0 co-simulation state machine, written once.
  *
- * Included by ncfmu's FMI layer (fmi2_functions.c, over the model interface fmi2_model.h: the Python
+ * Included by ncfmu's FMI layer (fmi2_functions.c, over the model interface model.h: the Python
  * runtime of the controller FMUs, or a native model such as the ServoAxis) and by the models. It says which call is allowed in
  * which state, what a refused call returns (fmi2Error: the instance stays usable and freeable;
  * fmi2Fatal is kept for a broken instance, never for bad input), and checks what every FMU checks

@@ -1,5 +1,5 @@
 /*
- * ncfmu: the FMI 3.0 co-simulation layer of every ncfmu FMU, over the same model interface (fmi2_model.h)
+ * ncfmu: the FMI 3.0 co-simulation layer of every ncfmu FMU, over the same model interface (model.h)
  * as the FMI 2.0 layer (fmi2_functions.c), as the Reference-FMUs keep fmi3Functions.c beside fmi2Functions.c.
  *
  * Variables are Float64 (a port's Real), Int32 (Integer), Boolean and String; every other type's call is
@@ -17,13 +17,13 @@
 
 #include "fmi3Functions.h"
 #include "fmi2_machine.h"
-#include "fmi2_model.h"
+#include "model.h"
 #define FMU_FMI_MAJOR 3                 /* the FMI version its serialized states are sealed with */
 #include "fmu_instance.h"
 
-_Static_assert((int)fmi3OK == FMU_OK && (int)fmi3Warning == FMU_WARNING && (int)fmi3Error == FMU_ERROR
-               && (int)fmi3Discard == 2 && (int)fmi3Fatal == 4,
-               "FMI 3.0's statuses are FMI 2.0's numbers (fmu_instance.h returns them)");
+_Static_assert((int)fmi3OK == ModelOK && (int)fmi3Warning == ModelWarning && (int)fmi3Discard == ModelDiscard
+               && (int)fmi3Error == ModelError && (int)fmi3Fatal == ModelFatal,
+               "FMI 3.0's statuses are the model interface's numbers (fmu_instance.h returns them)");
 _Static_assert(sizeof(fmi3Int32) == sizeof(int) && sizeof(fmi3Boolean) == 1
                && sizeof(fmi3ValueReference) == sizeof(unsigned), "the model interface carries Integers as int");
 
@@ -137,7 +137,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean tol_defined, 
 {
     FmuInstance *i = fmu_checked(c, "fmi3EnterInitializationMode", P_SETUP);
     int st = fmu_setup_experiment(i, "fmi3EnterInitializationMode", tol_defined, tol, start, stop_defined, stop);
-    return (fmi3Status)(st > FMU_WARNING ? st : fmu_transition(c, "fmi3EnterInitializationMode", P_SETUP, P_INIT,
+    return (fmi3Status)(st > ModelWarning ? st : fmu_transition(c, "fmi3EnterInitializationMode", P_SETUP, P_INIT,
                                                                fmu_model_enter_initialization));
 }
 

@@ -3,9 +3,10 @@
  * (fmi2_functions.c, fmi3_functions.c): they differ in their types and names, not in what they keep or check.
  *
  * An instance is found through its opaque handle (fmi2_machine.h); a call is checked against the state
- * machine; value references against the model's table (fmi2_model.h); FMU states are handles of the instance
- * that made them, any other is refused, never dereferenced. Statuses are FMI's numbers (OK 0, Warning 1,
- * Discard 2, Error 3, Fatal 4: the same in FMI 2.0 and 3.0); every call names itself (``call``) in what it logs.
+ * machine; value references against the model's table (model.h); FMU states are handles of the instance
+ * that made them, any other is refused, never dereferenced. Statuses are model.h's ModelStatus, FMI's numbers
+ * (OK 0, Warning 1, Discard 2, Error 3, Fatal 4: the same in FMI 2.0 and 3.0); every call names itself (``call``)
+ * in what it logs.
  */
 #ifndef NCFMU_FMU_INSTANCE_H
 #define NCFMU_FMU_INSTANCE_H
@@ -16,9 +17,7 @@
 #include <string.h>
 
 #include "fmi2_machine.h"
-#include "fmi2_model.h"
-
-enum { FMU_OK = 0, FMU_WARNING = 1, FMU_ERROR = 3 };
+#include "model.h"
 
 typedef struct {
     uintptr_t handle;
@@ -45,7 +44,7 @@ static FMI2_UNUSED FmuInstance *fmu_checked(void *c, const char *call, int phase
     FmuInstance *i = fmi2_instance_find((fmi2Component)c, 0);
     if (!i || !fmi2_allowed(&i->log, i->phase, call, phases)) return NULL;
     if (!i->model) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the instance has no model (its reset failed): free it",
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: the instance has no model (its reset failed): free it",
                  call);
         return NULL;
     }
@@ -60,7 +59,7 @@ static FMI2_UNUSED void *fmu_instance_start(FmuInstance *i, const char *call, co
     i->model = fmu_model_new(call, i->name, dir, visible, &i->log);
     fmi2Component handle = i->model ? fmi2_instance_add(i) : NULL;
     if (i->model && !handle) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: no new instance handle can be made", call);
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: no new instance handle can be made", call);
         fmu_model_free(i->model);
     }
     if (!handle) free(i);
@@ -93,35 +92,35 @@ static FMI2_UNUSED void *fmu_instance_free(void *c)
 static FMI2_UNUSED int fmu_reset(void *c, const char *call)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
+    if (!i) return ModelError;
     if (fmu_model_reset(i->model, call) != 0) {
         fmu_states_drop(i);             /* logged; the instance can only be freed (every call refuses) */
         fmu_model_free(i->model);
         i->model = NULL;
-        return FMU_ERROR;
+        return ModelError;
     }
     i->phase = P_INSTANTIATED;
     i->next_time = 0.0;
-    return FMU_OK;
+    return ModelOK;
 }
 
 /* The experiment's times (checked) given to the model of ``i`` (already fmu_checked: NULL when refused). */
 static FMI2_UNUSED int fmu_setup_experiment(FmuInstance *i, const char *call, int tol_defined, double tol,
                                             double start, int stop_defined, double stop)
 {
-    if (!i || !fmi2_experiment_ok(&i->log, call, start, stop_defined, stop)) return FMU_ERROR;
+    if (!i || !fmi2_experiment_ok(&i->log, call, start, stop_defined, stop)) return ModelError;
     int st = fmu_model_setup_experiment(i->model, call, tol_defined, tol, start, stop_defined, stop);
-    if (st <= FMU_WARNING) i->next_time = start;
+    if (st <= ModelWarning) i->next_time = start;
     return st;
 }
 
 /* ``call``, allowed in ``from``: the model does ``how``, and when it did, the instance is in ``to``. */
-static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, fmi2Status (*how)(Model *, const char *))
+static FMI2_UNUSED int fmu_transition(void *c, const char *call, int from, int to, ModelStatus (*how)(Model *, const char *))
 {
     FmuInstance *i = fmu_checked(c, call, from);
-    if (!i) return FMU_ERROR;
+    if (!i) return ModelError;
     int st = how(i->model, call);
-    if (st <= FMU_WARNING) i->phase = to;
+    if (st <= ModelWarning) i->phase = to;
     return st;
 }
 
@@ -129,12 +128,12 @@ static FMI2_UNUSED int fmu_set_debug_logging(void *c, const char *call, int on, 
                                              const char *const categories[])
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
+    if (!i) return ModelError;
     unsigned mask;
-    if (!fmi2_categories_ok(&i->log, call, n, categories, &mask)) return FMU_ERROR;
+    if (!fmi2_categories_ok(&i->log, call, n, categories, &mask)) return ModelError;
     i->log.debug = on;
     i->log.categories = mask;
-    return FMU_OK;
+    return ModelOK;
 }
 
 /* A step from ``t`` by ``h``, checked (finite, >= 1 ns, continuing where the last one ended). */
@@ -143,9 +142,9 @@ static FMI2_UNUSED int fmu_do_step(void *c, const char *call, double t, double h
     FmuInstance *i = fmu_checked(c, call, P_STEP);
     *out = i;
     if (!i || !fmi2_step_ok(&i->log, call, t, h) || !fmi2_step_ns_ok(&i->log, call, h)
-        || !fmi2_continues_ok(&i->log, call, i->next_time, t)) return FMU_ERROR;
+        || !fmi2_continues_ok(&i->log, call, i->next_time, t)) return ModelError;
     int st = fmu_model_do_step(i->model, call, t, h);
-    if (st <= FMU_WARNING) i->next_time = t + h;   /* the host's own arithmetic: its next step starts there */
+    if (st <= ModelWarning) i->next_time = t + h;   /* the host's own arithmetic: its next step starts there */
     return st;
 }
 
@@ -153,9 +152,9 @@ static FMI2_UNUSED int fmu_do_step(void *c, const char *call, double t, double h
 static FMI2_UNUSED int fmu_not_provided(void *c, const char *call, const char *why)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
-    FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %s", call, why);
-    return FMU_ERROR;
+    if (!i) return ModelError;
+    FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: %s", call, why);
+    return ModelError;
 }
 
 /* ---- variables ----------------------------------------------------------------------------------- */
@@ -166,7 +165,7 @@ static FMI2_UNUSED int fmu_refs_ok(FmuInstance *i, const char *call, const unsig
                                    int set, const void *values, const char *const type_names[4])
 {
     if (n > 0 && (!vr || !values)) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %zu values asked, but the %s array is NULL", call, n,
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: %zu values asked, but the %s array is NULL", call, n,
                  !vr ? "value reference" : "value");
         return 0;
     }
@@ -182,7 +181,7 @@ static FMI2_UNUSED int fmu_refs_ok(FmuInstance *i, const char *call, const unsig
         else if (set && v->causality == V_PARAMETER && !v->tunable && i->phase == P_STEP)
             why = "is a fixed parameter: it cannot be set after initialisation";
         if (why) {
-            FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: value reference %u%s%s%s %s (a %s call)", call, r,
+            FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: value reference %u%s%s%s %s (a %s call)", call, r,
                      v ? " (" : "", v ? v->name : "", v ? ")" : "", why, type_names[type]);
             return 0;
         }
@@ -192,7 +191,7 @@ static FMI2_UNUSED int fmu_refs_ok(FmuInstance *i, const char *call, const unsig
         if (type == V_STRING) {
             const char *s = ((const char *const *)values)[k];
             if (!s || !fmi2_utf8_ok((const unsigned char *)s)) {
-                FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: value reference %u (%s): %s", call, vr[k],
+                FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: value reference %u (%s): %s", call, vr[k],
                          v->name, s ? "not valid UTF-8 text" : "a NULL string");
                 return 0;
             }
@@ -210,13 +209,13 @@ static FMI2_UNUSED int fmu_get_values(void *c, const char *call, const unsigned 
                                       VarType type, size_t bool_size, const char *const type_names[4])
 {
     FmuInstance *i = fmu_checked(c, call, P_GETTABLE);
-    if (!i || !fmu_refs_ok(i, call, vr, n, type, 0, values, type_names)) return FMU_ERROR;
-    if (n == 0) return FMU_OK;
+    if (!i || !fmu_refs_ok(i, call, vr, n, type, 0, values, type_names)) return ModelError;
+    if (n == 0) return ModelOK;
     if (type != V_BOOLEAN || bool_size == sizeof(int)) return fmu_model_get(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's gets) */
-    if (!flags) return FMU_ERROR;
+    if (!flags) return ModelError;
     int st = fmu_model_get(i->model, call, vr, n, type, flags);
-    for (size_t k = 0; st <= FMU_WARNING && k < n; k++) ((unsigned char *)values)[k] = flags[k] != 0;
+    for (size_t k = 0; st <= ModelWarning && k < n; k++) ((unsigned char *)values)[k] = flags[k] != 0;
     if (flags != small) free(flags);
     return st;
 }
@@ -225,11 +224,11 @@ static FMI2_UNUSED int fmu_set_values(void *c, const char *call, const unsigned 
                                       VarType type, size_t bool_size, const char *const type_names[4])
 {
     FmuInstance *i = fmu_checked(c, call, P_SETTABLE);
-    if (!i || !fmu_refs_ok(i, call, vr, n, type, 1, values, type_names)) return FMU_ERROR;
-    if (n == 0) return FMU_OK;
+    if (!i || !fmu_refs_ok(i, call, vr, n, type, 1, values, type_names)) return ModelError;
+    if (n == 0) return ModelOK;
     if (type != V_BOOLEAN) return fmu_model_set(i->model, call, vr, n, type, values);
     int small[32], *flags = n <= 32 ? small : malloc(n * sizeof *flags);   /* (no allocation in a step's sets) */
-    if (!flags) return FMU_ERROR;
+    if (!flags) return ModelError;
     for (size_t k = 0; k < n; k++)                  /* 0 or 1 */
         flags[k] = bool_size == sizeof(int) ? ((const int *)values)[k] != 0 : ((const unsigned char *)values)[k] != 0;
     int st = fmu_model_set(i->model, call, vr, n, type, flags);
@@ -242,7 +241,7 @@ static FMI2_UNUSED FmuState *fmu_state_find(FmuInstance *i, const char *call, vo
 {
     for (size_t k = 0; s && k < i->n_states; k++)
         if (i->states[k].handle == (uintptr_t)s) return &i->states[k];
-    FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %p is not a live FMU state of this instance (freed, of "
+    FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: %p is not a live FMU state of this instance (freed, of "
              "another instance or FMU, or never made)", call, s);
     return NULL;
 }
@@ -259,7 +258,7 @@ static FMI2_UNUSED void *fmu_state_add(FmuInstance *i, const char *call, void *m
     }
     uintptr_t handle = fmi2_state_handle();
     if (!handle) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: no new FMU-state handle can be made", call);
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: no new FMU-state handle can be made", call);
         fmu_model_state_free(i->model, model);
         return NULL;
     }
@@ -270,31 +269,31 @@ static FMI2_UNUSED void *fmu_state_add(FmuInstance *i, const char *call, void *m
 static FMI2_UNUSED int fmu_get_state(void *c, const char *call, void **s)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
+    if (!i) return ModelError;
     if (!s) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the FMU-state pointer is NULL", call);
-        return FMU_ERROR;
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: the FMU-state pointer is NULL", call);
+        return ModelError;
     }
     FmuState *old = *s ? fmu_state_find(i, call, *s) : NULL;
-    if (*s && !old) return FMU_ERROR;
+    if (*s && !old) return ModelError;
     void *model = fmu_model_state_take(i->model, call);
-    if (!model) return FMU_ERROR;
+    if (!model) return ModelError;
     if (old) {                          /* FMI: a given state is overwritten */
         fmu_model_state_free(i->model, old->model);
         *old = (FmuState){old->handle, model, i->phase, i->next_time};
-        return FMU_OK;
+        return ModelOK;
     }
     *s = fmu_state_add(i, call, model, i->phase, i->next_time);
-    return *s ? FMU_OK : FMU_ERROR;
+    return *s ? ModelOK : ModelError;
 }
 
 static FMI2_UNUSED int fmu_set_state(void *c, const char *call, void *s)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
-    if (!state) return FMU_ERROR;
+    if (!state) return ModelError;
     int st = fmu_model_state_restore(i->model, call, state->model, i->phase == P_STEP || i->phase == P_TERMINATED);
-    if (st > FMU_WARNING) return st;
+    if (st > ModelWarning) return st;
     i->phase = state->phase;            /* the state's phase comes with it (the Reference-FMUs' setFMUState) */
     i->next_time = state->time;         /* steps go on from the state's time */
     return st;
@@ -303,14 +302,14 @@ static FMI2_UNUSED int fmu_set_state(void *c, const char *call, void *s)
 static FMI2_UNUSED int fmu_free_state(void *c, const char *call, void **s)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
-    if (!s || !*s) return FMU_OK;
+    if (!i) return ModelError;
+    if (!s || !*s) return ModelOK;
     FmuState *state = fmu_state_find(i, call, *s);
-    if (!state) return FMU_ERROR;
+    if (!state) return ModelError;
     fmu_model_state_free(i->model, state->model);
     *state = i->states[--i->n_states];
     *s = NULL;
-    return FMU_OK;
+    return ModelOK;
 }
 
 /* ---- serialized FMU states: the model's bytes, sealed ------------------------------------------------
@@ -437,68 +436,68 @@ static FMI2_UNUSED int fmu_state_size(void *c, const char *call, void *s, size_t
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
-    if (!state) return FMU_ERROR;
+    if (!state) return ModelError;
     if (!size) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the size pointer is NULL", call);
-        return FMU_ERROR;
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: the size pointer is NULL", call);
+        return ModelError;
     }
     size_t payload = 0;
-    if (!fmu_model_serialize(i->model, call, state->model, state->phase, state->time, &payload)) return FMU_ERROR;
+    if (!fmu_model_serialize(i->model, call, state->model, state->phase, state->time, &payload)) return ModelError;
     *size = payload + FMU_SEAL_SIZE;
-    return FMU_OK;
+    return ModelOK;
 }
 
 static FMI2_UNUSED int fmu_serialize(void *c, const char *call, void *s, unsigned char b[], size_t size)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
     FmuState *state = i ? fmu_state_find(i, call, s) : NULL;
-    if (!state) return FMU_ERROR;
+    if (!state) return ModelError;
     size_t payload = 0;
     const unsigned char *bytes = fmu_model_serialize(i->model, call, state->model, state->phase, state->time,
                                                      &payload);
-    if (!bytes) return FMU_ERROR;
+    if (!bytes) return ModelError;
     size_t needed = payload + FMU_SEAL_SIZE;
     if (!b || size < needed) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %s (%zu bytes given, %zu needed)", call,
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: %s (%zu bytes given, %zu needed)", call,
                  !b ? "the buffer is NULL" : "the buffer is too small", size, needed);
-        return FMU_ERROR;
+        return ModelError;
     }
     fmu_seal_header(b, payload);
     memcpy(b + FMU_SEAL_HEADER_SIZE, bytes, payload);
     fmu_put_le(b + needed - 4, fmu_crc32(b, needed - 4), 4);
-    return FMU_OK;
+    return ModelOK;
 }
 
 static FMI2_UNUSED int fmu_deserialize(void *c, const char *call, const unsigned char b[], size_t size, void **s)
 {
     FmuInstance *i = fmu_checked(c, call, P_ANY);
-    if (!i) return FMU_ERROR;
+    if (!i) return ModelError;
     if (!s || (size && !b)) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the %s is NULL", call,
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: the %s is NULL", call,
                  !s ? "FMU-state pointer" : "byte array");
-        return FMU_ERROR;
+        return ModelError;
     }
     char why[256];
     size_t payload = 0;
     const unsigned char *bytes = fmu_unseal(b, size, &payload, why, sizeof why);
     if (!bytes) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
         *s = NULL;
-        return FMU_ERROR;
+        return ModelError;
     }
     int phase = -1;
     double time = 0.0;
     void *model = fmu_model_deserialize(i->model, call, bytes, payload, &phase, &time);
-    if (!model) { *s = NULL; return FMU_ERROR; }   /* refused: the reason is in the log */
+    if (!model) { *s = NULL; return ModelError; }   /* refused: the reason is in the log */
     if (phase != P_INSTANTIATED && phase != P_INIT && phase != P_STEP && phase != P_TERMINATED) {
-        FMI2_SAY(&i->log, FMU_ERROR, "logStatusError", "%s: the state's phase (%d) is not one a state is taken in",
+        FMI2_SAY(&i->log, ModelError, "logStatusError", "%s: the state's phase (%d) is not one a state is taken in",
                  call, phase);            /* the models check it; this keeps a model's slip from the machine */
         fmu_model_state_free(i->model, model);
         *s = NULL;
-        return FMU_ERROR;
+        return ModelError;
     }
     *s = fmu_state_add(i, call, model, phase, time);
-    return *s ? FMU_OK : FMU_ERROR;
+    return *s ? ModelOK : ModelError;
 }
 
 #endif

@@ -1,7 +1,7 @@
 /*
- * ncfmu: a native model behind the model interface (fmi2_model.h, section 1), table-driven.
+ * ncfmu: a native model behind the model interface (model.h, section 1), table-driven.
  *
- * The model's C file gives its equations (fmi2_model.h, section 2: model_init, model_step, model_restore
+ * The model's C file gives its equations (model.h, section 2: model_init, model_step, model_restore
  * over ``values[vr]`` and its ModelState); the generated model_vars.h its variables, from the model's Python
  * ports. This file keeps the values, undoes a failed step, and makes, checks and serializes the FMU states
  * (plain data, in a versioned format checked against the model and its build).
@@ -12,7 +12,7 @@
 #include <string.h>
 
 #include "fmi2_machine.h"
-#include "fmi2_model.h"
+#include "model.h"
 #define NCFMU_VAR_TABLE
 #include "model_vars.h"
 
@@ -51,7 +51,7 @@ Model *fmu_model_new(const char *call, const char *name, const char *resources, 
         m->before = calloc(1, model_state_size());
     }
     if (!m || !m->state || !m->before) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "%s: out of memory", call);
+        FMI2_SAY(log, ModelError, "logStatusError", "%s: out of memory", call);
         if (m) { free(m->state); free(m->before); free(m); }
         return NULL;
     }
@@ -81,39 +81,39 @@ int fmu_model_reset(Model *m, const char *call)
     return 0;
 }
 
-fmi2Status fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
+ModelStatus fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
                                       int stop_defined, double stop)
 {
     (void)m; (void)tolerance_defined; (void)tolerance; (void)start; (void)stop_defined; (void)stop;
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_enter_initialization(Model *m, const char *call)
+ModelStatus fmu_model_enter_initialization(Model *m, const char *call)
 {
     (void)call;
     /* Outputs are initial unknowns: compute them now when the parameters allow (quietly; the parameters may
      * still change, and are judged at fmi2ExitInitializationMode). */
     model_init(m->values, m->state, NULL);
     m->initializing = 1;
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_exit_initialization(Model *m, const char *call)
+ModelStatus fmu_model_exit_initialization(Model *m, const char *call)
 {
     (void)call;
-    if (model_init(m->values, m->state, m->log) != 0) return fmi2Error;     /* stays in init: fix and retry */
+    if (model_init(m->values, m->state, m->log) != 0) return ModelError;     /* stays in init: fix and retry */
     m->initializing = 0;
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_terminate(Model *m, const char *call)
+ModelStatus fmu_model_terminate(Model *m, const char *call)
 {
     (void)call;
     (void)m;
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_do_step(Model *m, const char *call, double t, double h)
+ModelStatus fmu_model_do_step(Model *m, const char *call, double t, double h)
 {
     (void)call;
     /* Tools count time in integer nanoseconds (libcosim) and their conversion to seconds differs in the
@@ -126,12 +126,12 @@ fmi2Status fmu_model_do_step(Model *m, const char *call, double t, double h)
     if (model_step(m->values, m->state, t, step, m->log) != 0) {
         memcpy(m->state, m->before, model_state_size());    /* the instance stays where it was */
         memcpy(m->values, outputs, sizeof outputs);
-        return fmi2Error;
+        return ModelError;
     }
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values)
+ModelStatus fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values)
 {
     (void)call;
     for (size_t k = 0; k < n; k++) {
@@ -140,10 +140,10 @@ fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t
         else if (type == V_INTEGER) ((int *)values)[k] = (int)x;
         else ((int *)values)[k] = x != 0.0;
     }
-    return fmi2OK;
+    return ModelOK;
 }
 
-fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type,
+ModelStatus fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type,
                          const void *values)
 {
     (void)call;
@@ -155,7 +155,7 @@ fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t
     /* A parameter set in initialization mode: the initial outputs (initial unknowns) follow it, when the
      * parameters allow (quietly: they are judged at fmi2ExitInitializationMode). */
     if (parameter && m->initializing) model_init(m->values, m->state, NULL);
-    return fmi2OK;
+    return ModelOK;
 }
 
 /* ---- FMU states -------------------------------------------------------------------------------------- */
@@ -165,7 +165,7 @@ void *fmu_model_state_take(Model *m, const char *call)
 {
     Snapshot *s = calloc(1, snapshot_bytes());
     if (!s) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     memcpy(s->values, m->values, sizeof s->values);
@@ -188,7 +188,7 @@ static int params_equal(const double *a, const double *b)
 }
 
 /* A state record into the model; a record that does not pass model_restore leaves the model as it was. */
-fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized)
+ModelStatus fmu_model_state_restore(Model *m, const char *call, void *state, int initialized)
 {
     const Snapshot *s = state;
     double values[NVARS];
@@ -202,11 +202,11 @@ fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int 
     if (model_restore(m->values, m->state, judged, m->log) != 0) {
         memcpy(m->values, values, sizeof values);
         memcpy(m->state, m->before, model_state_size());
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the state was refused; the instance is unchanged", call);
-        return fmi2Error;
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the state was refused; the instance is unchanged", call);
+        return ModelError;
     }
     m->initializing = s->initializing;
-    return fmi2OK;
+    return ModelOK;
 }
 
 /* The serialized form: a header that names the format, the model and its build, then the plain data.
@@ -239,7 +239,7 @@ const unsigned char *fmu_model_serialize(Model *m, const char *call, void *state
 {
     const Snapshot *s = state;
     if (!m->bytes && !(m->bytes = malloc(ser_size()))) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: out of memory", call);
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: out of memory", call);
         return NULL;
     }
     SerHeader h;
@@ -296,7 +296,7 @@ void *fmu_model_deserialize(Model *m, const char *call, const unsigned char *byt
     }
     if (why) {
         free(s);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: %zu bytes refused: %s", call, size, why);
         return NULL;
     }
     *phase = h.phase;

@@ -1,5 +1,5 @@
 /*
- * ncfmu's Python FMUs: the Python runtime as a model behind the model interface (fmi2_model.h).
+ * ncfmu's Python FMUs: the Python runtime as a model behind the model interface (model.h).
  *
  * The FMI layer (fmi2_functions.c, the same file the native FMUs are built from) checks every call: the
  * instance handle, the state machine, value references, their types and settability, String values,
@@ -26,7 +26,7 @@
 /* The official FMI 2.0 headers (fmpy ships them; the builder passes -I<fmpy>/c-code), the model interface
  * and the contract with the Python side. */
 #include "fmi2Functions.h"
-#include "fmi2_model.h"
+#include "model.h"
 #include "ncfmu_contract.h"
 
 #if !defined(NCFMU_GUID) || !defined(NCFMU_MODULE) || !defined(NCFMU_CLASS)
@@ -258,10 +258,10 @@ static void flush_log(Model *m)
         PyObject *msg = py.SeqGetItem(taken, k);
         PyObject *st = msg ? py.SeqGetItem(msg, 0) : NULL, *cat = msg ? py.SeqGetItem(msg, 1) : NULL;
         PyObject *text = msg ? py.SeqGetItem(msg, 2) : NULL;
-        long status = st ? py.LongAs(st) : fmi2Error;
+        long status = st ? py.LongAs(st) : ModelError;
         const char *c_s = cat ? py.Utf8(cat) : NULL, *t_s = text ? py.Utf8(text) : NULL;
         if (t_s)
-            fmi2_say_text(m->log, status < fmi2OK || status > fmi2Fatal ? fmi2Error : (fmi2Status)status,
+            fmi2_say_text(m->log, status < ModelOK || status > ModelFatal ? ModelError : (ModelStatus)status,
                           c_s ? c_s : "logAll", t_s);
         py_drop(st); py_drop(cat); py_drop(text); py_drop(msg);
     }
@@ -360,7 +360,7 @@ static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, Py
     if (m->n_pending && !hand_inputs(m)) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the inputs set before could not be handed to the Python "
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the inputs set before could not be handed to the Python "
                  "slave: %s", fmi_call, text);
         return NULL;
     }
@@ -368,26 +368,26 @@ static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, Py
     if (!r) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the Python slave raised: %s", fmi_call, text);
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the Python slave raised: %s", fmi_call, text);
     }
     return r;
 }
 
 /* A call that returns a status (the contract's STATUS). */
-static fmi2Status call_status(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
+static ModelStatus call_status(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
     PyObject *r = call(m, fmi_call, entry, a, b, c);
     long st = r ? py.LongAs(r) : NCFMU_STATUS_ERROR;
     if (py.Occurred()) { py.Clear(); st = NCFMU_STATUS_ERROR; }
     py_drop(r);
     if (st < NCFMU_STATUS_OK || st > NCFMU_STATUS_FATAL) st = NCFMU_STATUS_ERROR;
-    return st == NCFMU_STATUS_FATAL ? fmi2Error : (fmi2Status)st;   /* nothing the slave says breaks the instance */
+    return st == NCFMU_STATUS_FATAL ? ModelError : (ModelStatus)st;   /* nothing the slave says breaks the instance */
 }
 
-static fmi2Status simple_call(Model *m, const char *fmi_call, int entry)
+static ModelStatus simple_call(Model *m, const char *fmi_call, int entry)
 {
     PyGILState_STATE g = py.GILEnsure();
-    fmi2Status st = call_status(m, fmi_call, entry, NULL, NULL, NULL);
+    ModelStatus st = call_status(m, fmi_call, entry, NULL, NULL, NULL);
     flush_log(m);
     py.GILRelease(g);
     return st;
@@ -427,7 +427,7 @@ static PyObject *slave_class(const Fmi2Log *log, const char *fmi_call, const cha
     if (!cls) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(log, fmi2Error, "logStatusError", "%s: the model %s could not be loaded from %s: %s", fmi_call,
+        FMI2_SAY(log, ModelError, "logStatusError", "%s: the model %s could not be loaded from %s: %s", fmi_call,
                  NCFMU_MODULE, resources, text);
     }
     return cls;
@@ -460,7 +460,7 @@ static int slave_make(Model *m, const char *fmi_call)
     if (!slave || !ports || !inputs || !pending) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the slave %s could not be made: %s", fmi_call,
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the slave %s could not be made: %s", fmi_call,
                  NCFMU_CLASS, text);
         py_drop(slave); py_drop(ports); py_drop(inputs); py_drop(pending);
         return 0;
@@ -534,7 +534,7 @@ Model *fmu_model_new(const char *fmi_call, const char *name, const char *resourc
                      const Fmi2Log *log)
 {
     if (!binary_ready()) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "%s",
+        FMI2_SAY(log, ModelError, "logStatusError", "%s",
                  python_problem[0] ? python_problem : "ncfmu: the Python runtime's API could not be found");
         return NULL;
     }
@@ -579,39 +579,39 @@ int fmu_model_reset(Model *m, const char *fmi_call)
     return made ? 0 : -1;
 }
 
-fmi2Status fmu_model_setup_experiment(Model *m, const char *fmi_call, int tolerance_defined, double tolerance,
+ModelStatus fmu_model_setup_experiment(Model *m, const char *fmi_call, int tolerance_defined, double tolerance,
                                       double start, int stop_defined, double stop)
 {
     PyGILState_STATE g = py.GILEnsure();
     PyObject *a = py.FloatFrom(start), *b = stop_defined ? py.FloatFrom(stop) : (py.IncRef(py.None), py.None);
     PyObject *t = tolerance_defined ? py.FloatFrom(tolerance) : (py.IncRef(py.None), py.None);
-    fmi2Status st = (a && b && t) ? call_status(m, fmi_call, N_SETUP_EXPERIMENT, a, b, t) : fmi2Error;
+    ModelStatus st = (a && b && t) ? call_status(m, fmi_call, N_SETUP_EXPERIMENT, a, b, t) : ModelError;
     py_drop(a); py_drop(b); py_drop(t);
     flush_log(m);
     py.GILRelease(g);
     return st;
 }
 
-fmi2Status fmu_model_enter_initialization(Model *m, const char *fmi_call)
+ModelStatus fmu_model_enter_initialization(Model *m, const char *fmi_call)
 {
     return simple_call(m, fmi_call, N_ENTER_INITIALIZATION);
 }
 
-fmi2Status fmu_model_exit_initialization(Model *m, const char *fmi_call)
+ModelStatus fmu_model_exit_initialization(Model *m, const char *fmi_call)
 {
     return simple_call(m, fmi_call, N_EXIT_INITIALIZATION);
 }
 
-fmi2Status fmu_model_terminate(Model *m, const char *fmi_call)
+ModelStatus fmu_model_terminate(Model *m, const char *fmi_call)
 {
     return simple_call(m, fmi_call, N_TERMINATE);
 }
 
-fmi2Status fmu_model_do_step(Model *m, const char *fmi_call, double t, double h)
+ModelStatus fmu_model_do_step(Model *m, const char *fmi_call, double t, double h)
 {
     PyGILState_STATE g = py.GILEnsure();
     PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
-    fmi2Status st = (a && b) ? call_status(m, fmi_call, N_DO_STEP, a, b, NULL) : fmi2Error;
+    ModelStatus st = (a && b) ? call_status(m, fmi_call, N_DO_STEP, a, b, NULL) : ModelError;
     py_drop(a); py_drop(b);
     flush_log(m);
     take_outputs(m);                      /* the step's outputs, for the Gets that follow (no GIL there) */
@@ -648,7 +648,7 @@ static int all_of(Model *m, const unsigned vr[], size_t n, VarCausality causalit
     return 1;
 }
 
-fmi2Status fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type, void *values)
+ModelStatus fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type, void *values)
 {
     int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
     if (outputs && m->out_valid) {
@@ -657,10 +657,10 @@ fmi2Status fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], si
             if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
             else ((int *)values)[k] = m->out_int[vr[k]];
         }
-        return fmi2OK;
+        return ModelOK;
     }
     PyGILState_STATE g = py.GILEnsure();
-    fmi2Status st = fmi2OK;
+    ModelStatus st = ModelOK;
     if (outputs && take_outputs(m)) {
         for (size_t k = 0; k < n; k++) {
             if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
@@ -671,39 +671,39 @@ fmi2Status fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], si
         PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
         for (size_t k = 0; out && k < n; k++) {
             PyObject *v = py.DictGetItem(out, m->port_name[vr[k]]);         /* borrowed */
-            if (!v) { st = fmi2Error; break; }
+            if (!v) { st = ModelError; break; }
             value_out(v, type, values, k);
         }
-        if (!out) st = fmi2Error;
+        if (!out) st = ModelError;
         py_drop(out);
     } else {
         PyObject *list = py.ListNew((Py_ssize_t_)n);
         for (size_t k = 0; list && k < n; k++) py.ListSetItem(list, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
         PyObject *got = list ? call(m, fmi_call, N_GET, list, NULL, NULL) : NULL;
         py_drop(list);
-        if (!got || py.SeqSize(got) != (Py_ssize_t_)n) st = fmi2Error;
-        for (size_t k = 0; st == fmi2OK && k < n; k++) {
+        if (!got || py.SeqSize(got) != (Py_ssize_t_)n) st = ModelError;
+        for (size_t k = 0; st == ModelOK && k < n; k++) {
             PyObject *v = py.SeqGetItem(got, (Py_ssize_t_)k);
-            if (!v) { st = fmi2Error; break; }
+            if (!v) { st = ModelError; break; }
             value_out(v, type, values, k);
             py_drop(v);                   /* a string stays alive in ``got``, kept below */
         }
-        if (type == V_STRING && st == fmi2OK) { py_drop(m->strings); m->strings = got; got = NULL; }
+        if (type == V_STRING && st == ModelOK) { py_drop(m->strings); m->strings = got; got = NULL; }
         py_drop(got);
     }
     if (py.Occurred()) {
         char text[512];
         py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: a value could not be read as %s: %s", fmi_call,
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: a value could not be read as %s: %s", fmi_call,
                  type_name(type), text);
-        st = fmi2Error;
+        st = ModelError;
     }
     flush_log(m);
     py.GILRelease(g);
     return st;
 }
 
-fmi2Status fmu_model_set(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type,
+ModelStatus fmu_model_set(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type,
                          const void *values)
 {
     if (type != V_STRING && all_of(m, vr, n, V_INPUT)) {
@@ -715,17 +715,17 @@ fmi2Status fmu_model_set(Model *m, const char *fmi_call, const unsigned vr[], si
             else m->in_int[r] = ((const int *)values)[k] != 0;
             if (!m->in_pending[r]) { m->in_pending[r] = 1; m->pending_vrs[m->n_pending++] = r; }
         }
-        return fmi2OK;
+        return ModelOK;
     }
     PyGILState_STATE g = py.GILEnsure();
-    fmi2Status st = fmi2OK;
+    ModelStatus st = ModelOK;
     {
         PyObject *refs = py.ListNew((Py_ssize_t_)n), *vals = py.ListNew((Py_ssize_t_)n);
         for (size_t k = 0; refs && vals && k < n; k++) {
             py.ListSetItem(refs, (Py_ssize_t_)k, py.LongFrom((long)vr[k]));
             py.ListSetItem(vals, (Py_ssize_t_)k, value_in(type, values, k));
         }
-        st = refs && vals ? call_status(m, fmi_call, N_SET, refs, vals, NULL) : fmi2Error;
+        st = refs && vals ? call_status(m, fmi_call, N_SET, refs, vals, NULL) : ModelError;
         py_drop(refs); py_drop(vals);
     }
     if (py.Occurred()) py.Clear();
@@ -744,12 +744,12 @@ void *fmu_model_state_take(Model *m, const char *fmi_call)
     return object;
 }
 
-fmi2Status fmu_model_state_restore(Model *m, const char *fmi_call, void *state, int initialized)
+ModelStatus fmu_model_state_restore(Model *m, const char *fmi_call, void *state, int initialized)
 {
     (void)initialized;                    /* the adapter judges a state's parameters itself */
     PyGILState_STATE g = py.GILEnsure();
     PyObject *name = py.StrFrom(fmi_call);  /* the adapter names the call in what it refuses */
-    fmi2Status st = name ? call_status(m, fmi_call, N_SET_STATE, state, name, NULL) : fmi2Error;
+    ModelStatus st = name ? call_status(m, fmi_call, N_SET_STATE, state, name, NULL) : ModelError;
     py_drop(name);
     if (py.Occurred()) py.Clear();
     flush_log(m);
@@ -804,7 +804,7 @@ void *fmu_model_deserialize(Model *m, const char *fmi_call, const unsigned char 
                             double *time)
 {
     if (size < TRAILER_SIZE || memcmp(b + size - TRAILER_SIZE, STATE_TRAILER, MAGIC_SIZE) != 0) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: %zu bytes that are not a state this FMU "
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s refused: %zu bytes that are not a state this FMU "
                  "serialized (no " STATE_TRAILER " trailer)", fmi_call, size);
         return NULL;
     }
@@ -813,7 +813,7 @@ void *fmu_model_deserialize(Model *m, const char *fmi_call, const unsigned char 
     memcpy(time, b + size - sizeof *time, sizeof *time);
     if (!isfinite(*time) || !(phase32 == P_INSTANTIATED || phase32 == P_INIT || phase32 == P_STEP
                               || phase32 == P_TERMINATED)) {
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s refused: the state's %s is %g", fmi_call,
+        FMI2_SAY(m->log, ModelError, "logStatusError", "%s refused: the state's %s is %g", fmi_call,
                  isfinite(*time) ? "phase" : "time", isfinite(*time) ? (double)phase32 : *time);
         return NULL;
     }

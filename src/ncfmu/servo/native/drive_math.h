@@ -13,7 +13,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "fmi2_model.h"                 /* Fmi2Log, FMI2_SAY: the drives' refusals (below) */
+#include "model.h"                 /* Fmi2Log, FMI2_SAY: the drives' refusals (below) */
 
 #ifndef PI
 #define PI 3.14159265358979323846
@@ -276,7 +276,7 @@ static inline void drive_plant_step(const double ad[3][3], const double bd[3][2]
 static inline int drive_substeps_ok(const Fmi2Log *log, double substep, double dt)
 {
     if (drive_substeps(substep, dt) != 0) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "communicationStepSize = %g s: more than %d sub-steps of "
+    FMI2_SAY(log, ModelError, "logStatusError", "communicationStepSize = %g s: more than %d sub-steps of "
              "substep = %g s in one step; take shorter steps", dt, DRIVE_MAX_SUBSTEPS, substep);
     return 0;
 }
@@ -287,7 +287,7 @@ static inline int drive_state_finite(const Fmi2Log *log, const char *what, const
 {
     for (size_t k = 0; k < n; k++)
         if (!isfinite(v[k]) || fabs(v[k]) > 1e12) {
-            FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the %s state holds %g, not a finite %s value", what,
+            FMI2_SAY(log, ModelError, "logStatusError", "FMU state: the %s state holds %g, not a finite %s value", what,
                      v[k], what);
             return 0;
         }
@@ -298,7 +298,7 @@ static inline int drive_state_finite(const Fmi2Log *log, const char *what, const
 static inline int drive_state_flags(const Fmi2Log *log, const char *what, int limited, int fault)
 {
     if ((limited == 0 || limited == 1) && (fault == 0 || fault == 1)) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: a flag of the %s state is neither 0 nor 1", what);
+    FMI2_SAY(log, ModelError, "logStatusError", "FMU state: a flag of the %s state is neither 0 nor 1", what);
     return 0;
 }
 

@@ -1,6 +1,6 @@
 /*
  * ncfmu ServoAxis: the equations of one feed axis, in C (the FMI plumbing is fmi2_functions.c over
- * native_model.c; this file gives the three functions of fmi2_model.h, section 2).
+ * native_model.c; this file gives the three functions of model.h, section 2).
  *
  * The executable specification is the Python stepper ncfmu.servo.axis.ServoAxis, and the design is
  * python-control's (ncfmu.servo.model): this file computes the same continuous models from the
@@ -13,7 +13,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "fmi2_model.h"
+#include "model.h"
 #include "model_vars.h"
 #include "drive_math.h"
 
@@ -85,19 +85,19 @@ static int design_ok(const double *values, const Fmi2Log *log)
     l.position = 1;
     double pm_p = phase_margin(&l);
     if (!(pm_v >= MIN_PHASE_MARGIN)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "vel_bandwidth = %.17g: gives the velocity loop a phase margin of %.1f "
+        FMI2_SAY(log, ModelError, "logStatusError", "vel_bandwidth = %.17g: gives the velocity loop a phase margin of %.1f "
                  "deg (< %g deg) with tau_current = %g s; lower vel_bandwidth", P(VR_vel_bandwidth), pm_v,
                  MIN_PHASE_MARGIN, P(VR_tau_current));
         return 0;
     }
     if (!(pm_p >= MIN_PHASE_MARGIN)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "Kv = %.17g: gives the position loop a phase margin of %.1f deg (< %g "
+        FMI2_SAY(log, ModelError, "logStatusError", "Kv = %.17g: gives the position loop a phase margin of %.1f deg (< %g "
                  "deg) with vel_bandwidth = %g rad/s; lower Kv", P(VR_Kv), pm_p, MIN_PHASE_MARGIN,
                  P(VR_vel_bandwidth));
         return 0;
     }
     if (!stable(&l)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "Kv = %.17g: the closed loop is unstable; lower Kv or vel_bandwidth",
+        FMI2_SAY(log, ModelError, "logStatusError", "Kv = %.17g: the closed loop is unstable; lower Kv or vel_bandwidth",
                  P(VR_Kv));
         return 0;
     }
@@ -110,7 +110,7 @@ static int parameters_ok(const double *values, const Fmi2Log *log)
 {
     /* The velocity loop is sampled every substep: a crossover above 0.5 rad per sample is no design. */
     if (!(P(VR_vel_bandwidth) * P(VR_substep) <= 0.5)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "vel_bandwidth = %.17g: must be <= 0.5 / substep = %g rad/s (the "
+        FMI2_SAY(log, ModelError, "logStatusError", "vel_bandwidth = %.17g: must be <= 0.5 / substep = %g rad/s (the "
                  "velocity loop is sampled every substep = %g s)", P(VR_vel_bandwidth), 0.5 / P(VR_substep),
                  P(VR_substep));
         return 0;
@@ -219,7 +219,7 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
     double cmd = P(VR_pos_cmd), vff = P(VR_vel_ff);
     int bad = !isfinite(cmd) || !isfinite(vff);
     if (bad && !m->fault)   /* never act on a NaN: hold the last good command, say why once */
-        FMI2_SAY(log, fmi2Warning, "logStatusWarning", "t = %.4f s: %s = %g is not finite; holding the last command", t,
+        FMI2_SAY(log, ModelWarning, "logStatusWarning", "t = %.4f s: %s = %g is not finite; holding the last command", t,
                  !isfinite(cmd) ? "pos_cmd" : "vel_ff", !isfinite(cmd) ? cmd : vff);
     m->fault = bad;
     m->cmd_prev = m->pos_cmd;
@@ -248,7 +248,7 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
     publish(values, m, m->p_meas, vel, m->x[1]);
     return 0;
 numeric:
-    FMI2_SAY(log, fmi2Error, "logStatusError", "t = %.4f s: the axis model left the finite numbers (step %g s)", t, dt);
+    FMI2_SAY(log, ModelError, "logStatusError", "t = %.4f s: the axis model left the finite numbers (step %g s)", t, dt);
     return -1;
 }
 

@@ -1,6 +1,6 @@
 /*
  * ncfmu SpindleDrive: the equations of a lathe spindle drive, in C (the FMI plumbing is fmi2_functions.c over
- * native_model.c; this file gives the three functions of fmi2_model.h, section 2).
+ * native_model.c; this file gives the three functions of model.h, section 2).
  *
  * The executable specification is the Python stepper ncfmu.servo.spindle.SpindleDrive, and the design is
  * python-control's (ncfmu.servo.spindle_model): this file computes the same continuous plant from the
@@ -12,7 +12,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "fmi2_model.h"
+#include "model.h"
 #include "model_vars.h"
 #include "drive_math.h"
 
@@ -61,7 +61,7 @@ static int stable(const Loop *l)
 static int parameters_ok(const double *values, const Fmi2Log *log)
 {
     if (!(P(VR_speed_bandwidth) * P(VR_substep) <= 0.5)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "speed_bandwidth = %.17g: must be <= 0.5 / substep = %g rad/s (the "
+        FMI2_SAY(log, ModelError, "logStatusError", "speed_bandwidth = %.17g: must be <= 0.5 / substep = %g rad/s (the "
                  "speed loop is sampled every substep = %g s)", P(VR_speed_bandwidth), 0.5 / P(VR_substep),
                  P(VR_substep));
         return 0;
@@ -69,13 +69,13 @@ static int parameters_ok(const double *values, const Fmi2Log *log)
     Loop l = {0.0, P(VR_speed_bandwidth), P(VR_b_visc) / P(VR_J), P(VR_tau_current), 0};
     double pm = phase_margin(&l);
     if (!(pm >= MIN_PHASE_MARGIN)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "speed_bandwidth = %.17g: gives the speed loop a phase margin of %.1f "
+        FMI2_SAY(log, ModelError, "logStatusError", "speed_bandwidth = %.17g: gives the speed loop a phase margin of %.1f "
                  "deg (< %g deg) with tau_current = %g s; lower speed_bandwidth", P(VR_speed_bandwidth), pm,
                  MIN_PHASE_MARGIN, P(VR_tau_current));
         return 0;
     }
     if (!stable(&l)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "speed_bandwidth = %.17g: the speed loop is unstable; lower "
+        FMI2_SAY(log, ModelError, "logStatusError", "speed_bandwidth = %.17g: the speed loop is unstable; lower "
                  "speed_bandwidth", P(VR_speed_bandwidth));
         return 0;
     }
@@ -155,13 +155,13 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
     int bad_load = !(load >= 0.0 && isfinite(load)), bad = bad_cmd || bad_dir || bad_load;
     if (bad && !m->fault) {   /* never act on a broken command: hold the last good one, say why once */
         if (bad_cmd)
-            FMI2_SAY(log, fmi2Warning, "logStatusWarning", "t = %.4f s: input speed_cmd = %g: must be finite; holding the "
+            FMI2_SAY(log, ModelWarning, "logStatusWarning", "t = %.4f s: input speed_cmd = %g: must be finite; holding the "
                      "last command", t, cmd);
         else if (bad_dir)
-            FMI2_SAY(log, fmi2Warning, "logStatusWarning", "t = %.4f s: input direction = %.0f: must be -1, 0 or 1; holding "
+            FMI2_SAY(log, ModelWarning, "logStatusWarning", "t = %.4f s: input direction = %.0f: must be -1, 0 or 1; holding "
                      "the last command", t, dir);
         else
-            FMI2_SAY(log, fmi2Warning, "logStatusWarning", "t = %.4f s: input load_torque = %g: must be finite and >= 0; "
+            FMI2_SAY(log, ModelWarning, "logStatusWarning", "t = %.4f s: input load_torque = %g: must be finite and >= 0; "
                      "holding the last command", t, load);
     }
     m->fault = bad;
@@ -174,7 +174,7 @@ int model_step(double *values, ModelState *m, double t, double dt, const Fmi2Log
     publish(values, m, w_mean, m->x[1]);
     return 0;
 numeric:
-    FMI2_SAY(log, fmi2Error, "logStatusError", "t = %.4f s: the spindle model left the finite numbers (step %g s)", t, dt);
+    FMI2_SAY(log, ModelError, "logStatusError", "t = %.4f s: the spindle model left the finite numbers (step %g s)", t, dt);
     return -1;
 }
 
@@ -185,7 +185,7 @@ int model_restore(double *values, ModelState *m, int judged, const Fmi2Log *log)
     double dyn[] = {m->x[0], m->x[1], m->x[2], m->x[3], m->a_meas, m->a_last, m->command, m->load};
     if (!drive_state_finite(log, "spindle", dyn, sizeof dyn / sizeof dyn[0])) return -1;
     if (!(m->load >= 0.0)) {
-        FMI2_SAY(log, fmi2Error, "logStatusError", "FMU state: the spindle state holds a load torque of %g, not >= 0", m->load);
+        FMI2_SAY(log, ModelError, "logStatusError", "FMU state: the spindle state holds a load torque of %g, not >= 0", m->load);
         return -1;
     }
     if (!drive_state_flags(log, "spindle", m->limited, m->fault)) return -1;

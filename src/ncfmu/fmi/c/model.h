@@ -12,16 +12,18 @@
  * The FMI layer holds everything FMI: instances and handles, the state machine (fmi2_machine.h), value
  * references checked against the model's table (unknown, wrong type, an output, a fixed parameter after
  * initialisation, a value outside the port's rule), step times, FMU-state handles. A model is asked only
- * what is its own: its variables' values, its steps, its states. Every call returns an fmi2Status (its
- * values are FMI 3.0's too); nothing a model says is fmi2Fatal.
+ * what is its own: its variables' values, its steps, its states. Every call returns a ModelStatus, the
+ * interface's own status type (as the Reference-FMUs' model.h has its Status): its numbers are FMI 2.0's and
+ * FMI 3.0's statuses' alike, which each layer asserts and returns as its own; nothing a model says is ModelFatal.
  */
-#ifndef NCFMU_FMI2_MODEL_H
-#define NCFMU_FMI2_MODEL_H
+#ifndef NCFMU_MODEL_H
+#define NCFMU_MODEL_H
 
 #include <stddef.h>
 #include "fmi2_machine.h"
 
 /* ---- 1. what every model gives the FMI layer -------------------------------------------------------- */
+typedef enum { ModelOK = 0, ModelWarning = 1, ModelDiscard = 2, ModelError = 3, ModelFatal = 4 } ModelStatus;
 typedef enum { V_REAL = 0, V_INTEGER = 1, V_BOOLEAN = 2, V_STRING = 3 } VarType;
 typedef enum { V_PARAMETER = 0, V_INPUT = 1, V_OUTPUT = 2, V_OTHER = 3 } VarCausality;
 
@@ -60,21 +62,21 @@ const VarInfo *fmu_model_variables(Model *m, unsigned *n);
 /* Back to the state after fmu_model_new; not 0 (logged) when that fails (the instance can only be freed). */
 int fmu_model_reset(Model *m, const char *call);
 
-fmi2Status fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
+ModelStatus fmu_model_setup_experiment(Model *m, const char *call, int tolerance_defined, double tolerance, double start,
                                       int stop_defined, double stop);
-fmi2Status fmu_model_enter_initialization(Model *m, const char *call);
+ModelStatus fmu_model_enter_initialization(Model *m, const char *call);
 /* ERROR (logged) when the parameters are refused: the instance stays in initialization mode. */
-fmi2Status fmu_model_exit_initialization(Model *m, const char *call);
-fmi2Status fmu_model_terminate(Model *m, const char *call);
+ModelStatus fmu_model_exit_initialization(Model *m, const char *call);
+ModelStatus fmu_model_terminate(Model *m, const char *call);
 
 /* One step from ``t`` by ``h`` (checked by the layer: finite, at least 1 ns, continuing); a failed step leaves
  * the model where it was. */
-fmi2Status fmu_model_do_step(Model *m, const char *call, double t, double h);
+ModelStatus fmu_model_do_step(Model *m, const char *call, double t, double h);
 
 /* Values of variables the layer checked (each vr a variable of ``type``; for a set, settable now; Strings
  * UTF-8 text; a value with a rule within it). A refused set changes nothing. */
-fmi2Status fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values);
-fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, const void *values);
+ModelStatus fmu_model_get(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, void *values);
+ModelStatus fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t n, VarType type, const void *values);
 
 /* FMU states, opaque to the layer (it keeps them behind handles, with the instance's phase and time; a state
  * set that the model accepts brings its phase with it, as the Reference-FMUs' setFMUState does, in every phase
@@ -84,7 +86,7 @@ fmi2Status fmu_model_set(Model *m, const char *call, const unsigned vr[], size_t
  * instance's parameters were accepted at fmi2ExitInitializationMode (a state with the same ones needs no new
  * judgement); ERROR (logged) when refused, the model unchanged. */
 void *fmu_model_state_take(Model *m, const char *call);
-fmi2Status fmu_model_state_restore(Model *m, const char *call, void *state, int initialized);
+ModelStatus fmu_model_state_restore(Model *m, const char *call, void *state, int initialized);
 void fmu_model_state_free(Model *m, void *state);
 
 /* Serialized: the model's own format, which carries the state's ``time`` and ``phase`` (one of P_*).
@@ -104,7 +106,7 @@ static inline int fmi2_value_ok(const Fmi2Log *log, const VarInfo *v, double x)
     else if ((v->has_min && (x < v->min || (v->min_exclusive && x == v->min))) || (v->has_max && x > v->max))
         rule = v->rule;
     if (!rule) return 1;
-    FMI2_SAY(log, fmi2Error, "logStatusError", "%s = %.17g: %s", v->name, x, rule);
+    FMI2_SAY(log, ModelError, "logStatusError", "%s = %.17g: %s", v->name, x, rule);
     return 0;
 }
 
