@@ -220,7 +220,19 @@ class SingleCycle:
     end: Point
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class PlannedCycle:
+    """A cycle planned as the program is read (G72, G73 and G70 of a G72 profile: :mod:`.g72_g73`), its moves in
+    the program's coordinates; the tool ends at ``end``."""
+
+    line: int
+    code: int
+    segments: tuple[Segment, ...]
+    end: Point
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle | PlannedCycle
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -711,7 +723,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
-        elif isinstance(op, (Thread, SingleCycle)):
+        elif isinstance(op, (Thread, SingleCycle, PlannedCycle)):
             out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
                     for g in op.segments]
             here = op.end
