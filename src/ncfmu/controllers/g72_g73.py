@@ -209,18 +209,18 @@ def check_profile(code: int, profile: Profile, start: Point) -> None:
         z_lo, x_lo, z_hi, x_hi = bounds(e)
         if code == 72:
             if t[0] < s[0] - TOL or z_lo < s[0] - TOL or z_hi > t[0] + TOL:
-                raise ProgramError(pb.line, 1, pb.raw, f"the profile moves -Z here (Z {s[0]:g} -> {z_lo:g}): a G72 "
+                raise ProgramError(pb.line, 1, pb.raw, f"the profile moves -Z here (Z {s[0]:g} -> {z_lo:.6g}): a G72 "
                                                        "profile is monotonic, Z never falls from the first block's "
                                                        "end toward the start point's Z (a pocket is not G72's type I)")
             if t[1] > s[1] + TOL or x_hi > s[1] + TOL or x_lo < t[1] - TOL:
-                raise ProgramError(pb.line, 1, pb.raw, f"the profile moves +X here (X {s[1]:g} -> {x_hi:g}, radius): "
+                raise ProgramError(pb.line, 1, pb.raw, f"the profile moves +X here (X {s[1]:g} -> {x_hi:.6g}, radius): "
                                                        "a G72 profile is monotonic, X never rises on the way toward "
                                                        "the axis")
             if z_hi > z0 + TOL:
                 raise ProgramError(pb.line, 1, pb.raw, f"the profile leaves the stock: Z {z_hi:g} in front of the "
                                                        f"start point's Z {z0:g}")
         elif t[0] > s[0] + TOL or z_hi > s[0] + TOL:
-            raise ProgramError(pb.line, 1, pb.raw, f"the profile moves +Z here (Z {s[0]:g} -> {z_hi:g}): a G73 "
+            raise ProgramError(pb.line, 1, pb.raw, f"the profile moves +Z here (Z {s[0]:g} -> {z_hi:.6g}): a G73 "
                                                    "profile runs toward the chuck (-Z) all along (X may fall and "
                                                    "rise)")
         if x_lo < -TOL:
@@ -267,6 +267,12 @@ def face_finish(b: Block, start: Point, profile: Profile, feed: float, comp: int
     return FaceFinish(b.line, 70, segments, start, start, profile, feed)
 
 
+def _falls(e: Element) -> bool:
+    """X falls somewhere along the element (toward -Z): a pocket's near wall or an undercut."""
+    _, x_lo, _, _ = bounds(e)
+    return e.end[1] < e.start[1] - TOL or x_lo < min(e.start[1], e.end[1]) - TOL
+
+
 def pattern_shifts(first: FirstBlock, u: float, w: float) -> tuple[Point, ...]:
     """The shift (z, x radius) of each pass of G73: the first by the escape plus the allowance, the last by the
     allowance, the steps between even."""
@@ -283,6 +289,12 @@ def pattern_repeat(b: Block, first: FirstBlock, start: Point, profile: Profile, 
         if value < 0:
             raise b.err(b.col(k), f"{k}{b.values[k]:g}: a negative allowance would cut into the part (an outside "
                                   "profile turned toward the chuck)")
+    falls = next((pb for pb in profile.blocks if _falls(pb.element)), None)
+    if falls is not None and (w > 0 or first.b > 0):
+        k = "W" if w > 0 else "G"
+        raise b.err(b.col(k), f"W{w:g} (Z allowance) with an escape W{first.b:g} (Z): the profile has a pocket (X "
+                              f"falls along -Z on line {falls.line}): a shift in Z moves its near wall into the part; "
+                              "give W0 in both G73 blocks (the pattern then steps in X alone)")
     shifts = pattern_shifts(first, u, w)
     if len(shifts) * (len(profile.blocks) + 5) > MAX_SEGMENTS:
         raise b.err(1, f"more than {MAX_SEGMENTS} planned moves: {len(shifts)} passes of {len(profile.blocks)} blocks")
