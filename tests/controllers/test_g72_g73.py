@@ -6,8 +6,7 @@ from __future__ import annotations
 import pytest
 
 from ncfmu.controllers import CutSequencer
-from ncfmu.controllers.g72_g73 import FaceFinish, FaceRough, PatternRepeat
-from ncfmu.controllers.lathe_program import Finish, parse, plan
+from ncfmu.controllers.lathe_program import Finish, PlannedCycle, parse, plan
 from ncfmu.errors import ProgramError
 
 X0, Z0 = 30.0, 2.0          # the start point (radius, Z)
@@ -81,7 +80,7 @@ def test_g70_finishes_the_g72_profile_and_leaves_the_face_in_z():
     assert sc3[0].element.start == pytest.approx((-2.0, 0.0)) and sc3[-1].element.end == pytest.approx((Z0, 0.0))
     assert sc4[-1].element.end == pytest.approx((Z0, X0))
     ops = parse(FACE, (X0, Z0))
-    assert [type(op) for op in ops if isinstance(op, (FaceRough, FaceFinish))] == [FaceRough, FaceFinish]
+    assert [op.code for op in ops if isinstance(op, PlannedCycle)] == [72, 70]
 
 
 def test_the_sequencer_runs_g72_and_reports_it():
@@ -113,7 +112,7 @@ PROFILE = [((1, 10), (-5, 10)), ((-5, 10), (-10, 20)), ((-10, 20), (-15, 20)), (
 
 def test_g73_runs_the_profile_shifted_d_times_evenly_down_to_the_allowance():
     g73 = segments(PATTERN, 73)
-    (op,) = [op for op in parse(PATTERN, (X0, Z0)) if isinstance(op, PatternRepeat)]
+    (op,) = [op for op in parse(PATTERN, (X0, Z0)) if isinstance(op, PlannedCycle)]
     # the first pass off by (Δk + W, Δi + U) = (1.1, 3.4), the last by the allowance (0.1, 0.4), even steps
     assert [c for shift in op.shifts for c in shift] == pytest.approx([1.1, 3.4, 0.6, 1.9, 0.1, 0.4], abs=1e-12)
     assert sorted({g.pass_no for g in g73} - {0}) == [1, 2, 3]
@@ -133,8 +132,8 @@ def test_g70_finishes_the_g73_profile():
     g70 = segments(PATTERN, 70)
     cut = [ends(g.element) for g in g70 if g.subcycle == 2]
     assert cut == flat(PROFILE)
-    assert [type(op) for op in parse(PATTERN, (X0, Z0)) if isinstance(op, (PatternRepeat, Finish))] == [
-        PatternRepeat, Finish]
+    assert [(type(op), getattr(op, "code", 70)) for op in parse(PATTERN, (X0, Z0))
+            if isinstance(op, (PlannedCycle, Finish))] == [(PlannedCycle, 73), (Finish, 70)]
 
 
 def test_g73_with_one_pass_and_no_escape_cuts_on_the_allowance():

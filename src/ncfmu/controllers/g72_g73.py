@@ -21,8 +21,9 @@ running toward the chuck, X free: pockets are fine, as on a cast or forged blank
 along the shifted profile (SC1 from S to the shifted start, SC2 the profile at G73's feed, the profile's G00
 blocks at the rapid rate, SC3 up the end wall to S's X, SC4 back to S's Z).
 
-Every region an operation cuts by its definition is its ``removed()`` (the part check's programmed part: the
-stock less them), a simple polygon of (Z, radius) points, :data:`FAR` standing for "to the outside".
+Each cycle is a :class:`.g7x.PlannedCycle`, the region it cuts by its definition its ``removed()`` (the part
+check's programmed part: the stock less them), a simple polygon of (Z, radius) points, :data:`FAR` standing for
+"to the outside".
 """
 
 from __future__ import annotations
@@ -71,66 +72,18 @@ _PLANNING_RAPID = 1.0
 
 # -- the operations ---------------------------------------------------------------------------------------
 def _above(profile: Profile) -> tuple[Point, ...]:
-    """Everything above the profile between its ends' Z (an outside profile running toward the chuck)."""
+    """What G73 (and its G70) cuts away: everything above the profile between its ends' Z (an outside profile
+    running toward the chuck)."""
     points = sample([m.element for m in profile.blocks], ARC_SPACING)
     (za, _), (zb, _) = points[0], points[-1]
     return (*points, (zb, FAR), (za, FAR))
 
 
 def _in_front(profile: Profile) -> tuple[Point, ...]:
-    """Everything in front of (+Z of) a G72 profile between its ends' X."""
+    """What G72 (and its G70) cuts away: everything in front of (+Z of) the profile between its ends' X."""
     points = sample([m.element for m in profile.blocks], ARC_SPACING)
     (_, xa), (_, xb) = points[0], points[-1]
     return (*points, (FAR, xb), (FAR, xa))
-
-
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
-@dataclass(frozen=True)
-class FaceRough(PlannedCycle):
-    """A G72 cycle from ``start``: depth of cut ``depth`` (Z) and retract ``retract``, allowances ``u`` (X, radius)
-    and ``w`` (Z), ``feed`` mm/s."""
-
-    start: Point
-    profile: Profile
-    depth: float
-    retract: float
-    u: float
-    w: float
-    feed: float
-
-    def removed(self) -> tuple[Point, ...]:
-        """The region G72 (with its G70) cuts away: everything in front of the profile, between its ends' X."""
-        return _in_front(self.profile)
-
-
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
-@dataclass(frozen=True)
-class FaceFinish(PlannedCycle):
-    """G70 along a G72 profile from ``start`` (``feed`` mm/s overrides the blocks' own; 0: none)."""
-
-    start: Point
-    profile: Profile
-    feed: float
-
-    def removed(self) -> tuple[Point, ...]:
-        """The region the finished face leaves cut away: in front of the profile, between its ends' X."""
-        return _in_front(self.profile)
-
-
-@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
-@dataclass(frozen=True)
-class PatternRepeat(PlannedCycle):
-    """A G73 cycle from ``start``: the profile run once per shift in ``shifts`` ((z, x radius), first to last),
-    at ``feed`` mm/s."""
-
-    start: Point
-    profile: Profile
-    shifts: tuple[Point, ...]
-    feed: float
-
-    def removed(self) -> tuple[Point, ...]:
-        """The region G73 (with its G70) cuts away: everything above the profile, between its ends' Z."""
-        return _above(self.profile)
 
 
 # -- the blocks -------------------------------------------------------------------------------------------
@@ -234,7 +187,7 @@ def check_profile(code: int, profile: Profile, start: Point) -> None:
 
 
 def face_rough(b: Block, first: FirstBlock, start: Point, profile: Profile, u: float, w: float,
-               feed: float) -> FaceRough:
+               feed: float) -> PlannedCycle:
     """G72 P Q U W F (``b``) after ``first`` from ``start``: ``u`` the X allowance (radius), ``w`` the Z one."""
     z0, x0 = start
     for k, value in (("U", u), ("W", w)):
@@ -253,10 +206,10 @@ def face_rough(b: Block, first: FirstBlock, start: Point, profile: Profile, u: f
                        "is too small")
     rough = Rough(b.line, (x0, z0), _exchanged_profile(profile), first.a, first.r, w, u, feed)
     segments = _exchanged_back(plan_cycle(rough, _PLANNING_RAPID), 72)
-    return FaceRough(b.line, 72, segments, start, start, profile, first.a, first.r, u, w, feed)
+    return PlannedCycle(b.line, 72, segments, start, start, profile, _in_front(profile))
 
 
-def face_finish(b: Block, start: Point, profile: Profile, feed: float, comp: int) -> FaceFinish:
+def face_finish(b: Block, start: Point, profile: Profile, feed: float, comp: int) -> PlannedCycle:
     """G70 P Q F (``b``) along a G72 profile from ``start``; ``comp`` the tool-nose compensation in force."""
     if comp:
         raise b.err(b.col("G"), f"G70 of a G72 profile with G4{1 if comp > 0 else 2} in force: the tool-nose radius "
@@ -264,7 +217,7 @@ def face_finish(b: Block, start: Point, profile: Profile, feed: float, comp: int
     z0, x0 = start
     finish = Finish(b.line, (x0, z0), _exchanged_profile(profile), feed)
     segments = tuple(g for g in _exchanged_back(plan_cycle(finish, _PLANNING_RAPID), 70) if g.element.length > EPS)
-    return FaceFinish(b.line, 70, segments, start, start, profile, feed)
+    return PlannedCycle(b.line, 70, segments, start, start, profile, _in_front(profile))
 
 
 def _falls(e: Element) -> bool:
@@ -283,7 +236,7 @@ def pattern_shifts(first: FirstBlock, u: float, w: float) -> tuple[Point, ...]:
 
 
 def pattern_repeat(b: Block, first: FirstBlock, start: Point, profile: Profile, u: float, w: float,
-                   feed: float) -> PatternRepeat:
+                   feed: float) -> PlannedCycle:
     """G73 P Q U W F (``b``) after ``first`` from ``start``: ``u`` the X allowance (radius), ``w`` the Z one."""
     for k, value in (("U", u), ("W", w)):
         if value < 0:
@@ -307,4 +260,4 @@ def pattern_repeat(b: Block, first: FirstBlock, start: Point, profile: Profile, 
         segments += [replace(g, cycle=73, pass_no=n if g.subcycle else 0)
                      for g in plan_cycle(Finish(b.line, start, shifted, feed), _PLANNING_RAPID)
                      if g.element.length > EPS]
-    return PatternRepeat(b.line, 73, tuple(segments), start, start, profile, shifts, feed)
+    return PlannedCycle(b.line, 73, tuple(segments), start, start, profile, _above(profile), shifts)

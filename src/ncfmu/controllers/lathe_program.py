@@ -56,6 +56,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Home,
     Modal,
     Op,
+    PlannedCycle,
     Profile,
     Rough,
     Segment,

@@ -373,11 +373,12 @@ class LathePart(MachinedPart):
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
         profiles: list[Any] = []
+        regions: list[Any] = []           # the ops that cut a region by their definition: removed() (G72, G73)
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         numbers = block_numbers(program, "lathe")
         spindle = self.spindle is not None and bool(program.strip())
         if program.strip():
-            from ..controllers.g7x import Tool
+            from ..controllers.g7x import PlannedCycle, Tool
             from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
             from ..controllers.lathe_program import Setup as Reading
             # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
@@ -391,10 +392,11 @@ class LathePart(MachinedPart):
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
             profiles = list({id(op.profile): op.profile for op in cycles}.values())
+            regions = list({id(op.profile): op for op in ops if isinstance(op, PlannedCycle)}.values())
             bores = [op.start[1] for op in cycles if op.profile.inside]
             if bores:
                 why = ""
-                if len(bores) < len(cycles):
+                if len(bores) < len(cycles) + len(regions):
                     why = ("the program has both inside and outside G71/G70 profiles: the part check judges one "
                            "kind at a time")
                 # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
@@ -427,10 +429,10 @@ class LathePart(MachinedPart):
         default = cutters.pop(0)
         removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        if program.strip() and not profiles and self.settings.drawing is None:
+        if program.strip() and not profiles and not regions and self.settings.drawing is None:
             return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                          spindle_checked=spindle, numbers=numbers)
-        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside)
+        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside, regions)
         if self.settings.drawing is not None:
             from shapely.geometry import LineString
 
@@ -497,17 +499,21 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
 
 
 def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
-                          inside: bool) -> tuple[Any, list[tuple[Any, int]]]:
+                          inside: bool, regions: Sequence[Any] = ()) -> tuple[Any, list[tuple[Any, int]]]:
     """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
     ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
     all above a profile; ``inside``, a bore: all below it down to the hole) -- or, for the registers (no
-    profiles), what each block's deepest pass cuts away; and the programmed elements with their program lines
-    (for naming the line nearest to a deviation)."""
+    profiles), what each block's deepest pass cuts away; less each of ``regions``' ``removed()`` (the ops that
+    cut a region by their definition: G72, G73); and the programmed elements with their program lines (for naming
+    the line nearest to a deviation)."""
     import shapely
     from shapely.geometry import LineString, Polygon
 
     removed: list[Any] = []
     lines: list[tuple[Any, int]] = []
+    for op in regions:
+        removed.append(Polygon(op.removed()).buffer(0))
+        lines += [(LineString(_elements_polyline([b.element])), b.line) for b in op.profile.blocks]
     if profiles:
         far = -FAR if inside else FAR
         for profile in profiles:
@@ -515,7 +521,7 @@ def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Seque
             (za, _), (ze, _) = outline[0], outline[-1]
             removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
             lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-    else:
+    elif not regions:
         stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
         for k in range(1, to_int(seq["n_blocks"]) + 1):
             b = f"block[{k}]."
