@@ -50,11 +50,12 @@ def test_g72_passes_step_in_z_and_cut_along_x():
         assert zs == pytest.approx(ze, abs=1e-9) and xs == pytest.approx(X0, abs=1e-9) and g.feed   # along -X
     # each pass ends on the profile + allowance: in front of the face Z-1.9 at X0.2, behind it at X20.2
     assert [g.element.end[1] for g in passes] == pytest.approx([0.2, 0.2, 20.2, 20.2, 20.2], abs=1e-9)
-    # SC3 retracts by R0.5 in +Z, SC4 returns in +X to the start point's X
+    # SC3 retracts by R0.5 at 45 degrees (+Z, +X), SC4 returns in +X to the start point's X
     for k in range(1, last):
         sc2, sc3, sc4 = ([g for g in rough if g.pass_no == k and g.subcycle == s] for s in (2, 3, 4))
         (z, x) = sc2[-1].element.end
-        assert sc3[0].element.end == pytest.approx((z + 0.5, x), abs=1e-9) and not sc3[0].feed
+        assert sc3[0].element.start == pytest.approx((z, x), abs=1e-9)
+        assert sc3[0].element.end == pytest.approx((z + 0.5, x + 0.5), abs=1e-9) and not sc3[0].feed
         assert sc4[-1].element.end == pytest.approx((z + 0.5, X0), abs=1e-9) and not sc4[-1].feed
     # the last pass runs along the profile shifted by (W0.1, U0.2), from the start point's X on: the allowance left
     final = [g.element for g in cuts if g.pass_no == last]

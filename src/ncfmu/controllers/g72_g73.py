@@ -3,16 +3,16 @@
 
 Geometry in the (z, x) plane, X a radius (as :mod:`.lathe_program`); S the start point (where the tool stands).
 
-G72 is G71 with the roles of the axes swapped: its profile N<P>..N<Q> starts with a move in Z only, from S
-toward the chuck to the profile's start A (at S's X); the rest runs toward the spindle axis (X never rises) and
-toward S's Z (Z never falls: Fanuc's type I, monotonic; a pocket is refused). The stock is what lies between the
-profile and S's Z, below S's X. The passes run parallel to X (SC2 from S's X toward the axis), each the depth
-W(Δd) deeper in Z, SC3 retracts by R(e) in +Z, SC4 returns in +X; then one pass along the profile shifted by the
-allowances U (in X, the X mode's) and W, so the finishing pass G70 takes the allowance everywhere. Seen with Z
-and X exchanged (:func:`exchanged`: a reflection about the line Z = X) a G72 profile *is* a G71 profile of type
-I -- its lead in (exchanged) X only, running toward (exchanged) -Z, monotone -- so G72 is planned as that G71
-(:func:`.g7x.plan_cycle`) and exchanged back, and G70 of a G72 profile likewise: SC3 leaves the face in +Z to
-S's Z, SC4 returns in +X.
+G72 is G71 with the roles of the axes swapped: its profile N<P>..N<Q> starts with a move in Z only, from S toward
+the chuck to the profile's start A (at S's X); the rest runs toward the spindle axis (X never rises) and toward S's
+Z (Z never falls: Fanuc's type I, monotonic; a pocket is refused). The stock is what lies between the profile and
+S's Z, below S's X. The passes run parallel to X (SC2 from S's X toward the axis), each the depth W(Δd) deeper in Z,
+SC3 retracts by R(e) at 45 degrees (+Z and +X, as Fanuc draws it), SC4 returns in +X; then one pass along the
+profile shifted by the allowances U (in X, the X mode's) and W, so the finishing pass G70 takes the allowance
+everywhere. Seen with Z and X exchanged (:func:`exchanged`: a reflection about the line Z = X) a G72 profile *is* a
+G71 profile of type I -- its lead in (exchanged) X only, running toward (exchanged) -Z, monotone -- so G72 is
+planned as that G71 (:func:`.g7x.plan_cycle`) and exchanged back, and G70 of a G72 profile likewise: SC3 leaves the
+face in +Z to S's Z, SC4 returns in +X.
 
 G73 repeats the whole profile (its first block a straight move from S to the profile's start, the rest
 running toward the chuck, X free: pockets are fine, as on a cast or forged blank) R(d) times, pass k
@@ -205,8 +205,23 @@ def face_rough(b: Block, first: FirstBlock, start: Point, profile: Profile, u: f
         raise b.err(1, f"more than {MAX_SEGMENTS // 4} passes of W{first.a:g} down to Z {deepest:g}: the depth of cut "
                        "is too small")
     rough = Rough(b.line, (x0, z0), _exchanged_profile(profile), first.a, first.r, w, u, feed)
-    segments = _exchanged_back(plan_cycle(rough, _PLANNING_RAPID), 72)
+    segments = _retracts_at_45_degrees(_exchanged_back(plan_cycle(rough, _PLANNING_RAPID), 72), first.r, x0)
     return PlannedCycle(b.line, 72, segments, start, start, profile, _in_front(profile))
+
+
+def _retracts_at_45_degrees(segments: tuple[Segment, ...], retract: float, x0: float) -> tuple[Segment, ...]:
+    """Each level's SC3 as Fanuc draws G72's: by the retract in +Z *and* +X (at most up to the start point's X),
+    SC4 from there. Straight off in +Z the insert's end edge would drag across the wedge its clearance angle left
+    on the face below it; at 45 degrees it leaves the face (the pass's floor stays behind it)."""
+    last = max(g.pass_no for g in segments)
+    out = list(segments)
+    for k, g in enumerate(out):
+        if g.subcycle == 3 and 0 < g.pass_no < last and k + 1 < len(out) and out[k + 1].subcycle == 4:
+            (z, x), (z1, _) = g.element.start, g.element.end
+            corner = (z1, x + min(retract, x0 - x))
+            out[k] = replace(g, element=Line((z, x), corner))
+            out[k + 1] = replace(out[k + 1], element=Line(corner, out[k + 1].element.end))
+    return tuple(g for g in out if g.element.length > EPS)
 
 
 def face_finish(b: Block, start: Point, profile: Profile, feed: float, comp: int) -> PlannedCycle:
