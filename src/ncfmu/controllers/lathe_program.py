@@ -17,6 +17,8 @@ Words (one block per line, letters in either case; the README has the table)::
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
                                                 (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
+    G72 W<depth> R<retract> / G72 P Q U W [F]     facing stock removal, G73 U<escape X> W<escape Z> R<passes> /
+                                                G73 P Q U W [F] pattern repeat (:mod:`.g72_g73`)
     G90 X/U Z/W [R] F | G94 X/U Z/W [R] F       single cycles: turning / facing, one pass (:mod:`.single_cycles`);
                                                 G90 with X/Z and no G00-G03 in its block (else the absolute mode)
     G32 / G92 / G76                               threads (:mod:`.thread_cycles`)
