@@ -15,7 +15,8 @@ planned as that G71 (:func:`.g7x.plan_cycle`) and exchanged back, and G70 of a G
 face in +Z to S's Z, SC4 returns in +X.
 
 G73 repeats the whole profile (its first block a straight move from S to the profile's start, the rest
-running toward the chuck, X free: pockets are fine, as on a cast or forged blank) R(d) times, pass k
+running toward the chuck, X free: pockets are fine, as on a cast or forged blank -- then without a shift in Z,
+which would move a pocket's near wall into the part) R(d) times, pass k
 (1..d) shifted by the finishing allowance (U/2 [radius], W) plus (Δi, Δk) (d - k) / (d - 1): the first pass
 (Δi + U/2, Δk + W) off the profile, the last on the allowance, the steps between even. Each pass is G70's path
 along the shifted profile (SC1 from S to the shifted start, SC2 the profile at G73's feed, the profile's G00
