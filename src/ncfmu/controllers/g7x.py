@@ -247,7 +247,29 @@ class PeckCycle:
         return self.region
 
 
-Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle | PeckCycle
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass(frozen=True)
+class PlannedCycle:
+    """A cycle planned as the program is read (:mod:`.g72_g73`: G72, G73, and G70 finishing a G72 profile): its
+    moves in the program's coordinates, the tool ending at ``end``; ``region`` what it cuts by its definition."""
+
+    line: int
+    code: int                           # 72, 73, or 70 (G70 along a G72 profile)
+    segments: tuple[Segment, ...]
+    end: Point
+    start: Point                        # the cycle's start point (z, x)
+    profile: Profile
+    region: tuple[Point, ...]           # a simple polygon of (z, x radius) points: see :meth:`removed`
+    shifts: tuple[Point, ...] = ()      # G73: each pass's shift of the profile (z, x radius), first to last
+
+    def removed(self) -> tuple[Point, ...]:
+        """The region this operation cuts away by its definition: a simple polygon of (Z, radius) points, mm, in
+        the program's coordinates (work and tool offsets not applied, X as a radius), large values (1e4) standing
+        for 'to the outside'."""
+        return self.region
+
+
+Op = Move | Rough | Finish | State | Dwell | Stop | Home | Thread | SingleCycle | PlannedCycle | PeckCycle
 
 
 def _extreme(arc: Arc, angle: float) -> Point | None:
@@ -738,7 +760,7 @@ def plan_ops(ops: list[Op], rapid: float, start: Point | None = None) -> list[Se
                 segs = [replace(g, element=shifted(g.element, dz, dx), modal=modal) for g in segs]
             out += segs
             here = op.start
-        elif isinstance(op, (Thread, SingleCycle, PeckCycle)):
+        elif isinstance(op, (Thread, SingleCycle, PlannedCycle, PeckCycle)):
             out += [replace(g, element=shifted(g.element, dz, dx), modal=modal, rate=g.rate if g.feed else rapid)
                     for g in op.segments]
             here = op.end

@@ -17,6 +17,8 @@ Words (one block per line, letters in either case; the README has the table)::
     G71 P<first N> Q<last N> U<X allowance> W<Z allowance> [F]  second block: U in the X mode in force
                                                 (U <= 0 for a bore: a profile rising from the start point)
     G70 P<first N> Q<last N> [F]                  one pass along the profile
+    G72 W<depth> R<retract> / G72 P Q U W [F]     facing stock removal, G73 U<escape X> W<escape Z> R<passes> /
+                                                G73 P Q U W [F] pattern repeat (:mod:`.g72_g73`)
     G90 X/U Z/W [R] F | G94 X/U Z/W [R] F       single cycles: turning / facing, one pass (:mod:`.single_cycles`);
                                                 G90 with X/Z and no G00-G03 in its block (else the absolute mode)
     G32 / G92 / G76                               threads (:mod:`.thread_cycles`)
@@ -59,6 +61,7 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     Modal,
     Op,
     PeckCycle,
+    PlannedCycle,
     Profile,
     Rough,
     Segment,
@@ -75,6 +78,8 @@ from .g7x import (  # noqa: F401  (the cycles' records, named here too: a lathe 
     plan_ops,
     rough_boundary,
 )
+from .g72_g73 import FirstBlock, face_finish, face_rough, first_block, first_block_error, pattern_repeat
+from .g72_g73 import check_profile as check_face_or_pattern
 from .gcode import (
     ARC_RADIUS_TOLERANCE,
     COORDINATE_LIMIT,
@@ -109,17 +114,15 @@ LATHE = Dialect(
     groups={**{g: "motion (G00-G03, G32, G92, G94)" for g in (*_MOTION, *_THREAD_MOTION, 94)}, 18: "plane (G18)",
             21: "units (G21)",
             90: "distance mode (G90/G91)", 91: "distance mode (G90/G91)", 7: "X mode (G7/G8)", 8: "X mode (G7/G8)",
-            **{g: "canned cycle (G70-G76)" for g in (70, 71, 74, 75, 76)},
+            **{g: "canned cycle (G70-G76)" for g in (70, 71, 72, 73, 74, 75, 76)},
             4: "non-modal (G04, G28, G50)", 28: "non-modal (G04, G28, G50)", 50: "non-modal (G04, G28, G50)",
             **{g: "tool-nose radius compensation (G40-G42)" for g in (40, 41, 42)}, 96: "spindle speed mode (G96/G97)",
             97: "spindle speed mode (G96/G97)", 98: "feed mode (G98/G99)", 99: "feed mode (G98/G99)",
             **{g: "work offset (G54-G59)" for g in range(54, 60)}},
     refused_g={17: "a lathe works in the XZ plane (G18)", 19: "a lathe works in the XZ plane (G18)",
-               20: "inch units are not in the subset: write the program in mm (G21)",
-               72: "G72 (facing stock removal) is not in the subset: G71 and G70 are",
-               73: "G73 (pattern repeat) is not in the subset: G71 and G70 are"},
-    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70, G71, G74-G76, G90, G91, G92, "
-           "G94, G96-G99",
+               20: "inch units are not in the subset: write the program in mm (G21)"},
+    g_list="G00-G03, G04, G7, G8, G18, G21, G28, G32, G40-G42, G50, G54-G59, G70-G76, G90, G91, G92, G94, "
+           "G96-G99",
     m_codes=frozenset({0, 1, 2, 3, 4, 5, 8, 9, 30, 98, 99}),
     m_list="M00, M01, M02, M03, M04, M05, M08, M09, M30, M98, M99",
     coordinates="XZIKRUWPQSTOLA",
@@ -266,7 +269,7 @@ def _interpret(b: Block, modes: _Modes, here: Point,
             modes.incremental = g == 91
         elif g in (7, 8):
             modes.diameter = g == 7
-        elif g in (70, 71):
+        elif g in (70, 71, 72, 73):
             cycle = g
         elif g in _THREAD_MOTION or g == 76:
             raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
@@ -811,7 +814,13 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
             if element is None:
                 raise blk.err(blk.col(word), f"{word}: the corner before takes this whole move")
             pending = (blk, word)
-        if j == i:
+        if j == i and code in (72, 73):
+            reason = first_block_error(code, element, start, end)
+            if reason:
+                raise blk.err(1, reason)
+            assert element is not None
+            lead = Move(element, rapid, modes.feed, blk.line, raw=blk.raw.strip())
+        elif j == i:
             if element is None or isinstance(element, Arc) or end[0] > start[0] + EPS:
                 raise blk.err(1, f"the profile's first block N{p} moves in a straight line from the start point "
                                  f"(X {start[1]:g}, Z {start[0]:g}) to the profile's start, in X (type I) or in X "
@@ -833,10 +842,33 @@ def _read_profile(blocks: list[Block], i: int, b: Block, p: int, q: int, modes: 
     if not pieces:
         raise b.err(b.col("Q"), f"the profile N{p}..N{q} has no block after its first (the outline of the part)")
     profile = Profile(p, q, lead, tuple(pieces), front=front)
+    if code in (72, 73):
+        check_face_or_pattern(code, profile, start)
+        return profile, j
     if lead.element.end[1] > start[1] + TOL:     # X rises to the profile: a bore, checked as the outside it mirrors
         pocket = check_profile(mirror_profile(profile, start[1]), start, inside=True)
         return replace(profile, pocket=pocket, inside=True), j
     return replace(profile, pocket=check_profile(profile, start)), j
+
+
+def _face_or_pattern(b: Block, first: FirstBlock | None, here: Point, profile: Profile, modes: _Modes,
+                     feed: float) -> Op:
+    """G72 P Q U W F or G73 P Q U W F (:mod:`.g72_g73`) after its first block ``first``."""
+    code = 72 if any(g == 72 for g, _ in b.g) else 73
+    if first is None:
+        raise b.err(1, f"G{code} P Q needs G{code}'s first block (" + ("G72 W<depth> R<retract>" if code == 72 else
+                                                                       "G73 U<escape X> W<escape Z> R<passes>")
+                       + ") before it")
+    if modes.comp:
+        raise b.err(b.col("G"), f"G{code} with G4{1 if modes.comp > 0 else 2} in force: G{code} roughs "
+                                "uncompensated, cancel the tool-nose radius compensation (G40) first")
+    feed = feed or modes.feed
+    if feed == 0.0:
+        raise b.err(1, f"G{code} with no feed: give F (mm/min) here or before")
+    u = b.values.get("U", 0.0) * (0.5 if modes.diameter else 1.0)
+    w = b.values.get("W", 0.0)
+    make = face_rough if code == 72 else pattern_repeat
+    return make(b, first, here, profile, u, w, feed)
 
 
 def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> list[Op]:
@@ -860,6 +892,8 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
     profiles: dict[tuple[int, int], Profile] = {}
     noses: dict[int, Nose] = {}             # index of a move under G41/G42 in ops -> its nose
     g71_first: tuple[float, float] | None = None
+    firsts: dict[int, FirstBlock] = {}      # G72's and G73's first blocks
+    kinds: dict[tuple[int, int], int] = {}  # the cycle (70-73) that read each profile
     pending: tuple[int, Block, str] | None = None   # the move (its index in ops) whose ,C or ,R waits for the next
     i = 0
     while i < len(blocks):
@@ -937,6 +971,9 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
         if cycle is None:
             continue
         v = cycle.values
+        if cycle.code in (72, 73) and "P" not in v and "Q" not in v:
+            firsts[cycle.code] = first_block(b)
+            continue
         if cycle.code == 71 and "P" not in v and "Q" not in v:
             if "U" not in v or "R" not in v:
                 raise b.err(1, "G71's first block gives the depth of cut U and the retract R (radius values)")
@@ -955,17 +992,25 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 if k in v:
                     raise b.err(b.col(k), f"{k}: G70 takes P, Q and F")
         elif "R" in v:
-            raise b.err(b.col("R"), "R: the retract belongs to G71's first block (G71 U R)")
+            first_words = {71: "the retract belongs to G71's first block (G71 U R)",
+                           72: "the retract belongs to G72's first block (G72 W R)",
+                           73: "the number of passes belongs to G73's first block (G73 U W R)"}
+            raise b.err(b.col("R"), f"R: {first_words[cycle.code]}")
         feed = v["F"] / 60.0 if "F" in v else 0.0
         if i < len(blocks) and blocks[i].n == p:
             profile, i = _read_profile(blocks, i, b, p, q, modes, here, cycle.code)
             profiles[(p, q)] = profile
+            kinds[(p, q)] = cycle.code
         elif (p, q) in profiles:
             profile = profiles[(p, q)]
             (z1, x1) = profile.lead.element.start
-            if cycle.code == 71 and math.dist((z1, x1), here) > EPS:
+            read_by = kinds[(p, q)] if kinds[(p, q)] != 70 else 71
+            if cycle.code != 70 and read_by != cycle.code:
+                raise b.err(b.col("P"), f"P{p}: the profile N{p}..N{q} was read as G{read_by}'s: G{cycle.code} "
+                                        "takes a profile of its own (its rules differ)")
+            if cycle.code != 70 and math.dist((z1, x1), here) > EPS:
                 raise b.err(b.col("P"), f"P{p}: the profile N{p}..N{q} was read from the start point X {x1:g} Z "
-                                        f"{z1:g}, this G71 starts at X {here[1]:g} Z {here[0]:g}")
+                                        f"{z1:g}, this G{cycle.code} starts at X {here[1]:g} Z {here[0]:g}")
         else:
             profile, _ = _read_profile(blocks, i, b, p, q, modes, here, cycle.code)   # raises: not found
         if cycle.code == 70:
@@ -973,6 +1018,9 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                 for pb in (profile.lead, *profile.blocks):
                     if not pb.rapid and pb.feed == 0.0:
                         raise b.err(1, f"G70: the profile's block on line {pb.line} has no feed: give F")
+            if kinds[(p, q)] == 72:
+                ops.append(face_finish(b, here, profile, feed, modes.comp))
+                continue
             nose = Nose(modes.comp, modes.row.nose_radius, modes.row.tip) if modes.comp else None
             finish = Finish(b.line, here, profile, feed, nose)
             if nose is not None:
@@ -984,6 +1032,9 @@ def parse(text: str, start: tuple[float, float], setup: Setup | None = None) -> 
                                             "(above the bore's profile): boring toward the chuck takes G41")
                 finish_path(finish)                  # raises where the nose cannot follow the profile
             ops.append(finish)
+            continue
+        if cycle.code in (72, 73):
+            ops.append(_face_or_pattern(b, firsts.get(cycle.code), here, profile, modes, feed))
             continue
         if g71_first is None:
             raise b.err(1, "G71 P Q needs G71's first block (G71 U<depth> R<retract>) before it")

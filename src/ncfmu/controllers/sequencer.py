@@ -212,15 +212,15 @@ class CutSequencer(CycleController):
         string("program", "parameter", "", "lathe part program in the Fanuc 0i-T dialect (README: O, N, X as a "
                "diameter (x_diameter), U/W, G00-G03 with I/K or R, G04, G28, G50 S, G96/G97, G98/G99, S, T, "
                "M00-M05, M08/M09, M30, G7/G8, G90/G91, G54-G59 (work[k]), M98/M99 subprograms, ,C ,R A) with G71 "
-               "stock removal (G71 U R / G71 P Q U W F), G70 finishing (G70 P Q F), G90/G94 single cycles, "
-               "G74/G75 peck drilling and grooving, threads (G32, G92, G76 following the spindle), one block per "
-               "line, "
+               "stock removal (G71 U R / G71 P Q U W F), G72 facing (G72 W R / G72 P Q U W F), G73 pattern repeat "
+               "(G73 U W R / G73 P Q U W F), G70 finishing (G70 P Q F), G90/G94 single cycles, G74/G75 peck "
+               "drilling and grooving, threads (G32, G92, G76 following the spindle), one block per line, "
                "starting at x_start/z_start; G00 and the cycles' rapid "
                "moves at block[1].rapid; empty: the registers block[k]"),
         integer("line", "output", None, "program line being executed, 1-based (0 idle, or no program)"),
-        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 70 finishing, 76 multiple "
-                "threading, 92 thread cutting, 32 a G32 thread, 90 turning, 94 facing (single cycles), 74 face peck "
-                "drilling, 75 grooving, 0 none"),
+        integer("canned_cycle", "output", None, "canned cycle running: 71 stock removal, 72 facing stock removal, "
+                "73 pattern repeat, 70 finishing, 76 multiple threading, 92 thread cutting, 32 a G32 thread, "
+                "90 turning, 94 facing (single cycles), 74 face peck drilling, 75 grooving, 0 none"),
         # the Fanuc 0i-T dialect of a program (appended: the value references before stay what they were)
         boolean("x_diameter", "parameter", True, "program: X and U are diameters until G7/G8, as on Fanuc's lathes; "
                 "false: radii (the axes and every other length are radii)"),

@@ -373,12 +373,12 @@ class LathePart(MachinedPart):
         face = to_float(seq["stock_face_z"])
         program = str(seq.get("program") or "")
         profiles: list[Any] = []
-        regions: list[tuple[Any, int]] = []   # (what an op cuts away by its definition, its line)
+        regions: list[Any] = []   # the ops that cut a region by their definition (removed()): G72-G75, G90, G94
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
         numbers = block_numbers(program, "lathe")
         spindle = self.spindle is not None and bool(program.strip())
         if program.strip():
-            from ..controllers.g7x import Tool
+            from ..controllers.g7x import PlannedCycle, Tool
             from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
             from ..controllers.lathe_program import Setup as Reading
             # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
@@ -393,11 +393,11 @@ class LathePart(MachinedPart):
             ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
             cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
             profiles = list({id(op.profile): op.profile for op in cycles}.values())
-            regions = [(op.removed(), op.line) for op in ops if hasattr(op, "removed")]
+            regions = [op for op in ops if hasattr(op, "removed")]
             bores = [op.start[1] for op in cycles if op.profile.inside]
             if bores:
                 why = ""
-                if len(bores) < len(cycles):
+                if len(bores) < len(cycles) + len([op for op in regions if isinstance(op, PlannedCycle)]):
                     why = ("the program has both inside and outside G71/G70 profiles: the part check judges one "
                            "kind at a time")
                 # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
@@ -499,15 +499,15 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
     return cutters
 
 
-def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any], inside: bool,
-                          regions: Sequence[tuple[Sequence[tuple[float, float]], int]] = ()
-                          ) -> tuple[Any, list[tuple[Any, int]]]:
+def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
+                          inside: bool, regions: Sequence[Any] = ()) -> tuple[Any, list[tuple[Any, int]]]:
     """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
     ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
-    all above a profile; ``inside``, a bore: all below it down to the hole) and what its other operations cut
-    away by their definition (``regions``: each op's ``removed()`` polygon and its line -- a G90/G94 pass's
-    quadrilateral) -- or, for the registers (no program), what each block's deepest pass cuts away; and the
-    programmed elements with their program lines (for naming the line nearest to a deviation)."""
+    all above a profile; ``inside``, a bore: all below it down to the hole) and each of ``regions``'
+    ``removed()`` (the ops that cut a region by their definition: G72/G73 profiles, G74/G75 holes and grooves,
+    G90/G94 passes) -- or, for the registers (neither), what each block's deepest pass cuts away; and the
+    programmed elements with their program lines (for naming the line nearest to a deviation: a profile's
+    blocks', else the op's own line along its region's outline)."""
     import shapely
     from shapely.geometry import LineString, Polygon
 
@@ -520,9 +520,14 @@ def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Seque
             (za, _), (ze, _) = outline[0], outline[-1]
             removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
             lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-    for region, line in regions:
+    for op in regions:
+        region = op.removed()
         removed.append(Polygon(region).buffer(0))
-        lines.append((LineString([*region, region[0]]), line))
+        profile = getattr(op, "profile", None)
+        if profile is not None:
+            lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
+        else:
+            lines.append((LineString([*region, region[0]]), op.line))
     if not profiles and not regions:
         stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
         for k in range(1, to_int(seq["n_blocks"]) + 1):
