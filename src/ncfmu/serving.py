@@ -317,6 +317,8 @@ class CrashWatch:
         self._flags: dict[str, bool] = {}          # each end column's value at the last row judged
         self._thread: threading.Thread | None = None
         self._closed = False
+        #: told each judged accumulator in the check's thread, which owns it (the web page's part section)
+        self.on_judged: Callable[[object], None] | None = None
         self.accumulator = self.new_accumulator()
 
     def sinks(self, recording: Sequence) -> list:
@@ -378,6 +380,8 @@ class CrashWatch:
         from .systems.part import crashes_so_far, verdict_of
         accumulator.write(rows)
         if accumulator is self.accumulator:
+            if self.on_judged is not None:
+                self.on_judged(accumulator)
             self._seen = crashes_so_far(accumulator)
             ended = self._program_end(rows)
             if ended is not None:
@@ -1231,6 +1235,8 @@ class LiveServer:
         self.cnc_components = cnc_components
         self._mirrors: list[_Mirror] = []
         self._mirrored: dict[int, object] = {}
+        #: told each snapshot published (the web page keeps the newest): on the server's loop, not to block it
+        self.listeners: list[Callable[[Snapshot], None]] = []
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -1284,6 +1290,8 @@ class LiveServer:
         self.vtype = vtype
         snap = self.runner.snapshot()
         assert snap is not None, "the runner takes its first snapshot when made"
+        for listen in self.listeners:
+            listen(snap)
         objects = server.nodes.objects
         instances: dict[str, Node] = {}
         self.nodes: dict[str, Node] = {}
@@ -1483,25 +1491,56 @@ class LiveServer:
                                         InputArgumentResults=[self.ua.StatusCode(getattr(codes, a))
                                                               for a in arguments])
 
+    async def call(self, what: str) -> str | None:
+        """A ``Simulation`` method without arguments (pause, resume, stop, reset), from a client or the web
+        page: None when it took effect (published), else the refusal."""
+        if what == "stop" and self.runner.state in ENDED_BADLY:
+            self.stopped.set()
+            return None
+        refusal = await self._submit(_Command(what))
+        if refusal is not None:
+            return refusal
+        if what == "reset":
+            self._owner.clear()            # nothing is forced after a Reset
+        if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
+            for name in self._held:
+                self._owner.pop(name, None)
+            self._held.clear()
+        await self._publish_once()
+        return None
+
+    async def write(self, name: str, value: object) -> str | None:
+        """Force an input or set a tunable parameter as a client's Write does, checked by the same rules; from a
+        front end without an OPC UA session (the web page: no watchdog owns it). None or the refusal."""
+        point = self.points.get(name)
+        if point is None:
+            return f"{name}: no such variable"
+        try:
+            checked = check_value(point, value)
+        except WriteRefused as err:
+            return str(err)
+        command = _Command("force" if point.writes == "input" else "set", name, checked)
+        refusal = await self._submit(command)
+        if refusal is None:
+            self._owner.pop(name, None)        # no client session owns it: the watchdog leaves it alone
+            await self._publish_once()
+        return refusal
+
+    async def release(self, name: str) -> str | None:
+        """``Simulation.Release(name)`` once its argument is checked: None or the refusal."""
+        refusal = await self._submit(_Command("release", name))
+        if refusal is None:
+            self._owner.pop(name, None)
+            await self._publish_once()
+        return refusal
+
     def _method(self, what: str):
         async def call(parent, *args):
             if args:
                 return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
                                          ["BadTooManyArguments"] * len(args))
-            if what == "stop" and self.runner.state in ENDED_BADLY:
-                self.stopped.set()
-                return []
-            refusal = await self._submit(_Command(what))
-            if refusal is not None:
-                return self._call_result("BadInvalidState", refusal)
-            if what == "reset":
-                self._owner.clear()            # nothing is forced after a Reset
-            if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
-                for name in self._held:
-                    self._owner.pop(name, None)
-                self._held.clear()
-            await self._publish_once()
-            return []
+            refusal = await self.call(what)
+            return [] if refusal is None else self._call_result("BadInvalidState", refusal)
         return call
 
     async def _release_method(self, parent, *args):
@@ -1523,12 +1562,8 @@ class LiveServer:
             return self._call_result(verdict, f"Release({text!r}): the name must be a String", [verdict])
         if verdict == "BadInvalidArgument":
             return self._call_result(verdict, f"Release({text!r}): not an input INSTANCE.VARIABLE", [verdict])
-        refusal = await self._submit(_Command("release", text))
-        if refusal is not None:
-            return self._call_result("BadInvalidState", refusal, ["Good"])
-        self._owner.pop(text, None)
-        await self._publish_once()
-        return []
+        refusal = await self.release(text)
+        return [] if refusal is None else self._call_result("BadInvalidState", refusal, ["Good"])
 
     # -- the watchdog -------------------------------------------------------------------------------------
     def _watch_sessions(self, iserver) -> None:
@@ -1623,6 +1658,8 @@ class LiveServer:
         ua = self.ua
         snap = self.runner.snapshot()
         if snap is not None:
+            for listen in self.listeners:
+                listen(snap)
             stamp = None
             for name, value in snap.values.items():
                 if self._last.get(name) != value and name in self.nodes:
@@ -1788,7 +1825,8 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
           security: Security | None = None, root: Path | None = None,
           ready: Callable[[str], None] | None = None, watchdog: float | None = None,
           cnc: bool = True, on_lost: str = "hold",
-          on_verdict: Callable[[float, str], None] | None = None, drawing=None) -> ServeSummary:
+          on_verdict: Callable[[float, str], None] | None = None, drawing=None, web: str | None = None,
+          page_ready: Callable[[str], None] | None = None) -> ServeSummary:
     """Run ``system`` (a name or an .ssp path) paced to the wall clock behind an OPC UA server at ``endpoint``
     until stopped (Ctrl-C, SIGTERM, the ``Stop`` method, ``stop_time``); with ``out``, write the recorded
     trajectory ``OUT/<system>.csv`` and the session's writes ``OUT/session_inputs.csv`` (an input CSV that
@@ -1798,10 +1836,16 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
     back. ``on_verdict(time, line)`` is told the part check's verdict each time a program ends (also
     ``Simulation.verdict``). With ``cnc`` (the default), the system is also served as an OPC 40502 (OPC UA for
     CNC Systems) ``CncInterface`` object (about 1 s more to start). With ``drawing`` (a
-    :class:`~ncfmu.systems.drawing.Drawing`), the part check judges against the part drawn."""
+    :class:`~ncfmu.systems.drawing.Drawing`), the part check judges against the part drawn. With ``web``
+    (``HOST:PORT``), the live page is served there too (:mod:`ncfmu.web`; ``page_ready(url)`` once it listens)."""
     from .project import OpenSystem, system_archive
     security = security or Security()
     check_endpoint(endpoint, security)
+    address = None
+    if web is not None:
+        from .web import check_address, parse_address
+        address = parse_address(web)
+        check_address(address, security)
     if stop_time is not None and not (math.isfinite(stop_time) and stop_time > 0):
         raise ConfigError("--stop-time", stop_time, "must be a number > 0")
     if watchdog is not None and not (math.isfinite(watchdog) and watchdog > 0):
@@ -1824,7 +1868,11 @@ def serve(system: str = "lathe_roughing", endpoint: str = DEFAULT_ENDPOINT, spee
         server = LiveServer(opened.system.name, runner, endpoint, security, watchdog=watchdog,
                             cnc_components=components if cnc else None, on_lost=on_lost, on_verdict=on_verdict)
         try:
-            asyncio.run(server.serve(ready))
+            if address is None:
+                asyncio.run(server.serve(ready))
+            else:
+                from .web import WebFront, serve_with_page
+                asyncio.run(serve_with_page(server, WebFront(server, address, security, watch), ready, page_ready))
         finally:
             writes = list(session.writes)
             end = float(session.time)
