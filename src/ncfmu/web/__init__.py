@@ -40,6 +40,10 @@ FRAME_RATE = 20.0
 SECTION_INTERVAL = 0.2
 #: Frames a page may have waiting before it is considered too slow (it then gets the whole state again).
 BACKLOG = 4
+#: The longest a page's stream stays silent (a comment line then): a page that left is found by the write.
+HEARTBEAT = 1.0
+#: How long the server waits for the pages' streams to end when it stops.
+SHUTDOWN = 1.0
 #: The ``--web`` address when only the option is given.
 DEFAULT_ADDRESS = "127.0.0.1:8080"
 STATIC = Path(__file__).parent / "static"
@@ -141,8 +145,14 @@ class _Page:
     """One connected page: the frames waiting for it; ``stale`` when it fell behind (the whole state next)."""
 
     def __init__(self) -> None:
-        self.frames: asyncio.Queue[bytes] = asyncio.Queue(BACKLOG)
+        self.frames: asyncio.Queue[bytes | None] = asyncio.Queue(BACKLOG)
         self.stale = True
+
+    def end(self) -> None:
+        """The server stops: the stream ends (None)."""
+        while not self.frames.empty():
+            self.frames.get_nowait()
+        self.frames.put_nowait(None)
 
     def push(self, frame: bytes) -> None:
         try:
@@ -162,11 +172,14 @@ class WebFront:
         self.interval = 1.0 / rate
         self.points = live.points
         self._snapshot: Snapshot | None = None
+        #: the first snapshot, the only one with the fixed parameters (the program's text): merged first
+        self._first: Snapshot | None = None
         self._values: dict[str, object] = {}         # what the pages were last sent
         self._frame_state: dict[str, object] = {}
         self._section: dict[str, object] | None = None      # the newest stock section (from the check thread)
         self._section_sent: dict[str, object] | None = None
         self._section_at = 0.0
+        self._section_crashes = 0
         self._pages: list[_Page] = []
         self._runner: web.AppRunner | None = None
         self._task: asyncio.Task | None = None
@@ -222,6 +235,8 @@ class WebFront:
     # -- fed by the OPC UA side and the part check ------------------------------------------------------
     def take(self, snapshot: Snapshot) -> None:
         """The OPC UA side's newest snapshot (its publishing loop, the event loop: a reference kept)."""
+        if self._first is None and not self._values:
+            self._first = snapshot
         self._snapshot = snapshot
 
     def judged(self, accumulator: Any) -> None:
@@ -232,9 +247,11 @@ class WebFront:
             return
         removal = found[0]
         now = _time.monotonic()
-        fresh = removal.stock is removal.initial
-        if not fresh and now - self._section_at < SECTION_INTERVAL:
+        # a new bar (a Reset) and a new crash are sent at once: the simulation may halt before the next
+        new = removal.stock is removal.initial or len(removal.crashes) != self._section_crashes
+        if not new and now - self._section_at < SECTION_INTERVAL:
             return
+        self._section_crashes = len(removal.crashes)
         self._section_at = now
         self._section = {"stock": _rings(removal.stock), "crashes": [c.as_dict() for c in removal.crashes]}
 
@@ -251,6 +268,10 @@ class WebFront:
         snap = self._snapshot
         changed: dict[str, object] = {}
         state: dict[str, object] = {}
+        if self._first is not None:
+            for name, value in self._first.values.items():
+                self._values[name] = changed[name] = _json_value(value)
+            self._first = None
         if snap is not None:
             self._snapshot = None
             for name, value in snap.values.items():
@@ -365,11 +386,11 @@ class WebFront:
             # a page from another site must not reach the buttons through the browser: the Host a browser sends
             # (DNS rebinding) and the Origin of a POST must be ours
             if request.host not in self._allowed_hosts:
-                return web.Response(status=421, text=f"Host {request.host!r}: not this server")
+                return web.json_response({"error": f"Host {request.host!r}: not this server"}, status=421)
             if request.method == "POST":
                 origin = request.headers.get("Origin")
                 if origin is not None and origin.split("://", 1)[-1] not in self._allowed_hosts:
-                    return web.Response(status=403, text=f"Origin {origin!r}: not this page")
+                    return web.json_response({"error": f"Origin {origin!r}: not this page"}, status=403)
             users = self.security.users
             if users:
                 said = request.headers.get("Authorization", "")
@@ -382,8 +403,8 @@ class WebFront:
                     known = users.get(name)
                     ok = known is not None and hmac.compare_digest(known.encode(), password.encode())
                 if not ok:
-                    return web.Response(status=401, headers={"WWW-Authenticate": 'Basic realm="ncfmu"'},
-                                        text="a user of --user is asked for")
+                    return web.json_response({"error": "a user of --user is asked for"}, status=401,
+                                             headers={"WWW-Authenticate": 'Basic realm="ncfmu"'})
             return await handler(request)
         return guard
 
@@ -411,7 +432,13 @@ class WebFront:
         self._pages.append(page)
         try:
             while True:
-                await response.write(await page.frames.get())
+                try:
+                    frame = await asyncio.wait_for(page.frames.get(), HEARTBEAT)
+                except TimeoutError:
+                    frame = b": still here\n\n"
+                if frame is None:
+                    break
+                await response.write(frame)
         except (ConnectionResetError, asyncio.CancelledError):
             pass
         finally:
@@ -444,7 +471,8 @@ class WebFront:
         from aiohttp import web
         context = _tls(self.security) if self.security.certificate is not None and not self.address.loopback \
             else None
-        runner = self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False)
+        runner = self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
+                                               shutdown_timeout=SHUTDOWN)
         await runner.setup()
         site = web.TCPSite(runner, self.address.host, self.address.port, ssl_context=context)
         try:
@@ -464,6 +492,8 @@ class WebFront:
     async def close(self) -> None:
         if self._task is not None:
             self._task.cancel()
+        for page in self._pages:
+            page.end()
         if self._runner is not None:
             await self._runner.cleanup()
 
