@@ -3,11 +3,11 @@
 The page (``static/``: plain HTML, JS and SVG, nothing from outside) shows a DRO, the program with its current
 line, the cycle, alarms and crashes as they happen, the part section being cut (the part check's polygons) and
 the panel's buttons. The server (aiohttp) runs on the OPC UA server's asyncio loop and never calls into the
-simulation: it keeps the newest :class:`~ncfmu.serving.Snapshot` the OPC UA side publishes (a reference, taken
+simulation: it keeps the newest :class:`~ncfmu.serve.Snapshot` the OPC UA side publishes (a reference, taken
 at up to 100 Hz) and, from the part check's thread, the newest section of the stock. A broadcaster encodes what
 changed once per frame (:data:`FRAME_RATE`) and pushes it to every page as server-sent events; a page that
 cannot keep up gets the whole state again instead of a queue that grows. The buttons are the OPC UA side's own
-commands (:meth:`~ncfmu.serving.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
+commands (:meth:`~ncfmu.serve.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from ..errors import ConfigError
 if TYPE_CHECKING:
     from aiohttp import web
 
-    from ..serving import LiveServer, Security, Snapshot
+    from ..serve import LiveServer, Security, Snapshot
 
 #: Frames pushed to the pages per second (a browser draws 10-30 Hz; the OPC UA side publishes at 100 Hz).
 FRAME_RATE = 20.0
@@ -164,11 +164,13 @@ class _Page:
 
 
 class WebFront:
-    """The page's server in front of a :class:`~ncfmu.serving.LiveServer` (see the module's docstring)."""
+    """The page's server in front of a :class:`~ncfmu.serve.LiveServer` (see the module's docstring)."""
 
     def __init__(self, live: LiveServer, address: WebAddress, security: Security, watch: Any = None,
-                 rate: float = FRAME_RATE) -> None:
+                 rate: float = FRAME_RATE, listening: Callable[[str], None] | None = None) -> None:
         self.live, self.address, self.security, self.watch = live, address, security, watch
+        #: told the page's URL once it listens
+        self.listening = listening
         self.interval = 1.0 / rate
         self.points = live.points
         self._snapshot: Snapshot | None = None
@@ -489,6 +491,17 @@ class WebFront:
         self._task = asyncio.create_task(self._broadcast())
         return self.url
 
+    async def serve(self, ready: Callable[[str], None] | None = None) -> None:
+        """The OPC UA server's ``serve`` with the page beside it on the same loop: the page listens first
+        (:attr:`listening` is told its URL), then the OPC UA server (``ready(endpoint)``)."""
+        url = await self.start()
+        if self.listening is not None:
+            self.listening(url)
+        try:
+            await self.live.serve(ready)
+        finally:
+            await self.close()
+
     async def close(self) -> None:
         if self._task is not None:
             self._task.cancel()
@@ -499,7 +512,7 @@ class WebFront:
 
 
 def _crash_text(crash: Any) -> str:
-    from ..serving import crash_text
+    from ..serve.crash_watch import crash_text
     return crash_text(crash)
 
 
@@ -508,14 +521,3 @@ _NO_OUTSIDE = {"Content-Security-Policy": "default-src 'self'; img-src 'self' da
                "Cache-Control": "no-cache"}
 
 
-async def serve_with_page(live: LiveServer, front: WebFront, ready: Callable[[str], None] | None = None,
-                          page_ready: Callable[[str], None] | None = None) -> None:
-    """The OPC UA server's ``serve`` with the page beside it on the same loop: the page listens first
-    (``page_ready(url)``), then the OPC UA server (``ready(endpoint)``)."""
-    url = await front.start()
-    if page_ready is not None:
-        page_ready(url)
-    try:
-        await live.serve(ready)
-    finally:
-        await front.close()
