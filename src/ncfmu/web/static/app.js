@@ -96,18 +96,20 @@ function buildSection(s) {
   // v up: the group flips the plane, so the view box's y runs from -vmax to -vmin
   view.setAttribute("viewBox", `${umin} ${-vmax} ${umax - umin} ${vmax - vmin}`);
   const g = svg("g", {transform: "scale(1,-1)"});
-  g.append(svg("line", {class: "axis", x1: umin, y1: 0, x2: umax, y2: 0}));
+  if (s.lathe) g.append(svg("line", {class: "axis", x1: umin, y1: 0, x2: umax, y2: 0}));   // the spindle's axis
   const stock = svg("path", {class: "stock", d: ringsPath(s.stock), "fill-rule": "evenodd"});
   const made = svg("path", {class: "made", d: ringsPath(s.stock), "data-section": "made"});
   const programmed = svg("path", {class: "programmed", d: ringsPath(s.programmed), "data-section": "programmed"});
   const tool = svg("polygon", {class: "tool", "data-section": "tool"});
   const crashes = svg("g", {"data-section": "crashes"});
-  g.append(stock, made, programmed, crashes, tool);
+  // where the tool is, at a size the view shows however small the tool (the seed mill's cutter is 0.4 mm)
+  const mark = svg("circle", {class: "tool-mark", r: 0.015 * (umax - umin), "data-section": "tool-mark"});
+  g.append(stock, made, programmed, crashes, tool, mark);
   view.append(g);
   document.getElementById("plane").textContent =
     `${s.axes[0]} (${s.u}) across, ${s.axes[1]} (${s.v}) up; grey: the stock, dark: the part so far, ` +
     "blue: the programmed part, orange: the tool";
-  section = {made, tool, crashes, spec: s};
+  section = {made, tool, mark, crashes, spec: s};
 }
 
 function drawTool() {
@@ -122,6 +124,8 @@ function drawTool() {
     pts = [...pts, ...outline.slice().reverse().map(([a, b]) => `${u + a + 0.2},${v + b + 0.2}`)];
   }
   section.tool.setAttribute("points", pts.join(" "));
+  section.mark.setAttribute("cx", u);
+  section.mark.setAttribute("cy", v);
 }
 
 function drawSection(frameSection) {
@@ -138,7 +142,8 @@ function showProgram() {
   const text = values[c.program];
   if (typeof text !== "string" || list.dataset.text === text) return;
   list.dataset.text = text;
-  list.replaceChildren(...text.split(/\r?\n/).map((line, i) => el("li", {"data-line": String(i + 1)}, line || " ")));
+  const lines = text.trim() ? text.split(/\r?\n/) : [];       // no program: the seed's own cycle
+  list.replaceChildren(...lines.map((line, i) => el("li", {"data-line": String(i + 1)}, line || " ")));
 }
 
 function markLine() {
