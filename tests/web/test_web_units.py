@@ -10,6 +10,8 @@ import subprocess
 import sys
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from ncfmu.errors import ConfigError
 from ncfmu.serve import Point, Security, Snapshot
@@ -97,3 +99,87 @@ def test_a_page_that_falls_behind_gets_the_whole_state_not_a_growing_queue():
         page.end()
         assert await page.frames.get() is None          # the server stops: its stream ends
     asyncio.run(main())
+
+
+@given(st.lists(st.tuples(st.floats(allow_nan=False, allow_infinity=False, width=32), st.booleans(), st.booleans()),
+                min_size=1, max_size=12),
+       st.integers(0, 11))
+def test_a_page_that_joins_late_and_applies_deltas_sees_what_one_there_from_the_start_sees(steps, joins):
+    """However the snapshots come (each frame decimates those since the last), the whole state a page gets when
+    it joins plus every delta after it is the same as the deltas from the start: one machine for every page."""
+    live = Live()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())        # type: ignore[arg-type]
+    first: dict = {}
+    late: dict | None = None
+    for k, (x, hold, skip_frame) in enumerate(steps):
+        forced = {"seq.feed_hold": True} if hold else {}
+        front.take(Snapshot(0.01 * k, {"x_axis.pos": x, "seq.feed_hold": hold}, forced))
+        if skip_frame and k != len(steps) - 1:            # a frame takes every snapshot since the last one
+            continue
+        frame = front._frame()
+        if frame is None:
+            continue
+        delta, whole = decode(frame[0]), decode(frame[1])
+        merge(first, delta)
+        if late is None and k >= joins:
+            late = whole
+        elif late is not None:
+            merge(late, delta)
+    assert late is None or late == first
+    assert first["values"]["x_axis.pos"] == steps[-1][0] and first["forced"] == (["seq.feed_hold"] if steps[-1][1]
+                                                                                 else [])
+
+
+def merge(state: dict, delta: dict) -> None:
+    """What the page's apply() does with a frame."""
+    state.setdefault("values", {}).update(delta.get("values", {}))
+    state.update({k: v for k, v in delta.items() if k != "values"})
+
+
+class Commands(Live):
+    """A LiveServer's commands, recorded: what each button asks of the OPC UA side's own implementation."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.points["seq.start"] = Point("seq.start", "seq", "start", "Boolean", "input", "discrete", None, "",
+                                         None, None)
+        self.said: list[tuple] = []
+        self.runner = type("R", (), {"state": "running", "feed_holds": ["seq.feed_hold"]})()
+
+    async def call(self, what: str):
+        self.said.append(("call", what))
+
+    async def write(self, name: str, value: object):
+        self.said.append(("write", name, value))
+        return None if value != 9.0 else f"{name} = 9.0: must be <= 1.5"
+
+    async def release(self, name: str):
+        self.said.append(("release", name))
+
+
+def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
+    from aiohttp import encode_basic_auth
+    from aiohttp.test_utils import TestClient, TestServer
+    live = Commands()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security(users={"op": "secret"}))  # type: ignore[arg-type]
+
+    async def main() -> None:
+        async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
+            front.address = parse_address(f"127.0.0.1:{client.port}")
+            assert (await client.get("/")).status == 401
+            wrong = {"Authorization": encode_basic_auth("op", "wrong")}
+            assert (await client.get("/", headers=wrong)).status == 401
+            auth = {"Authorization": encode_basic_auth("op", "secret")}
+            page = await client.get("/", headers=auth)
+            assert page.status == 200 and "default-src 'self'" in page.headers["Content-Security-Policy"]
+            assert 'data-action="hold"' in await page.text()
+            for action in ("hold", "release", "reset", "start"):
+                assert (await client.post(f"/api/action/{action}", json={}, headers=auth)).status == 200
+            refused = await client.post("/api/action/override", json={"value": 9.0}, headers=auth)
+            said = (await refused.json())["error"]
+            assert refused.status == 409 and said == "seq.feed_override = 9.0: must be <= 1.5"
+            assert (await client.get("/static/..%2fserve%2f__init__.py", headers=auth)).status == 404
+    asyncio.run(main())
+    assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "reset"),
+                         ("write", "seq.start", True), ("release", "seq.start"),
+                         ("write", "seq.feed_override", 9.0)]
