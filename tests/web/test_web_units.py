@@ -75,16 +75,15 @@ def test_frames_carry_what_changed_and_the_whole_state_to_a_new_page():
     # the first snapshot is the only one with the fixed parameters: a later one must not hide them
     front.take(Snapshot(0.0, {"x_axis.pos": 1.0, "seq.program": "G00 X1\nM30"}, {}))
     front.take(Snapshot(0.01, {"x_axis.pos": 1.5, "seq.feed_hold": False}, {}))
-    delta, whole = front._frame()
+    delta = front._frame()
     assert decode(delta)["values"] == {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": False}
     assert front._frame() is None                            # nothing new: nothing sent
     front.take(Snapshot(0.02, {"x_axis.pos": 1.5, "seq.feed_hold": True}, {"seq.feed_hold": True}, "running"))
-    delta, whole = front._frame()
-    d, w = decode(delta), decode(whole)
+    d, w = decode(front._frame()), decode(front._whole())
     assert d["values"] == {"seq.feed_hold": True} and d["forced"] == ["seq.feed_hold"] and d["time"] == 0.02
     assert w["values"]["seq.program"] == "G00 X1\nM30" and w["values"]["x_axis.pos"] == 1.5
     front.take(Snapshot(0.03, {"x_axis.pos": float("nan")}, {}))
-    assert decode(front._frame()[0])["values"] == {"x_axis.pos": "nan"}      # JSON has no NaN: the word
+    assert decode(front._frame())["values"] == {"x_axis.pos": "nan"}      # JSON has no NaN: the word
 
 
 def test_a_page_that_falls_behind_gets_the_whole_state_not_a_growing_queue():
@@ -119,7 +118,7 @@ def test_a_page_that_joins_late_and_applies_deltas_sees_what_one_there_from_the_
         frame = front._frame()
         if frame is None:
             continue
-        delta, whole = decode(frame[0]), decode(frame[1])
+        delta, whole = decode(frame), decode(front._whole())
         merge(first, delta)
         if late is None and k >= joins:
             late = whole

@@ -132,12 +132,13 @@ def _rings(geometry: Any) -> list[list[list[float]]]:
     return rings
 
 
-def _removal(accumulator: Any) -> tuple[Any, Any] | None:
-    """(the engine, the setup) of a part check's accumulator, as ``crashes_so_far`` finds them; None: none."""
+def _removal(accumulator: Any) -> tuple[Any, Any, Any] | None:
+    """(the engine, the setup, the report's part) of a part check's accumulator that removes material, as
+    ``crashes_so_far`` finds them; None: none (a grinder's judges sparks, not a section)."""
     for acc in getattr(accumulator, "parts", ()):
         setup = getattr(acc, "setup", None)
         if setup is not None and getattr(setup, "removal", None) is not None:
-            return setup.removal, setup
+            return setup.removal, setup, acc.part
     return None
 
 
@@ -219,8 +220,7 @@ class WebFront:
         }
         found = _removal(self.watch.accumulator) if self.watch is not None else None
         if found is not None:
-            removal, setup = found
-            part = self.watch.report.parts[0]
+            removal, setup, part = found
             u, v = part.plane_columns()
             tool = next((f"{c}.tool" for c in controllers if has(c, "tool")), None)
             machine["section"] = {
@@ -265,8 +265,8 @@ class WebFront:
                              "text": _crash_text(c)} for c in snap.crashes],
                 "verdict": snap.verdicts[-1][1] if snap.verdicts else ""}
 
-    def _frame(self) -> tuple[bytes, bytes] | None:
-        """(what changed since the last frame, the whole state), encoded once for every page; None: nothing."""
+    def _frame(self) -> bytes | None:
+        """What changed since the last frame, encoded once for every page; None: nothing did."""
         snap = self._snapshot
         changed: dict[str, object] = {}
         state: dict[str, object] = {}
@@ -288,35 +288,30 @@ class WebFront:
             self._section_sent = state["section"] = section
         if not changed and not state:
             return None
-        delta = {**state, "values": changed}
+        return _event({**state, "values": changed})
+
+    def _whole(self) -> bytes:
+        """The whole state as the last frame left it (for a page that joined or fell behind: encoded only then)."""
         whole = {**self._frame_state, "values": self._values}
         if self._section_sent is not None:
             whole["section"] = self._section_sent
-        return (b"data: " + json.dumps(delta, separators=(",", ":")).encode() + b"\n\n",
-                b"data: " + json.dumps(whole, separators=(",", ":")).encode() + b"\n\n")
+        return _event(whole)
 
     async def _broadcast(self) -> None:
         while True:
             await asyncio.sleep(self.interval)
             if not self._pages:
                 continue
-            stale = [p for p in self._pages if p.stale]
-            frame = self._frame()
-            if frame is None and not stale:
-                continue
-            if frame is None:
-                whole = {**self._frame_state, "values": self._values}
-                if self._section_sent is not None:
-                    whole["section"] = self._section_sent
-                frame = (b"", b"data: " + json.dumps(whole, separators=(",", ":")).encode() + b"\n\n")
-            delta, whole_frame = frame
+            delta = self._frame()
+            whole = self._whole() if any(p.stale for p in self._pages) else None
             for page in self._pages:
                 if page.stale:
+                    assert whole is not None
                     page.stale = False
-                    page.push(whole_frame)
-                elif delta:
+                    page.push(whole)
+                elif delta is not None:
                     page.push(delta)
-            self.frames_sent += 1
+            self.frames_sent += delta is not None
 
     # -- the panel -----------------------------------------------------------------------------------------------
     async def act(self, what: str, value: object = None) -> str | None:
@@ -375,7 +370,8 @@ class WebFront:
 
     @property
     def _allowed_hosts(self) -> set[str]:
-        port = self.address.port if self.address.port else int(self.url.rsplit(":", 1)[1].strip("/"))
+        """The Host a browser may name us by (the port is the one bound once listening)."""
+        port = self.address.port
         hosts = {self.address.host, "localhost", "127.0.0.1", "[::1]"} if self.address.loopback \
             else {self.address.host}
         return {f"{h}:{port}" for h in hosts} | {f"[{self.address.host}]:{port}"}
@@ -509,6 +505,11 @@ class WebFront:
             page.end()
         if self._runner is not None:
             await self._runner.cleanup()
+
+
+def _event(data: object) -> bytes:
+    """One server-sent event of ``data`` as JSON."""
+    return b"data: " + json.dumps(data, separators=(",", ":")).encode() + b"\n\n"
 
 
 def _crash_text(crash: Any) -> str:
