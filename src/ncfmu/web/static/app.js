@@ -78,6 +78,7 @@ function build() {
     if (p && p.min !== null) dial.min = String(Math.round(p.min * 100));
   }
   if (machine.section) buildSection(machine.section);
+  else document.getElementById("section-view").hidden = true;     // a grinder: no section is cut
 }
 
 function ringsPath(rings) {
