@@ -108,11 +108,11 @@ def test_two_browsers_watch_hold_and_release_the_same_machine(served):
         for d in (a, b):                         # ... both see it forced
             wait_for(lambda d=d: text(d, "Simulation.forced") == "seq.feed_hold" and text(d, "seq.feed_hold") == "on")
             assert "forced" in d.find_element("css selector", '[data-var="seq.feed_hold"]').get_attribute("class")
-        time.sleep(0.6)                          # the axes come to rest (1.2 s simulated)
+        t_hold = float(text(a, "Simulation.time"))
+        wait_for(lambda: float(text(a, "Simulation.time")) > t_hold + 1.0)       # the axes come to rest
         held = [(text(a, f"{axis}.pos"), text(b, f"{axis}.pos")) for axis in ("x_axis", "z_axis")]
         t_held = float(text(a, "Simulation.time"))
-        time.sleep(0.5)                          # 1 s simulated: neither axis moves by a µm
-        assert float(text(a, "Simulation.time")) > t_held + 0.5
+        wait_for(lambda: float(text(a, "Simulation.time")) > t_held + 1.0)       # 1 s on: neither moves by a µm
         for axis, (in_a, in_b) in zip(("x_axis", "z_axis"), held):
             assert text(a, f"{axis}.pos") == in_a, f"{axis} moved under feed hold"
             assert in_a == in_b == text(b, f"{axis}.pos"), "the two browsers see different machines"
