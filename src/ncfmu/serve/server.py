@@ -37,6 +37,8 @@ ON_LOST = ("hold", "release")
 #: How long a client's write waits for the simulation thread to take it (the thread takes writes between
 #: chunks, every few ms; longer means the simulation is stopped or failed).
 WRITE_TIMEOUT = 2.0
+#: The ``Simulation`` object's methods without an argument (:meth:`LiveServer.call`), as the address space names them
+METHODS = ("Pause", "Resume", "Stop", "Reset")
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/ncfmu"
 
@@ -249,9 +251,9 @@ class LiveServer:
              ("What", ua.VariantType.String), ("DepthMm", ua.VariantType.Double)])
         self._crash_events = await server.get_event_generator(crash_type, simobj.nodeid)
         self._crashes_published = 0
-        for method in ("Pause", "Resume", "Stop", "Reset"):
+        for method in METHODS:
             await simobj.add_method(self._nid(f"Simulation.{method}"), ua.QualifiedName(method, idx),
-                                    self._method(method.lower()), [], [])
+                                    self._method(method), [], [])
         arg = ua.Argument(Name="name", DataType=ua.NodeId(ua.Int32(ua.ObjectIds.String)), ValueRank=-1,
                           Description=ua.LocalizedText("the input, INSTANCE.VARIABLE (e.g. feed.mfin)"))
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
@@ -281,6 +283,57 @@ class LiveServer:
         if p.type == "Boolean":
             return bool(value)
         return "" if value is None else str(value)
+
+    # -- the panel: what any client may do -- an OPC UA client's request and any other front end's (a web page)
+    # come here alike. Coroutines of the server's event loop (the one :meth:`serve` runs on); each returns once
+    # the simulation thread applied it and the values are published (what a client reads next shows it), or
+    # raises WriteRefused (the OPC UA status's name and why; nothing changed).
+    async def write(self, name: str, value: object) -> None:
+        """Write one served variable as an OPC UA client's Write of its node does: ``INSTANCE.VARIABLE`` an input
+        (forced to ``value``) or a tunable parameter (set), ``INSTANCE.VARIABLE.forced`` True (the input held at
+        its present value) or False (released); ``value`` checked as :func:`~ncfmu.serve.address_space.check_value`
+        has it. No OPC UA session owns what it forces: the watchdog never releases it."""
+        command = self._command(name, value)
+        refusal = await self._submit(command)
+        if refusal is not None:
+            raise self._refused(command, refusal)
+        if command.what in ("force", "release"):
+            self._owner.pop(command.name, None)
+        await self._publish_once()
+
+    async def call(self, method: str) -> None:
+        """``Simulation.Pause``, ``Resume``, ``Stop`` or ``Reset`` (``method`` one of :data:`METHODS`), as an OPC UA
+        client's call does it."""
+        if method not in METHODS:
+            raise WriteRefused("BadMethodInvalid", f"{method!r}: not a method of Simulation ({', '.join(METHODS)})")
+        what = method.lower()
+        if what == "stop" and self.runner.state in ENDED_BADLY:
+            self.stopped.set()
+            return
+        refusal = await self._submit(_Command(what))
+        if refusal is not None:
+            raise WriteRefused("BadInvalidState", refusal)
+        if what == "reset":
+            self._owner.clear()            # nothing is forced after a Reset
+        if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
+            for name in self._held:
+                self._owner.pop(name, None)
+            self._held.clear()
+        await self._publish_once()
+
+    async def release(self, name: str) -> None:
+        """``Simulation.Release(name)``: the input ``name`` (INSTANCE.VARIABLE) falls back to what drives it, as an
+        OPC UA client's call does it."""
+        if not self._is_input(name):
+            raise WriteRefused("BadInvalidArgument", f"Release({name!r}): not an input INSTANCE.VARIABLE")
+        refusal = await self._submit(_Command("release", name))
+        if refusal is not None:
+            raise WriteRefused("BadInvalidState", refusal)
+        self._owner.pop(name, None)
+        await self._publish_once()
+
+    def _is_input(self, name: str) -> bool:
+        return name in self.points and self.points[name].causality == "input"
 
     # -- writes ------------------------------------------------------------------------------------------
     async def _submit(self, command: _Command) -> str | None:
@@ -324,18 +377,36 @@ class LiveServer:
         if forced:
             if vt != ua.VariantType.Boolean:
                 return "BadTypeMismatch", f"{key} = {value!r}: must be a Boolean"
+        else:
+            assert p is not None
+            if p.writes and vt != self.vtype[p.type]:
+                return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
+                                           f"must be a {self.vtype[p.type].name}")
+        try:
+            return self._command(key, value)
+        except WriteRefused as err:
+            return err.status, str(err)
+
+    def _command(self, key: str, value: object) -> _Command:
+        """The command that writes ``value`` to the served variable ``key`` (see :meth:`write`), or
+        :class:`WriteRefused`."""
+        if key.endswith(".forced") and key[:-7] in self.points:
+            if not isinstance(value, bool):
+                raise WriteRefused("BadTypeMismatch", f"{key} = {value!r}: must be a Boolean")
             name = key[:-7]
             # true: held at its present value; false: released
             return _Command("force", name, self._last.get(name)) if value else _Command("release", name)
-        assert p is not None
-        if p.writes and vt != self.vtype[p.type]:
-            return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
-                                       f"must be a {self.vtype[p.type].name}")
-        try:
-            checked = check_value(p, value)
-        except WriteRefused as err:
-            return err.status, str(err)
-        return _Command("force" if p.writes == "input" else "set", key, checked)
+        p = self.points.get(key)
+        if p is None:
+            raise WriteRefused("BadNotWritable", f"{key}: not writable")
+        return _Command("force" if p.writes == "input" else "set", key, check_value(p, value))
+
+    @staticmethod
+    def _refused(command: _Command, refusal: str) -> WriteRefused:
+        """The simulation thread's refusal of a write: the simulation's state (held, stopped ...), else the
+        model's rule."""
+        status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
+        return WriteRefused(status, f"{command.name}: {refusal}")
 
     async def _write(self, params, user=None) -> list:
         """The Write service (OPC UA Part 4 5.11.4): a StatusCode per WriteValue, the good ones applied in their
@@ -365,8 +436,8 @@ class LiveServer:
                     results[i] = ua.StatusCode()
                     self._owned(c, user)
                 else:
-                    status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
-                    results[i] = self._status(status, f"{c.name}: {refusal}")
+                    refused = self._refused(c, refusal)
+                    results[i] = self._status(refused.status, str(refused))
             await self._publish_once()
         if theirs:
             inner = ua.WriteParameters(NodesToWrite=[params.NodesToWrite[i] for i in theirs])
@@ -382,24 +453,15 @@ class LiveServer:
                                         InputArgumentResults=[self.ua.StatusCode(getattr(codes, a))
                                                               for a in arguments])
 
-    def _method(self, what: str):
+    def _method(self, method: str):
         async def call(parent, *args):
             if args:
-                return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
+                return self._call_result("BadTooManyArguments", f"{method} takes no argument",
                                          ["BadTooManyArguments"] * len(args))
-            if what == "stop" and self.runner.state in ENDED_BADLY:
-                self.stopped.set()
-                return []
-            refusal = await self._submit(_Command(what))
-            if refusal is not None:
-                return self._call_result("BadInvalidState", refusal)
-            if what == "reset":
-                self._owner.clear()            # nothing is forced after a Reset
-            if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
-                for name in self._held:
-                    self._owner.pop(name, None)
-                self._held.clear()
-            await self._publish_once()
+            try:
+                await self.call(method)
+            except WriteRefused as refused:
+                return self._call_result(refused.status, str(refused))
             return []
         return call
 
@@ -411,7 +473,7 @@ class LiveServer:
         text = first.Value if isinstance(first, ua.Variant) else first
         if isinstance(first, ua.Variant) and first.VariantType != ua.VariantType.String or not isinstance(text, str):
             verdict = "BadTypeMismatch"
-        elif text not in self.points or self.points[text].causality != "input":
+        elif not self._is_input(text):
             verdict = "BadInvalidArgument"
         else:
             verdict = "Good"
@@ -420,13 +482,10 @@ class LiveServer:
                                      [verdict] + ["BadTooManyArguments"] * (len(args) - 1))
         if verdict == "BadTypeMismatch":
             return self._call_result(verdict, f"Release({text!r}): the name must be a String", [verdict])
-        if verdict == "BadInvalidArgument":
-            return self._call_result(verdict, f"Release({text!r}): not an input INSTANCE.VARIABLE", [verdict])
-        refusal = await self._submit(_Command("release", text))
-        if refusal is not None:
-            return self._call_result("BadInvalidState", refusal, ["Good"])
-        self._owner.pop(text, None)
-        await self._publish_once()
+        try:
+            await self.release(text)
+        except WriteRefused as refused:          # the argument is bad (no input) or Good (the simulation refused)
+            return self._call_result(refused.status, str(refused), [verdict])
         return []
 
     # -- the watchdog -------------------------------------------------------------------------------------
