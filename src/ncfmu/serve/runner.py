@@ -133,7 +133,8 @@ class Runner:
         self._want_snapshot = True
         self._stop = threading.Event()
         self._said_overrun = False
-        self._on_state = on_state
+        #: called from the simulation thread when it ends (the server then stops, unless the run failed)
+        self.on_state = on_state
         self.thread = threading.Thread(target=self._main, name="ncfmu-simulation", daemon=True)
         self._take_snapshot()
         assert self._snapshot is not None
@@ -407,5 +408,5 @@ class Runner:
                     break
                 if c.done is not None:
                     c.done(f"the simulation is {self.state}")
-            if self._on_state is not None:
-                self._on_state()
+            if self.on_state is not None:
+                self.on_state()

@@ -660,7 +660,7 @@ class LiveServer:
             # state and the reason, until Stop, Ctrl-C or SIGTERM
             if self.runner.state not in ENDED_BADLY:
                 loop.call_soon_threadsafe(self.stopped.set)
-        self.runner._on_state = wake
+        self.runner.on_state = wake
         try:
             await self.server.start()
         except OSError as err:          # the port is taken, or the address is not this machine's
