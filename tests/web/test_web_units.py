@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from ncfmu.errors import ConfigError
-from ncfmu.serve import Point, Security, Snapshot
+from ncfmu.serve import Point, Security, Snapshot, WriteRefused
 from ncfmu.web import BACKLOG, WebFront, _Page, check_address, parse_address
 
 POINTS = [Point("x_axis.pos", "x_axis", "pos", "Real", "output", "continuous", "mm", "actual position", None, None),
@@ -24,14 +24,25 @@ POINTS = [Point("x_axis.pos", "x_axis", "pos", "Real", "output", "continuous", "
           Point("seq.program", "seq", "program", "String", "parameter", "fixed", None, "", None, None)]
 
 
+class Runner:
+    """The simulation thread as the page reads it: its newest snapshot (``latest``), set by the test."""
+
+    def __init__(self) -> None:
+        self.snap = Snapshot(0.0, {}, {})
+        self.state, self.feed_holds = "running", ["seq.feed_hold"]
+
+    def latest(self) -> Snapshot:
+        return self.snap
+
+
 class Live:
-    """What the page reads of the OPC UA side: its points and listeners (no server, no simulation)."""
+    """What the page reads of the OPC UA side: its points and the runner (no server, no simulation)."""
 
     system_name = "fake"
 
     def __init__(self) -> None:
         self.points = {p.name: p for p in POINTS}
-        self.listeners: list = []
+        self.runner = Runner()
 
 
 def test_addresses():
@@ -70,19 +81,17 @@ def decode(frame: bytes) -> dict:
 def test_frames_carry_what_changed_and_the_whole_state_to_a_new_page():
     live = Live()
     front = WebFront(live, parse_address("127.0.0.1:0"), Security())        # type: ignore[arg-type]
-    assert live.listeners == [front.take]
     assert front.machine["axes"] == ["x_axis"] and front.machine["controllers"][0]["program"] == "seq.program"
-    # the first snapshot is the only one with the fixed parameters: a later one must not hide them
-    front.take(Snapshot(0.0, {"x_axis.pos": 1.0, "seq.program": "G00 X1\nM30"}, {}))
-    front.take(Snapshot(0.01, {"x_axis.pos": 1.5, "seq.feed_hold": False}, {}))
+    live.runner.snap = Snapshot(0.01, {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": False}, {})
     delta = front._frame()
     assert decode(delta)["values"] == {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": False}
     assert front._frame() is None                            # nothing new: nothing sent
-    front.take(Snapshot(0.02, {"x_axis.pos": 1.5, "seq.feed_hold": True}, {"seq.feed_hold": True}, "running"))
+    live.runner.snap = Snapshot(0.02, {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": True},
+                                {"seq.feed_hold": True}, "running")
     d, w = decode(front._frame()), decode(front._whole())
     assert d["values"] == {"seq.feed_hold": True} and d["forced"] == ["seq.feed_hold"] and d["time"] == 0.02
     assert w["values"]["seq.program"] == "G00 X1\nM30" and w["values"]["x_axis.pos"] == 1.5
-    front.take(Snapshot(0.03, {"x_axis.pos": float("nan")}, {}))
+    live.runner.snap = Snapshot(0.03, {"x_axis.pos": float("nan")}, {})
     assert decode(front._frame())["values"] == {"x_axis.pos": "nan"}      # JSON has no NaN: the word
 
 
@@ -112,7 +121,7 @@ def test_a_page_that_joins_late_and_applies_deltas_sees_what_one_there_from_the_
     late: dict | None = None
     for k, (x, hold, skip_frame) in enumerate(steps):
         forced = {"seq.feed_hold": True} if hold else {}
-        front.take(Snapshot(0.01 * k, {"x_axis.pos": x, "seq.feed_hold": hold}, forced))
+        live.runner.snap = Snapshot(0.01 * k, {"x_axis.pos": x, "seq.feed_hold": hold}, forced)
         if skip_frame and k != len(steps) - 1:            # a frame takes every snapshot since the last one
             continue
         frame = front._frame()
@@ -143,16 +152,16 @@ class Commands(Live):
         self.points["seq.start"] = Point("seq.start", "seq", "start", "Boolean", "input", "discrete", None, "",
                                          None, None)
         self.said: list[tuple] = []
-        self.runner = type("R", (), {"state": "running", "feed_holds": ["seq.feed_hold"]})()
 
-    async def call(self, what: str):
-        self.said.append(("call", what))
+    async def call(self, method: str) -> None:
+        self.said.append(("call", method))
 
-    async def write(self, name: str, value: object):
+    async def write(self, name: str, value: object) -> None:
         self.said.append(("write", name, value))
-        return None if value != 9.0 else f"{name} = 9.0: must be <= 1.5"
+        if value == 9.0:
+            raise WriteRefused("BadOutOfRange", f"{name} = 9.0: must be <= 1.5")
 
-    async def release(self, name: str):
+    async def release(self, name: str) -> None:
         self.said.append(("release", name))
 
 
@@ -179,6 +188,6 @@ def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
             assert refused.status == 409 and said == "seq.feed_override = 9.0: must be <= 1.5"
             assert (await client.get("/static/..%2fserve%2f__init__.py", headers=auth)).status == 404
     asyncio.run(main())
-    assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "reset"),
+    assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "Reset"),
                          ("write", "seq.start", True), ("release", "seq.start"),
                          ("write", "seq.feed_override", 9.0)]

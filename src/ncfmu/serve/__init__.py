@@ -42,7 +42,14 @@ what, how deep), ``Simulation.crashes`` how many -- and the ``Simulation`` objec
 event (Message the same text, Severity 900, and the fields ``SimulationTime``, ``Line``, ``What``, ``DepthMm``).
 Reset starts again; Resume is refused.
 
-The package, by concern (each imports only those above it; nothing here imports the server but :func:`serve`):
+Another front end beside the OPC UA server (a web page) reads the values with
+:meth:`~ncfmu.serve.runner.Runner.latest` (never taking the server's snapshot) and acts with
+:meth:`~ncfmu.serve.server.LiveServer.write`, :meth:`~ncfmu.serve.server.LiveServer.call` and
+:meth:`~ncfmu.serve.server.LiveServer.release` on the server's event loop: the very code the OPC UA Write and the
+``Simulation`` methods run, with the same checks and refusals.
+
+The package, by concern (each module imports only those listed above it; tests/serve/test_serve_package.py holds
+them to it):
 
 - :mod:`~ncfmu.serve.address_space` -- the served variables (:class:`Point`) and the check of a write;
 - :mod:`~ncfmu.serve.recording` -- the recording of a served run (``--out``);

@@ -64,7 +64,7 @@ def points_of(slaves: Sequence) -> list[Point]:
 
 
 class WriteRefused(NcfmuError):
-    """A client's write that changes nothing; ``status`` is the OPC UA status code's name."""
+    """A client's write (or call) that changes nothing; ``status`` is the OPC UA status code's name."""
 
     def __init__(self, status: str, message: str) -> None:
         super().__init__(message)

@@ -10,7 +10,7 @@ import queue
 import threading
 import time as _time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -127,12 +127,14 @@ class Runner:
         self.lag = 0.0
         self.started, self.wall = 0.0, 0.0      # perf_counter at the thread's start; its wall time to the end
         self.commands: queue.SimpleQueue[_Command] = queue.SimpleQueue()
-        self._snapshot: Snapshot | None = None
+        self._snapshot: Snapshot | None = None       # the newest one, until snapshot() takes it
+        self._latest: Snapshot                        # the newest one, for latest()
         self._snapshot_lock = threading.Lock()
         self._want_snapshot = True
         self._stop = threading.Event()
         self._said_overrun = False
-        self._on_state = on_state
+        #: called from the simulation thread when it ends (the server then stops, unless the run failed)
+        self.on_state = on_state
         self.thread = threading.Thread(target=self._main, name="ncfmu-simulation", daemon=True)
         self._take_snapshot()
         assert self._snapshot is not None
@@ -140,6 +142,8 @@ class Runner:
         for p in self.points:
             if p.name not in self._snapshot.values:
                 self._snapshot.values[p.name] = session.value(p.name)
+        #: the first snapshot's values: what latest() shows of a variable no later snapshot holds (a fixed one)
+        self._first_values: dict[str, object] = dict(self._snapshot.values)
 
     # -- called from the server's thread -----------------------------------------------------------
     def start(self) -> None:
@@ -155,6 +159,15 @@ class Runner:
         self._want_snapshot = True
         return snap
 
+    def latest(self) -> Snapshot:
+        """The newest snapshot, every variable's value in it (the fixed parameters' as read at the start), without
+        taking it from :meth:`snapshot`'s one reader (the OPC UA server); for any other reader (a web page), from
+        any thread, as often as it likes (and ask for the next one). The simulation thread is never waited for."""
+        with self._snapshot_lock:
+            snap = self._latest
+        self._want_snapshot = True
+        return replace(snap, values={**self._first_values, **snap.values})
+
     def stop(self, reason: str = "") -> None:
         self.submit(_Command("stop", value=reason))
         self._stop.set()
@@ -169,8 +182,8 @@ class Runner:
         forced = dict(s.forced())
         values.update(forced)       # a forced input shows its forced value as soon as it is forced
         with self._snapshot_lock:
-            self._snapshot = Snapshot(float(s.time), values, forced, self.state, self.reason, self.lag,
-                                      self.stats.overruns, self.crashes, self.verdicts)
+            self._snapshot = self._latest = Snapshot(float(s.time), values, forced, self.state, self.reason,
+                                                     self.lag, self.stats.overruns, self.crashes, self.verdicts)
         self._want_snapshot = False
 
     def _apply(self, c: _Command) -> bool:
@@ -395,5 +408,5 @@ class Runner:
                     break
                 if c.done is not None:
                     c.done(f"the simulation is {self.state}")
-            if self._on_state is not None:
-                self._on_state()
+            if self.on_state is not None:
+                self.on_state()

@@ -24,7 +24,7 @@ from .address_space import UNECE, UNECE_NAMESPACE, Point, WriteRefused, _unece_i
 from .cnc_model import _Mirror, build_cnc_model
 from .crash_watch import CrashWatch, crash_text
 from .recording import Recorder
-from .runner import ENDED_BADLY, Runner, Snapshot, _Command
+from .runner import ENDED_BADLY, Runner, _Command
 from .security import APPLICATION_URI, Security, check_endpoint
 
 log = logging.getLogger(__package__)     # "ncfmu.serve", as before the package was split
@@ -37,6 +37,8 @@ ON_LOST = ("hold", "release")
 #: How long a client's write waits for the simulation thread to take it (the thread takes writes between
 #: chunks, every few ms; longer means the simulation is stopped or failed).
 WRITE_TIMEOUT = 2.0
+#: The ``Simulation`` object's methods without an argument (:meth:`LiveServer.call`), as the address space names them
+METHODS = ("Pause", "Resume", "Stop", "Reset")
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/ncfmu"
 
@@ -136,8 +138,6 @@ class LiveServer:
         self.cnc_components = cnc_components
         self._mirrors: list[_Mirror] = []
         self._mirrored: dict[int, object] = {}
-        #: told each snapshot published (the web page keeps the newest): on the server's loop, not to block it
-        self.listeners: list[Callable[[Snapshot], None]] = []
 
     async def _build(self) -> None:
         from asyncua import Server, ua
@@ -191,8 +191,6 @@ class LiveServer:
         self.vtype = vtype
         snap = self.runner.snapshot()
         assert snap is not None, "the runner takes its first snapshot when made"
-        for listen in self.listeners:
-            listen(snap)
         objects = server.nodes.objects
         instances: dict[str, Node] = {}
         self.nodes: dict[str, Node] = {}
@@ -259,9 +257,9 @@ class LiveServer:
              ("What", ua.VariantType.String), ("DepthMm", ua.VariantType.Double)])
         self._crash_events = await server.get_event_generator(crash_type, simobj.nodeid)
         self._crashes_published = 0
-        for method in ("Pause", "Resume", "Stop", "Reset"):
+        for method in METHODS:
             await simobj.add_method(self._nid(f"Simulation.{method}"), ua.QualifiedName(method, idx),
-                                    self._method(method.lower()), [], [])
+                                    self._method(method), [], [])
         arg = ua.Argument(Name="name", DataType=ua.NodeId(ua.Int32(ua.ObjectIds.String)), ValueRank=-1,
                           Description=ua.LocalizedText("the input, INSTANCE.VARIABLE (e.g. feed.mfin)"))
         await simobj.add_method(self._nid("Simulation.Release"), ua.QualifiedName("Release", idx),
@@ -291,6 +289,57 @@ class LiveServer:
         if p.type == "Boolean":
             return bool(value)
         return "" if value is None else str(value)
+
+    # -- the panel: what any client may do -- an OPC UA client's request and any other front end's (a web page)
+    # come here alike. Coroutines of the server's event loop (the one :meth:`serve` runs on); each returns once
+    # the simulation thread applied it and the values are published (what a client reads next shows it), or
+    # raises WriteRefused (the OPC UA status's name and why; nothing changed).
+    async def write(self, name: str, value: object) -> None:
+        """Write one served variable as an OPC UA client's Write of its node does: ``INSTANCE.VARIABLE`` an input
+        (forced to ``value``) or a tunable parameter (set), ``INSTANCE.VARIABLE.forced`` True (the input held at
+        its present value) or False (released); ``value`` checked as :func:`~ncfmu.serve.address_space.check_value`
+        has it. No OPC UA session owns what it forces: the watchdog never releases it."""
+        command = self._command(name, value)
+        refusal = await self._submit(command)
+        if refusal is not None:
+            raise self._refused(command, refusal)
+        if command.what in ("force", "release"):
+            self._owner.pop(command.name, None)
+        await self._publish_once()
+
+    async def call(self, method: str) -> None:
+        """``Simulation.Pause``, ``Resume``, ``Stop`` or ``Reset`` (``method`` one of :data:`METHODS`), as an OPC UA
+        client's call does it."""
+        if method not in METHODS:
+            raise WriteRefused("BadMethodInvalid", f"{method!r}: not a method of Simulation ({', '.join(METHODS)})")
+        what = method.lower()
+        if what == "stop" and self.runner.state in ENDED_BADLY:
+            self.stopped.set()
+            return
+        refusal = await self._submit(_Command(what))
+        if refusal is not None:
+            raise WriteRefused("BadInvalidState", refusal)
+        if what == "reset":
+            self._owner.clear()            # nothing is forced after a Reset
+        if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
+            for name in self._held:
+                self._owner.pop(name, None)
+            self._held.clear()
+        await self._publish_once()
+
+    async def release(self, name: str) -> None:
+        """``Simulation.Release(name)``: the input ``name`` (INSTANCE.VARIABLE) falls back to what drives it, as an
+        OPC UA client's call does it."""
+        if not self._is_input(name):
+            raise WriteRefused("BadInvalidArgument", f"Release({name!r}): not an input INSTANCE.VARIABLE")
+        refusal = await self._submit(_Command("release", name))
+        if refusal is not None:
+            raise WriteRefused("BadInvalidState", refusal)
+        self._owner.pop(name, None)
+        await self._publish_once()
+
+    def _is_input(self, name: str) -> bool:
+        return name in self.points and self.points[name].causality == "input"
 
     # -- writes ------------------------------------------------------------------------------------------
     async def _submit(self, command: _Command) -> str | None:
@@ -334,18 +383,36 @@ class LiveServer:
         if forced:
             if vt != ua.VariantType.Boolean:
                 return "BadTypeMismatch", f"{key} = {value!r}: must be a Boolean"
+        else:
+            assert p is not None
+            if p.writes and vt != self.vtype[p.type]:
+                return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
+                                           f"must be a {self.vtype[p.type].name}")
+        try:
+            return self._command(key, value)
+        except WriteRefused as err:
+            return err.status, str(err)
+
+    def _command(self, key: str, value: object) -> _Command:
+        """The command that writes ``value`` to the served variable ``key`` (see :meth:`write`), or
+        :class:`WriteRefused`."""
+        if key.endswith(".forced") and key[:-7] in self.points:
+            if not isinstance(value, bool):
+                raise WriteRefused("BadTypeMismatch", f"{key} = {value!r}: must be a Boolean")
             name = key[:-7]
             # true: held at its present value; false: released
             return _Command("force", name, self._last.get(name)) if value else _Command("release", name)
-        assert p is not None
-        if p.writes and vt != self.vtype[p.type]:
-            return "BadTypeMismatch", (f"{key} = {value!r} ({vt.name if vt else 'null'}): "
-                                       f"must be a {self.vtype[p.type].name}")
-        try:
-            checked = check_value(p, value)
-        except WriteRefused as err:
-            return err.status, str(err)
-        return _Command("force" if p.writes == "input" else "set", key, checked)
+        p = self.points.get(key)
+        if p is None:
+            raise WriteRefused("BadNotWritable", f"{key}: not writable")
+        return _Command("force" if p.writes == "input" else "set", key, check_value(p, value))
+
+    @staticmethod
+    def _refused(command: _Command, refusal: str) -> WriteRefused:
+        """The simulation thread's refusal of a write: the simulation's state (held, stopped ...), else the
+        model's rule."""
+        status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
+        return WriteRefused(status, f"{command.name}: {refusal}")
 
     async def _write(self, params, user=None) -> list:
         """The Write service (OPC UA Part 4 5.11.4): a StatusCode per WriteValue, the good ones applied in their
@@ -375,8 +442,8 @@ class LiveServer:
                     results[i] = ua.StatusCode()
                     self._owned(c, user)
                 else:
-                    status = "BadOutOfRange" if "simulation" not in refusal else "BadInvalidState"
-                    results[i] = self._status(status, f"{c.name}: {refusal}")
+                    refused = self._refused(c, refusal)
+                    results[i] = self._status(refused.status, str(refused))
             await self._publish_once()
         if theirs:
             inner = ua.WriteParameters(NodesToWrite=[params.NodesToWrite[i] for i in theirs])
@@ -392,55 +459,16 @@ class LiveServer:
                                         InputArgumentResults=[self.ua.StatusCode(getattr(codes, a))
                                                               for a in arguments])
 
-    async def call(self, what: str) -> str | None:
-        """A ``Simulation`` method without arguments (pause, resume, stop, reset), from a client or the web
-        page: None when it took effect (published), else the refusal."""
-        if what == "stop" and self.runner.state in ENDED_BADLY:
-            self.stopped.set()
-            return None
-        refusal = await self._submit(_Command(what))
-        if refusal is not None:
-            return refusal
-        if what == "reset":
-            self._owner.clear()            # nothing is forced after a Reset
-        if what in ("reset", "resume"):     # what a hold kept is released (Resume), or all is (Reset)
-            for name in self._held:
-                self._owner.pop(name, None)
-            self._held.clear()
-        await self._publish_once()
-        return None
-
-    async def write(self, name: str, value: object) -> str | None:
-        """Force an input or set a tunable parameter as a client's Write does, checked by the same rules; from a
-        front end without an OPC UA session (the web page: no watchdog owns it). None or the refusal."""
-        point = self.points.get(name)
-        if point is None:
-            return f"{name}: no such variable"
-        try:
-            checked = check_value(point, value)
-        except WriteRefused as err:
-            return str(err)
-        refusal = await self._submit(_Command("force" if point.writes == "input" else "set", name, checked))
-        if refusal is None:
-            self._owner.pop(name, None)        # no client session owns it: the watchdog leaves it alone
-            await self._publish_once()
-        return refusal
-
-    async def release(self, name: str) -> str | None:
-        """``Simulation.Release(name)`` once its argument is checked: None or the refusal."""
-        refusal = await self._submit(_Command("release", name))
-        if refusal is None:
-            self._owner.pop(name, None)
-            await self._publish_once()
-        return refusal
-
-    def _method(self, what: str):
+    def _method(self, method: str):
         async def call(parent, *args):
             if args:
-                return self._call_result("BadTooManyArguments", f"{what.capitalize()} takes no argument",
+                return self._call_result("BadTooManyArguments", f"{method} takes no argument",
                                          ["BadTooManyArguments"] * len(args))
-            refusal = await self.call(what)
-            return [] if refusal is None else self._call_result("BadInvalidState", refusal)
+            try:
+                await self.call(method)
+            except WriteRefused as refused:
+                return self._call_result(refused.status, str(refused))
+            return []
         return call
 
     async def _release_method(self, parent, *args):
@@ -451,7 +479,7 @@ class LiveServer:
         text = first.Value if isinstance(first, ua.Variant) else first
         if isinstance(first, ua.Variant) and first.VariantType != ua.VariantType.String or not isinstance(text, str):
             verdict = "BadTypeMismatch"
-        elif text not in self.points or self.points[text].causality != "input":
+        elif not self._is_input(text):
             verdict = "BadInvalidArgument"
         else:
             verdict = "Good"
@@ -460,10 +488,11 @@ class LiveServer:
                                      [verdict] + ["BadTooManyArguments"] * (len(args) - 1))
         if verdict == "BadTypeMismatch":
             return self._call_result(verdict, f"Release({text!r}): the name must be a String", [verdict])
-        if verdict == "BadInvalidArgument":
-            return self._call_result(verdict, f"Release({text!r}): not an input INSTANCE.VARIABLE", [verdict])
-        refusal = await self.release(text)
-        return [] if refusal is None else self._call_result("BadInvalidState", refusal, ["Good"])
+        try:
+            await self.release(text)
+        except WriteRefused as refused:          # the argument is bad (no input) or Good (the simulation refused)
+            return self._call_result(refused.status, str(refused), [verdict])
+        return []
 
     # -- the watchdog -------------------------------------------------------------------------------------
     def _watch_sessions(self, iserver) -> None:
@@ -558,8 +587,6 @@ class LiveServer:
         ua = self.ua
         snap = self.runner.snapshot()
         if snap is not None:
-            for listen in self.listeners:
-                listen(snap)
             stamp = None
             for name, value in snap.values.items():
                 if self._last.get(name) != value and name in self.nodes:
@@ -639,7 +666,7 @@ class LiveServer:
             # state and the reason, until Stop, Ctrl-C or SIGTERM
             if self.runner.state not in ENDED_BADLY:
                 loop.call_soon_threadsafe(self.stopped.set)
-        self.runner._on_state = wake
+        self.runner.on_state = wake
         try:
             await self.server.start()
         except OSError as err:          # the port is taken, or the address is not this machine's

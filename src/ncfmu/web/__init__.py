@@ -3,11 +3,11 @@
 The page (``static/``: plain HTML, JS and SVG, nothing from outside) shows a DRO, the program with its current
 line, the cycle, alarms and crashes as they happen, the part section being cut (the part check's polygons) and
 the panel's buttons. The server (aiohttp) runs on the OPC UA server's asyncio loop and never calls into the
-simulation: it keeps the newest :class:`~ncfmu.serve.Snapshot` the OPC UA side publishes (a reference, taken
-at up to 100 Hz) and, from the part check's thread, the newest section of the stock. A broadcaster encodes what
-changed once per frame (:data:`FRAME_RATE`) and pushes it to every page as server-sent events; a page that
-cannot keep up gets the whole state again instead of a queue that grows. The buttons are the OPC UA side's own
-commands (:meth:`~ncfmu.serve.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
+simulation: once per frame (:data:`FRAME_RATE`) it reads the newest snapshot (:meth:`~ncfmu.serve.Runner.latest`,
+which never waits for the simulation thread) and, from the part check's thread, the newest section of the stock;
+it encodes what changed once and pushes it to every page as server-sent events; a page that cannot keep up gets
+the whole state again instead of a queue that grows. The buttons are the OPC UA side's own requests
+(:meth:`~ncfmu.serve.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import ConfigError
+from ..serve.address_space import WriteRefused
+from ..serve.crash_watch import crash_text
 
 if TYPE_CHECKING:
     from aiohttp import web
@@ -174,9 +176,6 @@ class WebFront:
         self.listening = listening
         self.interval = 1.0 / rate
         self.points = live.points
-        self._snapshot: Snapshot | None = None
-        #: the first snapshot, the only one with the fixed parameters (the program's text): merged first
-        self._first: Snapshot | None = None
         self._values: dict[str, object] = {}         # what the pages were last sent
         self._frame_state: dict[str, object] = {}
         self._section: dict[str, object] | None = None      # the newest stock section (from the check thread)
@@ -189,7 +188,6 @@ class WebFront:
         self.url = ""
         self.frames_sent = 0
         self.machine = self._describe()
-        live.listeners.append(self.take)
         if watch is not None:
             watch.on_judged = self.judged
 
@@ -235,12 +233,6 @@ class WebFront:
         return machine
 
     # -- fed by the OPC UA side and the part check ------------------------------------------------------
-    def take(self, snapshot: Snapshot) -> None:
-        """The OPC UA side's newest snapshot (its publishing loop, the event loop: a reference kept)."""
-        if self._first is None and not self._values:
-            self._first = snapshot
-        self._snapshot = snapshot
-
     def judged(self, accumulator: Any) -> None:
         """The part check judged rows (its own thread, which owns the accumulator): the stock as it is now, at
         most every SECTION_INTERVAL (a Reset's first check always: the page must see the new bar)."""
@@ -262,27 +254,21 @@ class WebFront:
         return {"time": snap.time, "state": snap.state, "reason": snap.reason, "lag": snap.lag,
                 "overruns": snap.overruns, "forced": [n for n in self.points if n in snap.forced],
                 "crashes": [{"t": c.t, "line": c.line, "what": c.what, "depth_mm": c.depth_mm,
-                             "text": _crash_text(c)} for c in snap.crashes],
+                             "text": crash_text(c)} for c in snap.crashes],
                 "verdict": snap.verdicts[-1][1] if snap.verdicts else ""}
 
     def _frame(self) -> bytes | None:
         """What changed since the last frame, encoded once for every page; None: nothing did."""
-        snap = self._snapshot
+        snap = self.live.runner.latest()
         changed: dict[str, object] = {}
         state: dict[str, object] = {}
-        if self._first is not None:
-            for name, value in self._first.values.items():
-                self._values[name] = changed[name] = _json_value(value)
-            self._first = None
-        if snap is not None:
-            self._snapshot = None
-            for name, value in snap.values.items():
-                value = _json_value(value)
-                if self._values.get(name, changed) != value:
-                    self._values[name] = changed[name] = value
-            for key, value in self._state(snap).items():
-                if self._frame_state.get(key) != value:
-                    self._frame_state[key] = state[key] = value
+        for name, value in snap.values.items():
+            value = _json_value(value)
+            if self._values.get(name, changed) != value:
+                self._values[name] = changed[name] = value
+        for key, value in self._state(snap).items():
+            if self._frame_state.get(key) != value:
+                self._frame_state[key] = state[key] = value
         section = self._section
         if section is not None and section is not self._section_sent:
             self._section_sent = state["section"] = section
@@ -315,45 +301,43 @@ class WebFront:
 
     # -- the panel -----------------------------------------------------------------------------------------------
     async def act(self, what: str, value: object = None) -> str | None:
-        """A button: the OPC UA side's own command for it; None (done) or the refusal's text."""
+        """A button: the OPC UA side's own request for it; None (done) or the refusal's text."""
+        try:
+            return await self._act(what, value)
+        except WriteRefused as refused:
+            return str(refused)
+
+    async def _act(self, what: str, value: object) -> str | None:
         live = self.live
         runner = live.runner
         controllers = [c["name"] for c in self.machine["controllers"]]        # type: ignore[attr-defined]
         if what == "reset":
-            return await live.call("reset")
+            await live.call("Reset")
+            return None
         if what in ("start", "release") and runner.state in ("held", "paused"):
-            return await live.call("resume")          # the cycle start after a (watchdog's) hold or a pause
+            await live.call("Resume")          # the cycle start after a (watchdog's) hold or a pause
+            return None
         if what == "hold":
             for name in runner.feed_holds:
-                refusal = await live.write(name, True)
-                if refusal is not None:
-                    return refusal
+                await live.write(name, True)
             return None if runner.feed_holds else "the system has no feed-hold input"
         if what == "release":
             for name in runner.feed_holds:
-                refusal = await live.release(name)
-                if refusal is not None:
-                    return refusal
+                await live.release(name)
             return None
         if what == "start":
             starts = [f"{c}.start" for c in controllers if f"{c}.start" in self.points]
             if not starts:
                 return "the system has no start input"
             for name in starts:
-                refusal = await live.write(name, True)
-                if refusal is not None:
-                    return refusal
-            await asyncio.sleep(START_PULSE)
+                await live.write(name, True)
+            await asyncio.sleep(START_PULSE)      # the controller takes the rising edge at its next step
             for name in starts:
-                refusal = await live.release(name)
-                if refusal is not None:
-                    return refusal
+                await live.release(name)
             return None
         if what == "override":
             for c in controllers:
-                refusal = await live.write(f"{c}.feed_override", value)
-                if refusal is not None:
-                    return refusal
+                await live.write(f"{c}.feed_override", value)
             return None
         return f"{what!r}: not one of {', '.join((*ACTIONS, 'override'))}"
 
@@ -510,11 +494,6 @@ class WebFront:
 def _event(data: object) -> bytes:
     """One server-sent event of ``data`` as JSON."""
     return b"data: " + json.dumps(data, separators=(",", ":")).encode() + b"\n\n"
-
-
-def _crash_text(crash: Any) -> str:
-    from ..serve.crash_watch import crash_text
-    return crash_text(crash)
 
 
 #: Every page and file says where it may load from: here only (the page works on a plant network).
