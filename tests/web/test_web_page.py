@@ -175,6 +175,11 @@ def test_a_crash_appears_on_the_page(ncfmu_project):
             assert any(crash in e for e in events), events
             # the crash is drawn where it happened
             wait_for(lambda: d.find_elements("css selector", '[data-section="crashes"] circle'))
+            # the program line the controller is on is the one marked (it halted there: the page stands still)
+            line = text(d, "seq.line")
+            assert int(line) >= 4
+            assert [li.get_attribute("data-line") for li in d.find_elements("css selector", "#program li.current")] \
+                == [line]
             press(d, "reset")                           # Reset starts again: no crash, running
             wait_for(lambda: text(d, "Simulation.state") == "running" and text(d, "Simulation.crashes") == "0")
             assert errors(d) == []
