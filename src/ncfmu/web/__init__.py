@@ -46,8 +46,6 @@ BACKLOG = 4
 HEARTBEAT = 1.0
 #: How long the server waits for the pages' streams to end when it stops.
 SHUTDOWN = 1.0
-#: The ``--web`` address when only the option is given.
-DEFAULT_ADDRESS = "127.0.0.1:8080"
 STATIC = Path(__file__).parent / "static"
 #: What the page shows of a cycle controller, when the controller has it (in this order).
 CONTROLLER_VALUES = ("line", "block_no", "segment", "canned_cycle", "subcycle", "pass_no", "tool", "busy", "done",
@@ -186,7 +184,6 @@ class WebFront:
         self._runner: web.AppRunner | None = None
         self._task: asyncio.Task | None = None
         self.url = ""
-        self.frames_sent = 0
         self.machine = self._describe()
         if watch is not None:
             watch.on_judged = self.judged
@@ -297,7 +294,6 @@ class WebFront:
                     page.push(whole)
                 elif delta is not None:
                     page.push(delta)
-            self.frames_sent += delta is not None
 
     # -- the panel -----------------------------------------------------------------------------------------------
     async def act(self, what: str, value: object = None) -> str | None:
