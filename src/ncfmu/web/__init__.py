@@ -17,6 +17,7 @@ import base64
 import hmac
 import ipaddress
 import json
+import logging
 import math
 import ssl
 import tempfile
@@ -34,6 +35,8 @@ if TYPE_CHECKING:
     from aiohttp import web
 
     from ..serve import LiveServer, Security, Snapshot
+
+log = logging.getLogger("ncfmu.serve.web")
 
 #: Frames pushed to the pages per second (a browser draws 10-30 Hz; the OPC UA side publishes at 100 Hz).
 FRAME_RATE = 20.0
@@ -285,8 +288,12 @@ class WebFront:
             await asyncio.sleep(self.interval)
             if not self._pages:
                 continue
-            delta = self._frame()
-            whole = self._whole() if any(p.stale for p in self._pages) else None
+            try:
+                delta = self._frame()
+                whole = self._whole() if any(p.stale for p in self._pages) else None
+            except Exception:          # a frame that cannot be made must not end the pages' updates for good
+                log.exception("ncfmu serve --web: a frame failed")
+                continue
             for page in self._pages:
                 if page.stale:
                     assert whole is not None
