@@ -24,6 +24,12 @@ every trial. Claim nothing from the first mode's numbers about a change; claim f
 
 the same, but this checkout against itself: without the options ("off") and with them ("on"), interleaved.
 
+    python bench/serve_lag.py --on-off --browsers 2 [--repeats 3] [--seconds 30]
+
+the same with the live page: "on" adds ``--web`` and N headless chromium browsers watching the page for the whole
+run (tests/web/web_browser.py's, Debian's chromium; they share the machine's cores with the server, as they would
+on an engineer's desk), "off" is the same serve (both with --options) without the page and without browsers.
+
 Since issue 47 ``ncfmu serve`` serves the OPC 40502 model by default (``--cnc`` is its explicit form): a run
 "without options" has it; ``--options "--no-cnc"`` is the side without it.
 """
@@ -38,7 +44,10 @@ import re
 import socket
 import subprocess
 import sys
+import threading
 import time
+import urllib.request
+from contextlib import ExitStack
 from pathlib import Path
 
 WALL = re.compile(r"after (?P<wall>[\d.]+) s of wall time")
@@ -101,10 +110,37 @@ def wake_up_baseline(seconds: float) -> dict:
             "over_10ms": sum(x > 0.010 for x in late)}
 
 
+def watch_page(url: str, browsers: int, done: threading.Event, frames: list[int]) -> None:
+    """``browsers`` headless chromium browsers on the page until ``done``; the frames each page drew."""
+    sys.path.insert(0, str(Path(__file__).parent.parent / "tests" / "web"))
+    from web_browser import browser
+    give_up = time.monotonic() + 120.0
+    while not done.is_set():
+        try:
+            urllib.request.urlopen(url, timeout=1).close()
+            break
+        except OSError:
+            if time.monotonic() > give_up:
+                raise RuntimeError(f"no page at {url}") from None
+            time.sleep(0.1)
+    with ExitStack() as stack:
+        drivers = [stack.enter_context(browser()) for _ in range(browsers)]
+        for d in drivers:
+            d.get(url)
+        done.wait()
+        try:
+            frames.extend(int(d.execute_script("return Number(document.body.dataset.frames || 0)")) for d in drivers)
+        except Exception:           # the server ended first: the pages stand
+            pass
+
+
 def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str], python: str = sys.executable,
-               cwd: str | None = None, options: tuple[str, ...] = ()) -> dict:
+               cwd: str | None = None, options: tuple[str, ...] = (), browsers: int = 0) -> dict:
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}/ncfmu"
+    page = f"127.0.0.1:{free_port()}"
+    if browsers:
+        options = (*options, "--web", page)
     proc = subprocess.Popen([python, "-m", "ncfmu.cli", "serve", system, "--endpoint", endpoint,
                              "--speed", repr(speed), "--stop-time", repr(sim_seconds), *options],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd,
@@ -117,9 +153,16 @@ def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str], p
             await asyncio.sleep(0.2)
         stop.set()
         return await task
+    done, frames = threading.Event(), []
+    pages = threading.Thread(target=watch_page, args=(f"http://{page}/", browsers, done, frames), daemon=True)
+    if browsers:
+        pages.start()
     wall = time.perf_counter()
     changes = asyncio.run(client())
     wall = time.perf_counter() - wall
+    done.set()
+    if browsers:
+        pages.join(60)
     out = proc.stdout.read() if proc.stdout else ""
     m = SUMMARY.search(out)
     if proc.returncode != 0 or m is None:
@@ -127,7 +170,7 @@ def serve_once(system: str, speed: float, sim_seconds: float, axes: list[str], p
     w = WALL.search(out)
     return {"speed": speed, "options": list(options), "load_average": os.getloadavg()[0],
             "simulated_s": sim_seconds, "wall_s": float(w["wall"]) if w else round(wall, 2),
-            "data_changes": changes,
+            "data_changes": changes, "browsers": browsers, "page_frames": frames,
             "lag_p50_ms": float(m["p50"]), "lag_p99_ms": float(m["p99"]), "lag_max_ms": float(m["max"]),
             "overruns": int(m["overruns"])}
 
@@ -151,21 +194,26 @@ def compare(args, axes: list[str]) -> dict:
     rows: dict[str, list[dict]] = {names[0]: [], names[1]: []}
     for k in range(args.repeats):
         for which in names:
-            r = (serve_once(args.system, 1.0, args.seconds, axes, str(python), src and str(src))
-                 if which == names[0] else serve_once(args.system, 1.0, args.seconds, axes, options=options))
+            # with browsers, both sides get --options: they differ by the page and its browsers alone
+            r = (serve_once(args.system, 1.0, args.seconds, axes, str(python), src and str(src),
+                            options=options if args.browsers else ())
+                 if which == names[0] else serve_once(args.system, 1.0, args.seconds, axes, options=options,
+                                                      browsers=args.browsers))
             rows[which].append(r)
             label = ("this checkout, no options" if args.on_off else sha[:10]) if which == names[0] else \
-                f"this checkout {args.options}"
+                f"this checkout {args.options}" + (f" --web, {args.browsers} browsers" if args.browsers else "")
             print(f"  {k + 1} {which} ({label}): "
                   f"lag p50 {r['lag_p50_ms']:.2f} ms, p99 {r['lag_p99_ms']:.2f} ms, max {r['lag_max_ms']:.2f} ms; "
-                  f"overruns {r['overruns']}; {r['data_changes']} data changes; load average "
+                  f"overruns {r['overruns']}; {r['data_changes']} data changes; "
+                  + (f"frames drawn by the pages {r['page_frames']}; " if r["browsers"] else "") + "load average "
                   f"{r['load_average']:.2f}", flush=True)
     for which, rs in rows.items():
         p99 = sorted(r["lag_p99_ms"] for r in rs)
         print(f"{which}: lag p99 median {p99[len(p99) // 2]:.2f} ms (of {', '.join(f'{x:.2f}' for x in p99)}); "
               f"overruns {sum(r['overruns'] for r in rs)} in {len(rs)} runs of {args.seconds:g} s")
     print(f"machine: load average {os.getloadavg()[0]:.2f} (1 min) at the end")
-    return {"system": args.system, "against": sha, "options": list(options), **rows, "cores": os.cpu_count(),
+    return {"system": args.system, "against": sha, "options": list(options), "browsers": args.browsers, **rows,
+            "cores": os.cpu_count(),
             "load_average_start": load_start, "load_average_end": os.getloadavg()}
 
 
@@ -183,6 +231,8 @@ def main() -> dict:
                         help="compare this checkout without --options and with them, side by side")
     parser.add_argument("--options", default="",
                         help="ncfmu serve options of this checkout's runs (with --against or --on-off)")
+    parser.add_argument("--browsers", type=int, default=0,
+                        help="with --on-off: the 'on' side serves --web with this many browsers on the page")
     parser.add_argument("--repeats", type=int, default=3, help="old/new (off/on) pairs (with --against, --on-off)")
     parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
                         help="where bench/compare.py keeps the revisions' worktrees and venvs")

@@ -663,7 +663,7 @@ def cmd_vars(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from .serving import APPLICATION_URI, Security, make_certificate, serve
+    from .serve import APPLICATION_URI, Security, make_certificate, serve
     if args.make_certificate is not None:
         key, cert = make_certificate(args.make_certificate)
         print(f"ncfmu serve: wrote {cert} (application URI {APPLICATION_URI}) and its private key {key}; serve "
@@ -688,14 +688,25 @@ def cmd_serve(args) -> int:
     def verdict(t: float, line: str) -> None:
         print(f"ncfmu serve: program ended at t = {t:.3f} s: {line}", flush=True)
 
+    security = Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure)
+    front = None
+    if args.web is not None:            # the live page beside the OPC UA server (ncfmu.web)
+        from .web import WebFront, check_address, parse_address
+        address = parse_address(args.web)
+        check_address(address, security)
+
+        def front(live, watch) -> WebFront:
+            return WebFront(live, address, security, watch,
+                            listening=lambda url: print(f"ncfmu serve: the live page at {url}", flush=True))
+
     program = _program_value(args)
     summary = serve(args.system, endpoint=args.endpoint, speed=args.speed,
                     start_values={**_parse_set(args.set), **program},
                     stop_time=args.stop_time, step_size=args.step, record=args.record, out=args.out,
-                    security=Security(users, args.certificate, args.private_key, args.trust, args.allow_insecure),
+                    security=security,
                     root=args.root, ready=ready,
                     watchdog=args.watchdog, cnc=args.cnc, on_lost=args.on_lost or "hold",
-                    on_verdict=verdict, drawing=_drawing(args))
+                    on_verdict=verdict, drawing=_drawing(args), front=front)
     print(f"ncfmu serve: {summary.system} {summary.state} at t = {summary.time:.3f} s"
           + (f" ({summary.reason})" if summary.reason else "")
           + f" after {summary.wall:.2f} s of wall time"
@@ -904,6 +915,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--drawing", type=Path, default=None, metavar="FILE.dxf",
                    help="the part check judges against the part drawn (as 'ncfmu run --drawing'): a served mill's "
                         "gouges are crashes against the outline drawn")
+    p.add_argument("--web", nargs="?", const="127.0.0.1:8080", default=None, metavar="HOST:PORT",
+                   help="also serve the live page of the machine there (default 127.0.0.1:8080; another address "
+                        "than the loopback needs --user and --certificate, or --allow-insecure)")
     _program_option(p)
     _kind_options(p)
     p.set_defaults(func=cmd_serve, no_part_check=False)

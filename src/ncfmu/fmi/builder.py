@@ -216,7 +216,7 @@ def _run_setup(src: Path, out: Path, modules: list[str]) -> tuple[int, str]:
     setup = src / "build" / "setup.py"
     setup.write_text(_SETUP.format(modules=modules, jobs=_compile_jobs()))
     # as ``python -m mypyc`` runs it: mypyc's own folder first, and the working folder (the empty entry) on the
-    # path, so mypy finds the staged package there and does not check what it leaves out (serving, ...)
+    # path, so mypy finds the staged package there and does not check what it leaves out (serve, ...)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(mypyc.__file__).parents[1]),
                                                        os.environ.get("PYTHONPATH", "")]))
     started = time.monotonic()

@@ -1,0 +1,193 @@
+"""The live page's server without a browser or a served system: its address rules, and how frames are made and
+handed to pages (decimated, the whole state to a page that fell behind) from snapshots, never from the
+simulation."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import subprocess
+import sys
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ncfmu.errors import ConfigError
+from ncfmu.serve import Point, Security, Snapshot, WriteRefused
+from ncfmu.web import BACKLOG, WebFront, _Page, check_address, parse_address
+
+POINTS = [Point("x_axis.pos", "x_axis", "pos", "Real", "output", "continuous", "mm", "actual position", None, None),
+          Point("x_axis.pos_cmd", "x_axis", "pos_cmd", "Real", "input", "continuous", "mm", "", None, None),
+          Point("seq.feed_hold", "seq", "feed_hold", "Boolean", "input", "discrete", None, "", None, None),
+          Point("seq.feed_override", "seq", "feed_override", "Real", "input", "discrete", "1", "", 0.0, 1.5),
+          Point("seq.program", "seq", "program", "String", "parameter", "fixed", None, "", None, None)]
+
+
+class Runner:
+    """The simulation thread as the page reads it: its newest snapshot (``latest``), set by the test."""
+
+    def __init__(self) -> None:
+        self.snap = Snapshot(0.0, {}, {})
+        self.state, self.feed_holds = "running", ["seq.feed_hold"]
+
+    def latest(self) -> Snapshot:
+        return self.snap
+
+
+class Live:
+    """What the page reads of the OPC UA side: its points and the runner (no server, no simulation)."""
+
+    system_name = "fake"
+
+    def __init__(self) -> None:
+        self.points = {p.name: p for p in POINTS}
+        self.runner = Runner()
+
+
+def test_addresses():
+    assert parse_address("127.0.0.1:8080").loopback and parse_address("localhost:0").port == 0
+    assert parse_address("[::1]:9000").host == "::1" and parse_address("[::1]:9000").loopback
+    assert not parse_address("0.0.0.0:8080").loopback
+    for bad in ("8080", "127.0.0.1:", "127.0.0.1:http", "127.0.0.1:70000", ":8080"):
+        with pytest.raises(ConfigError, match=r"--web = .*must be HOST:PORT"):
+            parse_address(bad)
+
+
+def test_off_the_loopback_the_page_needs_users_and_https():
+    wide = parse_address("0.0.0.0:8080")
+    check_address(parse_address("127.0.0.1:8080"), Security())
+    with pytest.raises(ConfigError, match="needs --user NAME:PASSWORD"):
+        check_address(wide, Security())
+    with pytest.raises(ConfigError, match="needs --certificate and --private-key"):
+        check_address(wide, Security(users={"op": "pw"}))
+    check_address(wide, Security(users={"op": "pw"}, allow_insecure=True))
+
+
+def test_the_cli_refuses_an_open_page_in_one_line():
+    """Before anything is built: exit status 2 and one line naming the option, the value and the rule."""
+    done = subprocess.run([sys.executable, "-m", "ncfmu.cli", "serve", "lathe_taper", "--web", "0.0.0.0:8080"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    said = done.stderr.strip().splitlines()
+    assert len(said) == 1 and "--web = '0.0.0.0:8080'" in said[0] and "needs --user" in said[0], done.stderr
+
+
+def decode(frame: bytes) -> dict:
+    assert frame.startswith(b"data: ") and frame.endswith(b"\n\n")
+    return json.loads(frame[6:])
+
+
+def test_frames_carry_what_changed_and_the_whole_state_to_a_new_page():
+    live = Live()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())        # type: ignore[arg-type]
+    assert front.machine["axes"] == ["x_axis"] and front.machine["controllers"][0]["program"] == "seq.program"
+    live.runner.snap = Snapshot(0.01, {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": False}, {})
+    delta = front._frame()
+    assert decode(delta)["values"] == {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": False}
+    assert front._frame() is None                            # nothing new: nothing sent
+    live.runner.snap = Snapshot(0.02, {"x_axis.pos": 1.5, "seq.program": "G00 X1\nM30", "seq.feed_hold": True},
+                                {"seq.feed_hold": True}, "running")
+    d, w = decode(front._frame()), decode(front._whole())
+    assert d["values"] == {"seq.feed_hold": True} and d["forced"] == ["seq.feed_hold"] and d["time"] == 0.02
+    assert w["values"]["seq.program"] == "G00 X1\nM30" and w["values"]["x_axis.pos"] == 1.5
+    live.runner.snap = Snapshot(0.03, {"x_axis.pos": float("nan")}, {})
+    assert decode(front._frame())["values"] == {"x_axis.pos": "nan"}      # JSON has no NaN: the word
+
+
+def test_a_page_that_falls_behind_gets_the_whole_state_not_a_growing_queue():
+    async def main() -> None:
+        page = _Page()
+        page.stale = False
+        for k in range(BACKLOG):
+            page.push(b"%d" % k)
+        assert not page.stale and page.frames.qsize() == BACKLOG
+        page.push(b"one too many")
+        assert page.stale and page.frames.empty()      # the broadcaster sends it the whole state next
+        page.end()
+        assert await page.frames.get() is None          # the server stops: its stream ends
+    asyncio.run(main())
+
+
+@given(st.lists(st.tuples(st.floats(allow_nan=False, allow_infinity=False, width=32), st.booleans(), st.booleans()),
+                min_size=1, max_size=12),
+       st.integers(0, 11))
+def test_a_page_that_joins_late_and_applies_deltas_sees_what_one_there_from_the_start_sees(steps, joins):
+    """However the snapshots come (each frame decimates those since the last), the whole state a page gets when
+    it joins plus every delta after it is the same as the deltas from the start: one machine for every page."""
+    live = Live()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())        # type: ignore[arg-type]
+    first: dict = {}
+    late: dict | None = None
+    for k, (x, hold, skip_frame) in enumerate(steps):
+        forced = {"seq.feed_hold": True} if hold else {}
+        live.runner.snap = Snapshot(0.01 * k, {"x_axis.pos": x, "seq.feed_hold": hold}, forced)
+        if skip_frame and k != len(steps) - 1:            # a frame takes every snapshot since the last one
+            continue
+        frame = front._frame()
+        if frame is None:
+            continue
+        delta, whole = decode(frame), decode(front._whole())
+        merge(first, delta)
+        if late is None and k >= joins:
+            late = whole
+        elif late is not None:
+            merge(late, delta)
+    assert late is None or late == first
+    assert first["values"]["x_axis.pos"] == steps[-1][0] and first["forced"] == (["seq.feed_hold"] if steps[-1][1]
+                                                                                 else [])
+
+
+def merge(state: dict, delta: dict) -> None:
+    """What the page's apply() does with a frame."""
+    state.setdefault("values", {}).update(delta.get("values", {}))
+    state.update({k: v for k, v in delta.items() if k != "values"})
+
+
+class Commands(Live):
+    """A LiveServer's commands, recorded: what each button asks of the OPC UA side's own implementation."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.points["seq.start"] = Point("seq.start", "seq", "start", "Boolean", "input", "discrete", None, "",
+                                         None, None)
+        self.said: list[tuple] = []
+
+    async def call(self, method: str) -> None:
+        self.said.append(("call", method))
+
+    async def write(self, name: str, value: object) -> None:
+        self.said.append(("write", name, value))
+        if value == 9.0:
+            raise WriteRefused("BadOutOfRange", f"{name} = 9.0: must be <= 1.5")
+
+    async def release(self, name: str) -> None:
+        self.said.append(("release", name))
+
+
+def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
+    from aiohttp import encode_basic_auth
+    from aiohttp.test_utils import TestClient, TestServer
+    live = Commands()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security(users={"op": "secret"}))  # type: ignore[arg-type]
+
+    async def main() -> None:
+        async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
+            front.address = parse_address(f"127.0.0.1:{client.port}")
+            assert (await client.get("/")).status == 401
+            wrong = {"Authorization": encode_basic_auth("op", "wrong")}
+            assert (await client.get("/", headers=wrong)).status == 401
+            auth = {"Authorization": encode_basic_auth("op", "secret")}
+            page = await client.get("/", headers=auth)
+            assert page.status == 200 and "default-src 'self'" in page.headers["Content-Security-Policy"]
+            assert 'data-action="hold"' in await page.text()
+            for action in ("hold", "release", "reset", "start"):
+                assert (await client.post(f"/api/action/{action}", json={}, headers=auth)).status == 200
+            refused = await client.post("/api/action/override", json={"value": 9.0}, headers=auth)
+            said = (await refused.json())["error"]
+            assert refused.status == 409 and said == "seq.feed_override = 9.0: must be <= 1.5"
+            assert (await client.get("/static/..%2fserve%2f__init__.py", headers=auth)).status == 404
+    asyncio.run(main())
+    assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "Reset"),
+                         ("write", "seq.start", True), ("release", "seq.start"),
+                         ("write", "seq.feed_override", 9.0)]
