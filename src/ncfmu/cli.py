@@ -663,7 +663,7 @@ def cmd_vars(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from .serve import APPLICATION_URI, Security, make_certificate, serve
+    from .serving import APPLICATION_URI, Security, make_certificate, serve
     if args.make_certificate is not None:
         key, cert = make_certificate(args.make_certificate)
         print(f"ncfmu serve: wrote {cert} (application URI {APPLICATION_URI}) and its private key {key}; serve "

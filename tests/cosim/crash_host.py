@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from ncfmu.project import OpenSystem
-from ncfmu.serve import ENDED_BADLY, Recorder, Runner, points_of
+from ncfmu.serving import ENDED_BADLY, Recorder, Runner, points_of
 
 
 def main(archive: str, out: str, crash_at: str) -> None:

@@ -34,17 +34,17 @@ ALLOWED: dict[str, set[str]] = {
                 "machining"},
 }
 #: The front end: what nothing below it may import. Each front module may import every layer of ALLOWED and the
-#: front modules named here (``__init__`` is the package root: ``ncfmu.serve``).
+#: front modules named here (``__init__`` is the package root: ``ncfmu.serving``).
 FRONT: dict[str, set[str]] = {
     "docs": set(),
     "plots": set(),
     "project": {"docs"},
     "batch": {"project"},
-    "serve": {"project"},
-    "web": {"serve"},
+    "serving": {"project"},
+    "web": {"serving"},
     "pytest_plugin": {"project"},
-    "cli": {"project", "batch", "serve", "web", "plots"},
-    "__init__": {"serve"},
+    "cli": {"project", "batch", "serving", "web", "plots"},
+    "__init__": {"serving"},
 }
 #: third-party packages a layer must not import (the controllers run inside FMUs on the standard library)
 FORBIDDEN_PACKAGES = {"controllers": {"pythonfmu", "fmpy", "numpy", "scipy", "control", "shapely"},
@@ -125,8 +125,8 @@ def test_the_front_end_rule_catches_a_front_import():
     module it is not given, are found; front to a lower layer is fine."""
     layers = _layers()
     assert _violations("cosim", [(3, "project")], layers) == ["line 3: cosim imports project"]
-    assert _violations("serve", [(5, "cli"), (6, "project"), (7, "cosim")], layers) == [
-        "line 5: serve imports the front-end module cli"]
+    assert _violations("serving", [(5, "cli"), (6, "project"), (7, "cosim")], layers) == [
+        "line 5: serving imports the front-end module cli"]
 
 
 #: C outside the FMI layers and the native models (whose includes are C_INCLUDES below): the master's loop, which

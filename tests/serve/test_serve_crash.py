@@ -14,7 +14,7 @@ from serve_plc import connect, run
 
 from ncfmu.cosim.result import Result
 from ncfmu.machining.removal import TOUCH
-from ncfmu.serve import CRASH_CHECK, CRASH_SEVERITY, MAX_CHUNK_WALL
+from ncfmu.serving import CRASH_CHECK, CRASH_SEVERITY, MAX_CHUNK_WALL
 
 pytestmark = pytest.mark.slow
 

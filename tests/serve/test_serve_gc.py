@@ -11,7 +11,7 @@ import socket
 
 from test_serve_runner import POINTS, Session
 
-from ncfmu.serve import LiveServer, Runner
+from ncfmu.serving import LiveServer, Runner
 
 
 def free_endpoint() -> str:

@@ -1,4 +1,4 @@
-"""The ``ncfmu.serve`` package: split by concern with its imports pointing one way (the simulation thread knows
+"""The ``ncfmu.serving`` package: split by concern with its imports pointing one way (the simulation thread knows
 nothing of OPC UA), and ``ncfmu.serve(...)`` callable whether or not the package was imported."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from conftest import ROOT
 
 from ncfmu.errors import ConfigError
 
-PACKAGE = ROOT / "src" / "ncfmu" / "serve"
+PACKAGE = ROOT / "src" / "ncfmu" / "serving"
 
 #: module -> the package's modules it may import: each only those above it; the server all of them.
 BELOW: dict[str, set[str]] = {
@@ -47,17 +47,17 @@ def test_every_module_of_the_package_is_placed():
 @pytest.mark.parametrize("module", sorted(BELOW))
 def test_the_package_imports_point_one_way(module):
     ours, theirs = _imports(module)
-    assert ours <= BELOW[module], f"serve/{module}.py imports {sorted(ours - BELOW[module])}"
+    assert ours <= BELOW[module], f"serving/{module}.py imports {sorted(ours - BELOW[module])}"
     if module in OPC_UA_ONLY:
-        assert "asyncua" not in theirs, f"serve/{module}.py imports asyncua"
+        assert "asyncua" not in theirs, f"serving/{module}.py imports asyncua"
 
 
 def test_ncfmu_serve_stays_callable_once_the_package_is_imported():
-    """README: ``ncfmu.serve("grinder_feed", ...)`` from Python scripts. Importing the package binds the name
-    ``ncfmu.serve`` to it, over ncfmu's function: the call must still reach :func:`ncfmu.serve.serve` (here its
-    first check, the endpoint's, refuses before anything is opened)."""
+    """README: ``ncfmu.serve("grinder_feed", ...)`` from Python scripts. The package is ``ncfmu.serving`` so that
+    importing it never binds the name ``ncfmu.serve`` over ncfmu's function: the call still reaches
+    :func:`ncfmu.serving.serve` (here its first check, the endpoint's, refuses before anything is opened)."""
     import ncfmu
-    import ncfmu.serve.runner  # noqa: F401  (the import that binds the name)
+    import ncfmu.serving.runner  # noqa: F401  (a package named serve would bind ncfmu.serve here)
     with pytest.raises(ConfigError) as refused:
         ncfmu.serve("lathe_taper", endpoint="http://127.0.0.1:4840/ncfmu")
     assert str(refused.value) == "--endpoint = 'http://127.0.0.1:4840/ncfmu': must be opc.tcp://HOST:PORT/PATH"

@@ -13,7 +13,7 @@ import pytest
 from test_serve_gc import free_endpoint
 from test_serve_runner import POINTS, Session
 
-from ncfmu.serve import LiveServer, Point, Runner, WriteRefused
+from ncfmu.serving import LiveServer, Point, Runner, WriteRefused
 
 #: a fixed parameter: read once at the start, in no later snapshot
 FIXED = Point("a.k", "a", "k", "Real", "parameter", "fixed", None, "", None, None)

@@ -14,7 +14,7 @@ import pytest
 from test_serve_runner import POINTS, Session
 
 from ncfmu.machining.removal import Crash
-from ncfmu.serve import CRASH_CHECK, FAST_CHUNK, MAX_CHUNK_WALL, CrashWatch, Runner
+from ncfmu.serving import CRASH_CHECK, FAST_CHUNK, MAX_CHUNK_WALL, CrashWatch, Runner
 
 COLUMNS = [("time", np.dtype(np.float64)), ("a.y", np.dtype(np.float64))]
 

@@ -10,8 +10,8 @@ import time
 import pytest
 
 from ncfmu.errors import ConfigError, SimulationError, TerminationRequested
-from ncfmu.serve import PaceStats, Point, Runner
-from ncfmu.serve.runner import _Command
+from ncfmu.serving import PaceStats, Point, Runner
+from ncfmu.serving.runner import _Command
 
 POINTS = [Point("a.y", "a", "y", "Real", "output", "continuous", None, "", None, None),
           Point("a.u", "a", "u", "Real", "input", "continuous", None, "", None, None)]

@@ -14,8 +14,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from ncfmu.errors import ConfigError
-from ncfmu.serve import Point, Security, WriteRefused, check_endpoint, check_value
-from ncfmu.serve.address_space import _unece_id
+from ncfmu.serving import Point, Security, WriteRefused, check_endpoint, check_value
+from ncfmu.serving.address_space import _unece_id
 
 OVERRIDE = Point("panel.override", "panel", "override", "Real", "parameter", "tunable", "1", "feed override dial",
                  0.0, 1.5)

@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from ncfmu.errors import ConfigError
-from ncfmu.serve import Point, Security, Snapshot, WriteRefused
+from ncfmu.serving import Point, Security, Snapshot, WriteRefused
 from ncfmu.web import BACKLOG, WebFront, _Page, check_address, parse_address
 
 POINTS = [Point("x_axis.pos", "x_axis", "pos", "Real", "output", "continuous", "mm", "actual position", None, None),

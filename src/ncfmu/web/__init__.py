@@ -3,11 +3,11 @@
 The page (``static/``: plain HTML, JS and SVG, nothing from outside) shows a DRO, the program with its current
 line, the cycle, alarms and crashes as they happen, the part section being cut (the part check's polygons) and
 the panel's buttons. The server (aiohttp) runs on the OPC UA server's asyncio loop and never calls into the
-simulation: once per frame (:data:`FRAME_RATE`) it reads the newest snapshot (:meth:`~ncfmu.serve.Runner.latest`,
+simulation: once per frame (:data:`FRAME_RATE`) it reads the newest snapshot (:meth:`~ncfmu.serving.Runner.latest`,
 which never waits for the simulation thread) and, from the part check's thread, the newest section of the stock;
 it encodes what changed once and pushes it to every page as server-sent events; a page that cannot keep up gets
 the whole state again instead of a queue that grows. The buttons are the OPC UA side's own requests
-(:meth:`~ncfmu.serve.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
+(:meth:`~ncfmu.serving.LiveServer.call`, ``write``, ``release``): the same checks, the same effects.
 """
 
 from __future__ import annotations
@@ -28,15 +28,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import ConfigError
-from ..serve.address_space import WriteRefused
-from ..serve.crash_watch import crash_text
+from ..serving.address_space import WriteRefused
+from ..serving.crash_watch import crash_text
 
 if TYPE_CHECKING:
     from aiohttp import web
 
-    from ..serve import LiveServer, Security, Snapshot
+    from ..serving import LiveServer, Security, Snapshot
 
-log = logging.getLogger("ncfmu.serve.web")
+log = logging.getLogger("ncfmu.serving.web")
 
 #: Frames pushed to the pages per second (a browser draws 10-30 Hz; the OPC UA side publishes at 100 Hz).
 FRAME_RATE = 20.0
@@ -168,7 +168,7 @@ class _Page:
 
 
 class WebFront:
-    """The page's server in front of a :class:`~ncfmu.serve.LiveServer` (see the module's docstring)."""
+    """The page's server in front of a :class:`~ncfmu.serving.LiveServer` (see the module's docstring)."""
 
     def __init__(self, live: LiveServer, address: WebAddress, security: Security, watch: Any = None,
                  rate: float = FRAME_RATE, listening: Callable[[str], None] | None = None) -> None:

@@ -25,7 +25,7 @@ methods ``Pause``, ``Resume``, ``Stop``, ``Reset`` and ``Release(name)``.
 
 With a watchdog (``--watchdog S``), a client session that forced inputs is lost when it closes or is silent S s.
 As a CNC that loses its PLC or HMI link stops, ``--on-lost hold`` (the default) puts the machine in feed hold:
-each feed-hold input (:data:`~ncfmu.serve.runner.FEED_HOLD_INPUT`) forced true, the simulation running on (a
+each feed-hold input (:data:`~ncfmu.serving.runner.FEED_HOLD_INPUT`) forced true, the simulation running on (a
 system without one halts: a stop), the lost session's forces kept, ``Simulation.state`` ``held`` and
 ``Simulation.reason`` which session was lost and what is held. Those inputs cannot be forced or released one by
 one meanwhile (Bad_InvalidState); a client's ``Resume`` -- the cycle start after a feed hold -- releases them all
@@ -43,27 +43,24 @@ event (Message the same text, Severity 900, and the fields ``SimulationTime``, `
 Reset starts again; Resume is refused.
 
 Another front end beside the OPC UA server (a web page) reads the values with
-:meth:`~ncfmu.serve.runner.Runner.latest` (never taking the server's snapshot) and acts with
-:meth:`~ncfmu.serve.server.LiveServer.write`, :meth:`~ncfmu.serve.server.LiveServer.call` and
-:meth:`~ncfmu.serve.server.LiveServer.release` on the server's event loop: the very code the OPC UA Write and the
+:meth:`~ncfmu.serving.runner.Runner.latest` (never taking the server's snapshot) and acts with
+:meth:`~ncfmu.serving.server.LiveServer.write`, :meth:`~ncfmu.serving.server.LiveServer.call` and
+:meth:`~ncfmu.serving.server.LiveServer.release` on the server's event loop: the very code the OPC UA Write and the
 ``Simulation`` methods run, with the same checks and refusals.
 
 The package, by concern (each module imports only those listed above it; tests/serve/test_serve_package.py holds
 them to it):
 
-- :mod:`~ncfmu.serve.address_space` -- the served variables (:class:`Point`) and the check of a write;
-- :mod:`~ncfmu.serve.recording` -- the recording of a served run (``--out``);
-- :mod:`~ncfmu.serve.crash_watch` -- the part check's thread: crashes and verdicts as they happen;
-- :mod:`~ncfmu.serve.runner` -- the simulation thread (:class:`Runner`), which knows nothing of OPC UA;
-- :mod:`~ncfmu.serve.cnc_model` -- the OPC 40502 companion model;
-- :mod:`~ncfmu.serve.security` -- who may connect, the server's certificate;
-- :mod:`~ncfmu.serve.server` -- the OPC UA server (:class:`LiveServer`) and :func:`serve`.
+- :mod:`~ncfmu.serving.address_space` -- the served variables (:class:`Point`) and the check of a write;
+- :mod:`~ncfmu.serving.recording` -- the recording of a served run (``--out``);
+- :mod:`~ncfmu.serving.crash_watch` -- the part check's thread: crashes and verdicts as they happen;
+- :mod:`~ncfmu.serving.runner` -- the simulation thread (:class:`Runner`), which knows nothing of OPC UA;
+- :mod:`~ncfmu.serving.cnc_model` -- the OPC 40502 companion model;
+- :mod:`~ncfmu.serving.security` -- who may connect, the server's certificate;
+- :mod:`~ncfmu.serving.server` -- the OPC UA server (:class:`LiveServer`) and :func:`serve`.
 """
 
 from __future__ import annotations
-
-import sys
-import types
 
 from .address_space import Point, WriteRefused, check_value, points_of
 from .cnc_model import build_cnc_model, cnc_types_xml
@@ -78,14 +75,3 @@ __all__ = ["APPLICATION_URI", "CRASH_CHECK", "CRASH_SEVERITY", "DEFAULT_ENDPOINT
            "ServeSummary", "Snapshot", "WriteRefused", "build_cnc_model", "check_endpoint", "check_value",
            "cnc_types_xml", "make_certificate", "points_of", "serve"]
 
-
-class _CallablePackage(types.ModuleType):
-    """``ncfmu.serve(...)`` is the documented call from Python scripts (a function of ``ncfmu``). Importing this
-    package binds the name ``ncfmu.serve`` to the package, over that function; so the package calls
-    :func:`serve` too, and ``ncfmu.serve(...)`` works before and after anything imported the package."""
-
-    def __call__(self, *args, **kwargs) -> ServeSummary:
-        return serve(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallablePackage

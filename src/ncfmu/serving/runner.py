@@ -1,5 +1,5 @@
 """The simulation thread: :class:`Runner` paces a session to the wall clock, applies the clients' commands
-between chunks and leaves a :class:`Snapshot` of the values for the server (see :mod:`ncfmu.serve`). It knows
+between chunks and leaves a :class:`Snapshot` of the values for the server (see :mod:`ncfmu.serving`). It knows
 nothing of OPC UA."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from .address_space import Point
 from .crash_watch import CRASH_CHECK, CrashWatch, crash_text
 from .recording import Recorder
 
-log = logging.getLogger(__package__)     # "ncfmu.serve", as before the package was split
+log = logging.getLogger("ncfmu.serve")     # the name it had before the package was split
 
 #: The states a simulation ends in when it did not finish: ``failed`` (an FMU refused a call, the part check broke)
 #: and ``faulted`` (a foreign FMU's process died: :class:`~ncfmu.errors.FmuCrashed`); the session's rows are kept.
@@ -93,7 +93,7 @@ class PaceStats:
 
 
 class Runner:
-    """Paces a session in a worker thread (see the package's docstring, :mod:`ncfmu.serve`)."""
+    """Paces a session in a worker thread (see the package's docstring, :mod:`ncfmu.serving`)."""
 
     def __init__(self, session, points: Sequence[Point], speed: float = 1.0, recorder: Recorder | None = None,
                  on_state: Callable[[], None] | None = None,

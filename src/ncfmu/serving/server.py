@@ -1,4 +1,4 @@
-"""The OPC UA server in front of a :class:`~ncfmu.serve.runner.Runner` (:class:`LiveServer`: the address
+"""The OPC UA server in front of a :class:`~ncfmu.serving.runner.Runner` (:class:`LiveServer`: the address
 space, the writes, the methods, the watchdog, the publishing) and :func:`serve`, which wires a system to it."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from .recording import Recorder
 from .runner import ENDED_BADLY, Runner, _Command
 from .security import APPLICATION_URI, Security, check_endpoint
 
-log = logging.getLogger(__package__)     # "ncfmu.serve", as before the package was split
+log = logging.getLogger("ncfmu.serve")     # the name it had before the package was split
 
 #: The OPC UA Severity of a crash event (1..1000; 801-1000 is "high" in Part 5).
 CRASH_SEVERITY = 900
@@ -297,7 +297,7 @@ class LiveServer:
     async def write(self, name: str, value: object) -> None:
         """Write one served variable as an OPC UA client's Write of its node does: ``INSTANCE.VARIABLE`` an input
         (forced to ``value``) or a tunable parameter (set), ``INSTANCE.VARIABLE.forced`` True (the input held at
-        its present value) or False (released); ``value`` checked as :func:`~ncfmu.serve.address_space.check_value`
+        its present value) or False (released); ``value`` checked as :func:`~ncfmu.serving.address_space.check_value`
         has it. No OPC UA session owns what it forces: the watchdog never releases it."""
         command = self._command(name, value)
         refusal = await self._submit(command)

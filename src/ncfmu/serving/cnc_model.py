@@ -91,9 +91,9 @@ async def build_cnc_model(server, idx: int, system: str, components: Mapping[str
     model current."""
     from asyncua import ua
 
-    from ..version import __version__
     from ..catalogue import models
     from ..controllers.cycle import CycleController
+    from ..version import __version__
     await server.import_xml(xmlstring=cnc_types_xml())
     cnc = await server.get_namespace_index(CNC_NAMESPACE)
     start = dict(values or {})
