@@ -3,11 +3,13 @@
 A report part (:class:`LathePart`, :class:`MillPart`) like the others of :mod:`.report`: its accumulator reads
 the recorded rows chunk by chunk -- the servo axes' *actual* positions, the controller's program line and
 whether the move is at rapid -- and feeds them to the material-removal engine (:mod:`ncfmu.machining`), which
-keeps the stock left and the crashes, never the trajectory. Everything it needs besides comes from the run's
-parameters: the bar stock (``seq.stock_diameter``, ``seq.stock_length``, ``seq.stock_face_z``) and the chuck
-jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``contour.stock_margin`` around the
-contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
-profile or the outline its registers define (the deepest pass of each block), the mill's closed contour.
+keeps the stock left and the crashes, never the trajectory. Everything it needs besides is what the controller
+configured with the run's parameters publishes (its ``meaning``, :mod:`ncfmu.controllers.meaning`; the part check
+reads no program and no tool table itself): the bar stock and the tools the program uses of a lathe, with the
+chuck jaws (the limiter's regions with a lower X bound); the plate (``contour.stock_margin`` around the contour)
+and the cutter (the compensation's radius) of a mill; and the programmed part: the stock less the regions the
+lathe's operations cut away by their definition (each operation's ``removed()``: G71/G70's all above the profile;
+the registers' all above each block's deepest pass), the mill's closed contour.
 
 Inside work: a G71/G70 profile that rises from the start point's X (a bore, :mod:`..controllers.g7x`) is judged
 as a bore -- the stock a tube whose drilled hole's radius is the bore cycle's start point's X (no parameter: the
