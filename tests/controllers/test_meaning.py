@@ -5,6 +5,8 @@ whether it drives the spindle -- read by the part check, the plots and the threa
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ncfmu.controllers.contour import ContourInterpolator
 from ncfmu.controllers.g7x import FAR
@@ -158,3 +160,31 @@ def test_the_meaning_is_no_state_of_an_fmu_and_a_copy_shares_it():
     seq = CutSequencer(program=LATHE, x_start=25.0, z_start=5.0, x_diameter=False)
     assert "meaning" in CutSequencer.DERIVED and "meaning" in ContourInterpolator.DERIVED
     assert copy.deepcopy(seq).meaning is seq.meaning
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(1, 40), st.integers(-30, 0), st.booleans()),
+                min_size=1, max_size=12),
+       st.lists(st.integers(1, 9999), min_size=12, max_size=12, unique=True))
+def test_every_move_of_a_program_is_published_once_with_its_line_and_n_number(moves, numbers):
+    """Each block (a comment line or none between them, N given or not) is one element at its text line, with the
+    N number written on it, rapid as its G00 -- whatever the moves."""
+    text, expected, here = ["G21 G8 G98 F100"], [], (0.0, 10.0)     # X radius, mm/min: the start is Z 0, X 10
+    written: dict[int, int] = {}                  # text line -> the N number written on it
+    for k, (rapid, x, z, numbered) in enumerate(moves):
+        if k % 3 == 1:
+            text.append("(a comment line)")
+        n = numbers[k] if numbered else None
+        text.append(f"{f'N{n} ' if n else ''}G0{0 if rapid else 1} X{x} Z{z}")
+        if n:
+            written[len(text)] = n
+        if (z, float(x)) != here:                 # a block that stays where the tool is makes no element
+            expected.append((len(text), n, rapid))
+            here = (z, float(x))
+    text.append("M30")
+    m = CutSequencer(program="\n".join(text), x_start=10.0, z_start=0.0).meaning
+    assert [(p.line, p.n, p.rapid) for p in m.elements] == expected
+    assert m.numbers == written
+    if expected:
+        assert m.elements[-1].element.end == pytest.approx(here)
+
