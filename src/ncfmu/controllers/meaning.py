@@ -170,7 +170,8 @@ def lathe_meaning(ops: Sequence[object], blocks: Sequence[Block], start: Point, 
             if key not in edges_of:
                 edges_of[key] = tuple(programmed(b, numbers) for b in profile.blocks)
             edges = edges_of[key]
-            outlines.append(Outline(op.line, op.start, bool(profile.inside), edges))  # type: ignore[attr-defined]
+            outlines.append(Outline(op.line, op.start,  # type: ignore[attr-defined]
+                                    bool(getattr(profile, "inside", False)), edges))
         removed = getattr(op, "removed", None)
         if removed is not None:
             region = Region(op.line, tuple(removed()), edges)  # type: ignore[attr-defined]
