@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from .g7x import Tool
+from .g7x import FAR, Tool
 from .gcode import Block, Move
 from .geometry import Element, Point
 from .mypyc_compat import mypyc_attr
@@ -145,7 +145,8 @@ def block_numbers(blocks: Sequence[Block]) -> dict[int, int]:
     return {b.line: b.n for b in blocks if b.n is not None}
 
 
-def programmed(move: Move, numbers: Mapping[int, int]) -> Programmed:
+def _programmed(move: Move, numbers: Mapping[int, int]) -> Programmed:
+    """A move as a programmed element, with its block's N number."""
     return Programmed(move.element, move.line, numbers.get(move.line), move.rapid)
 
 
@@ -161,14 +162,14 @@ def lathe_meaning(ops: Sequence[object], blocks: Sequence[Block], start: Point, 
     edges_of: dict[int, tuple[Programmed, ...]] = {}     # id of a profile -> its blocks (one tuple a profile)
     for op in ops:
         if isinstance(op, Move):
-            elements.append(programmed(op, numbers))
+            elements.append(_programmed(op, numbers))
             continue
         profile = getattr(op, "profile", None)
         edges: tuple[Programmed, ...] = ()
         if profile is not None:
             key = id(profile)
             if key not in edges_of:
-                edges_of[key] = tuple(programmed(b, numbers) for b in profile.blocks)
+                edges_of[key] = tuple(_programmed(b, numbers) for b in profile.blocks)
             edges = edges_of[key]
             outlines.append(Outline(op.line, op.start,  # type: ignore[attr-defined]
                                     bool(getattr(profile, "inside", False)), edges))
@@ -204,7 +205,6 @@ def registers_meaning(stps: Sequence[Point], passes: Sequence[tuple[float, float
                       tools: Sequence[Tool], works: Sequence[Point], home: Point, stock: Stock) -> ProgramMeaning:
     """The meaning of the sequencer's registers: each block's deepest pass (``passes``: the pass's depth below its
     start point, its X and Z components Xp, Zp) from its start point ``stps`` (x, z) cuts away all above it."""
-    from .g7x import FAR
     regions = []
     for (x0, z0), (depth, xp, zp) in zip(stps, passes):
         # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
@@ -218,7 +218,7 @@ def mill_meaning(moves: Sequence[Move], blocks: Sequence[Block], start: Point, c
     """The meaning of a mill program: ``moves`` its moves (:func:`.rs274.parse`), the contour the ones under
     G41/G42 on both ends."""
     numbers = block_numbers(blocks)
-    elements = tuple(programmed(m, numbers) for m in moves)
+    elements = tuple(_programmed(m, numbers) for m in moves)
     chain = tuple(p for p, m in zip(elements, moves) if m.comp_before != 0 and m.comp_after != 0)
     outlines = (Outline(chain[0].line, chain[0].element.start, False, chain),) if chain else ()
     return ProgramMeaning("mill", start, elements, outlines, numbers=numbers, stock=Stock(margin=margin),
