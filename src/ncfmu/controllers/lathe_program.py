@@ -960,15 +960,6 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
     return out
 
 
-def first_work_offset(text: str) -> int:
-    """The work offset (1..6: G54..G59) the program's first G54..G59 selects, 1 (G54, power-on) when none does."""
-    for b in read(text, LATHE):
-        for g, _ in b.g:
-            if g in _WORK:
-                return g - 53
-    return 1
-
-
 def work_offsets(value: Callable[[str], float]) -> tuple[Point, ...]:
     """Setup.works from the sequencer's parameters ``seq.work[k].x`` / ``.z``, ``value(name)`` giving each."""
     return tuple((value(f"work[{k}].z"), value(f"work[{k}].x")) for k in range(1, len(_WORK) + 1))
