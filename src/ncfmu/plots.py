@@ -110,7 +110,7 @@ def plot_part(verdict, title: str, path: Path) -> Path:
     fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.01, label="made minus programmed [µm] (+ left, - gouge)")
     for c in verdict.crashes:
         ax.plot(*c.at, "rx", ms=10, mew=2)
-        ax.annotate(f"CRASH t = {c.t:.3f} s, line {c.line}", c.at, fontsize=8, color="tab:red")
+        ax.annotate(f"CRASH t = {c.t:.3f} s, {verdict.line_name(c.line)}", c.at, fontsize=8, color="tab:red")
     status = ("CRASH" if verdict.crashed else "within" if verdict.within_tolerance else "OUT OF")
     ax.set(title=f"{title}: the part as made ({status} tolerance {verdict.tolerance_mm:g} mm)", xlabel=f"{u} [mm]",
            ylabel=f"{v} [mm]")

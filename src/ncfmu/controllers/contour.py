@@ -43,6 +43,7 @@ from . import rs274
 from .base import POSITION_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .geometry import TANGENT, Arc, CornerError, Element, Line, ToolMove, compensate, turn_angle
+from .meaning import ProgramMeaning, mill_meaning, points_meaning
 from .motion import stop_speed
 from .mypyc_compat import mypyc_attr
 
@@ -137,6 +138,8 @@ class ContourInterpolator(CycleController):
     SEED = "cutter-compensation-GB1175423.txt"
     STOP_TIME = 40.0
     AXES = ("x", "y")
+    #: Rebuilt from the parameters, not saved with a state (fmi/state.py): what the program means.
+    DERIVED: ClassVar[tuple[str, ...]] = ("meaning",)
 
     PORTS = (
         string("program", "parameter", "", "part program, RS274/NGC subset (G00-G03 with I/J, G17, G21, G90/G91, "
@@ -207,9 +210,14 @@ class ContourInterpolator(CycleController):
         self.x_start = real_param(values, "x_start")
         self.y_start = real_param(values, "y_start")
         self.geometry_error: str | None = None
+        # the part check's: the interpolator publishes them with the program's meaning, it does not read them
+        cutter, margin = abs(self.diameter_delta) / 2.0, real_param(values, "stock_margin")
+        pocket = bool(values["pocket"])
         if self.program.strip():
             moves = rs274.parse(self.program, (self.x_start, self.y_start))
             self.contour: list[Element] = [m.element for m in moves]
+            self.meaning: ProgramMeaning = mill_meaning(moves, rs274.read(self.program, rs274.MILL),
+                                                        (self.x_start, self.y_start), cutter, margin, pocket)
             try:
                 path = program_path(moves, self.diameter_delta / 2.0, self.approach_feed)
             except ProgramError as err:
@@ -226,6 +234,7 @@ class ContourInterpolator(CycleController):
                 require(n >= 4, "n_points", n, "a closed path needs at least 3 distinct points")
             self.points = pts
             self.contour = list[Element](point_contour(pts, self.closed))
+            self.meaning = points_meaning(self.contour, (self.x_start, self.y_start), cutter, margin, pocket)
             try:
                 pieces = compensate(self.contour, self.side * self.diameter_delta / 2.0, self.closed)
                 path = [ToolMove(e, False, self.feed, k + 1) for e, k in pieces]

@@ -33,16 +33,11 @@ import math
 from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
-from .g7x import EPS, MAX_SEGMENTS, TOL, Finish, PlannedCycle, Profile, Rough, Segment, plan_cycle
+from .g7x import ARC_SPACING, EPS, FAR, MAX_SEGMENTS, TOL, Finish, PlannedCycle, Profile, Rough, Segment, plan_cycle
 from .gcode import Block, Move
 from .geometry import Arc, Element, Line, Point, bounds, sample
 from .mypyc_compat import mypyc_attr
 from .nose import translated
-
-#: "To the outside" in a region's polygon (mm): beyond any stock.
-FAR = 1e4
-#: Spacing of a removed region's points along an arc (mm): chords within 0.05 um of an arc of 1 mm radius.
-ARC_SPACING = 0.02
 
 
 # -- the exchange of Z and X ------------------------------------------------------------------------------

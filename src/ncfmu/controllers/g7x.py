@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
 from .gcode import Move
-from .geometry import Arc, CornerError, Element, Line, Point
+from .geometry import Arc, CornerError, Element, Line, Point, sample
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
 from .nose import translated as shifted
@@ -45,6 +45,10 @@ MAX_SEGMENTS = 20_000
 EPS = 1e-9
 #: Geometric tolerance of the profile checks (monotone, inside the stock), mm.
 TOL = 1e-6
+#: Far enough for any machine (mm): the open side of a region a cycle cuts away ("to the outside").
+FAR = 1e4
+#: Spacing of the points along a region's arcs (mm): chords within 0.1 um of an arc of 1 mm radius.
+ARC_SPACING = 0.02
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -57,7 +61,9 @@ class Tool:
     nose_radius: float = 0.0    # mm
     tip: int = 0                # Fanuc's imaginary tool-nose number 0..9
     max_depth: float = 0.0      # mm, the deepest cut the insert takes (0: not given)
-    width: float = 0.0          # mm, a grooving blade's width along Z (0: not one)
+    # the tool's shape (the part check sweeps it; the planner does not read it, but G74/G75 check it)
+    insert_angle: float = 80.0  # deg, the turning insert's corner angle
+    width: float = 0.0          # mm, a grooving or parting blade's width along Z (0: not one)
     drill_diameter: float = 0.0  # mm, a drill's on the spindle axis, programmed at its point (0: not one)
 
 
@@ -132,6 +138,14 @@ class Profile:
         """What G71 roughs to: the elements, after the front piece of a first block that moved in Z too."""
         return ([self.front] if self.front is not None else []) + self.elements
 
+    def removed(self) -> tuple[Point, ...]:
+        """What the profile's cycles cut away by their definition, a simple polygon of (Z, radius) points: all
+        above the profile (outside), or below it toward the axis (inside, a bore: down to the hole)."""
+        outline = sample(self.elements, ARC_SPACING)
+        (za, _), (ze, _) = outline[0], outline[-1]
+        far = -FAR if self.inside else FAR
+        return tuple(outline) + ((ze, far), (za, far))
+
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
@@ -148,6 +162,10 @@ class Rough:
     w: float
     feed: float
 
+    def removed(self) -> tuple[Point, ...]:
+        """The region the cycle cuts away by its definition: its profile's (the part's outline, not the passes)."""
+        return self.profile.removed()
+
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass(frozen=True)
@@ -160,6 +178,10 @@ class Finish:
     profile: Profile
     feed: float
     nose: Nose | None = None
+
+    def removed(self) -> tuple[Point, ...]:
+        """The region the cycle cuts away by its definition: its profile's (the part's outline, not the passes)."""
+        return self.profile.removed()
 
 
 

@@ -60,6 +60,9 @@ class Dialect:
     block_delete: bool = False           # a block may start with '/' (block delete, skipped with the switch on)
     subprograms: bool = False            # after the main program's end, further O programs ending with M99
     comma_letters: str = ""              # letters also taken after a comma (Fanuc's ,C ,R): the word is ",C"
+    # the plane's axes, its first coordinate first: (absolute letter, incremental letter or "") -- the lathe's
+    # (Z, W), (X, U); the mill's (X, ""), (Y, "")
+    axes: tuple[tuple[str, str], ...] = ()
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -75,6 +78,55 @@ class Move:
     comp_before: int = 0    # cutter compensation in force before the move: 0 off, +1 left, -1 right
     comp_after: int = 0     # ... and after it (a change is a lead-in or a lead-out)
     raw: str = field(default="", compare=False)      # the block as written (for messages)
+
+
+#: G40 / G41 / G42: the cutter (mill) or tool-nose (lathe) radius compensation's side, 0 off, +1 left of travel,
+#: -1 right.
+COMP_SIDE = {40: 0, 41: 1, 42: -1}
+
+
+@mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
+@dataclass
+class Modes:
+    """The modal state of a program's conversion, one for every dialect (LinuxCNC's setup block, as
+    interp_convert keeps it): the motion mode (G00-G03, a dialect's own motion codes), the distance mode
+    (G90/G91), the X mode (G7/G8: X a diameter; the mill has none), the feed (F, mm/s; 0 until one) and the
+    compensation's side (:data:`COMP_SIDE`). A dialect's own modes extend it (the lathe's machine state)."""
+
+    motion: int | None = None
+    incremental: bool = False
+    diameter: bool = False
+    feed: float = 0.0       # mm/s (a lathe under G99: mm/s per rev/min)
+    comp: int = 0
+
+    def distance_and_x(self, b: Block) -> None:
+        """The block's G90/G91 and G7/G8, read before its words as every move reads them."""
+        for g, _ in b.g:
+            if g in (90, 91):
+                self.incremental = g == 91
+            elif g in (7, 8):
+                self.diameter = g == 7
+
+    def feed_word(self, b: Block) -> None:
+        """The block's F (mm/min), modal: a cycle's too (RS274)."""
+        if "F" in b.values:
+            self.feed = b.values["F"] / 60.0
+
+    def end(self, b: Block, here: Point, axes: tuple[tuple[str, str], ...]) -> Point:
+        """Where a move of block ``b`` from ``here`` ends, in the plane of ``axes`` (a dialect's): on each axis its
+        absolute word, or ``here`` plus its incremental word (or plus the absolute word under G91), or ``here``;
+        X a diameter (halved) under G7."""
+        out: list[float] = []
+        v = b.values
+        for (absolute, incremental), at in zip(axes, here):
+            scale = 0.5 if self.diameter and absolute == "X" else 1.0
+            if incremental and incremental in v:
+                out.append(at + scale * v[incremental])
+            elif absolute in v:
+                out.append(at + scale * v[absolute] if self.incremental else scale * v[absolute])
+            else:
+                out.append(at)
+        return (out[0], out[1])
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)

@@ -82,9 +82,11 @@ from .g72_g73 import FirstBlock, face_finish, face_rough, first_block, first_blo
 from .g72_g73 import check_profile as check_face_or_pattern
 from .gcode import (
     ARC_RADIUS_TOLERANCE,
+    COMP_SIDE,
     COORDINATE_LIMIT,
     Block,
     Dialect,
+    Modes,
     Move,
     arc,
     program_lines,
@@ -133,6 +135,7 @@ LATHE = Dialect(
     block_delete=True,
     subprograms=True,
     comma_letters="CR",
+    axes=(("Z", "W"), ("X", "U")),
 )
 
 
@@ -151,13 +154,11 @@ class Setup:
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
 @dataclass
-class _Modes:
-    motion: int | None = None
-    incremental: bool = False
-    diameter: bool = False
-    feed: float = 0.0       # mm/s (under G99: mm/s per rev/min)
+class _Modes(Modes):
+    """The one conversion's modes (:class:`.gcode.Modes`: motion, G90/G91, G7/G8, F, the tool-nose radius
+    compensation's side) and the lathe's machine state besides."""
+
     machine: Modal = field(default_factory=Modal)
-    comp: int = 0           # tool-nose radius compensation: 0 G40, +1 G41 (left of travel), -1 G42 (right)
     row: Tool = field(default_factory=Tool)   # the tool table's row of the active offset (its nose)
     row_no: int = 0         # that row's number k (seq.tool[k]; 0: no offset)
     work: Point = (0.0, 0.0)    # the active work offset (z, x radius): G54..G59
@@ -196,7 +197,6 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
             raise b.err(b.col(incremental), f"{absolute} and {incremental} in one block: give the end point as "
                                             f"{absolute} (absolute) or {incremental} (incremental)")
     values = {**values, **{a: values[inc] for a, inc in (("X", "U"), ("Z", "W")) if inc in values}}
-    relative = {k for k, inc in (("X", "U"), ("Z", "W")) if inc in b.values}
     has_end = "X" in values or "Z" in values
     has_centre = "I" in values or "K" in values
     if has_centre and motion not in (2, 3):
@@ -219,11 +219,8 @@ def _move(b: Block, modes: _Modes, here: Point, values: dict[str, float],
         raise b.err(move_col, f"G{motion} (a thread) inside a profile: the profile's moves are G00-G03")
     if motion != 0 and modes.feed == 0.0 and not profile:   # a profile's feed is its cycle's (checked there)
         raise b.err(move_col, f"G{motion:02d} with no feed: give F (mm/min) first")
-    scale = 0.5 if modes.diameter else 1.0
     z, x = here
-    tz = z + values.get("Z", 0.0) if modes.incremental or "Z" in relative else values.get("Z", z)
-    tx = (x + scale * values.get("X", 0.0) if modes.incremental or "X" in relative else
-          (scale * values["X"] if "X" in values else x))
+    tz, tx = modes.end(b, here, LATHE.axes)
     if "A" in values:
         try:
             tz, tx = angled_end(here, values["A"], tx if "X" in values else None, tz if "Z" in values else None)
@@ -262,25 +259,21 @@ def _interpret(b: Block, modes: _Modes, here: Point,
     """Apply one block's modes; its move (or None), end point, rapid flag and canned cycle (or None)."""
     values = b.values
     new_motion, motion_col, cycle = None, None, None
+    modes.distance_and_x(b)
     for g, col in b.g:
         if g in _MOTION:
             new_motion, motion_col = g, col
-        elif g in (90, 91):
-            modes.incremental = g == 91
-        elif g in (7, 8):
-            modes.diameter = g == 7
         elif g in (70, 71, 72, 73):
             cycle = g
         elif g in _THREAD_MOTION or g == 76:
             raise b.err(col, f"G{g} (a thread) inside a profile: the profile's moves are G00-G03")
         elif g in _PECK:
             raise b.err(col, f"G{g} (a peck cycle) inside a profile: the profile's moves are G00-G03")
-        elif g == 94 or (g == 90 and profile and _single_kind(b, modes) == 90):
+        elif g == 94:
             raise b.err(col, f"G{g} (a single cycle) inside a profile: the profile's moves are G00-G03")
-        elif g in (40, 41, 42) and not profile:
-            modes.comp = {40: 0, 41: 1, 42: -1}[g]
-    if "F" in values:
-        modes.feed = values["F"] / 60.0                # modal, a cycle's F too (RS274)
+        elif g in COMP_SIDE and not profile:
+            modes.comp = COMP_SIDE[g]
+    modes.feed_word(b)
     if cycle is not None:
         if new_motion is not None:
             raise b.err(motion_col or 1, f"G{new_motion:02d} and G{cycle} in one block: a canned cycle moves by "
@@ -388,11 +381,7 @@ def _home(b: Block, modes: _Modes, here: Point, setup: Setup) -> Home:
     axes = [k for k in "XZUW" if k in v]
     if not axes:
         raise b.err(b.col("G"), "G28 names the axes to return: X/U and/or Z/W (the intermediate point)")
-    scale = 0.5 if modes.diameter else 1.0
-    z, x = here
-    vz = z + v["W"] if "W" in v else (z + v["Z"] if modes.incremental else v["Z"]) if "Z" in v else z
-    vx = (x + scale * v["U"] if "U" in v else (x + scale * v["X"] if modes.incremental else scale * v["X"])
-          if "X" in v else x)
+    vz, vx = modes.end(b, here, LATHE.axes)
     return Home(b.line, (vz, vx), (setup.home[0] if "Z" in v or "W" in v else None,
                                    setup.home[1] if "X" in v or "U" in v else None))
 
@@ -449,16 +438,9 @@ def _target(b: Block, modes: _Modes, here: Point, z_default: float | None = None
         if absolute in v and incremental in v:
             raise b.err(b.col(incremental), f"{absolute} and {incremental} in one block: give the end point as "
                                             f"{absolute} (absolute) or {incremental} (incremental)")
-    scale = 0.5 if modes.diameter else 1.0
-    z, x = here
-    if "W" in v or (modes.incremental and "Z" in v):
-        tz = z + v.get("W", v.get("Z", 0.0))
-    else:
-        tz = v["Z"] if "Z" in v else (z_default if z_default is not None else z)
-    if "U" in v or (modes.incremental and "X" in v):
-        tx = x + scale * v.get("U", v.get("X", 0.0))
-    else:
-        tx = scale * v["X"] if "X" in v else x
+    tz, tx = modes.end(b, here, LATHE.axes)
+    if z_default is not None and "Z" not in v and "W" not in v:
+        tz = z_default
     if max(abs(tz), abs(tx)) > COORDINATE_LIMIT:
         raise b.err(1, f"the thread ends at X {tx:g}, Z {tz:g}: beyond {COORDINATE_LIMIT:g} mm")
     return (tz, tx)
@@ -486,19 +468,9 @@ def _thread(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> P
     return end
 
 
-def _distance_and_x_modes(b: Block, modes: _Modes) -> None:
-    """The G90/G91 (absolute/incremental) and G7/G8 (X a diameter/radius) of a cycle's block, read before its
-    words as a plain move reads them."""
-    for g, _ in b.g:
-        if g in (90, 91):
-            modes.incremental = g == 91
-        elif g in (7, 8):
-            modes.diameter = g == 7
-
-
 def _thread_op(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     v = b.values
-    _distance_and_x_modes(b, modes)
+    modes.distance_and_x(b)
     try:
         if kind == 76 and not any(k in v for k in "XZUW"):
             for k in "FIK":
@@ -594,7 +566,7 @@ def _single_kind(b: Block, modes: _Modes) -> int:
 def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     """A G90/G94 pass from where the tool stands (the start point); it ends there again."""
     v = b.values
-    _distance_and_x_modes(b, modes)
+    modes.distance_and_x(b)
     for k in "IKPQ":
         if k in v:
             raise b.err(b.col(k), f"{k}: G{kind} takes X/U, Z/W, R (the taper) and F")
@@ -652,7 +624,7 @@ def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Poi
     """A G74/G75 block: the first (R alone) sets the retract e; the second adds the cycle's :class:`.g7x.PeckCycle`
     from where the tool stands (the start point), where it ends again."""
     v = b.values
-    _distance_and_x_modes(b, modes)
+    modes.distance_and_x(b)
     pecks_along, steps_across = ("Z", "X") if kind == 74 else ("X", "Z")
     for k in "IK":
         if k in v:
@@ -1144,15 +1116,6 @@ def _compensate(ops: list[Op], noses: dict[int, Nose]) -> list[Op]:
                 out.append(ops[k])
         i = last + 1
     return out
-
-
-def first_work_offset(text: str) -> int:
-    """The work offset (1..6: G54..G59) the program's first G54..G59 selects, 1 (G54, power-on) when none does."""
-    for b in read(text, LATHE):
-        for g, _ in b.g:
-            if g in _WORK:
-                return g - 53
-    return 1
 
 
 def work_offsets(value: Callable[[str], float]) -> tuple[Point, ...]:

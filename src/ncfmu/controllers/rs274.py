@@ -24,10 +24,12 @@ import math
 from ..errors import ProgramError
 from .gcode import (  # noqa: F401  (the front end's limits, named here as the mill's)
     ARC_RADIUS_TOLERANCE,
+    COMP_SIDE,
     COORDINATE_LIMIT,
     MAX_PROGRAM_CHARS,
     POINT_EPS,
     Dialect,
+    Modes,
     Move,
     arc,
     read,
@@ -54,6 +56,7 @@ MILL = Dialect(
                      "Z": "only the XY plane is in the subset (no Z)",
                      "D": "the offset is diameter_delta / 2, not a D word"},
     letter_list="G, M, N, O, X, Y, I, J, F",
+    axes=(("X", ""), ("Y", "")),
 )
 
 
@@ -68,32 +71,28 @@ def parse(text: str, start: Point) -> list[Move]:
     """
     blocks = read(text, MILL)
     moves: list[Move] = []
-    motion: int | None = None
-    incremental = False
-    feed = 0.0                    # mm/s; 0 until an F word
-    comp = 0                      # modal state
+    modes = Modes()
     comp_moved = 0                # compensation in force after the last move
-    x, y = start
+    here = start
     for b in blocks:
         n, raw, values = b.line, b.raw, b.values
         new_motion = None
         motion_col = None
+        modes.distance_and_x(b)
         for g, col in b.g:
             if g in _MOTION:
                 new_motion, motion_col = g, col
-            elif g in (90, 91):
-                incremental = g == 91
-            elif g in (40, 41, 42):
-                side = {40: 0, 41: 1, 42: -1}[g]
-                if side and (comp or comp_moved):
-                    on = comp or comp_moved
+            elif g in COMP_SIDE:
+                side = COMP_SIDE[g]
+                if side and (modes.comp or comp_moved):
+                    on = modes.comp or comp_moved
                     raise b.err(col, f"G{g}: cutter compensation is already on (G{41 if on > 0 else 42}); turn it "
                                      "off with G40 and a lead-out move first")
-                comp = side
-        if "F" in values:
-            feed = values["F"] / 60.0
+                modes.comp = side
+        modes.feed_word(b)
         if new_motion is not None:
-            motion = new_motion
+            modes.motion = new_motion
+        motion = modes.motion
         has_xy = "X" in values or "Y" in values
         has_ij = "I" in values or "J" in values
         xy_col = min((b.col(k) for k in "XY" if k in values), default=1)
@@ -104,10 +103,10 @@ def parse(text: str, start: Point) -> list[Move]:
         if has_xy or has_ij:
             if motion is None:
                 raise b.err(xy_col, "a move with no motion mode: give G00, G01, G02 or G03 first")
-            if motion != 0 and feed == 0.0:
+            if motion != 0 and modes.feed == 0.0:
                 raise b.err(move_col, f"G{motion:02d} with no feed: give F (mm/min) first")
-            tx = (x + values.get("X", 0.0)) if incremental else values.get("X", x)
-            ty = (y + values.get("Y", 0.0)) if incremental else values.get("Y", y)
+            x, y = here
+            tx, ty = modes.end(b, here, MILL.axes)
             if max(abs(tx), abs(ty)) > COORDINATE_LIMIT:
                 raise b.err(xy_col, f"the move ends at ({tx:g}, {ty:g}): beyond {COORDINATE_LIMIT:g} mm, no machine "
                                     "is that large")
@@ -121,17 +120,17 @@ def parse(text: str, start: Point) -> list[Move]:
             elif math.hypot(tx - x, ty - y) > POINT_EPS:
                 element = Line((x, y), (tx, ty))
             if element is not None:
-                if comp != comp_moved and not isinstance(element, Line):
-                    what = "start" if comp else "end"
+                if modes.comp != comp_moved and not isinstance(element, Line):
+                    what = "start" if modes.comp else "end"
                     raise b.err(move_col, f"an arc cannot {what} cutter compensation: program a straight "
-                                          f"{'lead-in' if comp else 'lead-out'} move (G00/G01)")
+                                          f"{'lead-in' if modes.comp else 'lead-out'} move (G00/G01)")
                 if len(moves) == MAX_MOVES:
                     raise b.err(move_col, f"more than {MAX_MOVES} moves: split the program")
-                moves.append(Move(element, motion == 0, feed, n, comp_moved, comp, raw.strip()))
-                comp_moved = comp
-                x, y = tx, ty
+                moves.append(Move(element, motion == 0, modes.feed, n, comp_moved, modes.comp, raw.strip()))
+                comp_moved = modes.comp
+                here = (tx, ty)
         if b.ends:
-            if comp_moved or comp:
+            if comp_moved or modes.comp:
                 raise b.err(b.col("M"), "cutter compensation is still on at the program end: end it with G40 and a "
                                         "lead-out move")
     if not moves:

@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 from ..errors import require
 from ..ports import boolean, integer, real, string
@@ -54,6 +54,7 @@ from . import lathe_program
 from .base import POSITION_LIMIT, SPEED_LIMIT, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
+from .meaning import ProgramMeaning, Stock, lathe_meaning, registers_meaning
 from .motion import ARC_TANGENTIAL, ElementMove, LinearMove
 from .mypyc_compat import mypyc_attr
 
@@ -184,6 +185,8 @@ class CutSequencer(CycleController):
     SEED = "repetitive-cut-sequencer-US4017723.txt"
     STOP_TIME = 100.0
     AXES = ("x", "z")
+    #: Rebuilt from the parameters, not saved with a state (fmi/state.py): what the program means.
+    DERIVED: ClassVar[tuple[str, ...]] = ("meaning",)
 
     PORTS = (
         real("x_start", "parameter", X_START, "mm", "X (radius) of the start point STP"),
@@ -322,21 +325,33 @@ class CutSequencer(CycleController):
         self.spindle_band = real_param(values, "spindle_band")
         self.thread_shift = real_param(values, "thread_shift")
         self.spindle_timeout = real_param(values, "spindle_timeout")
+        # the tool table: the one place its rows are read (the planner, the part check and the plots share them)
         tools = tuple(Tool(x_offset=real_param(values, f"tool[{k}].x_offset"),
                            z_offset=real_param(values, f"tool[{k}].z_offset"),
                            nose_radius=real_param(values, f"tool[{k}].nose_radius"),
                            tip=int_param(values, f"tool[{k}].tip"),
                            max_depth=real_param(values, f"tool[{k}].max_depth"),
+                           insert_angle=real_param(values, f"tool[{k}].insert_angle"),
                            width=real_param(values, f"tool[{k}].width"),
                            drill_diameter=real_param(values, f"tool[{k}].drill_diameter"))
                       for k in range(1, MAX_TOOLS + 1))
         works = lathe_program.work_offsets(lambda name: real_param(values, name))
+        home = (real_param(values, "z_home"), real_param(values, "x_home"))
         setup = lathe_program.Setup(diameter=bool(values["x_diameter"]), feed_per_rev=bool(values["feed_per_rev"]),
-                                    tools=tools, home=(real_param(values, "z_home"), real_param(values, "x_home")),
-                                    works=works)
+                                    tools=tools, home=home, works=works)
+        stock = Stock(diameter=real_param(values, "stock_diameter"), length=real_param(values, "stock_length"),
+                      face_z=real_param(values, "stock_face_z"))
+        start = (self.x_start, self.z_start)
         # a part program replaces the registers: its moves start at x_start/z_start, G00 at block[1].rapid
-        self.plan: list[Segment] = (lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,
-                                                       setup) if self.program.strip() else [])
+        if self.program.strip():
+            ops = lathe_program.parse(self.program, start, setup)
+            self.plan: list[Segment] = lathe_program.plan_ops(ops, blocks[0].rapid, (self.z_start, self.x_start))
+            self.meaning: ProgramMeaning = lathe_meaning(ops, lathe_program.read(self.program, lathe_program.LATHE),
+                                                         start, tools, works, home, stock, setup.diameter)
+        else:
+            self.plan = []
+            self.meaning = registers_meaning(self.stps, [(b.Xf + b.N * b.Xd, b.Xp, b.Zp) for b in blocks], start,
+                                             tools, works, home, stock)
         # the plan with the block-delete switch on (the same plan when no block starts with '/'): chosen at START
         deleting = self.plan and lathe_program.has_block_delete(self.program)
         self.plans = (self.plan, lathe_program.plan(self.program, (self.x_start, self.z_start), blocks[0].rapid,

@@ -41,9 +41,6 @@ from shapely.geometry.base import BaseGeometry
 
 #: Geometric resolution of the engine (mm): circles' chords, the path's simplification.
 RESOLUTION = 0.0005
-#: Spacing of the points along a profile's arcs (mm), programmed or drawn: chords within 0.1 um of an arc of 1 mm
-#: radius.
-ARC_SPACING = 0.02
 #: A chip thinner than this is a touch, not a cut (mm): the servo settling against a surface it just made.
 TOUCH = 0.005
 #: Chips of a smaller area are not subtracted (mm^2): a recut surface stays as it was.

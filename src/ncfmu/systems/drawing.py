@@ -11,7 +11,7 @@ LWPOLYLINE entities (with bulges) of its model space, in mm, in the XY plane:
 - a mill's: the outline in XY (milled outside); closed outlines inside it are holes.
 
 The entities are chained into closed outlines end to end (endpoints within :data:`JOIN_TOLERANCE` are one point),
-arcs made polylines at the part check's spacing :data:`~ncfmu.machining.removal.ARC_SPACING`; the outline is a
+arcs made polylines at the part check's spacing :data:`~ncfmu.controllers.g7x.ARC_SPACING`; the outline is a
 shapely polygon.
 Annotations (:data:`ANNOTATIONS`: text, dimensions, leaders, hatches, points) are not the part's outline and are
 passed over; every other entity is refused. Refused, with :class:`~ncfmu.errors.DrawingError` (one line: the
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..controllers.g7x import ARC_SPACING
 from ..controllers.geometry import Arc, Element, Line, sample
 from ..errors import DrawingError
-from ..machining.removal import ARC_SPACING
 
 #: Endpoints closer than this (mm) are one point of the outline: 1 um, a tenth of the default tolerance (0.01 mm).
 JOIN_TOLERANCE = 1e-3

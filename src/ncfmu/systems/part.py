@@ -3,12 +3,14 @@
 A report part (:class:`LathePart`, :class:`MillPart`) like the others of :mod:`.report`: its accumulator reads
 the recorded rows chunk by chunk -- the servo axes' *actual* positions, the controller's program line and
 whether the move is at rapid -- and feeds them to the material-removal engine (:mod:`ncfmu.machining`), which
-keeps the stock left and the crashes, never the trajectory. Everything it needs besides comes from the run's
-parameters: the bar stock (``seq.stock_diameter``, ``seq.stock_length``, ``seq.stock_face_z``) and the chuck
-jaws (the limiter's regions with a lower X bound) of a lathe; the plate (``contour.stock_margin`` around the
-contour) and the cutter (the compensation's radius) of a mill; and the programmed part: the lathe's G71/G70
-profile with what its other cycles cut away by their definition (an op's ``removed()``: G74's drilled hole, G75's
-groove) or the outline its registers define (the deepest pass of each block), the mill's closed contour.
+keeps the stock left and the crashes, never the trajectory. Everything it needs besides is what the controller
+configured with the run's parameters publishes (its ``meaning``, :mod:`ncfmu.controllers.meaning`; the part check
+reads no program and no tool table itself): the bar stock and the tools the program uses of a lathe, with the
+chuck jaws (the limiter's regions with a lower X bound); the plate (``contour.stock_margin`` around the contour)
+and the cutter (the compensation's radius) of a mill; and the programmed part: the stock less the regions the
+lathe's operations cut away by their definition (each operation's ``removed()``: G71/G70's all above the profile,
+G72/G73's profiles, G74's drilled hole, G75's groove, a G90/G94 pass; the registers' all above each block's
+deepest pass), the mill's closed contour.
 
 Inside work: a G71/G70 profile that rises from the start point's X (a bore, :mod:`..controllers.g7x`) is judged
 as a bore -- the stock a tube whose drilled hole's radius is the bore cycle's start point's X (no parameter: the
@@ -26,13 +28,15 @@ not finish is not judged (its crashes still count).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from ..controllers.base import POSITION_LIMIT
+from ..controllers.g7x import ARC_SPACING, FAR
+from ..controllers.meaning import ProgramMeaning, Programmed
 from ..controllers.peck_cycles import DRILL_POINT
 from ..machining import (
     Crash,
@@ -47,17 +51,25 @@ from ..machining import (
     placed,
     turning_insert,
 )
-from ..machining.removal import ARC_SPACING, BLADE, INSERT_ANGLE, Forbidden
+from ..machining.removal import BLADE, Forbidden
 from ..ports import to_float, to_int
-from .report import FirstTime, Parameters, Part, PartAccumulator, Report, ReportAccumulator, columns_of, table_of
+from .report import (
+    FirstTime,
+    Parameters,
+    Part,
+    PartAccumulator,
+    Report,
+    ReportAccumulator,
+    columns_of,
+    configured,
+    table_of,
+)
 from .threads import ThreadJudge, ThreadResult, thread_judge
 
 #: The default tolerance of the part against the programmed part (mm): ``--tolerance``.
 TOLERANCE = 0.01
 #: How many crash lines a summary prints (the JSON keeps up to the engine's MAX_CRASHES).
 CRASH_LINES = 5
-#: Far enough for any machine (mm): the extent of the open sides of regions.
-FAR = 1e4
 #: The spindle stands (a cut then is a crash) below the larger of these: an absolute speed (rev/min) and a
 #: fraction of the commanded speed. Why: 1 rev/min is a revolution a minute -- at the slowest feed a program
 #: writes (F 1 mm/min, G98) a chip of 1 mm a revolution, ten times what a finishing insert takes (0.05-0.3 mm/rev):
@@ -340,8 +352,8 @@ class LathePart(MachinedPart):
         if self.spindle is None:
             return None
         from ..controllers.sequencer import CutSequencer
-        seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
-        return thread_judge(seq, self.seq, self.x, self.z, self.spindle, self.settings.tolerance)
+        plan = configured(CutSequencer, parameters.get(self.seq, {})).plan
+        return thread_judge(plan, self.seq, self.x, self.z, self.spindle, self.settings.tolerance)
 
     def standing(self, rows: np.ndarray) -> np.ndarray | None:
         """The spindle stands: |actual speed| below STANDSTILL_RPM and below STANDSTILL_FRACTION of the speed
@@ -367,49 +379,29 @@ class LathePart(MachinedPart):
         from shapely.geometry import Polygon, box
 
         from ..controllers.sequencer import CutSequencer
-        seq = {**CutSequencer.default_parameters(), **parameters.get(self.seq, {})}
-        radius = to_float(seq["stock_diameter"]) / 2.0
-        length = to_float(seq["stock_length"])
-        face = to_float(seq["stock_face_z"])
-        program = str(seq.get("program") or "")
-        profiles: list[Any] = []
-        regions: list[Any] = []   # the ops that cut a region by their definition (removed()): G72-G75, G90, G94
+        meaning: ProgramMeaning = configured(CutSequencer, parameters.get(self.seq, {})).meaning
+        radius = meaning.stock.diameter / 2.0
+        length = meaning.stock.length
+        face = meaning.stock.face_z
         hole = 0.0                        # the radius of the stock's drilled hole (0: a solid bar)
-        numbers = block_numbers(program, "lathe")
-        spindle = self.spindle is not None and bool(program.strip())
-        if program.strip():
-            from ..controllers.g7x import PlannedCycle, Tool
-            from ..controllers.lathe_program import Finish, Rough, parse, work_offsets
-            from ..controllers.lathe_program import Setup as Reading
-            # read as the sequencer reads it: X mode, feed mode, tool table, machine reference (G28)
-            tools = tuple(Tool(x_offset=to_float(seq[f"tool[{k}].x_offset"]),
-                               z_offset=to_float(seq[f"tool[{k}].z_offset"]),
-                               nose_radius=to_float(seq[f"tool[{k}].nose_radius"]),
-                               tip=to_int(seq[f"tool[{k}].tip"]), width=to_float(seq[f"tool[{k}].width"]),
-                               drill_diameter=to_float(seq[f"tool[{k}].drill_diameter"])) for k in range(1, 9))
-            reading = Reading(diameter=bool(seq["x_diameter"]), feed_per_rev=bool(seq["feed_per_rev"]), tools=tools,
-                              home=(to_float(seq["z_home"]), to_float(seq["x_home"])),
-                              works=work_offsets(lambda name: to_float(seq[name])))
-            ops = parse(program, (to_float(seq["x_start"]), to_float(seq["z_start"])), reading)
-            cycles = [op for op in ops if isinstance(op, (Rough, Finish))]
-            profiles = list({id(op.profile): op.profile for op in cycles}.values())
-            regions = [op for op in ops if hasattr(op, "removed")]
-            bores = [op.start[1] for op in cycles if op.profile.inside]
-            if bores:
-                why = ""
-                if len(bores) < len(cycles) + len([op for op in regions if isinstance(op, PlannedCycle)]):
-                    why = ("the program has both inside and outside G71/G70 profiles: the part check judges one "
-                           "kind at a time")
-                # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
-                # the boring bar enters the hole at its radius and roughs outward from it)
-                elif min(bores) <= 0.0:
-                    why = (f"the bore's cycle starts at X {min(bores):g} (radius): no drilled hole to bore from "
-                           "(the start point's X is the hole's)")
-                else:
-                    hole = min(bores)
-                if why:
-                    return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
-                                 Polygon(), [], why, spindle_checked=spindle, numbers=numbers)
+        numbers = dict(meaning.numbers)
+        spindle = self.spindle is not None and meaning.drives_spindle
+        bores = [o.start[1] for o in meaning.outlines if o.inside]
+        if bores:
+            why = ""
+            if len(bores) < len(meaning.outlines):
+                why = ("the program has both inside and outside G71/G70 profiles: the part check judges one "
+                       "kind at a time")
+            # the drilled hole is where the bore's cycle starts: the G71/G70 start point's X (Fanuc's form --
+            # the boring bar enters the hole at its radius and roughs outward from it)
+            elif min(bores) <= 0.0:
+                why = (f"the bore's cycle starts at X {min(bores):g} (radius): no drilled hole to bore from "
+                       "(the start point's X is the hole's)")
+            else:
+                hole = min(bores)
+            if why:
+                return Setup(MaterialRemoval(box(face - length, 0.0, face, radius), lathe_tool(0.0)), None,
+                             Polygon(), [], why, spindle_checked=spindle, numbers=numbers)
         inside = hole > 0.0
         stock = box(face - length, hole, face, radius)
         if inside:
@@ -426,32 +418,28 @@ class LathePart(MachinedPart):
                 if abs(lim_min) < POSITION_LIMIT and top > lower:
                     forbidden.append(Forbidden("tool into the chuck jaws", box(lower, -1.0, top, lim_min)))
                 lower = top
-        cutters = lathe_cutters(seq, program, self.settings, hole)
+        cutters = lathe_cutters(meaning, self.settings, hole)
         default = cutters.pop(0)
         removal = MaterialRemoval(stock, default.outline, forbidden, default.max_depth, cutters)
         anchor = box(face - length, hole, face - length + min(1.0, length), radius)
-        if program.strip() and not profiles and not regions and self.settings.drawing is None:
+        if meaning.programmed and not meaning.regions and self.settings.drawing is None:
             return Setup(removal, None, anchor, [], "the program has no G71/G70 profile to judge against",
                          spindle_checked=spindle, numbers=numbers)
-        programmed, lines = programmed_lathe_part(stock, seq, profiles, inside, regions)
+        programmed, lines = programmed_part(stock, meaning)
         if self.settings.drawing is not None:
-            from shapely.geometry import LineString
-
-            from ..controllers.gcode import Move
             from .drawing import lathe_part
             programmed = lathe_part(self.settings.drawing, stock)
-            if program.strip() and not lines:       # no profile: where the part is off, the nearest cut's line
-                lines = [(LineString(_elements_polyline([op.element])), op.line) for op in ops
-                         if isinstance(op, Move) and not op.rapid]
+            if meaning.programmed and not lines:     # no region: where the part is off, the nearest cut's line
+                lines = _element_lines(p for p in meaning.elements if not p.rapid)
         return Setup(removal, programmed, anchor, lines, spindle_checked=spindle, numbers=numbers)
 
 
-def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSettings,
-                  hole: float = 0.0) -> dict[int, Cutter]:
+def lathe_cutters(meaning: ProgramMeaning, settings: PartSettings, hole: float = 0.0) -> dict[int, Cutter]:
     """The tools a lathe run sweeps, by turret station (the sequencer's ``tool`` output; 0: before any T word, and
-    the registers' cycles): each the shape of the tool table's row its program's T words give it
-    (``T0102``: station 1 with the row of offset 2 -- a station given several rows keeps the first; station 0,
-    the row 0: no offset, a turning insert), placed at the axes' position less that row's offsets.
+    the registers' cycles): each the shape of the tool table's row the program's T words give it (the configured
+    sequencer's ``meaning.tools``: ``T0102`` is station 1 with the row of offset 2 -- a station given several rows
+    keeps the first; station 0, the row 0: no offset, a turning insert), placed at the axes' position less that
+    row's offsets.
 
     A row is a drill (``drill_diameter`` > 0: :func:`~ncfmu.machining.drill`), a grooving or parting blade
     (``width`` > 0: :func:`~ncfmu.machining.grooving_insert`) or else a turning insert of ``insert_angle``
@@ -461,102 +449,51 @@ def lathe_cutters(seq: Mapping[str, object], program: str, settings: PartSetting
     hole's radius high); max_depth the row's (``settings.max_depth`` when given), 0 none. The axes stand at the
     programmed point plus the row's offsets and the program's first work offset (a program that changes its work
     offset is judged with its first)."""
-    rows: dict[int, int] = {0: 0}
-    if program.strip():
-        from ..controllers.gcode import read
-        from ..controllers.lathe_program import LATHE
-        for b in read(program, LATHE):
-            if "T" in b.values:
-                station, row = divmod(int(b.values["T"]), 100)
-                rows.setdefault(station, row)
-    work = np.zeros(2)          # and the program's first work offset (G54..G59; G54 at power-on)
-    if program.strip():
-        from ..controllers.lathe_program import first_work_offset
-        w = f"work[{first_work_offset(program)}]."
-        if w + "z" in seq:
-            work = np.array([to_float(seq[w + "z"]), to_float(seq[w + "x"])])
+    work = np.array(meaning.first_work if meaning.programmed else (0.0, 0.0))
     blade = hole if hole > 0.0 else BLADE
     cutters: dict[int, Cutter] = {}
-    for station, k in rows.items():
-        def value(name: str, default: float = 0.0, k: int = k) -> float:
-            key = f"tool[{k}].{name}"
-            return to_float(seq[key]) if k and key in seq else default
-
-        nose = value("nose_radius") if settings.nose_radius is None else settings.nose_radius
-        depth = value("max_depth") if settings.max_depth is None else settings.max_depth
-        tip = int(value("tip"))
+    for use in meaning.tools:
+        row = use.tool
+        nose = row.nose_radius if settings.nose_radius is None else settings.nose_radius
+        depth = row.max_depth if settings.max_depth is None else settings.max_depth
+        tip = row.tip
         if tip in (0, 9):
             tip = 2 if hole > 0.0 else 3
-        if value("drill_diameter") > 0.0:
-            outline, on_axis = drill(value("drill_diameter"), DRILL_POINT), True
+        if row.drill_diameter > 0.0:
+            outline, on_axis = drill(row.drill_diameter, DRILL_POINT), True
         else:
-            width = value("width")
-            shape = (grooving_insert(width, nose, blade) if width > 0.0
-                     else turning_insert(nose, value("insert_angle", INSERT_ANGLE), blade))
+            shape = (grooving_insert(row.width, nose, blade) if row.width > 0.0
+                     else turning_insert(nose, row.insert_angle, blade))
             outline, on_axis = placed(shape, tip, nose), False
-        shift = np.array([value("z_offset"), value("x_offset")]) + work
-        cutters[station] = Cutter(outline - shift, depth if depth > 0 else math.inf, on_axis)
+        shift = np.array([row.z_offset, row.x_offset]) + work
+        cutters[use.station] = Cutter(outline - shift, depth if depth > 0 else math.inf, on_axis)
     return cutters
 
 
-def programmed_lathe_part(stock: Any, seq: Mapping[str, object], profiles: Sequence[Any],
-                          inside: bool, regions: Sequence[Any] = ()) -> tuple[Any, list[tuple[Any, int]]]:
-    """The programmed part of a lathe run, the one place it is made (a drawing may stand in for it): the
-    ``stock`` (a polygon of the half-section) less what the program's G71/G70 ``profiles`` cut away (outside:
-    all above a profile; ``inside``, a bore: all below it down to the hole) and each of ``regions``'
-    ``removed()`` (the ops that cut a region by their definition: G72/G73 profiles, G74/G75 holes and grooves,
-    G90/G94 passes) -- or, for the registers (neither), what each block's deepest pass cuts away; and the
+def programmed_part(stock: Any, meaning: ProgramMeaning) -> tuple[Any, list[tuple[Any, int]]]:
+    """The programmed part, the one place it is made (a drawing may stand in for it): the ``stock`` (a polygon:
+    the lathe's half-section, the mill's plate) less the union of the regions the program's operations cut away
+    by their definition (``meaning.regions``: G71/G70's all above a profile, a bore's all below it down to the
+    hole, the registers' all above each block's deepest pass, every cycle's with a ``removed()``); and the
     programmed elements with their program lines (for naming the line nearest to a deviation: a profile's
-    blocks', else the op's own line along its region's outline)."""
+    blocks, else the region's outline by its operation's line; the registers' none)."""
     import shapely
     from shapely.geometry import LineString, Polygon
 
-    removed: list[Any] = []
+    removed = [Polygon(r.outline).buffer(0) for r in meaning.regions]
     lines: list[tuple[Any, int]] = []
-    if profiles:
-        far = -FAR if inside else FAR
-        for profile in profiles:
-            outline = _elements_polyline(profile.elements)
-            (za, _), (ze, _) = outline[0], outline[-1]
-            removed.append(Polygon([*outline, (ze, far), (za, far)]).buffer(0))
-            lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-    for op in regions:
-        region = op.removed()
-        removed.append(Polygon(region).buffer(0))
-        profile = getattr(op, "profile", None)
-        if profile is not None:
-            lines += [(LineString(_elements_polyline([b.element])), b.line) for b in profile.blocks]
-        else:
-            lines.append((LineString([*region, region[0]]), op.line))
-    if not profiles and not regions:
-        stp = (to_float(seq["x_start"]), to_float(seq["z_start"]))
-        for k in range(1, to_int(seq["n_blocks"]) + 1):
-            b = f"block[{k}]."
-            if seq.get(b + "own_stp"):
-                stp = (to_float(seq[b + "x_stp"]), to_float(seq[b + "z_stp"]))
-            x0, z0 = stp
-            depth = to_float(seq[b + "Xf"]) + to_int(seq[b + "N"]) * to_float(seq[b + "Xd"])
-            xp, zp = to_float(seq[b + "Xp"]), to_float(seq[b + "Zp"])
-            # the deepest pass: from (z0, x0 - depth) to (z0 - Zp, x0 - depth - Xp); above it is cut away
-            removed.append(Polygon([(z0, x0 - depth), (z0 - zp, x0 - depth - xp), (z0 - zp, FAR), (z0, FAR)]))
+    for r in meaning.regions:
+        if r.edges:
+            lines += _element_lines(r.edges)
+        elif r.line:
+            lines.append((LineString(r.outline), r.line))
     return stock.difference(shapely.union_all(removed)), lines
 
 
-def block_numbers(program: str, dialect: str) -> dict[int, int]:
-    """The N number of each of a program's text lines that has one (line -> N), read as the controller reads
-    it (``dialect``: "lathe" or "mill"); {} for no program or one that does not read (the run refuses it)."""
-    if not program.strip():
-        return {}
-    from ..controllers.gcode import read
-    from ..errors import NcfmuError
-    if dialect == "lathe":
-        from ..controllers.lathe_program import LATHE as DIALECT
-    else:
-        from ..controllers.rs274 import MILL as DIALECT
-    try:
-        return {b.line: b.n for b in read(program, DIALECT) if b.n is not None}
-    except NcfmuError:
-        return {}
+def _element_lines(elements: Iterable[Programmed]) -> list[tuple[Any, int]]:
+    """Each programmed element as a polyline, with its program line."""
+    from shapely.geometry import LineString
+    return [(LineString(_elements_polyline([p.element])), p.line) for p in elements]
 
 
 @dataclass(frozen=True)
@@ -587,37 +524,30 @@ class MillPart(MachinedPart):
 
     def setup(self, parameters: Parameters) -> Setup:
         import shapely
-        from shapely.geometry import LineString, Polygon, box
+        from shapely.geometry import Polygon, box
 
         from ..controllers.contour import ContourInterpolator
-        values = {**ContourInterpolator.default_parameters(), **parameters.get(self.contour, {})}
-        c = ContourInterpolator(**values)
-        margin = to_float(values["stock_margin"])
-        cutter = mill_cutter(abs(c.diameter_delta) / 2.0)
-        rapid_lines: list[int] = []
-        if c.program.strip():
-            from ..controllers import rs274
-            moves = rs274.parse(c.program, (c.x_start, c.y_start))
-            rapid_lines = sorted({m.line for m in moves if m.rapid})
-            chain = [m for m in moves if m.comp_before != 0 and m.comp_after != 0]
-            elements, labels = [m.element for m in chain], [m.line for m in chain]
-        else:
-            elements, labels = list(c.contour), list(range(1, len(c.contour) + 1))
+        meaning: ProgramMeaning = configured(ContourInterpolator, parameters.get(self.contour, {})).meaning
+        margin = meaning.stock.margin
+        cutter = mill_cutter(meaning.cutter_radius)
+        rapid_lines = meaning.rapid_lines
+        contour = meaning.outlines[0].elements if meaning.outlines else ()
+        elements = [p.element for p in contour]
         outline = _elements_polyline(elements) if elements else []
         closed = len(outline) > 3 and math.dist(outline[0], outline[-1]) < 1e-6
         part = Polygon(outline).buffer(0) if closed else None
         if self.settings.drawing is not None:
             part = self.settings.drawing.outline
         if part is None or part.is_empty:
-            xs = [p[0] for p in outline] or [c.x_start]
-            ys = [p[1] for p in outline] or [c.y_start]
+            xs = [p[0] for p in outline] or [meaning.start[0]]
+            ys = [p[1] for p in outline] or [meaning.start[1]]
             plate = box(min(xs) - margin, min(ys) - margin, max(xs) + margin, max(ys) + margin)
             return Setup(MaterialRemoval(plate, cutter), None, plate, [], "the contour is not closed: no part outline",
-                         tuple(rapid_lines), numbers=block_numbers(c.program, "mill"))
+                         rapid_lines, numbers=dict(meaning.numbers))
         x0, y0, x1, y1 = part.bounds
         plate = box(x0 - margin, y0 - margin, x1 + margin, y1 + margin)
-        lines = [(LineString(_elements_polyline([e])), line) for e, line in zip(elements, labels)]
-        if bool(values["pocket"]):
+        lines = _element_lines(contour)
+        if meaning.pocket:
             # a pocket: the part is the plate around the contour; the cutter must stay inside the contour (what
             # it must not enter reaches far beyond the plate, so the plate's own edge is no wall of it)
             wall = box(x0 - FAR, y0 - FAR, x1 + FAR, y1 + FAR).difference(part)
@@ -626,8 +556,8 @@ class MillPart(MachinedPart):
             wall = part
         gouge = Forbidden("cutter into the part's finished contour (gouge)", wall, self.settings.tolerance)
         shapely.prepare(part)
-        return Setup(MaterialRemoval(plate, cutter, [gouge]), part, part, lines, "", tuple(rapid_lines),
-                     numbers=block_numbers(c.program, "mill"))
+        return Setup(MaterialRemoval(plate, cutter, [gouge]), part, part, lines, "", rapid_lines,
+                     numbers=dict(meaning.numbers))
 
 
 def with_part_settings(report: Report, settings: PartSettings) -> Report:

@@ -20,6 +20,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +29,24 @@ from ..errors import SystemDefinitionError
 from ..ports import to_float, to_int
 
 Parameters = Mapping[str, Mapping[str, object]]      # instance -> parameter -> value
+
+#: How many configured controllers :func:`configured` keeps (a run's report asks for one a few times).
+_CONFIGURED_KEPT = 4
+_configured_cache: dict[tuple[str, tuple[tuple[str, str], ...]], Any] = {}
+
+
+def configured(kind: type[Any], values: Mapping[str, object]) -> Any:
+    """A controller of class ``kind`` configured with a component's parameters ``values`` (the run's; its
+    defaults for the rest): its ``meaning`` is what the run's program means (the part check, the plots and the
+    thread judge read it, never the program). Kept for the next reader of the same parameters."""
+    key = (kind.__qualname__, tuple(sorted((k, repr(v)) for k, v in values.items())))
+    controller = _configured_cache.get(key)
+    if controller is None or type(controller) is not kind:
+        controller = kind(**values)
+        if len(_configured_cache) >= _CONFIGURED_KEPT:
+            _configured_cache.pop(next(iter(_configured_cache)))
+        _configured_cache[key] = controller
+    return controller
 
 
 def start_parameters(components, start_values: Mapping[str, object]) -> dict[str, dict[str, object]]:
@@ -240,47 +259,24 @@ class LatheCycle(Part):
 
     def x_written(self, parameters: Parameters) -> str | None:
         """How the run's part program writes X: "diameter", "radius", "diameter and radius" (G7 and G8 both), or
-        None for a run of the registers (radii): its G7/G8 words outside comments, else seq.x_diameter. The axis
-        and the summary's X are radii either way."""
-        import re
-
+        None for a run of the registers (radii): its G7/G8 words, else seq.x_diameter (the configured sequencer's
+        ``meaning.x_written``). The axis and the summary's X are radii either way."""
         from ..controllers.sequencer import CutSequencer
-        seq = parameters.get(self.seq, {})
-        program = str(seq.get("program") or "")
-        if not program.strip():
-            return None
-        words = re.findall(r"(?i)G0*([78])(?![\d.])", re.sub(r"\([^)]*\)", "", program))
-        if words:
-            modes = {"7": "diameter", "8": "radius"}
-            return " and ".join(dict.fromkeys(modes[w] for w in sorted(words)))
-        diameter = seq.get("x_diameter", CutSequencer.default_parameters().get("x_diameter", False))
-        if isinstance(diameter, str):
-            diameter = diameter.strip().lower() in ("true", "1")
-        return "diameter" if bool(diameter) else "radius"
+        return configured(CutSequencer, parameters.get(self.seq, {})).meaning.x_written or None
 
     def draw(self, ax, result, parameters: Parameters) -> None:
+        from ..controllers.sequencer import CutSequencer
         seq = parameters.get(self.seq, {})
-        program = str(seq.get("program") or "")
-        if program.strip() and "x_start" in seq:
-            # a part program: the finished profile of each cycle and the planned passes, from the program itself
+        controller = configured(CutSequencer, seq)
+        if controller.meaning.programmed:
+            # a part program: the finished profile of each cycle and the planned passes, as the sequencer runs them
             from ..controllers.geometry import sample
-            from ..controllers.lathe_program import Finish, Rough, Setup, parse, plan_ops, work_offsets
-            start = (to_float(seq["x_start"]), to_float(seq["z_start"]))
-            from ..controllers.g7x import Tool
-            tools = tuple(Tool(x_offset=to_float(seq.get(f"tool[{k}].x_offset", 0.0)),
-                               z_offset=to_float(seq.get(f"tool[{k}].z_offset", 0.0)),
-                               nose_radius=to_float(seq.get(f"tool[{k}].nose_radius", 0.0)),
-                               tip=to_int(seq.get(f"tool[{k}].tip", 0))) for k in range(1, 9))
-            setup = Setup(diameter=bool(seq.get("x_diameter", True)), feed_per_rev=bool(seq.get("feed_per_rev", False)),
-                          tools=tools, home=(to_float(seq.get("z_home", 50.0)), to_float(seq.get("x_home", 50.0))),
-                          works=work_offsets(lambda name: to_float(seq.get(name, 0.0))))
-            ops = parse(program, start, setup)          # the planned moves in the axes' coordinates
-            for k, seg in enumerate(plan_ops(ops, 1.0, (start[1], start[0]))):
+            for k, seg in enumerate(controller.plan):     # the planned moves in the axes' coordinates
                 ax.plot(*zip(*sample([seg.element], 0.2)), color="tab:green", lw=0.5, alpha=0.6,
                         label="planned moves" if k == 0 else None)
-            profiles = {id(op.profile): op.profile for op in ops if isinstance(op, (Rough, Finish))}
+            profiles = {id(o.elements): o.elements for o in controller.meaning.outlines}
             for k, profile in enumerate(profiles.values()):
-                ax.plot(*zip(*sample(profile.elements, 0.2)), color="k", lw=1.5,
+                ax.plot(*zip(*sample([p.element for p in profile], 0.2)), color="k", lw=1.5,
                         label="profile (finished part)" if k == 0 else None)
         elif "x_start" in seq and "block[1].Xf" in seq:
             stock = to_float(seq["x_start"]) - to_float(seq["block[1].Xf"])
@@ -580,7 +576,7 @@ class ContourCycle(Part):
     def interpolator(self, parameters: Parameters):
         """The interpolator the run used (its tool path and contour), from the run's parameters."""
         from ..controllers.contour import ContourInterpolator
-        return ContourInterpolator(**parameters.get(self.contour, {}))
+        return configured(ContourInterpolator, parameters.get(self.contour, {}))
 
     def accumulator(self, parameters: Parameters) -> PartAccumulator:
         return _ContourAccumulator(self, parameters)

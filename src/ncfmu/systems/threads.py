@@ -21,11 +21,13 @@ G92 run):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from ..controllers.g7x import Segment
 
 #: The local lead within this fraction of the programmed lead is the full lead (Fanuc's a).
 LEAD_RATIO = 0.02
@@ -194,26 +196,11 @@ class ThreadJudge:
                             start, end, len(passes), bool(spread > self.tolerance * 1000.0))
 
 
-def thread_judge(seq_values: Mapping[str, object], seq: str, x: str, z: str, spindle: str,
+def thread_judge(plan: Sequence[Segment], seq: str, x: str, z: str, spindle: str,
                  tolerance_mm: float) -> ThreadJudge | None:
-    """The judge of the threads of the program in a sequencer's parameters ``seq_values`` (every parameter, the
-    defaults filled in), read as the sequencer reads it; None: no program, or one without threads."""
-    from ..controllers.g7x import Tool
-    from ..controllers.lathe_program import Setup, parse, plan_ops, work_offsets
-    from ..ports import to_float, to_int
-    program = str(seq_values.get("program") or "")
-    if not program.strip() or not any(g in program.upper() for g in ("G32", "G92", "G76")):
-        return None
-    tools = tuple(Tool(x_offset=to_float(seq_values[f"tool[{k}].x_offset"]),
-                       z_offset=to_float(seq_values[f"tool[{k}].z_offset"]),
-                       nose_radius=to_float(seq_values[f"tool[{k}].nose_radius"]),
-                       tip=to_int(seq_values[f"tool[{k}].tip"])) for k in range(1, 9))
-    reading = Setup(diameter=bool(seq_values["x_diameter"]), feed_per_rev=bool(seq_values["feed_per_rev"]),
-                    tools=tools, home=(to_float(seq_values["z_home"]), to_float(seq_values["x_home"])),
-                    works=work_offsets(lambda name: to_float(seq_values[name])))
-    start = (to_float(seq_values["x_start"]), to_float(seq_values["z_start"]))
-    segments = plan_ops(parse(program, start, reading), to_float(seq_values["block[1].rapid"]), (start[1], start[0]))
-    passes = planned_passes(segments)
+    """The judge of the threads in a configured sequencer's ``plan`` (its planned moves: the program as the
+    sequencer reads it); None: no program, or one without threads."""
+    passes = planned_passes(list(plan))
     if not passes:
         return None
     return ThreadJudge(passes, f"{seq}.threading", f"{spindle}.revolutions", f"{x}.pos", f"{z}.pos", tolerance_mm)
