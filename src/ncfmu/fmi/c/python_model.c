@@ -128,6 +128,7 @@ static struct {
     PyObject *(*GetAttr)(PyObject *, PyObject *);
     PyObject *(*GetAttrString)(PyObject *, const char *);
     PyObject *(*CallMethod)(PyObject *, PyObject *, ...);
+    PyObject *(*CallFunction)(PyObject *, ...);
     PyObject *(*StrFrom)(const char *);
     PyObject *(*InternFrom)(const char *);
     const char *(*Utf8)(PyObject *);
@@ -144,6 +145,8 @@ static struct {
     int (*BytesAs)(PyObject *, char **, Py_ssize_t_ *);
     PyObject *(*Occurred)(void);
     void (*Fetch)(PyObject **, PyObject **, PyObject **);
+    void (*Normalize)(PyObject **, PyObject **, PyObject **);
+    int (*SetTraceback)(PyObject *, PyObject *);
     PyObject *(*Str)(PyObject *);
     void (*Clear)(void);
     void (*IncRef)(PyObject *);
@@ -163,12 +166,13 @@ static int py_load(void)
     L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
     L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
     L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
-    L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString")
+    L(CallMethod, "PyObject_CallMethodObjArgs") L(CallFunction, "PyObject_CallFunctionObjArgs") L(StrFrom, "PyUnicode_FromString")
     L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
     L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
     L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(ListSize, "PyList_Size") L(SysGet, "PySys_GetObject")
     L(Import, "PyImport_ImportModule") L(BytesFrom, "PyBytes_FromStringAndSize")
     L(BytesAs, "PyBytes_AsStringAndSize") L(Occurred, "PyErr_Occurred") L(Fetch, "PyErr_Fetch")
+    L(Normalize, "PyErr_NormalizeException") L(SetTraceback, "PyException_SetTraceback")
     L(Str, "PyObject_Str") L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef")
     L(None, "_Py_NoneStruct")
 #undef L
@@ -240,6 +244,9 @@ struct Model {
     int *in_int;
     unsigned char *in_pending;            /* set and not yet handed over */
     unsigned *pending_vrs, n_pending;
+    /* The slave's fmi_stepper: the controller's step a DoStep calls directly (NULL: not taken since the last other
+     * call into the slave, which may have rebound its controller; None: no controller, fmi_do_step says why). */
+    PyObject *stepper;
 };
 
 /* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
@@ -354,16 +361,29 @@ static int take_outputs(Model *m)
 }
 
 /* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
+/* The inputs set since the last call handed to the slave, before a call into it; 0 (logged) if they could not be. */
+static int inputs_handed(Model *m, const char *fmi_call)
+{
+    if (m->n_pending == 0 || hand_inputs(m)) return 1;
+    char text[512];
+    py_error_text(text, sizeof text);
+    FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the inputs set before could not be handed to the Python "
+             "slave: %s", fmi_call, text);
+    return 0;
+}
+
+static void stepper_forget(Model *m)
+{
+    py_drop(m->stepper);
+    m->stepper = NULL;
+}
+
 static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
     m->out_valid = 0;                                        /* Python code runs: ``out`` may change */
-    if (m->n_pending && !hand_inputs(m)) {
-        char text[512];
-        py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, fmi2Error, "logStatusError", "%s: the inputs set before could not be handed to the Python "
-                 "slave: %s", fmi_call, text);
-        return NULL;
-    }
+    if (entry != N_STEP_REPORT && entry != N_STEPPER && entry != N_GET)   /* ... and the controller may be another */
+        stepper_forget(m);
+    if (!inputs_handed(m, fmi_call)) return NULL;
     PyObject *r = py.CallMethod(m->slave, names[entry], a, b, c, NULL);
     if (!r) {
         char text[512];
@@ -396,6 +416,7 @@ static fmi2Status simple_call(Model *m, const char *fmi_call, int entry)
 /* ---- making and dropping the Python slave -------------------------------------------------------- */
 static void slave_drop(Model *m)
 {
+    stepper_forget(m);
     py_drop(m->slave); py_drop(m->inputs); py_drop(m->pending); py_drop(m->strings);
     for (unsigned k = 0; m->port_name && k < m->n; k++) py_drop(m->port_name[k]);
     free(m->port_name); free(m->vars);
@@ -607,11 +628,45 @@ fmi2Status fmu_model_terminate(Model *m, const char *fmi_call)
     return simple_call(m, fmi_call, N_TERMINATE);
 }
 
+/* A step through the slave's stepper: the controller's compiled step called from here with the inputs dict (no
+ * interpreted frame, no method lookup); a step that raised or queued messages is reported to the slave, which logs
+ * it as fmi_do_step does. */
+static fmi2Status stepper_step(Model *m, const char *fmi_call, PyObject *t, PyObject *h)
+{
+    m->out_valid = 0;
+    if (!inputs_handed(m, fmi_call)) return fmi2Error;
+    PyObject *r = py.CallFunction(m->stepper, t, h, m->inputs, NULL);
+    long queued = r ? py.LongAs(r) : -1;
+    py_drop(r);
+    if (queued == 0) return fmi2OK;
+    PyObject *type = NULL, *error = NULL, *trace = NULL;
+    if (py.Occurred()) {                                     /* the step raised: the slave says where */
+        py.Fetch(&type, &error, &trace);
+        py.Normalize(&type, &error, &trace);
+        if (error && trace) py.SetTraceback(error, trace);
+    }
+    fmi2Status st = call_status(m, fmi_call, N_STEP_REPORT, t, error ? error : py.None, NULL);
+    py_drop(type); py_drop(error); py_drop(trace);
+    return st;
+}
+
+/* The slave's stepper, taken when not held; 1 if there is one (a controller), 0 for fmi_do_step. */
+static int stepper_taken(Model *m, const char *fmi_call)
+{
+    if (!m->stepper && !(m->stepper = call(m, fmi_call, N_STEPPER, NULL, NULL, NULL))) py.Clear();
+    return m->stepper && m->stepper != py.None;
+}
+
 fmi2Status fmu_model_do_step(Model *m, const char *fmi_call, double t, double h)
 {
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
-    fmi2Status st = (a && b) ? call_status(m, fmi_call, N_DO_STEP, a, b, NULL) : fmi2Error;
+    /* Whole nanoseconds, as fmi_do_step and native_model.c round the step (a tool's seconds differ in the last bit):
+     * Python's round(h * 1e9) * 1e-9 for every finite h */
+    double whole = nearbyint(h * 1e9) * 1e-9;
+    int direct = isfinite(whole) && stepper_taken(m, fmi_call);
+    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(direct ? whole : h);
+    fmi2Status st = !(a && b) ? fmi2Error
+                  : direct ? stepper_step(m, fmi_call, a, b) : call_status(m, fmi_call, N_DO_STEP, a, b, NULL);
     py_drop(a); py_drop(b);
     flush_log(m);
     take_outputs(m);                      /* the step's outputs, for the Gets that follow (no GIL there) */
