@@ -243,10 +243,16 @@ struct Model {
     double *in_real;
     int *in_int;
     unsigned char *in_pending;            /* set and not yet handed over */
+    /* What the inputs dict holds, as handed over last (known: 1), while only the controller's step has run since
+     * (it reads the dict, never writes it): a value set again to the same bits is not written again. */
+    double *handed_real;
+    int *handed_int;
+    unsigned char *handed_known;
     unsigned *pending_vrs, n_pending;
     /* The slave's fmi_stepper: the controller's step a DoStep calls directly (NULL: not taken since the last other
      * call into the slave, which may have rebound its controller; None: no controller, fmi_do_step says why). */
     PyObject *stepper;
+    PyObject *out_dict;                   /* the slave's ``out`` (NULL: not taken since the last other call) */
 };
 
 /* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
@@ -289,9 +295,18 @@ static int hand_inputs(Model *m)
         m->in_pending[vr] = 0;
         if (!ok) continue;
         VarType type = m->vars[vr].type;
-        PyObject *v = type == V_REAL ? value_in(type, m->in_real, vr) : value_in(type, m->in_int, vr);
+        int real = type == V_REAL;
+        if (m->handed_known[vr] && (real ? memcmp(&m->handed_real[vr], &m->in_real[vr], sizeof(double)) == 0
+                                         : m->handed_int[vr] == m->in_int[vr]))
+            continue;                                        /* the dict holds this very value */
+        m->handed_known[vr] = 0;
+        PyObject *v = real ? value_in(type, m->in_real, vr) : value_in(type, m->in_int, vr);
         if (!v || py.DictSetItem(m->inputs, m->port_name[vr], v) != 0) ok = 0;
         py_drop(v);
+        if (!ok) continue;
+        if (real) m->handed_real[vr] = m->in_real[vr];
+        else m->handed_int[vr] = m->in_int[vr];
+        m->handed_known[vr] = 1;
     }
     m->n_pending = 0;
     return ok;
@@ -336,7 +351,8 @@ static int map_make(Model *m, PyObject *out)
 static int take_outputs(Model *m)
 {
     m->out_valid = 0;
-    PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
+    if (!m->out_dict) m->out_dict = py.GetAttr(m->slave, names[N_OUT]);
+    PyObject *out = m->out_dict;
     int ok = out != NULL;
     for (int attempt = 0; ok && attempt < 2; attempt++) {
         Py_ssize_t_ pos = 0;
@@ -354,7 +370,6 @@ static int take_outputs(Model *m)
         if (same && k == m->n_map) break;                  /* every output read */
         ok = attempt == 0 && map_make(m, out);               /* a new dict, or keys changed: map it, read again */
     }
-    py_drop(out);
     if (py.Occurred()) { py.Clear(); ok = 0; }
     m->out_valid = ok;
     return ok;
@@ -372,17 +387,20 @@ static int inputs_handed(Model *m, const char *fmi_call)
     return 0;
 }
 
-static void stepper_forget(Model *m)
+/* Python code other than the controller's step is about to run: the slave may rebind its controller and ``out`` and
+ * write its inputs dict (a restored state, a reset), so what the shim holds of them is taken anew. */
+static void held_forget(Model *m)
 {
-    py_drop(m->stepper);
-    m->stepper = NULL;
+    py_drop(m->stepper); py_drop(m->out_dict);
+    m->stepper = m->out_dict = NULL;
+    if (m->handed_known) memset(m->handed_known, 0, m->n ? m->n : 1);
 }
 
 static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
     m->out_valid = 0;                                        /* Python code runs: ``out`` may change */
-    if (entry != N_STEP_REPORT && entry != N_STEPPER && entry != N_GET)   /* ... and the controller may be another */
-        stepper_forget(m);
+    if (entry != N_STEP_REPORT && entry != N_STEPPER && entry != N_GET)   /* ... and its controller, ``out``, inputs */
+        held_forget(m);
     if (!inputs_handed(m, fmi_call)) return NULL;
     PyObject *r = py.CallMethod(m->slave, names[entry], a, b, c, NULL);
     if (!r) {
@@ -416,17 +434,18 @@ static fmi2Status simple_call(Model *m, const char *fmi_call, int entry)
 /* ---- making and dropping the Python slave -------------------------------------------------------- */
 static void slave_drop(Model *m)
 {
-    stepper_forget(m);
+    held_forget(m);
     py_drop(m->slave); py_drop(m->inputs); py_drop(m->pending); py_drop(m->strings);
     for (unsigned k = 0; m->port_name && k < m->n; k++) py_drop(m->port_name[k]);
     free(m->port_name); free(m->vars);
     free(m->out_vrs); free(m->out_real); free(m->out_int); free(m->in_real); free(m->in_int); free(m->in_pending);
-    free(m->pending_vrs);
+    free(m->pending_vrs); free(m->handed_real); free(m->handed_int); free(m->handed_known);
     map_drop(m);
     m->slave = m->inputs = m->pending = m->strings = NULL;
     m->port_name = NULL; m->vars = NULL;
     m->out_vrs = m->pending_vrs = NULL; m->out_real = m->in_real = NULL; m->out_int = m->in_int = NULL;
     m->in_pending = NULL;
+    m->handed_real = NULL; m->handed_int = NULL; m->handed_known = NULL;
     m->n = m->n_out = m->n_pending = 0;
     m->out_valid = 0;
 }
@@ -530,7 +549,11 @@ static int slave_make(Model *m, const char *fmi_call)
     m->out_int = calloc(size, sizeof *m->out_int);
     m->in_int = calloc(size, sizeof *m->in_int);
     m->in_pending = calloc(size, 1);
-    if (!m->out_vrs || !m->pending_vrs || !m->out_real || !m->in_real || !m->out_int || !m->in_int || !m->in_pending) {
+    m->handed_real = calloc(size, sizeof *m->handed_real);
+    m->handed_int = calloc(size, sizeof *m->handed_int);
+    m->handed_known = calloc(size, 1);
+    if (!m->out_vrs || !m->pending_vrs || !m->out_real || !m->in_real || !m->out_int || !m->in_int || !m->in_pending
+        || !m->handed_real || !m->handed_int || !m->handed_known) {
         slave_drop(m);
         return 0;
     }
