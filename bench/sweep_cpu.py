@@ -232,16 +232,20 @@ def main() -> dict:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None)
     parser.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
-                        help="a dask config value for the 2-worker run (e.g. distributed.worker.profile.enabled=False)")
+                        help="a dask config value for the 2-worker run's cluster (e.g. "
+                             "distributed.worker.multiprocessing-method=spawn)")
     parser.add_argument("--pair", action="store_true", help="also two serial halves side by side, no dask")
     parser.add_argument("--half", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--parallel-only", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.parallel_only:
-        import dask
         import yaml
-        with dask.config.set({k: yaml.safe_load(v) for k, v in (c.split("=", 1) for c in args.config)}):
-            p = parallel(args.stop, args.workers)
+
+        import ncfmu.batch
+        # over the cluster's own settings too (batch.LOCAL_CLUSTER_CONFIG), which local_cluster sets over the client's
+        settings = (c.split("=", 1) for c in args.config)
+        ncfmu.batch.LOCAL_CLUSTER_CONFIG.update({k: yaml.safe_load(v) for k, v in settings})
+        p = parallel(args.stop, args.workers)
         Path(args.json).write_text(json.dumps(p))
         return p
     if args.half is not None:
