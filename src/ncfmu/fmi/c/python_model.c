@@ -166,7 +166,8 @@ static int py_load(void)
     L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
     L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
     L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
-    L(CallMethod, "PyObject_CallMethodObjArgs") L(CallFunction, "PyObject_CallFunctionObjArgs") L(StrFrom, "PyUnicode_FromString")
+    L(CallMethod, "PyObject_CallMethodObjArgs") L(CallFunction, "PyObject_CallFunctionObjArgs")
+    L(StrFrom, "PyUnicode_FromString")
     L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
     L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
     L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(ListSize, "PyList_Size") L(SysGet, "PySys_GetObject")
@@ -375,7 +376,6 @@ static int take_outputs(Model *m)
     return ok;
 }
 
-/* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
 /* The inputs set since the last call handed to the slave, before a call into it; 0 (logged) if they could not be. */
 static int inputs_handed(Model *m, const char *fmi_call)
 {
@@ -396,6 +396,7 @@ static void held_forget(Model *m)
     if (m->handed_known) memset(m->handed_known, 0, m->n ? m->n : 1);
 }
 
+/* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
 static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
     m->out_valid = 0;                                        /* Python code runs: ``out`` may change */
