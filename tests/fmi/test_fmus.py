@@ -34,7 +34,8 @@ def test_model_description_carries_units_and_initial_unknowns(fmus):
 def test_fmu_runs_the_code_it_was_built_from(fmus, fmu_runner, monkeypatch):
     """Break the in-process ncfmu: the FMU must not notice (it runs its own vendored copy)."""
     import ncfmu.controllers.sequencer as src
-    monkeypatch.setattr(src.CutSequencer, "step", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("dev copy")))
+    for entry in ("step", "step_then_count_messages"):           # the latter is what the binary calls
+        monkeypatch.setattr(src.CutSequencer, entry, lambda *a, **k: (_ for _ in ()).throw(RuntimeError("dev copy")))
     monkeypatch.setattr(src, "MAX_BLOCKS", 1)
     r = fmu_runner(fmus["CutSequencer"]).start()
     r.set(start=True)
