@@ -66,29 +66,39 @@ def resolve(rev: str) -> str:
 def prepare(sha: str, work: Path, constraints: Path, compiled: bool = False) -> tuple[Path, Path]:
     """The revision's worktree and venv python, built once and cached (a 'ready' marker after the build);
     ``compiled``: installed with the ``compiled`` extra (mypyc), so ``ncfmu build`` compiles the controllers
-    where the revision can (a revision without the extra builds as it always did)."""
+    where the revision can (a revision without the extra builds as it always did); else built with ``--pure`` where
+    the revision has it (mypy now comes in without the extra: a plain ``ncfmu build`` compiled the "pure" side too).
+    A cache entry prepared before that rule is built again (its marker says ``pure`` after)."""
     home = work / (sha[:12] + ("-compiled" if compiled else ""))
     src, venv = home / "src", home / "venv"
     python = venv / "bin" / "python"
-    if (home / "ready").is_file():
+    marker = home / "ready"
+    build = [str(venv / "bin" / "ncfmu"), "build", *([] if compiled else ["--pure"])]
+    if marker.is_file() and (compiled or marker.read_text().split()[1:] == ["pure"]):
         return src, python
-    if home.exists():       # an interrupted preparation: start it again
-        subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(src)], capture_output=True)
-        shutil.rmtree(home, ignore_errors=True)
-    home.mkdir(parents=True)
-    steps = [
-        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(src), sha],
-        [sys.executable, "-m", "venv", str(venv)],
-        [str(python), "-m", "pip", "install", "-q", "-c", str(constraints), "-e",
-         f"{src}[compiled]" if compiled else str(src)],
-        [str(venv / "bin" / "ncfmu"), "build"],
-    ]
+    if marker.is_file():    # prepared before the rule above: only built again
+        steps = [build]
+    else:
+        if home.exists():       # an interrupted preparation: start it again
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(src)], capture_output=True)
+            shutil.rmtree(home, ignore_errors=True)
+        home.mkdir(parents=True)
+        steps = [
+            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(src), sha],
+            [sys.executable, "-m", "venv", str(venv)],
+            [str(python), "-m", "pip", "install", "-q", "-c", str(constraints), "-e",
+             f"{src}[compiled]" if compiled else str(src)],
+            build,
+        ]
     for cmd in steps:
+        if cmd[-1] == "--pure" and "--pure" not in subprocess.run(
+                [str(venv / "bin" / "ncfmu"), "build", "--help"], capture_output=True, text=True).stdout:
+            cmd = cmd[:-1]      # a revision from before the compiled build: its build is pure
         print(f"[{sha[:10]}] {' '.join(cmd[:4])} ...", file=sys.stderr, flush=True)
         out = subprocess.run(cmd, cwd=src if src.exists() else REPO, capture_output=True, text=True)
         if out.returncode:
             raise CompareError(f"{sha[:10]}: {' '.join(cmd)} failed:\n{out.stdout[-2000:]}{out.stderr[-2000:]}")
-    (home / "ready").write_text(sha + "\n")
+    marker.write_text(sha + ("\n" if compiled else " pure\n"))
     return src, python
 
 

@@ -232,10 +232,22 @@ def main() -> dict:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None)
     parser.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
-                        help="a dask config value for the 2-worker run (e.g. distributed.worker.profile.enabled=False)")
+                        help="a dask config value for the 2-worker run's cluster (e.g. "
+                             "distributed.worker.multiprocessing-method=spawn)")
     parser.add_argument("--pair", action="store_true", help="also two serial halves side by side, no dask")
     parser.add_argument("--half", type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--parallel-only", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.parallel_only:
+        import yaml
+
+        import ncfmu.batch
+        # over the cluster's own settings too (batch.LOCAL_CLUSTER_CONFIG), which local_cluster sets over the client's
+        settings = (c.split("=", 1) for c in args.config)
+        ncfmu.batch.LOCAL_CLUSTER_CONFIG.update({k: yaml.safe_load(v) for k, v in settings})
+        p = parallel(args.stop, args.workers)
+        Path(args.json).write_text(json.dumps(p))
+        return p
     if args.half is not None:
         half = serial(args.stop, {"seq.block[1].Xd": VARY["seq.block[1].Xd"],
                                   "seq.block[1].feed": [VARY["seq.block[1].feed"][args.half]]})
@@ -244,10 +256,14 @@ def main() -> dict:
     from ncfmu.project import build
     build(HERE.parent)
     s = serial(args.stop)
-    import dask
-    import yaml
-    with dask.config.set({k: yaml.safe_load(v) for k, v in (c.split("=", 1) for c in args.config)}):
-        p = parallel(args.stop, args.workers)
+    # the 2-worker sweep in a process of its own, as `ncfmu sweep` runs it: this one has opened the system for the
+    # serial run, and a worker forked from it (batch.LOCAL_CLUSTER_CONFIG) would start with that system open
+    import subprocess
+    with tempfile.TemporaryDirectory() as tmp:
+        subprocess.run([sys.executable, __file__, "--parallel-only", "--stop", str(args.stop), "--workers",
+                        str(args.workers), "--json", f"{tmp}/p.json", *(f"--config={c}" for c in args.config)],
+                       check=True, stdout=subprocess.DEVNULL)
+        p = json.loads(Path(f"{tmp}/p.json").read_text())
     out = {"config": args.config, "load_avg": os.getloadavg(), "stop_time_s": args.stop, "serial": s, "parallel": p}
     report(s, p)
     if args.pair:

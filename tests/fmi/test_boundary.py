@@ -4,7 +4,10 @@ host sees must be what the slave holds: every call below is one that would tell 
 
 from __future__ import annotations
 
+import copy
 import math
+import subprocess
+import sys
 
 from ncfmu.controllers import AreaLimiter
 from ncfmu.systems import parameters
@@ -58,3 +61,93 @@ def test_outputs_after_a_restored_state_are_the_states(fmus, fmu_runner):
     assert outputs(r) == saved
     assert (r.get("ref_cmd_in"), r.get("ref_pos")) == (0.5, 0.49)
     r.slave.free_state(state)
+
+
+
+def test_a_restored_state_steps_on_from_the_state_with_its_inputs(fmus, fmu_runner):
+    """DoStep calls the controller's step directly and keeps what it handed over: after fmi2SetFMUstate the restored
+    controller steps (not the one before it), its outputs are read, and an input set to the value it had just before
+    the restore reaches the step although the shim handed that very value over already (the state's dict held
+    another)."""
+    r = fmu_runner(fmus["AreaLimiter"]).start(**LIMITER)
+    twin = AreaLimiter.from_parameters({**AreaLimiter.default_parameters(), **LIMITER})
+    inputs = AreaLimiter.default_inputs()
+
+    def step(k: int, x: float) -> None:
+        r.set(ref_cmd_in=x, ref_pos=x - 0.01)
+        inputs.update(ref_cmd_in=x, ref_pos=x - 0.01)
+        r.slave.do_step(k * 1e-3, 1e-3)
+        assert outputs(r) == twin_outputs(twin.step(k * 1e-3, 1e-3, dict(inputs))), f"step {k}"
+
+    for k in range(40):
+        step(k, 0.01 * k)
+    state, at_state = r.slave.get_state(), copy.deepcopy((twin, inputs))
+    for k in range(40, 140):                         # away: ref 0.39 -> -0.60
+        step(k, 0.39 - 0.01 * (k - 39))
+    away = outputs(r)
+    r.slave.set_state(state)
+    twin, inputs = at_state
+    assert outputs(r) != away
+    for k in range(40, 60):                          # first the value handed over last, then back up
+        step(k, 0.39 - 0.01 * 100 if k == 40 else 0.39 + 0.002 * (k - 40))
+    r.slave.free_state(state)
+
+
+# A host in its own process (a defect in the step's error path may crash it): the FMU's own copy of the controller
+# is given a step that raises; the binary fails that DoStep with fmi2Error, the slave logs where, and the instance
+# goes on (reset, initialised again, its own step).
+FAILING_STEP_HOST = r"""
+import importlib, sys, tempfile
+from ctypes import byref
+import fmpy.fmi2 as fmi2
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.logging import addLoggerProxy
+from ncfmu.fmi.builder import vendored_package
+
+fmu = sys.argv[1]
+md = read_model_description(fmu)
+def said(env, name, status, category, message):
+    print("LOG", status, message.decode().replace("\n", " | "), flush=True)
+callbacks = fmi2.fmi2CallbackFunctions()
+callbacks.logger = fmi2.fmi2CallbackLoggerTYPE(said)
+callbacks.allocateMemory, callbacks.freeMemory = fmi2.defaultCallbacks.allocateMemory, fmi2.defaultCallbacks.freeMemory
+addLoggerProxy(byref(callbacks))
+slave = fmi2.FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu, tempfile.mkdtemp()),
+                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="dut")
+slave.instantiate(callbacks=callbacks)
+limiter = importlib.import_module(f"{vendored_package(fmu)}.controllers.limiter").AreaLimiter  # the FMU's own copy
+working = limiter.step_then_count_messages
+def broken_step(self, t, dt, inputs):
+    raise ZeroDivisionError("a defect in the step")
+limiter.step_then_count_messages = broken_step
+ref_cmd = next(v.valueReference for v in md.modelVariables if v.name == "ref_cmd")
+for attempt in ("broken", "working"):
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    try:
+        slave.doStep(0.0, 1e-3)
+        slave.doStep(1e-3, 1e-3)
+        print("STEPPED", attempt, slave.getReal([ref_cmd]), flush=True)
+    except FMICallException as err:
+        print("FAILED", attempt, err, flush=True)
+    slave.reset()
+    limiter.step_then_count_messages = working
+slave.freeInstance()
+print("END", flush=True)
+"""
+
+
+def test_a_step_that_raises_fails_the_dostep_and_the_log_says_where(fmus):
+    proc = subprocess.run([sys.executable, "-c", FAILING_STEP_HOST, str(fmus["AreaLimiter"])],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = proc.stdout.splitlines()
+    failed = [line for line in lines if line.startswith("FAILED")]
+    assert failed and failed[0].startswith("FAILED broken") and "fmi2DoStep" in failed[0], lines
+    errors = [line for line in lines if line.startswith("LOG 3 ")]
+    assert len(errors) == 1, lines
+    assert errors[0].startswith("LOG 3 dut: doStep at t = 0.000000 s failed: ZeroDivisionError('a defect in the step')")
+    assert "Traceback" in errors[0] and "in broken_step" in errors[0], errors[0]
+    assert lines[-2].startswith("STEPPED working [") and lines[-1] == "END", lines

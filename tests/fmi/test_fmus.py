@@ -34,7 +34,8 @@ def test_model_description_carries_units_and_initial_unknowns(fmus):
 def test_fmu_runs_the_code_it_was_built_from(fmus, fmu_runner, monkeypatch):
     """Break the in-process ncfmu: the FMU must not notice (it runs its own vendored copy)."""
     import ncfmu.controllers.sequencer as src
-    monkeypatch.setattr(src.CutSequencer, "step", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("dev copy")))
+    for entry in ("step", "step_then_count_messages"):           # the latter is what the binary calls
+        monkeypatch.setattr(src.CutSequencer, entry, lambda *a, **k: (_ for _ in ()).throw(RuntimeError("dev copy")))
     monkeypatch.setattr(src, "MAX_BLOCKS", 1)
     r = fmu_runner(fmus["CutSequencer"]).start()
     r.set(start=True)
@@ -119,13 +120,14 @@ def test_bad_limit_table_refused_at_initialisation(fmus, fmu_runner, name, value
 def test_a_controller_exception_fails_the_step_with_fmi2error(fmus, fmu_runner, monkeypatch):
     """A defect inside the controller: fmi2Error and the exception in the log, the host keeps running."""
     r = fmu_runner(fmus["OperatorPanel"]).start()
-    r.slave.do_step(0.0, 1e-3)
     from ncfmu.fmi.builder import vendored_package
     vendored = sys.modules[f"{vendored_package(fmus['OperatorPanel'])}.controllers.panel"]   # the FMU's own copy
 
     def broken(self, t, dt, inputs):
         raise ZeroDivisionError("deliberate defect")
-    monkeypatch.setattr(vendored.OperatorPanel, "step", broken)
+    # the method the binary's DoStep calls (compiled, it calls ``step`` natively: a patched ``step`` is not seen),
+    # before the first step (the binary takes it then and holds it while only steps run)
+    monkeypatch.setattr(vendored.OperatorPanel, "step_then_count_messages", broken)
     with pytest.raises(SimulationError) as err:
-        r.slave.do_step(1e-3, 1e-3)
+        r.slave.do_step(0.0, 1e-3)
     assert "returned fmi2Error" in str(err.value) and "deliberate defect" in str(err.value)

@@ -134,6 +134,12 @@ class Controller:
         """Advance by ``dt`` seconds; return the outputs (the same dict each time, updated in place)."""
         raise NotImplementedError
 
+    def step_then_count_messages(self, t: float, dt: float, inputs: Mapping[str, object]) -> int:
+        """:meth:`step`, then how many messages are queued: what an FMU's binary calls a step, in one call (compiled,
+        no Python frame around the step), and it takes the messages only when there are any."""
+        self.step(t, dt, inputs)
+        return len(self.messages)
+
     def outputs(self) -> dict[str, object]:
         """The present outputs (valid from ``reset()`` on)."""
         return self._outputs  # type: ignore[attr-defined]

@@ -18,6 +18,8 @@ else: the contract is the table in :mod:`ncfmu.fmi.contract`, described in ``doc
 from __future__ import annotations
 
 import copy
+import traceback
+from collections.abc import Callable, Mapping
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.default_experiment import DefaultExperiment
@@ -100,15 +102,24 @@ class ControllerSlave(Fmi2Slave):
             return STATUS["ERROR"]
         # Tools count time in integer nanoseconds (libcosim); their conversion to seconds can differ in
         # the last bit (1e6 ns -> 0.0010000000000000002 s). Whole nanoseconds make every tool's step equal.
+        # (The shim's DoStep rounds so too before it calls fmi_stepper's step, as native_model.c does.)
         step_size = round(step_size * 1e9) * 1e-9
         try:
-            self.logic.step(current_time, step_size, self.inputs)
+            queued = self.logic.step_then_count_messages(current_time, step_size, self.inputs)
         except Exception as err:                                  # a defect: say where, fail the step
-            import traceback
-            self.log(f"{self.instance_name}: doStep at t = {current_time:.6f} s failed: {err!r}\n"
-                     f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
+            return self.fmi_step_report(current_time, err)
+        return self.fmi_step_report(current_time, None) if queued else STATUS["OK"]
+
+    def fmi_stepper(self) -> Callable[[float, float, Mapping[str, object]], int] | None:
+        return None if self.logic is None else self.logic.step_then_count_messages
+
+    def fmi_step_report(self, current_time: float, error: BaseException | None) -> int:
+        if error is not None:
+            trace = "".join(traceback.format_exception(type(error), error, error.__traceback__, limit=4))
+            self.log(f"{self.instance_name}: doStep at t = {current_time:.6f} s failed: {error!r}\n{trace}",
+                     Fmi2Status.error)
             return STATUS["ERROR"]
-        if self.logic.messages:
+        if self.logic is not None:
             self._flush()
         return STATUS["OK"]
 

@@ -44,6 +44,14 @@ ENTRIES: tuple[Entry, ...] = (
           "status: ERROR when the parameters are refused (the instance lives on: fmi2Reset)"),
     Entry("DO_STEP", "fmi_do_step", "slave", "method", ("current_time", "step_size"),
           "status: OK, DISCARD, or ERROR (the step failed; the reason is in the log)"),
+    Entry("STEPPER", "fmi_stepper", "slave", "method", (),
+          "the controller's step_then_count_messages(current_time, step_size, inputs) -> the number of messages it "
+          "queued (an int), or None while there is no controller: the shim's DoStep calls it with the slave's "
+          "inputs dict and a step of whole nanoseconds, no Python frame between (fmi_do_step when None); "
+          "taken anew after any other call into the slave (it may rebind its controller)"),
+    Entry("STEP_REPORT", "fmi_step_report", "slave", "method", ("current_time", "error"),
+          "status: after a stepper call that raised (error: the exception, its traceback set; ERROR) or queued "
+          "messages (error None; OK): logs them as fmi_do_step does"),
     Entry("TERMINATE", "fmi_terminate", "slave", "method", (), "status"),
     Entry("GET", "fmi_get", "slave", "method", ("vrs",),
           "list of values, one per vr (the shim checked each vr's type before)"),

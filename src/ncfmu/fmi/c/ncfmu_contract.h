@@ -15,6 +15,10 @@
 #define NCFMU_EXIT_INITIALIZATION "fmi_exit_initialization_mode"
 /* slave.fmi_do_step(current_time, step_size) [method] -> status: OK, DISCARD, or ERROR (the step failed; the reason is in the log) */
 #define NCFMU_DO_STEP "fmi_do_step"
+/* slave.fmi_stepper() [method] -> the controller's step_then_count_messages(current_time, step_size, inputs) -> the number of messages it queued (an int), or None while there is no controller: the shim's DoStep calls it with the slave's inputs dict and a step of whole nanoseconds, no Python frame between (fmi_do_step when None); taken anew after any other call into the slave (it may rebind its controller) */
+#define NCFMU_STEPPER "fmi_stepper"
+/* slave.fmi_step_report(current_time, error) [method] -> status: after a stepper call that raised (error: the exception, its traceback set; ERROR) or queued messages (error None; OK): logs them as fmi_do_step does */
+#define NCFMU_STEP_REPORT "fmi_step_report"
 /* slave.fmi_terminate() [method] -> status */
 #define NCFMU_TERMINATE "fmi_terminate"
 /* slave.fmi_get(vrs) [method] -> list of values, one per vr (the shim checked each vr's type before) */
@@ -39,7 +43,7 @@
 #define NCFMU_INPUTS "inputs"
 
 /* Every name above, for the shim's table of interned names: X(MACRO_SUFFIX). */
-#define NCFMU_CONTRACT_NAMES(X) X(INSTANTIATE) X(PORTS) X(SETUP_EXPERIMENT) X(ENTER_INITIALIZATION) X(EXIT_INITIALIZATION) X(DO_STEP) X(TERMINATE) X(GET) X(SET) X(GET_STATE) X(SET_STATE) X(SERIALIZE) X(DESERIALIZE) X(TAKE_LOG) X(PENDING_LOG) X(OUT) X(INPUTS)
+#define NCFMU_CONTRACT_NAMES(X) X(INSTANTIATE) X(PORTS) X(SETUP_EXPERIMENT) X(ENTER_INITIALIZATION) X(EXIT_INITIALIZATION) X(DO_STEP) X(STEPPER) X(STEP_REPORT) X(TERMINATE) X(GET) X(SET) X(GET_STATE) X(SET_STATE) X(SERIALIZE) X(DESERIALIZE) X(TAKE_LOG) X(PENDING_LOG) X(OUT) X(INPUTS)
 
 #define NCFMU_STATE_TRAILER "ncfmu-t2"  /* then the phase, an int32, and the time, a double */
 #define NCFMU_STATE_TRAILER_SIZE 20

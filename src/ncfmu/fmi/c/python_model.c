@@ -128,6 +128,7 @@ static struct {
     PyObject *(*GetAttr)(PyObject *, PyObject *);
     PyObject *(*GetAttrString)(PyObject *, const char *);
     PyObject *(*CallMethod)(PyObject *, PyObject *, ...);
+    PyObject *(*CallFunction)(PyObject *, ...);
     PyObject *(*StrFrom)(const char *);
     PyObject *(*InternFrom)(const char *);
     const char *(*Utf8)(PyObject *);
@@ -144,6 +145,8 @@ static struct {
     int (*BytesAs)(PyObject *, char **, Py_ssize_t_ *);
     PyObject *(*Occurred)(void);
     void (*Fetch)(PyObject **, PyObject **, PyObject **);
+    void (*Normalize)(PyObject **, PyObject **, PyObject **);
+    int (*SetTraceback)(PyObject *, PyObject *);
     PyObject *(*Str)(PyObject *);
     void (*Clear)(void);
     void (*IncRef)(PyObject *);
@@ -163,12 +166,14 @@ static int py_load(void)
     L(DictSetItem, "PyDict_SetItem") L(FloatAs, "PyFloat_AsDouble") L(FloatFrom, "PyFloat_FromDouble")
     L(LongAs, "PyLong_AsLong") L(LongFrom, "PyLong_FromLong") L(IsTrue, "PyObject_IsTrue")
     L(BoolFrom, "PyBool_FromLong") L(GetAttr, "PyObject_GetAttr") L(GetAttrString, "PyObject_GetAttrString")
-    L(CallMethod, "PyObject_CallMethodObjArgs") L(StrFrom, "PyUnicode_FromString")
+    L(CallMethod, "PyObject_CallMethodObjArgs") L(CallFunction, "PyObject_CallFunctionObjArgs")
+    L(StrFrom, "PyUnicode_FromString")
     L(InternFrom, "PyUnicode_InternFromString") L(Utf8, "PyUnicode_AsUTF8") L(SeqSize, "PySequence_Size")
     L(SeqGetItem, "PySequence_GetItem") L(SeqContains, "PySequence_Contains") L(ListNew, "PyList_New")
     L(ListSetItem, "PyList_SetItem") L(ListInsert, "PyList_Insert") L(ListSize, "PyList_Size") L(SysGet, "PySys_GetObject")
     L(Import, "PyImport_ImportModule") L(BytesFrom, "PyBytes_FromStringAndSize")
     L(BytesAs, "PyBytes_AsStringAndSize") L(Occurred, "PyErr_Occurred") L(Fetch, "PyErr_Fetch")
+    L(Normalize, "PyErr_NormalizeException") L(SetTraceback, "PyException_SetTraceback")
     L(Str, "PyObject_Str") L(Clear, "PyErr_Clear") L(IncRef, "Py_IncRef") L(DecRef, "Py_DecRef")
     L(None, "_Py_NoneStruct")
 #undef L
@@ -239,7 +244,16 @@ struct Model {
     double *in_real;
     int *in_int;
     unsigned char *in_pending;            /* set and not yet handed over */
+    /* What the inputs dict holds, as handed over last (known: 1), while only the controller's step has run since
+     * (it reads the dict, never writes it): a value set again to the same bits is not written again. */
+    double *handed_real;
+    int *handed_int;
+    unsigned char *handed_known;
     unsigned *pending_vrs, n_pending;
+    /* The slave's fmi_stepper: the controller's step a DoStep calls directly (NULL: not taken since the last other
+     * call into the slave, which may have rebound its controller; None: no controller, fmi_do_step says why). */
+    PyObject *stepper;
+    PyObject *out_dict;                   /* the slave's ``out`` (NULL: not taken since the last other call) */
 };
 
 /* ---- calls into the Python slave (the GIL held) ---------------------------------------------------- */
@@ -282,9 +296,18 @@ static int hand_inputs(Model *m)
         m->in_pending[vr] = 0;
         if (!ok) continue;
         VarType type = m->vars[vr].type;
-        PyObject *v = type == V_REAL ? value_in(type, m->in_real, vr) : value_in(type, m->in_int, vr);
+        int real = type == V_REAL;
+        if (m->handed_known[vr] && (real ? memcmp(&m->handed_real[vr], &m->in_real[vr], sizeof(double)) == 0
+                                         : m->handed_int[vr] == m->in_int[vr]))
+            continue;                                        /* the dict holds this very value */
+        m->handed_known[vr] = 0;
+        PyObject *v = real ? value_in(type, m->in_real, vr) : value_in(type, m->in_int, vr);
         if (!v || py.DictSetItem(m->inputs, m->port_name[vr], v) != 0) ok = 0;
         py_drop(v);
+        if (!ok) continue;
+        if (real) m->handed_real[vr] = m->in_real[vr];
+        else m->handed_int[vr] = m->in_int[vr];
+        m->handed_known[vr] = 1;
     }
     m->n_pending = 0;
     return ok;
@@ -329,7 +352,8 @@ static int map_make(Model *m, PyObject *out)
 static int take_outputs(Model *m)
 {
     m->out_valid = 0;
-    PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
+    if (!m->out_dict) m->out_dict = py.GetAttr(m->slave, names[N_OUT]);
+    PyObject *out = m->out_dict;
     int ok = out != NULL;
     for (int attempt = 0; ok && attempt < 2; attempt++) {
         Py_ssize_t_ pos = 0;
@@ -347,23 +371,38 @@ static int take_outputs(Model *m)
         if (same && k == m->n_map) break;                  /* every output read */
         ok = attempt == 0 && map_make(m, out);               /* a new dict, or keys changed: map it, read again */
     }
-    py_drop(out);
     if (py.Occurred()) { py.Clear(); ok = 0; }
     m->out_valid = ok;
     return ok;
+}
+
+/* The inputs set since the last call handed to the slave, before a call into it; 0 (logged) if they could not be. */
+static int inputs_handed(Model *m, const char *fmi_call)
+{
+    if (m->n_pending == 0 || hand_inputs(m)) return 1;
+    char text[512];
+    py_error_text(text, sizeof text);
+    FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the inputs set before could not be handed to the Python "
+             "slave: %s", fmi_call, text);
+    return 0;
+}
+
+/* Python code other than the controller's step is about to run: the slave may rebind its controller and ``out`` and
+ * write its inputs dict (a restored state, a reset), so what the shim holds of them is taken anew. */
+static void held_forget(Model *m)
+{
+    py_drop(m->stepper); py_drop(m->out_dict);
+    m->stepper = m->out_dict = NULL;
+    if (m->handed_known) memset(m->handed_known, 0, m->n ? m->n : 1);
 }
 
 /* slave.<entry>(a, b, c): a new reference, or NULL after logging the exception that escaped. */
 static PyObject *call(Model *m, const char *fmi_call, int entry, PyObject *a, PyObject *b, PyObject *c)
 {
     m->out_valid = 0;                                        /* Python code runs: ``out`` may change */
-    if (m->n_pending && !hand_inputs(m)) {
-        char text[512];
-        py_error_text(text, sizeof text);
-        FMI2_SAY(m->log, ModelError, "logStatusError", "%s: the inputs set before could not be handed to the Python "
-                 "slave: %s", fmi_call, text);
-        return NULL;
-    }
+    if (entry != N_STEP_REPORT && entry != N_STEPPER && entry != N_GET)   /* ... and its controller, ``out``, inputs */
+        held_forget(m);
+    if (!inputs_handed(m, fmi_call)) return NULL;
     PyObject *r = py.CallMethod(m->slave, names[entry], a, b, c, NULL);
     if (!r) {
         char text[512];
@@ -396,16 +435,18 @@ static ModelStatus simple_call(Model *m, const char *fmi_call, int entry)
 /* ---- making and dropping the Python slave -------------------------------------------------------- */
 static void slave_drop(Model *m)
 {
+    held_forget(m);
     py_drop(m->slave); py_drop(m->inputs); py_drop(m->pending); py_drop(m->strings);
     for (unsigned k = 0; m->port_name && k < m->n; k++) py_drop(m->port_name[k]);
     free(m->port_name); free(m->vars);
     free(m->out_vrs); free(m->out_real); free(m->out_int); free(m->in_real); free(m->in_int); free(m->in_pending);
-    free(m->pending_vrs);
+    free(m->pending_vrs); free(m->handed_real); free(m->handed_int); free(m->handed_known);
     map_drop(m);
     m->slave = m->inputs = m->pending = m->strings = NULL;
     m->port_name = NULL; m->vars = NULL;
     m->out_vrs = m->pending_vrs = NULL; m->out_real = m->in_real = NULL; m->out_int = m->in_int = NULL;
     m->in_pending = NULL;
+    m->handed_real = NULL; m->handed_int = NULL; m->handed_known = NULL;
     m->n = m->n_out = m->n_pending = 0;
     m->out_valid = 0;
 }
@@ -509,7 +550,11 @@ static int slave_make(Model *m, const char *fmi_call)
     m->out_int = calloc(size, sizeof *m->out_int);
     m->in_int = calloc(size, sizeof *m->in_int);
     m->in_pending = calloc(size, 1);
-    if (!m->out_vrs || !m->pending_vrs || !m->out_real || !m->in_real || !m->out_int || !m->in_int || !m->in_pending) {
+    m->handed_real = calloc(size, sizeof *m->handed_real);
+    m->handed_int = calloc(size, sizeof *m->handed_int);
+    m->handed_known = calloc(size, 1);
+    if (!m->out_vrs || !m->pending_vrs || !m->out_real || !m->in_real || !m->out_int || !m->in_int || !m->in_pending
+        || !m->handed_real || !m->handed_int || !m->handed_known) {
         slave_drop(m);
         return 0;
     }
@@ -607,11 +652,45 @@ ModelStatus fmu_model_terminate(Model *m, const char *fmi_call)
     return simple_call(m, fmi_call, N_TERMINATE);
 }
 
+/* A step through the slave's stepper: the controller's compiled step called from here with the inputs dict (no
+ * interpreted frame, no method lookup); a step that raised or queued messages is reported to the slave, which logs
+ * it as fmi_do_step does. */
+static ModelStatus stepper_step(Model *m, const char *fmi_call, PyObject *t, PyObject *h)
+{
+    m->out_valid = 0;
+    if (!inputs_handed(m, fmi_call)) return ModelError;
+    PyObject *r = py.CallFunction(m->stepper, t, h, m->inputs, NULL);
+    long queued = r ? py.LongAs(r) : -1;
+    py_drop(r);
+    if (queued == 0) return ModelOK;
+    PyObject *type = NULL, *error = NULL, *trace = NULL;
+    if (py.Occurred()) {                                     /* the step raised: the slave says where */
+        py.Fetch(&type, &error, &trace);
+        py.Normalize(&type, &error, &trace);
+        if (error && trace) py.SetTraceback(error, trace);
+    }
+    ModelStatus st = call_status(m, fmi_call, N_STEP_REPORT, t, error ? error : py.None, NULL);
+    py_drop(type); py_drop(error); py_drop(trace);
+    return st;
+}
+
+/* The slave's stepper, taken when not held; 1 if there is one (a controller), 0 for fmi_do_step. */
+static int stepper_taken(Model *m, const char *fmi_call)
+{
+    if (!m->stepper && !(m->stepper = call(m, fmi_call, N_STEPPER, NULL, NULL, NULL))) py.Clear();
+    return m->stepper && m->stepper != py.None;
+}
+
 ModelStatus fmu_model_do_step(Model *m, const char *fmi_call, double t, double h)
 {
     PyGILState_STATE g = py.GILEnsure();
-    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(h);
-    ModelStatus st = (a && b) ? call_status(m, fmi_call, N_DO_STEP, a, b, NULL) : ModelError;
+    /* Whole nanoseconds, as fmi_do_step and native_model.c round the step (a tool's seconds differ in the last bit):
+     * Python's round(h * 1e9) * 1e-9 for every finite h */
+    double whole = nearbyint(h * 1e9) * 1e-9;
+    int direct = isfinite(whole) && stepper_taken(m, fmi_call);
+    PyObject *a = py.FloatFrom(t), *b = py.FloatFrom(direct ? whole : h);
+    ModelStatus st = !(a && b) ? ModelError
+                  : direct ? stepper_step(m, fmi_call, a, b) : call_status(m, fmi_call, N_DO_STEP, a, b, NULL);
     py_drop(a); py_drop(b);
     flush_log(m);
     take_outputs(m);                      /* the step's outputs, for the Gets that follow (no GIL there) */
