@@ -373,14 +373,9 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
 LOCAL_CLUSTER_CONFIG: dict[str, object] = {"distributed.worker.profile.enabled": False,
                                            "distributed.admin.tick.interval": "1s",
                                            "distributed.admin.system-monitor.interval": "10s"}
-#: On Linux the workers are forked from this process, not spawned: a spawned worker is a new interpreter that imports
-#: distributed, then ncfmu and the co-simulation again before its first variant (~1.1 s CPU a worker, a fifth of a
-#: 16-variant lathe_taper sweep on 2 workers: bench/README.md, issue 50); a forked one has them all and starts at
-#: once, its start overlapping nothing but the other's. Fork is what multiprocessing itself uses on Linux by default;
-#: CPython takes the import lock across the fork and resets the GIL and the threading state in the child (dask forks
-#: from a thread of its own). Elsewhere (macOS: system libraries not safe after fork) dask's spawn stays.
-if sys.platform.startswith("linux"):
-    LOCAL_CLUSTER_CONFIG["distributed.worker.multiprocessing-method"] = "fork"
+#: The workers stay spawned (dask's default), not forked, though a forked worker would start ~1 s of CPU sooner
+#: (bench/README.md, "sweep workers"): a sweep is often started from a process that holds open FMUs, their loaded
+#: binaries and threads (a pytest session, a notebook), and a fork copies those mid-use into every worker.
 
 
 def local_cluster(workers: int):

@@ -229,24 +229,3 @@ def test_a_local_cluster_spends_nothing_on_the_dashboard_it_does_not_serve():
     assert scheduler == (1000.0, 10000.0)             # ms
     assert settings() == before
 
-
-@pytest.mark.slow
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers are forked on Linux only (spawned elsewhere)")
-def test_a_local_clusters_worker_starts_without_importing_again():
-    """A spawned worker is a new interpreter: importing distributed alone cost it 0.28-0.41 s CPU before it could take
-    a task, and ncfmu with the co-simulation another ~0.5 s inside its first variant (bench/sweep_cpu.py). Forked
-    from this process it has them: at its start it has spent next to no CPU and holds what this process imported."""
-    import resource
-
-    from dask.distributed import Client
-
-    import ncfmu.cosim.master  # noqa: F401 -- imported here, before the cluster starts
-    from ncfmu.batch import local_cluster
-
-    def started() -> tuple[float, bool]:
-        usage = resource.getrusage(resource.RUSAGE_SELF)
-        return usage.ru_utime + usage.ru_stime, "ncfmu.cosim.master" in sys.modules
-    with local_cluster(1) as cluster, Client(cluster) as client:
-        cpu, has_master = next(iter(client.run(started).values()))
-    assert has_master
-    assert cpu < 0.15, f"the worker spent {cpu:.2f} s CPU starting"
