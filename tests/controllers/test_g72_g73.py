@@ -189,3 +189,16 @@ def test_g72_g73_without_their_first_block_or_under_g42_are_refused():
     assert err.line_no == 3 and "G72's first block (G72 W<depth> R<retract>)" in str(err)
     err = refused(PATTERN.replace("G00 X30 Z2\n", "G00 X30 Z2\nG42 G01 X30 Z2.5 F100\nG00 X30 Z2\n"))
     assert err.line_no == 6 and "G40" in str(err)
+
+
+@pytest.mark.parametrize("cycle", ["G90 X25 Z-6 F300\nX20", "G94 X10 Z1 F300\nZ0.5"])
+@pytest.mark.parametrize("program", [FACE, PATTERN])
+def test_g72_g73_right_after_modal_single_cycle_passes_are_their_own_blocks(cycle, program):
+    # G72/G73 are Fanuc's group 00: their U/W never make the next pass of a modal G90/G94 (as G71's don't)
+    after = program.replace("G00 X30 Z2\n", f"G00 X30 Z2\n{cycle}\n", 1)
+    code = 72 if "G72" in program else 73
+    ops = parse(after, (X0, Z0))
+    (cycle_op,) = [op for op in ops if isinstance(op, PlannedCycle) and op.code == code]
+    (alone,) = [op for op in parse(program, (X0, Z0)) if isinstance(op, PlannedCycle) and op.code == code]
+    assert [(g.element, g.feed, g.subcycle, g.pass_no) for g in cycle_op.segments] == \
+        [(g.element, g.feed, g.subcycle, g.pass_no) for g in alone.segments]

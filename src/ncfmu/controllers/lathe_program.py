@@ -106,9 +106,9 @@ _WORK = range(54, 60)       # G54..G59: the work offsets seq.work[1..6]
 #: The G codes a G70/G71 profile may not hold (the machine's state, not the part's outline). A set made once:
 #: mypyc (the compiled controllers) cannot compile a starred range inside a tuple display.
 _NOT_IN_PROFILE = frozenset({4, 28, 40, 41, 42, 50, *_WORK, 96, 97, 98, 99})
-#: Fanuc's group 00 codes here: one-shot, their own block's meaning -- their U/W (G28 U0 W0, G71 U1.5 R0.5, G04 U1.5)
-#: never make the next pass of a modal G90/G94/G92/G32.
-_ONE_SHOT = frozenset({4, 28, 50, 70, 71})
+#: Fanuc's group 00 codes here: one-shot, their own block's meaning -- their U/W (G28 U0 W0, G71 U1.5 R0.5,
+#: G72 P Q U W, G73 U3 W1 R3, G04 U1.5) never make the next pass of a modal G90/G94/G92/G32.
+_ONE_SHOT = frozenset({4, 28, 50, 70, 71, 72, 73})
 #: The lathe's words: a Fanuc 0i-T programmer's (G code system A), and RS274's G7/G8/G90/G91/G18/G21.
 _THREAD_MOTION = (32, 92)
 LATHE = Dialect(
