@@ -183,6 +183,11 @@ def test_no_commanded_point_passes_the_end_point_and_no_peck_is_deeper_than_aske
     (DRILL.replace("G74 Z-20.", "G74 G01 Z-20."), 4, "G01 in a G74 block: give it a block of its own"),
     (GROOVE.replace("G75 X40. Z-18.", "G75 Z-18."), 4, "G75 gives the end X the pecks reach (X or U)"),
     (DRILL.replace("G74 Z-20.", "G74 Z2."), 4, "G74: the end point's Z is the start point's"),
+    # a drill's hole opens toward the tailstock (+Z): drilling away from the face starts inside the part
+    (DRILL.replace("G74 Z-20.", "G74 Z10."), 4, "a drill drills toward the chuck (-Z)"),
+    # a groove's width is the blade's: a row without one (a turning insert) has no groove to cut by definition
+    (GROOVE.replace("T0202", "T0101"), 4, "the active offset's row (tool[1]) is no grooving blade: set tool[1].width"),
+    (GROOVE.replace(" T0202", ""), 4, "give a grooving blade's offset first (T, its row's tool[k].width)"),
     ("G21 G98 T0101\nG00 X60. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100.\nN10 G00 X40.\nG75 X30. Z-10. P1000\n"
      "N20 G01 Z-20.\nM30", 6, "G75 (a peck cycle) inside a profile"),
 ])

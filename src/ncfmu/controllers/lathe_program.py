@@ -671,11 +671,19 @@ def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Poi
                                     f"drill: set tool[{row}].drill_diameter" if row else
                                     "G74 on the spindle axis drills: give a drill's offset first (T, its row's "
                                     "tool[k].drill_diameter)")
+        if end[0] > here[0]:
+            raise b.err(b.col("Z" if "Z" in v else "W"), f"G74 to Z {end[0]:g} from Z {here[0]:g}: a drill drills "
+                                                         "toward the chuck (-Z), its hole open toward the start point")
     if kind == 75:
         if tool.drill_diameter > 0.0:
             raise b.err(b.col("G"), f"G75 with a drill (tool[{row}].drill_diameter {tool.drill_diameter:g}): a drill "
                                     "cuts along Z on the axis, G75 grooves in X")
-        if tool.width > 0.0 and step > tool.width + EPS:
+        if tool.width <= 0.0:
+            raise b.err(b.col("G"), f"G75 grooves with a blade: the active offset's row (tool[{row}]) is no grooving "
+                                    f"blade: set tool[{row}].width" if row else
+                                    "G75 grooves with a blade: give a grooving blade's offset first (T, its row's "
+                                    "tool[k].width)")
+        if step > tool.width + EPS:
             raise b.err(b.col("Q"), f"Q{round(step * 1000)}: steps of {step:g} mm in Z wider than the blade "
                                     f"(tool[{row}].width {tool.width:g}) leave a ridge between the plunges")
     try:
