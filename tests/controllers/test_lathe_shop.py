@@ -329,3 +329,13 @@ def test_the_readme_table_lists_every_word_the_lathe_takes() -> None:
     taken = set(re.findall(r",?[A-Z]", lathe_program.LATHE.letter_list))      # "G, M, ..., A, ,C, ,R"
     assert {",C", ",R", "G", "A"} <= taken
     assert taken - letters == set()
+
+
+@pytest.mark.parametrize("block, word", [("G90 X-10. Z-30. F100", "X-10"),      # the cut's end below the axis
+                                         ("G90 X10. Z-30. R-8. F100", "R-8"),  # the taper's start below it
+                                         ("G90 U-62. W-32. F100", "U-62")])
+def test_a_g90_pass_across_the_spindle_axis_is_refused(block: str, word: str) -> None:
+    # an OD/ID turning pass runs along Z at its X: below the axis the tool's far side is in the part (as a G71
+    # profile crossing the axis is refused); a facing G94 may end past the centre
+    err = _refusals(f"G00 X52. Z2.\n{block}\nM30\n")[0]
+    assert err.line_no == 2 and word in str(err) and "spindle axis" in str(err), str(err)

@@ -588,6 +588,14 @@ def _single(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> P
         modes.feed = v["F"] / 60.0
     if modes.feed == 0.0:
         raise b.err(b.col("G"), f"G{kind} with no feed: give F first")
+    low = min(end[1], end[1] + modes.cycle_taper) if kind == 90 else 0.0
+    if low < -EPS:
+        # a turning pass runs along Z at its X: below the axis the tool's far side is in the part (a G71 profile
+        # crossing the axis is refused alike); a facing pass (G94) may end past the centre
+        word = next((k for k in ("X", "U") if k in v), "R") if end[1] < -EPS else "R"
+        given = f"{word}{v[word]:g}" if word in v else f"R{modes.cycle_taper:g} (modal)"
+        raise b.err(b.col(word), f"{given}: G90's cut {'ends' if end[1] < -EPS else 'starts'} at X {low:g} "
+                                 "(radius), across the spindle axis")
     modes.cycle_end = end
     modes.cycle_pass = 1 if new else modes.cycle_pass + 1
     try:
