@@ -202,3 +202,9 @@ def test_g72_g73_right_after_modal_single_cycle_passes_are_their_own_blocks(cycl
     (alone,) = [op for op in parse(program, (X0, Z0)) if isinstance(op, PlannedCycle) and op.code == code]
     assert [(g.element, g.feed, g.subcycle, g.pass_no) for g in cycle_op.segments] == \
         [(g.element, g.feed, g.subcycle, g.pass_no) for g in alone.segments]
+
+
+def test_a_g73_profile_above_the_start_points_x_is_refused_naming_its_line():
+    # each pass returns to the start point's Z at its X (SC4): a collar of the part higher than that is in the way
+    err = refused(PATTERN.replace("X20 Z-10", "X35 Z-10"))
+    assert err.line_no == 7 and "above the start point's X 30" in str(err), str(err)

@@ -149,8 +149,8 @@ def first_block_error(code: int, element: Element | None, start: Point, end: Poi
 
 def check_profile(code: int, profile: Profile, start: Point) -> None:
     """A G72 profile: toward the axis (X never rises) and toward the start point's Z (Z never falls), at most S's
-    Z, above the axis. A G73 profile: toward the chuck (Z never rises), above the axis. Raises ProgramError naming
-    the block that is not."""
+    Z, above the axis. A G73 profile: toward the chuck (Z never rises), at most S's X, above the axis. Raises
+    ProgramError naming the block that is not."""
     z0, x0 = start
     for pb in profile.blocks:
         e = pb.element
@@ -172,6 +172,10 @@ def check_profile(code: int, profile: Profile, start: Point) -> None:
             raise ProgramError(pb.line, 1, pb.raw, f"the profile moves +Z here (Z {s[0]:g} -> {z_hi:.6g}): a G73 "
                                                    "profile runs toward the chuck (-Z) all along (X may fall and "
                                                    "rise)")
+        elif x_hi > x0 + TOL:
+            raise ProgramError(pb.line, 1, pb.raw, f"the profile rises above the start point's X {x0:g} here (X "
+                                                   f"{x_hi:.6g}, radius): each pass returns to the start point's Z "
+                                                   "at its X, through the part there; start G73 above the part")
         if x_lo < -TOL:
             raise ProgramError(pb.line, 1, pb.raw, f"the profile crosses the spindle axis: X {x_lo:.6g} < 0")
     last = profile.blocks[-1]
