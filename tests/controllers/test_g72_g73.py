@@ -208,3 +208,15 @@ def test_a_g73_profile_above_the_start_points_x_is_refused_naming_its_line():
     # each pass returns to the start point's Z at its X (SC4): a collar of the part higher than that is in the way
     err = refused(PATTERN.replace("X20 Z-10", "X35 Z-10"))
     assert err.line_no == 7 and "above the start point's X 30" in str(err), str(err)
+
+
+def test_g73_returns_over_the_highest_point_of_each_shifted_pass():
+    # a collar (X29, radius) below the start point's X30 but ending lower (X25): the first pass is shifted 3.4 up
+    # (the blank's surface there at X32.4); the return to the start point's Z passes above it, not through it
+    text = (PATTERN.replace("G73 U3 W1 R3", "G73 U3 W0 R3").replace("U0.4 W0.1", "U0.4 W0")
+            .replace("X20 Z-10\nZ-15\nN20 X30", "X29 Z-8\nX20 Z-12\nZ-15\nN20 X25"))
+    (op,) = [op for op in parse(text, (X0, Z0)) if isinstance(op, PlannedCycle)]
+    for k, (_, dx) in enumerate(op.shifts, 1):
+        returns = [g.element for g in op.segments if g.pass_no == k and g.subcycle == 4]
+        assert returns and all(min(e.start[1], e.end[1]) >= 29 + dx - 1e-9 for e in returns), (k, returns)
+    assert op.segments[-1].element.end == pytest.approx((Z0, X0))

@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 
 from ..errors import ProgramError
 from .gcode import Move
-from .geometry import Arc, CornerError, Element, Line, Point, sample
+from .geometry import Arc, CornerError, Element, Line, Point, bounds, sample
 from .mypyc_compat import mypyc_attr
 from .nose import Nose
 from .nose import translated as shifted
@@ -736,7 +736,9 @@ def _plan_finish(op: Finish, rapid: float) -> list[Segment]:
         r, f = rate(pb)
         out.append(Segment(pb.element, r, f, 2, 1, 0.0, pb.line, 70))
     bz, bx = op.profile.blocks[-1].element.end
-    clear = max(x0, bx)
+    # SC4 returns along Z above every point of the profile: a G73 pass (a profile shifted up by the escape) may
+    # rise above the start point's X where the blank is still standing (a G70/G71 profile never does)
+    clear = max([x0] + [bounds(pb.element)[3] for pb in op.profile.blocks])
     # up the wall the profile ends at, at the feed: below the stock's X the roughing left its allowance there
     up = op.feed or op.profile.blocks[-1].feed
     out.append(Segment(Line((bz, bx), (bz, clear)), up or rapid, up > 0, 3, 1, 0.0, op.line, 70))
