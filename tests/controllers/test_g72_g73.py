@@ -220,3 +220,16 @@ def test_g73_returns_over_the_highest_point_of_each_shifted_pass():
         returns = [g.element for g in op.segments if g.pass_no == k and g.subcycle == 4]
         assert returns and all(min(e.start[1], e.end[1]) >= 29 + dx - 1e-9 for e in returns), (k, returns)
     assert op.segments[-1].element.end == pytest.approx((Z0, X0))
+
+
+def test_g72s_last_pass_leaves_a_face_inside_the_stock_at_45_degrees_too():
+    # the front face at Z-3 (allowance W0.1: Z-2.9), inside a bar: the pass along the profile ends on it at X0.2, in the
+    # material its clearance angle leaves; straight off in +Z the insert's end edge drags across it at rapid (the
+    # part check: 'rapid into the stock', 0.087 mm), so it leaves as the rough passes do: by R in +Z and +X
+    rough = segments(FACE.replace("N10 G00 Z-6\nG01 X20\nZ-2", "N10 G00 Z-6\nG01 X20\nZ-3"), 72)
+    last = max(g.pass_no for g in rough)
+    sc2, sc3, sc4 = ([g for g in rough if g.pass_no == last and g.subcycle == s] for s in (2, 3, 4))
+    (z, x) = sc2[-1].element.end
+    assert (z, x) == pytest.approx((-2.9, 0.2), abs=1e-9)
+    assert sc3[0].element.end == pytest.approx((z + 0.5, x + 0.5), abs=1e-9) and not sc3[0].feed
+    assert sc4[-1].element.start == sc3[-1].element.end and sc4[-1].element.end[1] == pytest.approx(X0)

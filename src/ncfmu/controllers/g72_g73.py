@@ -212,11 +212,11 @@ def face_rough(b: Block, first: FirstBlock, start: Point, profile: Profile, u: f
 def _retracts_at_45_degrees(segments: tuple[Segment, ...], retract: float, x0: float) -> tuple[Segment, ...]:
     """Each level's SC3 as Fanuc draws G72's: by the retract in +Z *and* +X (at most up to the start point's X),
     SC4 from there. Straight off in +Z the insert's end edge would drag across the wedge its clearance angle left
-    on the face below it; at 45 degrees it leaves the face (the pass's floor stays behind it)."""
-    last = max(g.pass_no for g in segments)
+    on the face below it; at 45 degrees it leaves the face (the pass's floor stays behind it). The pass along the
+    profile too: it ends on the profile's last face, inside the stock when that face is."""
     out = list(segments)
     for k, g in enumerate(out):
-        if g.subcycle == 3 and 0 < g.pass_no < last and k + 1 < len(out) and out[k + 1].subcycle == 4:
+        if g.subcycle == 3 and g.pass_no > 0 and k + 1 < len(out) and out[k + 1].subcycle == 4:
             (z, x), (z1, _) = g.element.start, g.element.end
             corner = (z1, x + min(retract, x0 - x))
             out[k] = replace(g, element=Line((z, x), corner))
