@@ -188,3 +188,12 @@ def test_every_move_of_a_program_is_published_once_with_its_line_and_n_number(mo
     if expected:
         assert m.elements[-1].element.end == pytest.approx(here)
 
+
+
+def test_the_first_work_offset_is_the_first_the_program_runs_not_one_in_a_subprogram_never_called():
+    # the CNC's memory holds O2000 beside the called O1000: its G55 never runs, the axes stand in G54 all along
+    text = "G00 X10. Z0\nM98 P1000\nM30\nO1000\nG00 X12.\nM99\nO2000\nG55\nG00 X14.\nM99\n"
+    values = {"work[2].x": 1.0, "work[2].z": -3.0, "work[3].x": 2.0, "work[3].z": -4.0}
+    assert CutSequencer(program=text, **values).meaning.first_work == (0.0, 0.0)
+    called = text.replace("M98 P1000", "M98 P2000").replace("O1000\nG00 X12.", "O1000\nG56\nG00 X12.")
+    assert CutSequencer(program=called, **values).meaning.first_work == (-3.0, 1.0)   # O2000's G55 runs first

@@ -24,6 +24,7 @@ from .g7x import FAR, Tool
 from .gcode import Block, Move
 from .geometry import Element, Point
 from .mypyc_compat import mypyc_attr
+from .subprograms import run_order
 
 
 @mypyc_attr(native_class=False, allow_interpreted_subclasses=True)
@@ -181,7 +182,8 @@ def lathe_meaning(ops: Sequence[object], blocks: Sequence[Block], start: Point, 
     rows: dict[int, int] = {0: 0}              # station -> the row its first T word gives it
     first_work = 0
     modes: list[str] = []
-    for b in blocks:
+    # in the order the CNC runs them: a subprogram the text holds but never calls sets nothing
+    for b in run_order(list(blocks)):
         if "T" in b.values:
             station, row = divmod(int(b.values["T"]), 100)
             if station not in rows:
