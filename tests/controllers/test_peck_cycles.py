@@ -188,6 +188,9 @@ def test_no_commanded_point_passes_the_end_point_and_no_peck_is_deeper_than_aske
     # a groove's width is the blade's: a row without one (a turning insert) has no groove to cut by definition
     (GROOVE.replace("T0202", "T0101"), 4, "the active offset's row (tool[1]) is no grooving blade: set tool[1].width"),
     (GROOVE.replace(" T0202", ""), 4, "give a grooving blade's offset first (T, its row's tool[k].width)"),
+    # an outside blade (tip 3) pecking away from the axis: its groove's region would open upward from X70, missing
+    # the band from X62 it cuts, and the blade's body stands in the part
+    (GROOVE.replace("G75 X40.", "G75 X70."), 4, "tool[2].tip 3 is an outside blade: its pecks run toward the axis"),
     ("G21 G98 T0101\nG00 X60. Z2.\nG71 U1. R0.5\nG71 P10 Q20 U0.2 W0.1 F100.\nN10 G00 X40.\nG75 X30. Z-10. P1000\n"
      "N20 G01 Z-20.\nM30", 6, "G75 (a peck cycle) inside a profile"),
 ])

@@ -691,6 +691,13 @@ def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Poi
                                     f"blade: set tool[{row}].width" if row else
                                     "G75 grooves with a blade: give a grooving blade's offset first (T, its row's "
                                     "tool[k].width)")
+        inside = tool.tip in (1, 2)        # a bore's blade: its body below its edge (peck_cycles.region)
+        if (end[1] > here[1] + EPS) != inside and abs(end[1] - here[1]) > EPS:
+            raise b.err(b.col("X" if "X" in v else "U"),
+                        f"G75 to X {2 * end[1] if modes.diameter else end[1]:g} from X "
+                        f"{2 * here[1] if modes.diameter else here[1]:g}: tool[{row}].tip {tool.tip} is an "
+                        f"{'inside' if inside else 'outside'} blade: its pecks run "
+                        f"{'away from' if inside else 'toward'} the axis")
         if step > tool.width + EPS:
             raise b.err(b.col("Q"), f"Q{round(step * 1000)}: steps of {step:g} mm in Z wider than the blade "
                                     f"(tool[{row}].width {tool.width:g}) leave a ridge between the plunges")
