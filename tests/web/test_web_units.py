@@ -191,3 +191,65 @@ def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
     assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "Reset"),
                          ("write", "seq.start", True), ("release", "seq.start"),
                          ("write", "seq.feed_override", 9.0)]
+
+
+def _requests(front: WebFront, bind: str, requests: list[tuple[str, str, dict[str, str], object]]) -> list[int]:
+    """Each (method, path, headers, json body) against ``front`` served on ``bind``'s host: the statuses."""
+    from aiohttp.test_utils import TestClient, TestServer
+
+    async def main() -> list[int]:
+        async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
+            front.address = parse_address(bind.replace(":0", f":{client.port}"))
+            port = client.port
+            statuses = []
+            for method, path, headers, body in requests:
+                headers = {k: v.replace("PORT", str(port)) for k, v in headers.items()}
+                said = await client.request(method, path, headers=headers, json=body)
+                statuses.append(said.status)
+            return statuses
+    return asyncio.run(main())
+
+
+def test_a_page_served_on_every_interface_is_reached_by_the_machines_own_name():
+    """Bound to 0.0.0.0 the page is reached as http://192.168.1.5:PORT or http://plant-pc:PORT (the users are
+    asked for there); a POST from another site is still refused by its Origin."""
+    from aiohttp import encode_basic_auth
+    live = Commands()
+    front = WebFront(live, parse_address("0.0.0.0:0"), Security(users={"op": "secret"},  # type: ignore[arg-type]
+                                                                allow_insecure=True))
+    auth = {"Authorization": encode_basic_auth("op", "secret")}
+    statuses = _requests(front, "0.0.0.0:0", [
+        ("GET", "/", {**auth, "Host": "192.168.1.5:PORT"}, None),
+        ("GET", "/", {**auth, "Host": "plant-pc:PORT"}, None),
+        ("POST", "/api/action/hold", {**auth, "Host": "plant-pc:PORT", "Origin": "http://plant-pc:PORT"}, {}),
+        ("POST", "/api/action/hold", {**auth, "Host": "plant-pc:PORT", "Origin": "http://evil.example"}, {}),
+        ("GET", "/", {"Host": "plant-pc:PORT"}, None)])
+    assert statuses == [200, 200, 200, 403, 401]
+    assert live.said == [("write", "seq.feed_hold", True)]
+
+
+def test_an_override_too_large_for_a_double_is_refused_naming_it():
+    """{"value": 1e400} parses as inf and 10**400 as an int no float holds: both refused (409) with the rule,
+    never a server error."""
+    front = WebFront(Live(), parse_address("127.0.0.1:0"), Security())  # type: ignore[arg-type]
+    live = front.live
+
+    async def write(name: str, value: object) -> None:
+        from ncfmu.serving.address_space import check_value
+        check_value(live.points[name], value)
+    live.write = write  # type: ignore[attr-defined]
+    front.machine["controllers"] = [{"name": "seq"}]
+    from aiohttp.test_utils import TestClient, TestServer
+
+    async def main() -> list[tuple[int, str]]:
+        async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
+            front.address = parse_address(f"127.0.0.1:{client.port}")
+            said = []
+            for body in ('{"value": 1e400}', '{"value": 1' + "0" * 400 + "}", '{"value": NaN}'):
+                r = await client.post("/api/action/override", data=body,
+                                      headers={"Content-Type": "application/json"})
+                said.append((r.status, (await r.json())["error"]))
+            return said
+    said = asyncio.run(main())
+    assert [s for s, _ in said] == [409, 409, 409], said
+    assert all(text.startswith("seq.feed_override = ") for _, text in said), said

@@ -368,13 +368,16 @@ class WebFront:
 
         @web.middleware
         async def guard(request: web.Request, handler):
-            # a page from another site must not reach the buttons through the browser: the Host a browser sends
-            # (DNS rebinding) and the Origin of a POST must be ours
-            if request.host not in self._allowed_hosts:
+            # a page from another site must not reach the buttons through the browser: on the loopback (no users
+            # asked for) the Host a browser sends must be ours (DNS rebinding); beyond it the machine has names
+            # and addresses we cannot list (0.0.0.0 is bound) and the users are asked for, so any Host is served;
+            # the Origin of a POST must be ours, or the very Host it came by
+            ours = self._allowed_hosts if self.address.loopback else {request.host}
+            if request.host not in ours:
                 return web.json_response({"error": f"Host {request.host!r}: not this server"}, status=421)
             if request.method == "POST":
                 origin = request.headers.get("Origin")
-                if origin is not None and origin.split("://", 1)[-1] not in self._allowed_hosts:
+                if origin is not None and origin.split("://", 1)[-1] not in ours:
                     return web.json_response({"error": f"Origin {origin!r}: not this page"}, status=403)
             users = self.security.users
             if users:
