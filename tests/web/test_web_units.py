@@ -253,3 +253,21 @@ def test_an_override_too_large_for_a_double_is_refused_naming_it():
     said = asyncio.run(main())
     assert [s for s, _ in said] == [409, 409, 409], said
     assert all(text.startswith("seq.feed_override = ") for _, text in said), said
+
+
+def test_on_port_80_the_browser_names_the_host_without_the_port():
+    """http://localhost/ sends ``Host: localhost`` (the scheme's own port is left out): still this server."""
+    front = WebFront(Commands(), parse_address("127.0.0.1:80"), Security())  # type: ignore[arg-type]
+    statuses = _requests(front, "127.0.0.1:80", [
+        ("GET", "/", {"Host": "localhost"}, None), ("GET", "/", {"Host": "127.0.0.1"}, None),
+        ("GET", "/", {"Host": "localhost:80"}, None), ("GET", "/", {"Host": "evil.example"}, None),
+        ("POST", "/api/action/hold", {"Host": "localhost", "Origin": "http://localhost"}, {})])
+    assert statuses == [200, 200, 200, 421, 200]
+
+
+def test_an_override_on_a_system_without_a_cycle_controller_is_refused_not_ignored():
+    live = Commands()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())  # type: ignore[arg-type]
+    front.machine["controllers"] = []
+    said = asyncio.run(front.act("override", 0.5))
+    assert said == "the system has no feed-override input" and live.said == []

@@ -339,6 +339,8 @@ class WebFront:
                 await live.release(name)
             return None
         if what == "override":
+            if not controllers:
+                return "the system has no feed-override input"
             for c in controllers:
                 await live.write(f"{c}.feed_override", value)
             return None
@@ -361,7 +363,10 @@ class WebFront:
         port = self.address.port
         hosts = {self.address.host, "localhost", "127.0.0.1", "[::1]"} if self.address.loopback \
             else {self.address.host}
-        return {f"{h}:{port}" for h in hosts} | {f"[{self.address.host}]:{port}"}
+        named = {f"{h}:{port}" for h in hosts} | {f"[{self.address.host}]:{port}"}
+        # a browser leaves the scheme's own port out of Host and Origin (the loopback is served by HTTP)
+        bare = {h if ":" not in h or h.startswith("[") else f"[{h}]" for h in hosts}
+        return named | bare if port == 80 else named
 
     def _guard(self):
         from aiohttp import web
