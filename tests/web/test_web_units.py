@@ -271,3 +271,23 @@ def test_an_override_on_a_system_without_a_cycle_controller_is_refused_not_ignor
     front.machine["controllers"] = []
     said = asyncio.run(front.act("override", 0.5))
     assert said == "the system has no feed-override input" and live.said == []
+
+
+def test_a_malformed_override_body_is_a_clear_400_never_a_server_error():
+    """Bad JSON, JSON nested deeper than the parser recurses (4 kB of brackets), no value: 400 with the rule;
+    a body beyond the 4 kB limit: 413."""
+    live = Commands()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())  # type: ignore[arg-type]
+    from aiohttp.test_utils import TestClient, TestServer
+
+    async def main() -> list[int]:
+        async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
+            front.address = parse_address(f"127.0.0.1:{client.port}")
+            statuses = []
+            for body in ("{", "[" * 2000 + "]" * 2000, '{"val": 1}', "\xff", " " * 5000):
+                said = await client.post("/api/action/override", data=body.encode("latin-1"),
+                                         headers={"Content-Type": "application/json"})
+                statuses.append(said.status)
+            return statuses
+    assert asyncio.run(main()) == [400, 400, 400, 400, 413]
+    assert live.said == []

@@ -445,7 +445,7 @@ class WebFront:
         if what == "override":
             try:
                 body = await request.json()
-            except ValueError:
+            except (ValueError, RecursionError):      # 4 kB of brackets nest deeper than the parser recurses
                 body = None
             if not isinstance(body, dict) or "value" not in body:
                 return web.json_response({"error": 'override: the body must be {"value": NUMBER}'}, status=400)
