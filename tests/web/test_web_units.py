@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from ncfmu.errors import ConfigError
 from ncfmu.serving import Point, Security, Snapshot, WriteRefused
-from ncfmu.web import BACKLOG, WebFront, _Page, check_address, parse_address
+from ncfmu.web import BACKLOG, START_PULSE, WebFront, _Page, check_address, parse_address
 
 POINTS = [Point("x_axis.pos", "x_axis", "pos", "Real", "output", "continuous", "mm", "actual position", None, None),
           Point("x_axis.pos_cmd", "x_axis", "pos_cmd", "Real", "input", "continuous", "mm", "", None, None),
@@ -165,6 +165,13 @@ class Commands(Live):
         self.said.append(("release", name))
 
 
+async def steps(runner: Runner, step: float = 0.001) -> None:
+    """The simulation stepping (the snapshot's time moves on every 10 ms of wall time)."""
+    while True:
+        await asyncio.sleep(0.01)
+        runner.snap = Snapshot(runner.snap.time + step, runner.snap.values, runner.snap.forced)
+
+
 def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
     from aiohttp import encode_basic_auth
     from aiohttp.test_utils import TestClient, TestServer
@@ -172,6 +179,7 @@ def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
     front = WebFront(live, parse_address("127.0.0.1:0"), Security(users={"op": "secret"}))  # type: ignore[arg-type]
 
     async def main() -> None:
+        simulation = asyncio.create_task(steps(live.runner))
         async with TestClient(TestServer(front._app(), host="127.0.0.1")) as client:
             front.address = parse_address(f"127.0.0.1:{client.port}")
             assert (await client.get("/")).status == 401
@@ -187,6 +195,7 @@ def test_the_buttons_are_the_opc_ua_sides_commands_and_users_are_asked_for():
             said = (await refused.json())["error"]
             assert refused.status == 409 and said == "seq.feed_override = 9.0: must be <= 1.5"
             assert (await client.get("/static/..%2fserve%2f__init__.py", headers=auth)).status == 404
+        simulation.cancel()
     asyncio.run(main())
     assert live.said == [("write", "seq.feed_hold", True), ("release", "seq.feed_hold"), ("call", "Reset"),
                          ("write", "seq.start", True), ("release", "seq.start"),
@@ -291,3 +300,30 @@ def test_a_malformed_override_body_is_a_clear_400_never_a_server_error():
             return statuses
     assert asyncio.run(main()) == [400, 400, 400, 400, 413]
     assert live.said == []
+
+
+def test_a_start_press_lasts_until_the_simulation_made_a_step():
+    """At a slow --speed (0.005: a 1 ms step takes 0.2 s of wall time) a press released after a fixed wall time
+    falls between two steps and the controller never sees it: the press is held until the simulated time moved
+    on (or the simulation stopped running)."""
+    live = Commands()
+    front = WebFront(live, parse_address("127.0.0.1:0"), Security())  # type: ignore[arg-type]
+
+    async def main() -> list[list[tuple]]:
+        seen = []
+        press = asyncio.create_task(front.act("start"))
+        await asyncio.sleep(3 * START_PULSE)
+        seen.append(list(live.said))
+        live.runner.snap = Snapshot(0.001, {}, {})          # the next step
+        assert await asyncio.wait_for(press, 1.0) is None
+        seen.append(list(live.said))
+        live.said.clear()
+        press = asyncio.create_task(front.act("start"))
+        await asyncio.sleep(3 * START_PULSE)
+        live.runner.state = "stopped"                         # no step is coming: the press ends
+        assert await asyncio.wait_for(press, 1.0) is None
+        seen.append(list(live.said))
+        return seen
+    press, step, stopped = asyncio.run(main())
+    assert press == [("write", "seq.start", True)]
+    assert step == stopped == [("write", "seq.start", True), ("release", "seq.start")]

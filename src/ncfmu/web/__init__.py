@@ -55,7 +55,8 @@ CONTROLLER_VALUES = ("line", "block_no", "segment", "canned_cycle", "subcycle", 
                      "alarm", "feed_hold", "feed_override", "s_cmd", "rapid")
 #: The panel's buttons (each a ``data-action``) and the override dial's action.
 ACTIONS = ("start", "hold", "release", "reset")
-#: The wall time a start press is held (the controller takes the rising edge at its next step).
+#: The least wall time a start press is held (and until the simulation made a step: the controller takes the
+#: rising edge at its next step).
 START_PULSE = 0.1
 
 
@@ -334,7 +335,12 @@ class WebFront:
                 return "the system has no start input"
             for name in starts:
                 await live.write(name, True)
-            await asyncio.sleep(START_PULSE)      # the controller takes the rising edge at its next step
+            # the controller takes the rising edge at its next step: the press lasts until the simulation made
+            # one (at a slow --speed a step takes longer than START_PULSE of wall time), or stopped running
+            pressed_at = runner.latest().time
+            await asyncio.sleep(START_PULSE)
+            while runner.state == "running" and runner.latest().time <= pressed_at:
+                await asyncio.sleep(START_PULSE / 4)
             for name in starts:
                 await live.release(name)
             return None
