@@ -327,3 +327,15 @@ def test_a_start_press_lasts_until_the_simulation_made_a_step():
     press, step, stopped = asyncio.run(main())
     assert press == [("write", "seq.start", True)]
     assert step == stopped == [("write", "seq.start", True), ("release", "seq.start")]
+
+
+def test_an_unreadable_certificate_for_https_is_one_config_error(tmp_path):
+    """``--certificate`` missing or not a certificate: ConfigError naming it (the CLI's one line, exit 2), as
+    the OPC UA side says it -- never cryptography's ValueError or a FileNotFoundError's traceback."""
+    from ncfmu.web import _tls
+    garbage = tmp_path / "server.der"
+    garbage.write_bytes(b"not a certificate")
+    with pytest.raises(ConfigError, match=r"--certificate = .*server.der.*not a certificate"):
+        _tls(Security(users={"op": "secret"}, certificate=garbage, private_key=garbage))
+    with pytest.raises(ConfigError, match=r"--certificate = .*missing.der.*cannot read it"):
+        _tls(Security(users={"op": "secret"}, certificate=tmp_path / "missing.der", private_key=garbage))

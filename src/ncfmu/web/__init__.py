@@ -103,9 +103,16 @@ def _tls(security: Security) -> ssl.SSLContext:
     from cryptography import x509
     from cryptography.hazmat.primitives.serialization import Encoding
     assert security.certificate is not None and security.private_key is not None
-    raw = Path(security.certificate).read_bytes()
-    cert = x509.load_pem_x509_certificate(raw) if raw.lstrip().startswith(b"-----") else \
-        x509.load_der_x509_certificate(raw)
+    where = str(security.certificate)
+    try:
+        raw = Path(security.certificate).read_bytes()
+    except OSError as err:
+        raise ConfigError("--certificate", where, f"cannot read it: {err.strerror or err}") from None
+    try:
+        cert = x509.load_pem_x509_certificate(raw) if raw.lstrip().startswith(b"-----") else \
+            x509.load_der_x509_certificate(raw)
+    except ValueError as err:
+        raise ConfigError("--certificate", where, f"not a certificate (DER or PEM): {err}") from None
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
     with tempfile.TemporaryDirectory() as folder:      # ssl reads PEM files only
         pem = Path(folder) / "cert.pem"
