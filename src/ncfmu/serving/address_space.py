@@ -79,7 +79,10 @@ def check_value(point: Point, value: object) -> object:
     if point.type == "Real":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise WriteRefused("BadTypeMismatch", f"{point.name} = {value!r}: must be a Double")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:        # an integer beyond any double (a JSON body may say 10**400)
+            x = math.inf if value > 0 else -math.inf
         if not math.isfinite(x):
             raise WriteRefused("BadOutOfRange", f"{point.name} = {x!r}: must be finite")
         if (point.minimum is not None and x < point.minimum) or (point.maximum is not None and x > point.maximum):

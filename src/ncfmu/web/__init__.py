@@ -55,7 +55,8 @@ CONTROLLER_VALUES = ("line", "block_no", "segment", "canned_cycle", "subcycle", 
                      "alarm", "feed_hold", "feed_override", "s_cmd", "rapid")
 #: The panel's buttons (each a ``data-action``) and the override dial's action.
 ACTIONS = ("start", "hold", "release", "reset")
-#: The wall time a start press is held (the controller takes the rising edge at its next step).
+#: The least wall time a start press is held (and until the simulation made a step: the controller takes the
+#: rising edge at its next step).
 START_PULSE = 0.1
 
 
@@ -102,9 +103,16 @@ def _tls(security: Security) -> ssl.SSLContext:
     from cryptography import x509
     from cryptography.hazmat.primitives.serialization import Encoding
     assert security.certificate is not None and security.private_key is not None
-    raw = Path(security.certificate).read_bytes()
-    cert = x509.load_pem_x509_certificate(raw) if raw.lstrip().startswith(b"-----") else \
-        x509.load_der_x509_certificate(raw)
+    where = str(security.certificate)
+    try:
+        raw = Path(security.certificate).read_bytes()
+    except OSError as err:
+        raise ConfigError("--certificate", where, f"cannot read it: {err.strerror or err}") from None
+    try:
+        cert = x509.load_pem_x509_certificate(raw) if raw.lstrip().startswith(b"-----") else \
+            x509.load_der_x509_certificate(raw)
+    except ValueError as err:
+        raise ConfigError("--certificate", where, f"not a certificate (DER or PEM): {err}") from None
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
     with tempfile.TemporaryDirectory() as folder:      # ssl reads PEM files only
         pem = Path(folder) / "cert.pem"
@@ -334,11 +342,18 @@ class WebFront:
                 return "the system has no start input"
             for name in starts:
                 await live.write(name, True)
-            await asyncio.sleep(START_PULSE)      # the controller takes the rising edge at its next step
+            # the controller takes the rising edge at its next step: the press lasts until the simulation made
+            # one (at a slow --speed a step takes longer than START_PULSE of wall time), or stopped running
+            pressed_at = runner.latest().time
+            await asyncio.sleep(START_PULSE)
+            while runner.state == "running" and runner.latest().time <= pressed_at:
+                await asyncio.sleep(START_PULSE / 4)
             for name in starts:
                 await live.release(name)
             return None
         if what == "override":
+            if not controllers:
+                return "the system has no feed-override input"
             for c in controllers:
                 await live.write(f"{c}.feed_override", value)
             return None
@@ -361,20 +376,26 @@ class WebFront:
         port = self.address.port
         hosts = {self.address.host, "localhost", "127.0.0.1", "[::1]"} if self.address.loopback \
             else {self.address.host}
-        return {f"{h}:{port}" for h in hosts} | {f"[{self.address.host}]:{port}"}
+        named = {f"{h}:{port}" for h in hosts} | {f"[{self.address.host}]:{port}"}
+        # a browser leaves the scheme's own port out of Host and Origin (the loopback is served by HTTP)
+        bare = {h if ":" not in h or h.startswith("[") else f"[{h}]" for h in hosts}
+        return named | bare if port == 80 else named
 
     def _guard(self):
         from aiohttp import web
 
         @web.middleware
         async def guard(request: web.Request, handler):
-            # a page from another site must not reach the buttons through the browser: the Host a browser sends
-            # (DNS rebinding) and the Origin of a POST must be ours
-            if request.host not in self._allowed_hosts:
+            # a page from another site must not reach the buttons through the browser: on the loopback (no users
+            # asked for) the Host a browser sends must be ours (DNS rebinding); beyond it the machine has names
+            # and addresses we cannot list (0.0.0.0 is bound) and the users are asked for, so any Host is served;
+            # the Origin of a POST must be ours, or the very Host it came by
+            ours = self._allowed_hosts if self.address.loopback else {request.host}
+            if request.host not in ours:
                 return web.json_response({"error": f"Host {request.host!r}: not this server"}, status=421)
             if request.method == "POST":
                 origin = request.headers.get("Origin")
-                if origin is not None and origin.split("://", 1)[-1] not in self._allowed_hosts:
+                if origin is not None and origin.split("://", 1)[-1] not in ours:
                     return web.json_response({"error": f"Origin {origin!r}: not this page"}, status=403)
             users = self.security.users
             if users:
@@ -437,7 +458,7 @@ class WebFront:
         if what == "override":
             try:
                 body = await request.json()
-            except ValueError:
+            except (ValueError, RecursionError):      # 4 kB of brackets nest deeper than the parser recurses
                 body = None
             if not isinstance(body, dict) or "value" not in body:
                 return web.json_response({"error": 'override: the body must be {"value": NUMBER}'}, status=400)
