@@ -176,3 +176,14 @@ def test_a_port_in_use_is_one_line_and_status_2(project, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == (f"ncfmu serve: --endpoint = 'opc.tcp://127.0.0.1:{port}/ncfmu': cannot listen there: "
                        "address already in use"), err
+
+
+def test_a_user_is_admitted_by_name_and_password_only_both_right():
+    """The one credential check of the OPC UA server and the web page (``Security.admits``): both words right, of
+    one user; a wrong password, another user's, an unknown name, an empty or missing word are refused."""
+    sec = Security(users={"plc": "s3cret", "hmi": "other"})
+    assert sec.admits("plc", "s3cret") and sec.admits("hmi", "other")
+    for name, password in (("plc", "other"), ("hmi", "s3cret"), ("plc", "s3cre"), ("plc", "s3cret "),
+                           ("nobody", "s3cret"), ("", ""), (None, "s3cret"), ("plc", None), (None, None)):
+        assert not sec.admits(name, password), (name, password)
+    assert not Security().admits("", "")           # no users: nobody is admitted by name

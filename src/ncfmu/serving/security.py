@@ -3,6 +3,7 @@ certificate (:func:`make_certificate`)."""
 
 from __future__ import annotations
 
+import hmac
 import ipaddress
 import os
 from dataclasses import dataclass, field
@@ -24,6 +25,18 @@ class Security:
     private_key: Path | None = None
     trust: Path | None = None                # folder of the client certificates (or their CAs) accepted
     allow_insecure: bool = False             # off the loopback: security policy None, any client certificate
+
+    def admits(self, name: str | None, password: str | None) -> bool:
+        """Whether ``name`` and ``password`` are one of ``users``, compared in constant time against every user
+        (the answer's time tells neither whether the name exists nor how much of the password was right): the
+        one check of the OPC UA server and the web page."""
+        said_name = (name or "").encode()
+        said_password = (password or "").encode()
+        found = False
+        for user, secret in self.users.items():
+            found |= (hmac.compare_digest(user.encode(), said_name)
+                      & hmac.compare_digest(secret.encode(), said_password))
+        return found and name is not None and password is not None
 
 
 def _is_loopback(endpoint: str) -> bool:

@@ -148,11 +148,9 @@ class LiveServer:
         server = self.server = Server()
         sec = self.security
         if sec.users:
-            users = dict(sec.users)
-
             class _Users(UserManager):
                 def get_user(self, iserver, username=None, password=None, certificate=None):
-                    if username is not None and users.get(username) == password:
+                    if sec.admits(username, password):
                         return User(role=UserRole.User, name=username)
                     return None
             server = self.server = Server(user_manager=_Users())

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import asyncio
 import base64
-import hmac
 import ipaddress
 import json
 import logging
@@ -397,8 +396,7 @@ class WebFront:
                 origin = request.headers.get("Origin")
                 if origin is not None and origin.split("://", 1)[-1] not in ours:
                     return web.json_response({"error": f"Origin {origin!r}: not this page"}, status=403)
-            users = self.security.users
-            if users:
+            if self.security.users:
                 said = request.headers.get("Authorization", "")
                 ok = False
                 if said.startswith("Basic "):
@@ -406,8 +404,7 @@ class WebFront:
                         name, _, password = base64.b64decode(said[6:]).decode().partition(":")
                     except ValueError:
                         name, password = "", ""
-                    known = users.get(name)
-                    ok = known is not None and hmac.compare_digest(known.encode(), password.encode())
+                    ok = self.security.admits(name, password)
                 if not ok:
                     return web.json_response({"error": "a user of --user is asked for"}, status=401,
                                              headers={"WWW-Authenticate": 'Basic realm="ncfmu"'})
