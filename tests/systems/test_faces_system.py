@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from drawings import outline_dxf
 from shapely.geometry import Point
 
 from ncfmu.systems.part import LathePart
@@ -68,13 +69,13 @@ def test_a_g72_face_finished_by_g70_is_the_programmed_part_closed_loop(ncfmu_run
 def test_the_face_drawn_a_tenth_deeper_is_out_of_tolerance_at_its_line(ncfmu_run, tmp_path):
     """The same run judged against a drawing whose shoulder face lies 0.1 mm deeper (Z-4.1): 0.1 mm left on that
     face, named by the profile's block that cut it (the run is the one above: ncfmu_run keeps it)."""
-    right = _drawing(tmp_path / "right.dxf", OUTLINE)
+    right = outline_dxf(tmp_path / "right.dxf", OUTLINE)
     p = ncfmu_run("lathe_roughing", stop_time=60.0, start_values={"seq.program": EXAMPLE.read_text()},
                   drawing=right).part
     assert p.crashes == [] and p.within_tolerance is True                  # the drawing of the program: in
     deeper = [(-4.1 if z == -4.0 else z, x) for z, x in OUTLINE]
     off = ncfmu_run("lathe_roughing", stop_time=60.0, start_values={"seq.program": EXAMPLE.read_text()},
-                    drawing=_drawing(tmp_path / "deeper.dxf", deeper)).part
+                    drawing=outline_dxf(tmp_path / "deeper.dxf", deeper)).part
     assert off.within_tolerance is False and off.max_left_mm == pytest.approx(0.1, abs=0.01)
     assert off.left_line == FACE_LINE and off.max_gouge_mm < 0.01
 
@@ -84,11 +85,3 @@ def test_the_face_drawn_a_tenth_deeper_is_out_of_tolerance_at_its_line(ncfmu_run
 OUTLINE = [(0.0, 0.0), (0.0, 10.0), (-1.0, 22.0), (-4.0, 22.0), (-4.0, 29.0), (-80.0, 29.0), (-80.0, 0.0)]
 
 
-def _drawing(path, outline):
-    import ezdxf
-    doc = ezdxf.new(units=4)
-    msp = doc.modelspace()
-    for a, b in zip(outline, outline[1:] + outline[:1]):
-        msp.add_line(a, b)
-    doc.saveas(path)
-    return path

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import ezdxf
 import numpy as np
 import pytest
+from drawings import outline_dxf
+from shop_programs import PASSES
 
 #: Diameters, G99 F mm/rev. The chamfer 1 x 45 degrees at the face (,C1 from the corner), turned with tool 1; the
 #: grooves: 3 mm wide, 1 mm deep (radius), 6 mm apart, from Z-9 on, by a grooving blade 2 mm wide (tool 2, its
@@ -49,20 +50,13 @@ OUTLINE = [(0.0, 0.0), (0.0, 28.0), (-1.0, 29.0),
            (-40.0, 29.0), (-40.0, 0.0)]
 
 
-def _drawing(path, outline):
-    doc = ezdxf.new(units=4)
-    msp = doc.modelspace()
-    for a, b in zip(outline, outline[1:] + outline[:1]):
-        msp.add_line(a, b)
-    doc.saveas(path)
-    return path
 
 
 @pytest.mark.slow
 def test_grooves_by_a_subprogram_under_g54_with_a_chamfer_are_the_part_drawn(ncfmu_run, tmp_path):
     start = {"seq.program": GROOVES, "seq.work[1].z": WORK_Z, "seq.work[1].x": WORK_X,
              "seq.tool[2].width": BLADE_WIDTH, "seq.tool[2].tip": 3}
-    right = _drawing(tmp_path / "grooves.dxf", OUTLINE)
+    right = outline_dxf(tmp_path / "grooves.dxf", OUTLINE)
     r = ncfmu_run("lathe_roughing", stop_time=9.0, start_values=start, drawing=right)
     assert r["seq.done"][-1], "the program did not finish in 9 s"
     x, z, line = r["x_axis.pos"], r["z_axis.pos"], r["seq.line"]
@@ -79,28 +73,13 @@ def test_grooves_by_a_subprogram_under_g54_with_a_chamfer_are_the_part_drawn(ncf
     # the grooves drawn 3 mm further toward the chuck: the part made is out of tolerance, at a groove's line
     shifted = [(z - 3.0 if -30.0 <= z <= -9.0 else z, x) for z, x in OUTLINE]
     off = ncfmu_run("lathe_roughing", stop_time=9.0, start_values=start,
-                    drawing=_drawing(tmp_path / "off.dxf", shifted)).part
+                    drawing=outline_dxf(tmp_path / "off.dxf", shifted)).part
     assert off.within_tolerance is False and off.max_gouge_mm == pytest.approx(1.0, abs=0.01)
     assert GROOVE_LINE in (off.gouge_line, off.left_line)
 
 
-#: G94 facing and G90 turning passes (the last a taper, R-1: X48 at Z2 rising to X50 at Z-15) under G54, judged
-#: by the passes' own definition (no profile, no drawing): the bar faced 2 mm deep down to X40, turned over 15 mm.
-PASSES = """G21 G40 G98
-G54
-T0101
-G97 S800 M03
-G00 X64. Z2.
-G94 X40. Z-1. F600
-Z-2.
-G00 X60. Z2.
-G90 X54. Z-15. F600
-X50. R-1.
-G00 X64. Z5.
-M05
-M30
-"""
-#: The face pass to Z-2 and the taper pass (text lines).
+#: PASSES (G94 facing, G90 turning under G54, judged by their own definition): the face pass to Z-2 and the
+#: taper pass (text lines).
 FACE_LINE, TAPER_LINE = 7, 10
 #: G54 (z, x radius) and tool 1's offsets: the axes stand at the programmed point + both.
 PASS_WORK = (-3.0, 0.5)

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import math
 
-import ezdxf
 import numpy as np
 import pytest
 import shapely
+from drawings import outline_dxf
 from shapely.geometry import LineString
 
 from ncfmu.controllers import lathe_program
@@ -119,13 +119,6 @@ OUTLINE = [(0.0, 5.0), (0.0, 29.0), (-7.0, 29.0), (-7.0, 27.0), (-12.0, 27.0), (
            (-40.0, 0.0), (-12.0, 0.0), (-12.0 + CONE, 5.0)]
 
 
-def _drawing(path, outline):
-    doc = ezdxf.new(units=4)
-    msp = doc.modelspace()
-    for a, b in zip(outline, outline[1:] + outline[:1]):
-        msp.add_line(a, b)
-    doc.saveas(path)
-    return path
 
 
 @pytest.mark.slow
@@ -144,12 +137,12 @@ def test_closed_loop_a_hole_by_g74_and_a_groove_by_g75_are_judged_to_depth(ncfmu
     # the part drawn with the hole 1 mm shallower: the hole drilled is 1 mm too deep, out of tolerance at the G74
     shallow = [(zz + 1.0 if zz < 0.0 and xx < 5.0 + 1e-9 and zz > -40.0 else zz, xx) for zz, xx in OUTLINE]
     off = ncfmu_run("lathe_roughing", stop_time=12.0, start_values=start,
-                    drawing=_drawing(tmp_path / "shallow.dxf", shallow)).part
+                    drawing=outline_dxf(tmp_path / "shallow.dxf", shallow)).part
     assert off.within_tolerance is False and off.gouge_line == DRILL_LINE
     assert off.max_gouge_mm == pytest.approx(math.sin(math.radians(DRILL_POINT / 2.0)), abs=0.01)
     # the part drawn with the groove 1 mm shallower (radius 28): out of tolerance at the G75
     groove = [(zz, 28.0 if xx == 27.0 else xx) for zz, xx in OUTLINE]
     off = ncfmu_run("lathe_roughing", stop_time=12.0, start_values=start,
-                    drawing=_drawing(tmp_path / "groove.dxf", groove)).part
+                    drawing=outline_dxf(tmp_path / "groove.dxf", groove)).part
     assert off.within_tolerance is False and off.gouge_line == GROOVE_LINE
     assert off.max_gouge_mm == pytest.approx(1.0, abs=0.01)

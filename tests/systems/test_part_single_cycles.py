@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pytest
 from shapely.geometry import Polygon
+from shop_programs import PASSES
 from test_part_tools import BAR, LATHE, lathe_check
 
 from ncfmu.controllers import lathe_program
@@ -15,22 +16,7 @@ from ncfmu.controllers.sequencer import CutSequencer
 
 #: G54 shifts the axes 3 mm toward the chuck and 0.5 mm (radius) up from the part's coordinates.
 WORK_Z, WORK_X = -3.0, 0.5
-#: Face the bar's end 2 mm deep down to X40 (two G94 passes), then turn it to X50 over 15 mm in two G90 passes,
-#: the last a taper (R-1: the cut starts 1 mm, radius, below its end's X: X48 at Z2 rising to X50 at Z-15).
-PASSES = """G21 G40 G98
-G54
-T0101
-G97 S800 M03
-G00 X64. Z2.
-G94 X40. Z-1. F600
-Z-2.
-G00 X60. Z2.
-G90 X54. Z-15. F600
-X50. R-1.
-G00 X64. Z5.
-M05
-M30
-"""
+#: PASSES' two G94 and two G90 passes (text lines).
 FACE_LINES, TURN_LINES = (6, 7), (9, 10)
 
 

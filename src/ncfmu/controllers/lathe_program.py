@@ -628,6 +628,15 @@ def _microns_word(b: Block, letter: str, what: str) -> float:
     return value / 1000.0
 
 
+def _no_such_tool(b: Block, row: int, what: str, tool: str, field: str) -> ProgramError:
+    """The refusal of a cycle whose active offset's row (``row``; 0: no T yet) is not the ``tool`` it needs (its
+    ``tool[k].<field>`` not set)."""
+    if row:
+        return b.err(b.col("G"), f"{what}: the active offset's row (tool[{row}]) is no {tool}: set "
+                                 f"tool[{row}].{field}")
+    return b.err(b.col("G"), f"{what}: give a {tool}'s offset first (T, its row's tool[k].{field})")
+
+
 def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Point:
     """A G74/G75 block: the first (R alone) sets the retract e; the second adds the cycle's :class:`.g7x.PeckCycle`
     from where the tool stands (the start point), where it ends again."""
@@ -675,10 +684,7 @@ def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Poi
             raise b.err(across, "G74 of a tool on the spindle axis steps across X: a drill makes one hole on the "
                                 "axis (omit X/U and give P0)")
         if tool.drill_diameter <= 0.0:
-            raise b.err(b.col("G"), f"G74 on the spindle axis drills: the active offset's row (tool[{row}]) is no "
-                                    f"drill: set tool[{row}].drill_diameter" if row else
-                                    "G74 on the spindle axis drills: give a drill's offset first (T, its row's "
-                                    "tool[k].drill_diameter)")
+            raise _no_such_tool(b, row, "G74 on the spindle axis drills", "drill", "drill_diameter")
         if end[0] > here[0]:
             raise b.err(b.col("Z" if "Z" in v else "W"), f"G74 to Z {end[0]:g} from Z {here[0]:g}: a drill drills "
                                                          "toward the chuck (-Z), its hole open toward the start point")
@@ -687,10 +693,7 @@ def _peck(b: Block, kind: int, modes: _Modes, here: Point, ops: list[Op]) -> Poi
             raise b.err(b.col("G"), f"G75 with a drill (tool[{row}].drill_diameter {tool.drill_diameter:g}): a drill "
                                     "cuts along Z on the axis, G75 grooves in X")
         if tool.width <= 0.0:
-            raise b.err(b.col("G"), f"G75 grooves with a blade: the active offset's row (tool[{row}]) is no grooving "
-                                    f"blade: set tool[{row}].width" if row else
-                                    "G75 grooves with a blade: give a grooving blade's offset first (T, its row's "
-                                    "tool[k].width)")
+            raise _no_such_tool(b, row, "G75 grooves with a blade", "grooving blade", "width")
         inside = tool.tip in (1, 2)        # a bore's blade: its body below its edge (peck_cycles.region)
         if (end[1] > here[1] + EPS) != inside and abs(end[1] - here[1]) > EPS:
             raise b.err(b.col("X" if "X" in v else "U"),

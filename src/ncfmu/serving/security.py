@@ -39,14 +39,19 @@ class Security:
         return found and name is not None and password is not None
 
 
-def _is_loopback(endpoint: str) -> bool:
-    host = urlparse(endpoint).hostname or ""
+def is_loopback_host(host: str) -> bool:
+    """Whether ``host`` (a name or an address, IPv6 without brackets) is this machine's loopback: the one rule of
+    the OPC UA endpoint and the web page's address."""
     if host == "localhost":
         return True
     try:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+def _is_loopback(endpoint: str) -> bool:
+    return is_loopback_host(urlparse(endpoint).hostname or "")
 
 
 def check_endpoint(endpoint: str, security: Security) -> None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import asyncio
 import base64
-import ipaddress
 import json
 import logging
 import math
@@ -29,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import ConfigError
 from ..serving.address_space import WriteRefused
 from ..serving.crash_watch import crash_text
+from ..serving.security import is_loopback_host
 
 if TYPE_CHECKING:
     from aiohttp import web
@@ -66,12 +66,7 @@ class WebAddress:
 
     @property
     def loopback(self) -> bool:
-        if self.host == "localhost":
-            return True
-        try:
-            return ipaddress.ip_address(self.host).is_loopback
-        except ValueError:
-            return False
+        return is_loopback_host(self.host)
 
 
 def parse_address(text: str) -> WebAddress:
