@@ -238,6 +238,12 @@ def int_param(values: Mapping[str, object], name: str) -> int:
     return to_int(values[name])
 
 
+def as_float(value: object) -> float:
+    """``float(value)``: an input's value as a float. A float (what a host's fmi2SetReal gives) is taken as it is:
+    compiled, a type test instead of a call of ``float`` (an interpreted call, costly in every step)."""
+    return value if type(value) is float else float(value)  # type: ignore[arg-type]
+
+
 def finite_inputs(inputs: Mapping[str, object], names: tuple[str, ...]) -> str | None:
     """Return a message naming the first input that is NaN or infinite, else None."""
     for name in names:
@@ -268,26 +274,35 @@ class PositionGuard:
 
     def check(self, inputs: Mapping[str, object], dt: float) -> str | None:
         """Return a message naming the first absurd input (and the rule), else None."""
-        # Every step, twice a step in a lathe: the common case in one pass, the messages below only when needed.
-        new = []
-        for name in self.names:
-            value = inputs[name]
+        # Every step, twice a step in a lathe: one pass judges, a second one keeps the positions in ``last`` (in
+        # place: no list made a step), so that ``last`` is untouched when an input is absurd.
+        names, last = self.names, self.last
+        n = len(names)
+        prev = last if last is not None and len(last) == n else None
+        reach = SPEED_LIMIT * dt + 1e-9
+        jumped = -1
+        for i in range(n):
+            value = inputs[names[i]]
             # a float (what a host's fmi2SetReal gives) is judged as a float (compiled: a C test, no call)
             if type(value) is float:
-                if not abs(value) <= POSITION_LIMIT:        # false for NaN and the infinities too
-                    return self._absurd(inputs)
-                new.append(value)
-                continue
-            if not (math.isfinite(value) and abs(value) <= POSITION_LIMIT):  # type: ignore[arg-type]
+                x = value
+            elif math.isfinite(value):  # type: ignore[arg-type]
+                x = float(value)  # type: ignore[arg-type]
+            else:
                 return self._absurd(inputs)
-            new.append(float(value))  # type: ignore[arg-type]
-        last, self.last = self.last, new
-        if last is not None:
-            reach = SPEED_LIMIT * dt + 1e-9
-            for name, old, value in zip(self.names, last, new):
-                if abs(value - old) > reach:
-                    return (f"input {name} jumped {old!r} -> {value!r} in one step of {dt:g} s: "
-                            f"faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
+            if not abs(x) <= POSITION_LIMIT:                # false for NaN and the infinities too
+                return self._absurd(inputs)
+            if prev is not None and jumped < 0 and abs(x - prev[i]) > reach:
+                jumped = i
+        if prev is None:
+            prev = self.last = [0.0] * n
+        old = prev[jumped] if jumped >= 0 else 0.0
+        for i in range(n):
+            value = inputs[names[i]]
+            prev[i] = as_float(value)
+        if jumped >= 0:
+            return (f"input {names[jumped]} jumped {old!r} -> {prev[jumped]!r} in one step of {dt:g} s: "
+                    f"faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
         return None
 
     def _absurd(self, inputs: Mapping[str, object]) -> str:

@@ -40,7 +40,7 @@ from typing import Any, ClassVar
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
 from . import rs274
-from .base import POSITION_LIMIT, int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, as_float, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .geometry import TANGENT, Arc, CornerError, Element, Line, ToolMove, compensate, turn_angle
 from .meaning import ProgramMeaning, mill_meaning, points_meaning
@@ -383,7 +383,7 @@ class ContourInterpolator(CycleController):
         elif why:
             self.vff = [0.0, 0.0]
         elif self.busy:
-            scale = 0.0 if inputs["feed_hold"] else self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+            scale = 0.0 if inputs["feed_hold"] else self.override.read(self, t, as_float(inputs["feed_override"]))
             self._advance(t, dt, scale, inputs)
 
     def _advance(self, t: float, dt: float, scale: float, inputs: Mapping[str, object],

@@ -38,7 +38,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 from ..ports import Port, real
-from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, finite_inputs, real_param
+from .base import SPEED_LIMIT, Controller, OverrideDial, PositionGuard, as_float, finite_inputs, real_param
 from .mypyc_compat import mypyc_attr
 
 #: What :meth:`InPosition.judge` says of a motion this step.
@@ -315,7 +315,7 @@ class CycleController(Controller):
     def actual(self, inputs: Mapping[str, object], axes: Sequence[str] | None = None) -> list[float]:
         """The actual positions of ``axes`` (default: all), from the servo inputs."""
         names = self._pos_inputs if axes is None else axis_inputs(axes, "_pos")
-        return [float(inputs[n]) for n in names]  # type: ignore[arg-type]
+        return [as_float(inputs[n]) for n in names]
 
     def in_position(self, inputs: Mapping[str, object], axes: Sequence[str] | None = None) -> bool:
         for name in self._in_position_inputs if axes is None else axis_inputs(axes, "_in_position"):

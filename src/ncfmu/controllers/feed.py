@@ -45,7 +45,7 @@ from typing import Any
 
 from ..errors import ConfigError, ProgramError, require
 from ..ports import boolean, integer, real, string
-from .base import int_param, real_param, servo_ports
+from .base import as_float, int_param, real_param, servo_ports
 from .cycle import Button, CycleController, cycle_ports
 from .gcode import program_lines
 from .motion import LinearMove
@@ -424,7 +424,7 @@ class ProgrammableFeed(CycleController):
         elif self.word is not None:
             word = self.word
             if word.kind == "feed":
-                rate = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+                rate = self.override.read(self, t, as_float(inputs["feed_override"]))
                 self.move.advance(dt, 0.0 if hold else rate)
             elif word.kind == "return":
                 self.move.advance(dt, 0.0 if hold else 1.0)

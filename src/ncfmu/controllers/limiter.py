@@ -46,7 +46,7 @@ from typing import ClassVar
 
 from ..errors import require
 from ..ports import boolean, integer, real
-from .base import POSITION_LIMIT, Controller, PositionGuard, int_param, real_param
+from .base import POSITION_LIMIT, Controller, PositionGuard, as_float, int_param, real_param
 from .motion import stop_speed
 from .mypyc_compat import mypyc_attr
 
@@ -365,8 +365,8 @@ class AreaLimiter(Controller):
         if self.fault:
             self.say("info", f"t = {t:.4f} s: inputs sane again; following the commands")
             self.fault = None
-        c = (float(cmd[0]), float(cmd[1]))  # type: ignore[arg-type]
-        v_in = (float(vff[0]), float(vff[1]))  # type: ignore[arg-type]
+        c = (as_float(cmd[0]), as_float(cmd[1]))
+        v_in = (as_float(vff[0]), as_float(vff[1]))
 
         if self.hard:
             self._release(t, c, v_in)
@@ -377,7 +377,7 @@ class AreaLimiter(Controller):
         self.clock += dt
         if self.clock >= self.monitor_period - 1e-12:
             self.clock = 0.0
-            self._monitor(t, c, float(inputs["ref_pos"]), float(inputs["lim_pos"]))  # type: ignore[arg-type]
+            self._monitor(t, c, as_float(inputs["ref_pos"]), as_float(inputs["lim_pos"]))
         return self._publish()
 
     def _absurd(self, cmd: tuple[float, float], vff: tuple[float, float], inputs: Mapping[str, object],

@@ -46,12 +46,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Final
 
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import POSITION_LIMIT, SPEED_LIMIT, int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, SPEED_LIMIT, as_float, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .meaning import ProgramMeaning, Stock, lathe_meaning, registers_meaning
@@ -64,6 +64,10 @@ MAX_TOOLS = 8
 WORK_OFFSETS = 6            # G54..G59
 #: A dwell whose time left is below this is over (s): steps of dt do not sum exactly to its time.
 DWELL_EPS = 1e-9
+#: tool, spindle_dir, coolant, s_cmd while no program move runs: those of no program (a constant, not read from a
+#: ``Modal`` every step: its fields are a dataclass's, each read an attribute lookup).
+_NO_PROGRAM_MODAL: Final[tuple[int, int, bool, float]] = (NO_MODAL.tool, NO_MODAL.spindle, NO_MODAL.coolant,
+                                                          NO_MODAL.rpm(0.0))
 #: A thread's Z may fall back this far (mm) as the spindle's encoder jitters; more is a spindle turning backwards.
 THREAD_BACKLASH = 1e-9
 
@@ -540,7 +544,7 @@ class CutSequencer(CycleController):
 
     def advance(self, t: float, dt: float, inputs: Mapping[str, object], why: str | None) -> None:
         if self.busy:
-            override = self.override.read(self, t, float(inputs["feed_override"]))  # type: ignore[arg-type]
+            override = self.override.read(self, t, as_float(inputs["feed_override"]))
             cutting = self.plan[self.segment].feed if self.plan and self.phase != APPROACH else self.phase == SC2
             scale = 0.0 if inputs["feed_hold"] else (override if cutting else 1.0)
             self.rapid = not cutting
@@ -672,10 +676,13 @@ class CutSequencer(CycleController):
         out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
         out["rapid"] = self.rapid and (self.busy or not self.move.done)
         out["threading"] = self.threading
-        seg = self.plan[self.segment] if self.plan and self.program_started else None
-        modal = seg.modal if seg is not None else NO_MODAL
+        if not (self.plan and self.program_started):      # the registers, or before the program's first move
+            out["tool"], out["spindle_dir"], out["coolant"], out["s_cmd"] = _NO_PROGRAM_MODAL
+            return out
+        seg = self.plan[self.segment]
+        modal = seg.modal
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
-        if modal.css and seg is not None:                # G96: at the tool's X (a rapid: at its end, as Fanuc)
+        if modal.css:                                     # G96: at the tool's X (a rapid: at its end, as Fanuc)
             x = self.x_cmd if seg.feed else seg.element.end[1]
             out["s_cmd"] = modal.rpm(x - modal.offset[1])
         else:
