@@ -190,7 +190,8 @@ class CutSequencer(CycleController):
     STOP_TIME = 100.0
     AXES = ("x", "z")
     #: Rebuilt from the parameters, not saved with a state (fmi/state.py): what the program means.
-    DERIVED: ClassVar[tuple[str, ...]] = ("meaning",)
+    #: The status last written into ``out`` by :meth:`_publish` and that dict (a cache of what ``out`` holds).
+    DERIVED: ClassVar[tuple[str, ...]] = ("meaning", "_status", "_status_of")
 
     PORTS = (
         real("x_start", "parameter", X_START, "mm", "X (radius) of the start point STP"),
@@ -395,6 +396,8 @@ class CutSequencer(CycleController):
         self.spindle_wait: float | None = None   # s waited for the spindle to arrive at speed (None: not waiting)
         self.program_started = False         # a program's state (tool, spindle ...) is its present move's
         self._outputs: dict[str, object] = {}
+        self._status: tuple[object, ...] = ()
+        self._status_of: dict[str, object] | None = None
         self.rapid = False                   # the present move runs at rapid (kept through a controlled stop)
         self._optional_stop = False
         self._block_delete = False
@@ -665,21 +668,24 @@ class CutSequencer(CycleController):
         out = self._outputs
         out["x_cmd"], out["z_cmd"] = self.x_cmd, self.z_cmd
         out["x_vff"], out["z_vff"] = self.x_vff, self.z_vff
-        out["subcycle"] = self.phase if self.phase > 0 else 0
-        out["pass_no"] = self.pass_no
-        out["passes_left"] = self.passes_left
-        out["block_no"] = self.block_index + 1 if self.busy else 0
-        out["sigma_x"] = self.sigma_x
         running = self.busy and bool(self.plan) and self.phase != APPROACH
-        out["line"] = self.plan[self.segment].line if running else 0
-        out["canned_cycle"] = self.plan[self.segment].cycle if running else 0
-        out["busy"], out["done"], out["alarm"] = self.busy, self.done, self.alarm
-        out["rapid"] = self.rapid and (self.busy or not self.move.done)
-        out["threading"] = self.threading
-        if not (self.plan and self.program_started):      # the registers, or before the program's first move
+        program = bool(self.plan) and self.program_started
+        seg = self.plan[self.segment] if running or program else None
+        status: tuple[object, ...] = (
+            self.phase if self.phase > 0 else 0, self.pass_no, self.passes_left,
+            self.block_index + 1 if self.busy else 0, self.sigma_x,
+            seg.line if running and seg is not None else 0, seg.cycle if running and seg is not None else 0,
+            self.busy, self.done, self.alarm, self.rapid and (self.busy or not self.move.done), self.threading)
+        # The status changes at a phase, pass or block, rarely within one: written into ``out`` only when it did (one
+        # tuple compared instead of twelve dictionary stores a step), and always into another ``out`` (a reset's, a
+        # restored state's: the cache describes the dict it was written into).
+        if self._status_of is not out or status != self._status:
+            (out["subcycle"], out["pass_no"], out["passes_left"], out["block_no"], out["sigma_x"], out["line"],
+             out["canned_cycle"], out["busy"], out["done"], out["alarm"], out["rapid"], out["threading"]) = status
+            self._status, self._status_of = status, out
+        if not program or seg is None:                    # the registers, or before the program's first move
             out["tool"], out["spindle_dir"], out["coolant"], out["s_cmd"] = _NO_PROGRAM_MODAL
             return out
-        seg = self.plan[self.segment]
         modal = seg.modal
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
         if modal.css:                                     # G96: at the tool's X (a rapid: at its end, as Fanuc)
