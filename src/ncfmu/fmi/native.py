@@ -147,12 +147,12 @@ def model_description(m: NativeModel, guid: str, fmi_version: str = "2.0") -> by
 def build_description(m: NativeModel) -> str:
     """``sources/buildDescription.xml`` (the FMI 3.0 form, which FMI 2.0 tools that compile sources also read)."""
     files = "\n".join(f'      <SourceFile name="{n}"/>' for n in (*LAYER_SOURCES, m.model_c.name))
-    how = ("C99 with -O2 (fmi2FreeInstance drops the library's reference to itself in a tail call); link with -lm "
+    how = ("C11 with -O2 (fmi2FreeInstance drops the library's reference to itself in a tail call); link with -lm "
            "-lpthread -ldl")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiBuildDescription fmiVersion="3.0">
   <BuildConfiguration modelIdentifier="{m.name}" description="{how}">
-    <SourceFileSet language="C99">
+    <SourceFileSet language="C11">
 {files}
     </SourceFileSet>
     <Library name="m"/>
@@ -254,7 +254,7 @@ def _design_section(m: NativeModel, design: str, rows: list[tuple[str, str]], fi
 {figure}
 <h2>Runtime requirements</h2>
 <p>None: a C binary (linux64, built with the system C compiler) linked against the C library and libm only;
-the C sources are in <code>sources/</code> ({c_files}; C99, link with -lm -lpthread -ldl), so
+the C sources are in <code>sources/</code> ({c_files}; C11, link with -lm -lpthread -ldl), so
 <code>fmpy.build.build_platform_binary</code> or any FMI tool that compiles sources builds it for another
 platform.</p>"""
 
@@ -316,7 +316,7 @@ def build_native_fmu(m: NativeModel, dest_dir: Path) -> Path:
             with _output_to(log):
                 build_platform_binary(stage, build_dir=Path(tmp) / "build",
                                       cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm -lpthread -ldl",
-                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c99 -D_DEFAULT_SOURCE"})
+                                                     "CMAKE_C_FLAGS:STRING": "-O2 -std=c11 -D_DEFAULT_SOURCE"})
         except Exception as err:  # fmpy raises CalledProcessError; the compiler's messages are in the log
             tail = log.read_text(errors="replace").strip().splitlines()[-30:] if log.exists() else []
             raise BuildError(f"{m.name}: compiling the native FMU failed: {err}\n" + "\n".join(tail)) from err

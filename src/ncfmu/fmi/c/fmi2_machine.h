@@ -14,6 +14,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -189,17 +190,34 @@ static inline int fmi2_utf8_ok(const unsigned char *s)
 #define FMI2_HANDLE_INSTANCE ((uint64_t)0x1u << 44)
 #define FMI2_HANDLE_STATE    ((uint64_t)0x2u << 44)
 
-typedef struct { uintptr_t handle; void *object; } Fmi2Entry;
+typedef struct { _Atomic uintptr_t handle; void *_Atomic object; } Fmi2Entry;
 
-/* The live instances of this binary (hosts such as ecos instantiate, step and free on several threads). */
+/* The live instances of this binary (hosts such as ecos instantiate, step and free on several threads).
+ * Changed under ``lock`` only; every call of an instance looks its handle up, so the lookup takes no lock: a
+ * sequence lock (``seq`` odd while the table changes; a lookup that saw it change looks again under the lock).
+ * A table outgrown stays allocated (a lookup may still be reading it): a few entries, once per doubling. */
 static struct {
     pthread_mutex_t lock;
-    Fmi2Entry *live;
-    size_t n, cap;
+    Fmi2Entry *_Atomic live;
+    _Atomic size_t n;
+    size_t cap;
     uint32_t made;
     uint64_t binary;                    /* the 12 bits naming this load of the binary, + 1 (0: not yet) */
     void *self;                         /* the reference to this library held while instances live */
-} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0, 0, NULL};
+    atomic_uint seq;
+} fmi2_handles FMI2_UNUSED = {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0, 0, 0, NULL, 0};
+
+/* A change of the live table begins / ends (called with the lock held). */
+static inline void fmi2_table_change(void)
+{
+    atomic_fetch_add_explicit(&fmi2_handles.seq, 1, memory_order_relaxed);
+    atomic_thread_fence(memory_order_release);
+}
+
+static inline void fmi2_table_changed(void)
+{
+    atomic_fetch_add_explicit(&fmi2_handles.seq, 1, memory_order_release);
+}
 
 /* A new handle of ``kind``; 0 when the count ran out. Called with fmi2_handles.lock held. */
 static inline uintptr_t fmi2_handle_locked(uint64_t kind)
@@ -231,7 +249,7 @@ static inline void fmi2_library_hold_locked(void)
 static inline void *fmi2_library_release(void)
 {
     pthread_mutex_lock(&fmi2_handles.lock);
-    void *self = fmi2_handles.n == 0 ? fmi2_handles.self : NULL;
+    void *self = atomic_load_explicit(&fmi2_handles.n, memory_order_relaxed) == 0 ? fmi2_handles.self : NULL;
     if (self) fmi2_handles.self = NULL;
     pthread_mutex_unlock(&fmi2_handles.lock);
     return self;
@@ -255,17 +273,51 @@ static inline fmi2Component fmi2_instance_add(void *object)
 {
     pthread_mutex_lock(&fmi2_handles.lock);
     uintptr_t h = 0;
-    if (fmi2_handles.n == fmi2_handles.cap) {
+    size_t n = atomic_load_explicit(&fmi2_handles.n, memory_order_relaxed);
+    Fmi2Entry *live = atomic_load_explicit(&fmi2_handles.live, memory_order_relaxed);
+    if (n == fmi2_handles.cap) {
         size_t cap = fmi2_handles.cap ? 2 * fmi2_handles.cap : 8;
-        Fmi2Entry *grown = realloc(fmi2_handles.live, cap * sizeof *grown);
-        if (grown) { fmi2_handles.live = grown; fmi2_handles.cap = cap; }
+        Fmi2Entry *grown = calloc(cap, sizeof *grown);      /* the old table is not freed: see fmi2_handles */
+        if (grown) {
+            for (size_t k = 0; k < n; k++) {
+                atomic_init(&grown[k].handle, atomic_load_explicit(&live[k].handle, memory_order_relaxed));
+                atomic_init(&grown[k].object, atomic_load_explicit(&live[k].object, memory_order_relaxed));
+            }
+            atomic_store_explicit(&fmi2_handles.live, grown, memory_order_release);
+            live = grown;
+            fmi2_handles.cap = cap;
+        }
     }
-    if (fmi2_handles.n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0) {
-        fmi2_handles.live[fmi2_handles.n++] = (Fmi2Entry){h, object};
+    if (n < fmi2_handles.cap && (h = fmi2_handle_locked(FMI2_HANDLE_INSTANCE)) != 0) {
+        fmi2_table_change();
+        atomic_store_explicit(&live[n].handle, h, memory_order_relaxed);
+        atomic_store_explicit(&live[n].object, object, memory_order_relaxed);
+        atomic_store_explicit(&fmi2_handles.n, n + 1, memory_order_relaxed);
+        fmi2_table_changed();
         fmi2_library_hold_locked();
     }
     pthread_mutex_unlock(&fmi2_handles.lock);
     return (fmi2Component)h;
+}
+
+/* The instance behind ``c`` in the live table as it stands, without the lock: 1 with *found (NULL: not live) when
+ * the table did not change while it was read, else 0 (look again under the lock). */
+static inline int fmi2_instance_seen(fmi2Component c, void **found)
+{
+    unsigned before = atomic_load_explicit(&fmi2_handles.seq, memory_order_acquire);
+    if (before & 1) return 0;
+    Fmi2Entry *live = atomic_load_explicit(&fmi2_handles.live, memory_order_acquire);
+    size_t n = atomic_load_explicit(&fmi2_handles.n, memory_order_relaxed);
+    void *object = NULL;
+    for (size_t k = 0; k < n; k++)
+        if (atomic_load_explicit(&live[k].handle, memory_order_relaxed) == (uintptr_t)c) {
+            object = atomic_load_explicit(&live[k].object, memory_order_relaxed);
+            break;
+        }
+    atomic_thread_fence(memory_order_acquire);
+    if (atomic_load_explicit(&fmi2_handles.seq, memory_order_relaxed) != before) return 0;
+    *found = object;
+    return 1;
 }
 
 /* The instance behind ``c``, or NULL (NULL, freed, made-up or another binary's handle). With ``remove``,
@@ -274,11 +326,22 @@ static inline void *fmi2_instance_find(fmi2Component c, int remove)
 {
     if (!c) return NULL;
     void *found = NULL;
+    if (!remove && fmi2_instance_seen(c, &found)) return found;
     pthread_mutex_lock(&fmi2_handles.lock);
-    for (size_t k = 0; k < fmi2_handles.n; k++) {
-        if (fmi2_handles.live[k].handle != (uintptr_t)c) continue;
-        found = fmi2_handles.live[k].object;
-        if (remove) fmi2_handles.live[k] = fmi2_handles.live[--fmi2_handles.n];
+    Fmi2Entry *live = atomic_load_explicit(&fmi2_handles.live, memory_order_relaxed);
+    size_t n = atomic_load_explicit(&fmi2_handles.n, memory_order_relaxed);
+    for (size_t k = 0; k < n; k++) {
+        if (atomic_load_explicit(&live[k].handle, memory_order_relaxed) != (uintptr_t)c) continue;
+        found = atomic_load_explicit(&live[k].object, memory_order_relaxed);
+        if (remove) {
+            fmi2_table_change();
+            atomic_store_explicit(&live[k].handle, atomic_load_explicit(&live[n - 1].handle, memory_order_relaxed),
+                                  memory_order_relaxed);
+            atomic_store_explicit(&live[k].object, atomic_load_explicit(&live[n - 1].object, memory_order_relaxed),
+                                  memory_order_relaxed);
+            atomic_store_explicit(&fmi2_handles.n, n - 1, memory_order_relaxed);
+            fmi2_table_changed();
+        }
         break;
     }
     pthread_mutex_unlock(&fmi2_handles.lock);

@@ -236,8 +236,10 @@ struct Model {
     unsigned *out_vrs, n_out;             /* the Real, Integer and Boolean outputs */
     /* ``out`` read in its own order (PyDict_Next, no lookups): the key met at each position last time (a
      * reference held, so the same address is the same string) and the output's vr there (UINT32_MAX: none);
-     * a key not where it was makes the map anew. */
-    PyObject **map_key;
+     * a key not where it was makes the map anew. The value met there last time is held too: the same object (a
+     * value is immutable) is the same value, not read again -- a status the controller did not write this step, a
+     * bool, a small int. */
+    PyObject **map_key, **map_value;
     unsigned *map_vr, n_map;
     double *out_real;
     int *out_int, out_valid;
@@ -315,9 +317,9 @@ static int hand_inputs(Model *m)
 
 static void map_drop(Model *m)
 {
-    for (unsigned k = 0; k < m->n_map; k++) py_drop(m->map_key[k]);
-    free(m->map_key); free(m->map_vr);
-    m->map_key = NULL; m->map_vr = NULL; m->n_map = 0;
+    for (unsigned k = 0; k < m->n_map; k++) { py_drop(m->map_key[k]); py_drop(m->map_value[k]); }
+    free(m->map_key); free(m->map_value); free(m->map_vr);
+    m->map_key = m->map_value = NULL; m->map_vr = NULL; m->n_map = 0;
 }
 
 /* The map of ``out``'s positions to outputs, made anew; 0 if ``out`` lacks an output (or is no dict). */
@@ -329,8 +331,9 @@ static int map_make(Model *m, PyObject *out)
     while (py.DictNext(out, &pos, &key, &value)) count++;
     if (count == 0 && m->n_out) return 0;
     m->map_key = calloc(count ? (size_t)count : 1, sizeof *m->map_key);
+    m->map_value = calloc(count ? (size_t)count : 1, sizeof *m->map_value);
     m->map_vr = calloc(count ? (size_t)count : 1, sizeof *m->map_vr);
-    if (!m->map_key || !m->map_vr) { map_drop(m); return 0; }
+    if (!m->map_key || !m->map_value || !m->map_vr) { map_drop(m); return 0; }
     unsigned found = 0;
     pos = 0;
     while (py.DictNext(out, &pos, &key, &value) && m->n_map < (unsigned)count) {
@@ -362,11 +365,16 @@ static int take_outputs(Model *m)
         int same = m->n_map > 0 || m->n_out == 0;
         while (same && py.DictNext(out, &pos, &key, &v)) {
             if (k >= m->n_map || m->map_key[k] != key) { same = 0; break; }
-            unsigned vr = m->map_vr[k++];
-            if (vr == UINT32_MAX) continue;
+            unsigned vr = m->map_vr[k];
+            PyObject **held = &m->map_value[k++];
+            if (vr == UINT32_MAX || v == *held) continue;    /* not an output; the very value read before */
             VarType type = m->vars[vr].type;
             if (type == V_REAL) value_out(v, type, m->out_real, vr);
             else value_out(v, type, m->out_int, vr);
+            if (py.Occurred()) continue;                     /* not a value of its type: the Get says which */
+            py.IncRef(v);
+            py_drop(*held);
+            *held = v;
         }
         if (same && k == m->n_map) break;                  /* every output read */
         ok = attempt == 0 && map_make(m, out);               /* a new dict, or keys changed: map it, read again */
@@ -729,15 +737,18 @@ static int all_of(Model *m, const unsigned vr[], size_t n, VarCausality causalit
 
 ModelStatus fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type, void *values)
 {
-    int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
-    if (outputs && m->out_valid) {
-        /* the master's every-step call: the outputs taken after the step, no Python */
-        for (size_t k = 0; k < n; k++) {
-            if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
-            else ((int *)values)[k] = m->out_int[vr[k]];
-        }
-        return ModelOK;
+    if (type != V_STRING && m->out_valid) {
+        /* the master's every-step call: the outputs taken after the step, no Python (one pass: a reference that is
+         * not an output leaves it, and the call reads them all below) */
+        const VarInfo *vars = m->vars;
+        size_t k = 0;
+        if (type == V_REAL)
+            for (double *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_real[vr[k]];
+        else
+            for (int *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_int[vr[k]];
+        if (k == n) return ModelOK;
     }
+    int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
     PyGILState_STATE g = py.GILEnsure();
     ModelStatus st = ModelOK;
     if (outputs && take_outputs(m)) {
