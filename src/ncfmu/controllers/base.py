@@ -244,6 +244,14 @@ def as_float(value: object) -> float:
     return value if type(value) is float else float(value)  # type: ignore[arg-type]
 
 
+def input_or(inputs: Mapping[str, object], name: str, default: object) -> object:
+    """``inputs.get(name, default)`` (an input added in a later release, read with its default from a caller that
+    gives the first release's inputs). Compiled, a dict's own ``get``: no method looked up on a Mapping."""
+    if type(inputs) is dict:
+        return inputs.get(name, default)
+    return inputs.get(name, default)
+
+
 def finite_inputs(inputs: Mapping[str, object], names: tuple[str, ...]) -> str | None:
     """Return a message naming the first input that is NaN or infinite, else None."""
     for name in names:

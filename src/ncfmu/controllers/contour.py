@@ -139,7 +139,7 @@ class ContourInterpolator(CycleController):
     STOP_TIME = 40.0
     AXES = ("x", "y")
     #: Rebuilt from the parameters, not saved with a state (fmi/state.py): what the program means.
-    DERIVED: ClassVar[tuple[str, ...]] = ("meaning",)
+    DERIVED: ClassVar[tuple[str, ...]] = (*CycleController.DERIVED, "meaning")
 
     PORTS = (
         string("program", "parameter", "", "part program, RS274/NGC subset (G00-G03 with I/J, G17, G21, G90/G91, "

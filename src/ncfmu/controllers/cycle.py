@@ -161,23 +161,32 @@ class CycleController(Controller):
     #: Every cycle controller's: the alarm latched, a cycle running.
     alarm: bool
     busy: bool
+    #: Within a step, the positions it judged (None between steps).
+    _judged: list[float] | None
+    #: Not state (fmi/state.py): ``_judged``. A subclass that derives more lists these too.
+    DERIVED: ClassVar[tuple[str, ...]] = ("_judged",)
 
     # -- the order of a step ------------------------------------------------------------------------
     def step(self, t: float, dt: float, inputs: Mapping[str, object]) -> dict[str, object]:
         """One step of the NC cycle, in the order of the module docstring; the hooks are the controller's."""
         edges = self.read_buttons(inputs)
         bad = self.judge_inputs(inputs, dt)
-        why = bad
-        if bad:
-            self.stop(t, bad)
-        elif self.ALARM_INPUT and inputs[self.ALARM_INPUT]:
-            self.external_alarm(t)
-        elif self.watching_following_error():
-            why = self.following_error(inputs, self.command_point())
-            if why:
-                self.stop(t, why)
-        self.take_commands(t, inputs, edges, bad, why)
-        self.advance(t, dt, inputs, why)
+        # the positions just judged are this step's actual positions (read once: :meth:`actual` hands them out)
+        self._judged = None if bad else self.positions.last
+        try:
+            why = bad
+            if bad:
+                self.stop(t, bad)
+            elif self.ALARM_INPUT and inputs[self.ALARM_INPUT]:
+                self.external_alarm(t)
+            elif self.watching_following_error():
+                why = self.following_error(inputs, self.command_point())
+                if why:
+                    self.stop(t, why)
+            self.take_commands(t, inputs, edges, bad, why)
+            self.advance(t, dt, inputs, why)
+        finally:
+            self._judged = None
         return self._publish()
 
     # -- hooks: what the controller's seed adds ------------------------------------------------------
@@ -310,10 +319,14 @@ class CycleController(Controller):
         self.start_button = Button()
         self.inpos = InPosition(self.inpos_band, self.inpos_timeout)
         self.positions = PositionGuard(tuple(f"{a}_pos" for a in self.AXES))
+        self._judged = None
         self.override = OverrideDial()
 
     def actual(self, inputs: Mapping[str, object], axes: Sequence[str] | None = None) -> list[float]:
-        """The actual positions of ``axes`` (default: all), from the servo inputs."""
+        """The actual positions of ``axes`` (default: all), from the servo inputs (within a step, those the step
+        judged: the same values, not read again; the list is not to be changed)."""
+        if axes is None and self._judged is not None:
+            return self._judged
         names = self._pos_inputs if axes is None else axis_inputs(axes, "_pos")
         return [as_float(inputs[n]) for n in names]
 

@@ -85,7 +85,8 @@ class AreaLimiter(Controller):
     STOP_TIME = 1.0
     # The region the reference axis is in, cached with its bounds and range (_enter): derived from the table alone,
     # whichever region it holds, so not saved in a state -- a restored limiter keeps its fresh cache, a valid one.
-    DERIVED: ClassVar[tuple[str, ...]] = ("_reg", "_reg_lo", "_reg_hi", "_reg_min", "_reg_max")
+    # The status last written into ``out`` and that dict (_publish): a cache of what ``out`` holds.
+    DERIVED: ClassVar[tuple[str, ...]] = ("_reg", "_reg_lo", "_reg_hi", "_reg_min", "_reg_max", "_status", "_status_of")
 
     PORTS = (
         integer("n_regions", "parameter", 1, "number of regions in the limit table",
@@ -189,6 +190,8 @@ class AreaLimiter(Controller):
         self._tick = list(self.pos)             # gated positions at the last tick
         self.fault: str | None = None
         self._outputs: dict[str, object] = {}
+        self._status: tuple[bool, int, int] = (False, 0, 0)
+        self._status_of: dict[str, object] | None = None
         self._publish()
 
     # -- the envelope -----------------------------------------------------------------------------
@@ -549,7 +552,12 @@ class AreaLimiter(Controller):
         out = self._outputs
         out["ref_cmd"], out["lim_cmd"] = self.pos
         out["ref_vff"], out["lim_vff"] = self.vel
-        out["alarm"], out["region"], out["blocked"] = self.alarm, self.region, self.blocked
+        # the status changes at a region's boundary or an alarm: written into ``out`` when it did, and always into
+        # another ``out`` (a reset's, a restored state's)
+        status = (self.alarm, self.region, self.blocked)
+        if self._status_of is not out or status != self._status:
+            out["alarm"], out["region"], out["blocked"] = status
+            self._status, self._status_of = status, out
         return out
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:

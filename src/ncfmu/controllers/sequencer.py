@@ -51,7 +51,7 @@ from typing import Any, ClassVar, Final
 from ..errors import require
 from ..ports import boolean, integer, real, string
 from . import lathe_program
-from .base import POSITION_LIMIT, SPEED_LIMIT, as_float, int_param, real_param, servo_ports
+from .base import POSITION_LIMIT, SPEED_LIMIT, as_float, input_or, int_param, real_param, servo_ports
 from .cycle import CycleController, cycle_ports
 from .g7x import NO_MODAL, Segment, Tool
 from .meaning import ProgramMeaning, Stock, lathe_meaning, registers_meaning
@@ -191,7 +191,7 @@ class CutSequencer(CycleController):
     AXES = ("x", "z")
     #: Rebuilt from the parameters, not saved with a state (fmi/state.py): what the program means.
     #: The status last written into ``out`` by :meth:`_publish` and that dict (a cache of what ``out`` holds).
-    DERIVED: ClassVar[tuple[str, ...]] = ("meaning", "_status", "_status_of")
+    DERIVED: ClassVar[tuple[str, ...]] = (*CycleController.DERIVED, "meaning", "_status", "_status_of")
 
     PORTS = (
         real("x_start", "parameter", X_START, "mm", "X (radius) of the start point STP"),
@@ -534,8 +534,8 @@ class CutSequencer(CycleController):
         appended later are read with their defaults: a caller that gives the first release's inputs runs as
         before (no optional stop, a spindle standing still)."""
         self._pressed = bool(super().read_buttons(inputs))
-        self._optional_stop = bool(inputs.get("optional_stop", False))
-        self._block_delete = bool(inputs.get("block_delete", False))
+        self._optional_stop = bool(input_or(inputs, "optional_stop", False))
+        self._block_delete = bool(input_or(inputs, "block_delete", False))
         return self._pressed
 
     def rebase(self, actual: Mapping[str, float]) -> None:
@@ -580,7 +580,7 @@ class CutSequencer(CycleController):
         if self.stop_wait:
             self.stop_wait = not self._pressed
             return 0.0, True
-        actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
+        actual = abs(as_float(input_or(inputs, "spindle_speed", 0.0)))
         if self.spindle_wait is not None and not self._speed_arrived(t, dt, actual, seg):
             return 0.0, True
         if seg.feed and seg.modal.per_rev:
@@ -613,7 +613,7 @@ class CutSequencer(CycleController):
             if self.arrival(t, dt, True, inputs):
                 self._next_phase()
             return 0.0, True
-        rev = float(inputs.get("revolutions", 0.0))  # type: ignore[arg-type]
+        rev = as_float(input_or(inputs, "revolutions", 0.0))
         if not abs(rev) <= POSITION_LIMIT:        # false for NaN too
             self.stop(t, f"revolutions = {rev!r}: the spindle's encoder angle must be finite, within "
                          f"{POSITION_LIMIT:g} rev (the thread on line {seg.line})")
@@ -621,7 +621,7 @@ class CutSequencer(CycleController):
         turns = rev * seg.modal.spindle - self.thread_shift / 360.0
         if not self.threading:
             if self.spindle_wait is not None:
-                actual = abs(float(inputs.get("spindle_speed", 0.0)))  # type: ignore[arg-type]
+                actual = abs(as_float(input_or(inputs, "spindle_speed", 0.0)))
                 if not self._speed_arrived(t, dt, actual, seg):
                     return 0.0, True
             if not self.thread_armed or inputs["feed_hold"] or math.floor(turns) <= math.floor(self.thread_last):
@@ -675,16 +675,18 @@ class CutSequencer(CycleController):
             self.phase if self.phase > 0 else 0, self.pass_no, self.passes_left,
             self.block_index + 1 if self.busy else 0, self.sigma_x,
             seg.line if running and seg is not None else 0, seg.cycle if running and seg is not None else 0,
-            self.busy, self.done, self.alarm, self.rapid and (self.busy or not self.move.done), self.threading)
+            self.busy, self.done, self.alarm, self.rapid and (self.busy or not self.move.done), self.threading,
+            program)
         # The status changes at a phase, pass or block, rarely within one: written into ``out`` only when it did (one
         # tuple compared instead of twelve dictionary stores a step), and always into another ``out`` (a reset's, a
         # restored state's: the cache describes the dict it was written into).
         if self._status_of is not out or status != self._status:
             (out["subcycle"], out["pass_no"], out["passes_left"], out["block_no"], out["sigma_x"], out["line"],
-             out["canned_cycle"], out["busy"], out["done"], out["alarm"], out["rapid"], out["threading"]) = status
+             out["canned_cycle"], out["busy"], out["done"], out["alarm"], out["rapid"], out["threading"], _) = status
+            if not program:                               # the registers, or before the program's first move
+                out["tool"], out["spindle_dir"], out["coolant"], out["s_cmd"] = _NO_PROGRAM_MODAL
             self._status, self._status_of = status, out
-        if not program or seg is None:                    # the registers, or before the program's first move
-            out["tool"], out["spindle_dir"], out["coolant"], out["s_cmd"] = _NO_PROGRAM_MODAL
+        if not program or seg is None:
             return out
         modal = seg.modal
         out["tool"], out["spindle_dir"], out["coolant"] = modal.tool, modal.spindle, modal.coolant
