@@ -1,0 +1,98 @@
+"""What a controller publishes stays its state's own while the step skips work it need not redo.
+
+The sequencer and the limiter write their status outputs (sub-cycle, pass, block, flags; alarm, region, blocked)
+into ``out`` only when the status changed, the cycle controllers read the positions a step judged once, and the
+position guard keeps its last positions in place. None of that may let a restored state publish what its
+registers do not say, nor leave a step's reading behind it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ncfmu.controllers import CutSequencer
+from ncfmu.controllers.base import PositionGuard
+from ncfmu.controllers.limiter import AreaLimiter
+from ncfmu.fmi import state
+
+DT = 1e-3
+
+
+def sequencer_at_rest() -> CutSequencer:
+    seq = CutSequencer()
+    inputs = CutSequencer.default_inputs()
+    for k in range(3):
+        seq.step(k * DT, DT, inputs)
+    return seq
+
+
+def limiter_at_rest() -> AreaLimiter:
+    lim = AreaLimiter()
+    inputs = AreaLimiter.default_inputs()
+    for k in range(3):
+        lim.step(k * DT, DT, inputs)
+    return lim
+
+
+@pytest.mark.parametrize("make, output, value", [
+    (sequencer_at_rest, "pass_no", 7),
+    (sequencer_at_rest, "busy", True),
+    (sequencer_at_rest, "tool", 3),
+    (limiter_at_rest, "region", 2),
+    (limiter_at_rest, "alarm", True),
+])
+def test_a_state_publishing_a_status_its_registers_do_not_give_is_refused(make, output, value):
+    """A state whose ``_outputs`` says another status than its registers is refused, though the status the registers
+    give is the one a fresh controller publishes (the cache of what was written describes the fresh controller's
+    dict, not the restored one, so the check publishes the restored registers in full)."""
+    logic = make()
+    cls = type(logic)
+    assert logic.outputs()[output] != value
+    blob_ok = state.dumps(cls.MODEL_NAME, cls.default_parameters(), cls.default_inputs(), logic)
+    assert state.loads(blob_ok, cls, cls.from_parameters)[0] is not None
+    logic.outputs()[output] = value
+    blob = state.dumps(cls.MODEL_NAME, cls.default_parameters(), cls.default_inputs(), logic)
+    with pytest.raises(state.StateError, match="not what the state publishes"):
+        state.loads(blob, cls, cls.from_parameters)
+
+
+def test_a_restored_status_is_published_at_the_first_step():
+    """A sequencer restored from a running state (pass 1 of block 1) into one at rest publishes the restored status
+    at its first step, as the original does."""
+    running = CutSequencer()
+    inputs = dict(CutSequencer.default_inputs(), start=True)
+    out = running.step(0.0, DT, inputs)
+    inputs["start"] = False
+    for k in range(1, 400):                    # the axes follow the command exactly
+        inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+        out = running.step(k * DT, DT, inputs)
+    assert out["busy"] and out["pass_no"] >= 1
+    blob = state.dumps("CutSequencer", CutSequencer.default_parameters(), inputs, running)
+    restored, _, _ = state.loads(blob, CutSequencer, CutSequencer.from_parameters)
+    inputs["x_pos"], inputs["z_pos"] = out["x_cmd"], out["z_cmd"]
+    again, original = dict(restored.step(0.4, DT, inputs)), dict(running.step(0.4, DT, inputs))
+    assert again == original and again["busy"] and again["pass_no"] == out["pass_no"]
+
+
+def test_the_guard_keeps_its_last_positions_when_an_input_is_absurd():
+    """An absurd input leaves the positions of the last sane step as they were: the next step's jump is judged
+    against them, not against a position of the absurd step."""
+    guard = PositionGuard(("x_pos", "z_pos"))
+    assert guard.check({"x_pos": 1.0, "z_pos": 2.0}, DT) is None
+    assert guard.check({"x_pos": 1.5, "z_pos": math.nan}, DT) == "input z_pos = nan: must be finite"
+    assert guard.last == [1.0, 2.0]
+    # 1.0 -> 3.5 in one step is 2500 mm/s: a jump against the last sane step (1.5 -> 3.5 would be 2000, allowed)
+    assert guard.check({"x_pos": 3.5, "z_pos": 2.0}, DT) == (
+        "input x_pos jumped 1.0 -> 3.5 in one step of 0.001 s: faster than 2000 mm/s, no axis moves so")
+    assert guard.last == [3.5, 2.0]
+
+
+def test_between_steps_the_actual_positions_are_read_from_the_inputs():
+    """Within a step the cycle controller reads the positions it judged; after the step, :meth:`actual` reads the
+    inputs it is given."""
+    seq = CutSequencer()
+    inputs = CutSequencer.default_inputs()
+    seq.step(0.0, DT, inputs)
+    assert seq.actual({"x_pos": 5.0, "z_pos": 6.0}) == [5.0, 6.0]
