@@ -370,8 +370,10 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
 #: one (not Windows), else spawned (dask's default). Never forked from the client itself: a sweep is often started
 #: from a process that holds open FMUs, their loaded binaries and threads (a pytest session, a notebook), and a
 #: fork would copy those mid-use into every worker. The forkserver is a fresh interpreter with none of that: it
-#: imports :data:`WORKER_MODULES` once and forks each worker from there, so a worker starts with them imported
-#: (spawned, each worker imported distributed and then ncfmu, ~0.6 s CPU a worker, before its first variant ran).
+#: imports :data:`WORKER_MODULES` once (~0.5 s CPU, once per process) and forks each worker from there, so a worker
+#: starts with them imported: at its first result it has spent ~0.7 s CPU, spawned ~1.1 s (distributed and ncfmu
+#: imported again in each), and a later sweep of the process starts its cluster in ~0.15 s (bench/README.md,
+#: "the sweep on 2 workers").
 WORKER_START = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
 #: dask settings of the LocalCluster a sweep starts (an existing cluster keeps its own), measured with
 #: bench/sweep_cpu.py (bench/README.md, "the sweep on 2 workers"): the workers started as :data:`WORKER_START`
