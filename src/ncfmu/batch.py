@@ -396,8 +396,8 @@ def start_worker_forkserver() -> None:
     """Start this process's forkserver, importing :data:`WORKER_MODULES`, if workers are forked from one.
 
     Once per process: it lives on and forks the workers of every later LocalCluster of this process, which then
-    start with nothing to import. Called before this process imports distributed itself (~0.3 s CPU), so that
-    the forkserver's imports run beside the client's on the other core."""
+    start with nothing to import. A sweep calls it first thing, so that the forkserver's imports run on the other
+    core beside the client's own work before its cluster starts (reading the archive, importing distributed)."""
     if LOCAL_CLUSTER_CONFIG.get("distributed.worker.multiprocessing-method") != "forkserver":
         return
     from multiprocessing import forkserver
@@ -427,8 +427,6 @@ def local_cluster(workers: int):
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
                  scheduler_file: str | None, connect_timeout: float, record_result: Callable,
                  fixed: Mapping[str, object]) -> None:
-    if scheduler is None and scheduler_file is None:
-        start_worker_forkserver()                      # its imports beside this process's import of dask
     from dask.distributed import Client, as_completed
     cluster = None
     if scheduler is not None or scheduler_file is not None:
@@ -487,6 +485,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         _scheduler_address(scheduler_file)              # refused now, not after the archive is built and read
     if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
         raise SystemDefinitionError(f"--timeout {timeout!r}: must be a number of seconds > 0")
+    if workers > 0 and scheduler is None and scheduler_file is None:
+        start_worker_forkserver()       # its imports beside this process's work: the archive, dask's import
     archive = system_archive(system, root).resolve()
     data = archive.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
