@@ -69,16 +69,16 @@ class Accounting:
         self.main_tid = threading.get_native_id()
 
     def roles(self) -> dict[int, str]:
-        """pid -> role: client, nanny-i, worker-i (a worker is a nanny's child)."""
+        """pid -> role: client, forkserver (the workers' parent, up from an earlier sweep too), nanny-i, worker-i."""
         out = {self.me.pid: "client"}
-        if self.cluster is None:
-            return out
-        pids = {ws.pid: i for i, ws in enumerate(sorted(self.cluster.scheduler.workers.values(),
-                                                        key=lambda w: w.address))}
+        workers = [] if self.cluster is None else self.cluster.scheduler.workers.values()
+        pids = {ws.pid: i for i, ws in enumerate(sorted(workers, key=lambda w: w.address))}
         for child in self.me.children(recursive=True):
             try:
                 if child.pid in pids:
                     out[child.pid] = f"worker-{pids[child.pid]}"
+                elif "multiprocessing.forkserver" in " ".join(child.cmdline()):
+                    out[child.pid] = "forkserver"        # the workers' parent: it imported once, then forked each
                 elif child.ppid() == self.me.pid and any(c.pid in pids for c in child.children()):
                     out[child.pid] = f"nanny-{pids[next(c.pid for c in child.children() if c.pid in pids)]}"
                 else:
@@ -153,16 +153,15 @@ def analyse(snaps: list[dict]) -> dict:
         return b["cpu"].get(role, 0.0) - a["cpu"].get(role, 0.0)
     out: dict = {"wall_s": end["t"] - start["t"], "cluster_start_wall_s": up["t"] - start["t"],
                  "first_result_wall_s": results[0]["t"] - up["t"], "end_wall_s": end["t"] - last["t"]}
-    # per process, whole run up to the last result (the workers are gone after it), and the end phase
-    out["cpu_by_process_s"] = {r: last["cpu"].get(r, 0.0) for r in roles}
-    out["cpu_by_process_s"]["client"] = last["cpu"]["client"] - start["cpu"]["client"]
+    # per process, whole run up to the last result (the workers are gone after it), and the end phase; a process
+    # there before the sweep (the client, a forkserver an earlier sweep started) from the start
+    out["cpu_by_process_s"] = {r: delta(start, last, r) for r in roles}
     out["client_main_thread_s"] = last["client_main"] - start["client_main"]
     out["client_other_threads_s"] = last["client_threads"] - start["client_threads"]
     out["end_client_cpu_s"] = end["cpu"]["client"] - last["cpu"]["client"]
     out["end_children_gone_cpu_s"] = end["children_gone"] - last["children_gone"]
     # phases: cluster start, first result of each worker, steady (each worker: its first to its last result)
-    out["phase_cluster_start_cpu_s"] = {r: up["cpu"].get(r, 0.0) - (start["cpu"].get(r, 0.0) if r == "client"
-                                                                    else 0.0) for r in up["cpu"]}
+    out["phase_cluster_start_cpu_s"] = {r: delta(start, up, r) for r in up["cpu"]}
     steady = {}
     for w in workers:
         own = [s for s in results if s["done"].get(w, 0) > 0]
@@ -235,6 +234,8 @@ def main() -> dict:
                         help="a dask config value for the 2-worker run's cluster (e.g. "
                              "distributed.worker.multiprocessing-method=spawn)")
     parser.add_argument("--pair", action="store_true", help="also two serial halves side by side, no dask")
+    parser.add_argument("--again", action="store_true",
+                        help="a second 2-worker sweep in the same process after the first (its forkserver is up)")
     parser.add_argument("--half", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--parallel-only", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -246,6 +247,8 @@ def main() -> dict:
         settings = (c.split("=", 1) for c in args.config)
         ncfmu.batch.LOCAL_CLUSTER_CONFIG.update({k: yaml.safe_load(v) for k, v in settings})
         p = parallel(args.stop, args.workers)
+        if args.again:
+            p["again"] = parallel(args.stop, args.workers)
         Path(args.json).write_text(json.dumps(p))
         return p
     if args.half is not None:
@@ -261,17 +264,23 @@ def main() -> dict:
     import subprocess
     with tempfile.TemporaryDirectory() as tmp:
         subprocess.run([sys.executable, __file__, "--parallel-only", "--stop", str(args.stop), "--workers",
-                        str(args.workers), "--json", f"{tmp}/p.json", *(f"--config={c}" for c in args.config)],
+                        str(args.workers), "--json", f"{tmp}/p.json", *(f"--config={c}" for c in args.config),
+                        *(["--again"] if args.again else [])],
                        check=True, stdout=subprocess.DEVNULL)
         p = json.loads(Path(f"{tmp}/p.json").read_text())
     out = {"config": args.config, "load_avg": os.getloadavg(), "stop_time_s": args.stop, "serial": s, "parallel": p}
     report(s, p)
+    if "again" in p:
+        print("the same sweep again, in the same process:")
+        report(s, p["again"])
     if args.pair:
         out["pair"] = two = pair(args.stop)
         extra = 100 * (two["cpu_per_variant_mean_s"] / s["cpu_per_variant_mean_s"] - 1)
         print(f"two serial halves side by side (no dask): {two['wall_s']:.2f} s wall, "
               f"{two['cpu_per_variant_mean_s']:.3f} s CPU a variant (mean; serial alone "
               f"{s['cpu_per_variant_mean_s']:.3f} s: {extra:+.1f} %)")
+        print(f"two plain processes' wall / the 2-worker sweep's: {two['wall_s'] / p['wall_s']:.3f}"
+              + (f" (again: {two['wall_s'] / p['again']['wall_s']:.3f})" if "again" in p else ""))
     print(f"load average {os.getloadavg()[0]:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=2))

@@ -39,6 +39,7 @@ import io
 import itertools
 import json
 import math
+import multiprocessing
 import os
 import sys
 import tempfile
@@ -365,17 +366,45 @@ def _connect(scheduler: str | None, scheduler_file: str | None, connect_timeout:
     return client
 
 
-#: dask settings of the LocalCluster a sweep starts (an existing cluster keeps its own): what a worker's process
-#: spends beside its variant, measured with bench/sweep_cpu.py (bench/README.md, "the sweep on 2 workers"): the
-#: statistical profiler (a thread sampling the task thread's stack every 10 ms, for the dashboard nobody opens)
-#: off; the event-loop health tick every 1 s instead of 20 ms and the system monitor (psutil samples for the
-#: dashboard) every 10 s instead of 0.5 s, in each worker and in the client's scheduler.
-LOCAL_CLUSTER_CONFIG: dict[str, object] = {"distributed.worker.profile.enabled": False,
+#: How a LocalCluster's nannies start their workers: forked from this process's forkserver where the platform has
+#: one (not Windows), else spawned (dask's default). Never forked from the client itself: a sweep is often started
+#: from a process that holds open FMUs, their loaded binaries and threads (a pytest session, a notebook), and a
+#: fork would copy those mid-use into every worker. The forkserver is a fresh interpreter with none of that: it
+#: imports :data:`WORKER_MODULES` once (~0.5 s CPU, once per process) and forks each worker from there, so a worker
+#: starts with them imported: at its first result it has spent ~0.7 s CPU, spawned ~1.1 s (distributed and ncfmu
+#: imported again in each), and a later sweep of the process starts its cluster in ~0.15 s (bench/README.md,
+#: "the sweep on 2 workers").
+WORKER_START = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+#: dask settings of the LocalCluster a sweep starts (an existing cluster keeps its own), measured with
+#: bench/sweep_cpu.py (bench/README.md, "the sweep on 2 workers"): the workers started as :data:`WORKER_START`
+#: says; the statistical profiler (a thread sampling the task thread's stack every 10 ms, for the dashboard nobody
+#: opens) off; the event-loop health tick every 1 s instead of 20 ms and the system monitor (psutil samples for
+#: the dashboard) every 10 s instead of 0.5 s, in each worker and in the client's scheduler.
+LOCAL_CLUSTER_CONFIG: dict[str, object] = {"distributed.worker.multiprocessing-method": WORKER_START,
+                                           "distributed.worker.profile.enabled": False,
                                            "distributed.admin.tick.interval": "1s",
                                            "distributed.admin.system-monitor.interval": "10s"}
-#: The workers stay spawned (dask's default), not forked, though a forked worker would start ~1 s of CPU sooner
-#: (bench/README.md, "sweep workers"): a sweep is often started from a process that holds open FMUs, their loaded
-#: binaries and threads (a pytest session, a notebook), and a fork copies those mid-use into every worker.
+#: What a LocalCluster's worker imports before its first variant, in the forkserver: dask's worker (distributed,
+#: which imports the packages dask's own preload list names) and what ``run_variant`` imports (the co-simulation
+#: with fmpy and numpy, the project's opening of a system, the outcome of a run). Nothing is opened there: a
+#: system's FMUs are instantiated in each worker (their files and binaries are that worker's own).
+WORKER_MODULES = ("distributed", "ncfmu.batch", "ncfmu.project", "ncfmu.cosim.master", "ncfmu.cosim.record",
+                  "ncfmu.systems.outcome")
+
+
+def start_worker_forkserver() -> None:
+    """Start this process's forkserver, importing :data:`WORKER_MODULES`, if workers are forked from one.
+
+    Once per process: it lives on and forks the workers of every later LocalCluster of this process, which then
+    start with nothing to import. A sweep calls it first thing, so that the forkserver's imports run on the other
+    core beside the client's own work before its cluster starts (reading the archive, importing distributed)."""
+    if LOCAL_CLUSTER_CONFIG.get("distributed.worker.multiprocessing-method") != "forkserver":
+        return
+    from multiprocessing import forkserver
+    # the preload is read when the server starts; dask sets its own list on the context later, at its first
+    # worker, which a running server does not read again
+    multiprocessing.get_context("forkserver").set_forkserver_preload(list(WORKER_MODULES))
+    forkserver.ensure_running()
 
 
 def local_cluster(workers: int):
@@ -383,12 +412,16 @@ def local_cluster(workers: int):
 
     dask's scheduler serves HTTP (health, metrics) even with the dashboard off, on port 8787 unless told
     otherwise: a second cluster on the machine (two sweeps, a test run beside a notebook) then warns "Port 8787
-    is already in use". Ours listens on a free port of the loopback instead."""
+    is already in use". Ours listens on a free port of the loopback instead.
+
+    Each worker gets this process's environment as it is now (the nanny sets it in the worker): a forkserver's
+    children inherit the environment it was started with, maybe by an earlier sweep."""
     import dask
     from dask.distributed import LocalCluster
+    start_worker_forkserver()
     with dask.config.set(LOCAL_CLUSTER_CONFIG):        # read by the scheduler, the nannies and (through them) workers
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, env=dict(os.environ))
 
 
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
@@ -452,6 +485,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         _scheduler_address(scheduler_file)              # refused now, not after the archive is built and read
     if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
         raise SystemDefinitionError(f"--timeout {timeout!r}: must be a number of seconds > 0")
+    if workers > 0 and scheduler is None and scheduler_file is None:
+        start_worker_forkserver()       # its imports beside this process's work: the archive, dask's import
     archive = system_archive(system, root).resolve()
     data = archive.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
