@@ -96,3 +96,17 @@ def test_between_steps_the_actual_positions_are_read_from_the_inputs():
     inputs = CutSequencer.default_inputs()
     seq.step(0.0, DT, inputs)
     assert seq.actual({"x_pos": 5.0, "z_pos": 6.0}) == [5.0, 6.0]
+
+
+@pytest.mark.parametrize("names, last", [(("z_pos", "x_pos"), [0.0, 10.0]), (("x_pos", "x_pos"), [10.0, 10.0])])
+def test_a_state_whose_guard_judges_other_inputs_than_the_axes_is_refused(names, last):
+    """Within a step the actual positions are those the position guard judged: a state whose guard judges the axes
+    in another order (Z read as X) or one axis twice (Z not judged at all) is refused. Restored, the swapped one
+    makes the sequencer at rest (X 10, Z 0 mm, standing at its command) see X at 0 mm: an excess-following-error
+    alarm of 10 mm at its first step."""
+    logic = sequencer_at_rest()
+    inputs = CutSequencer.default_inputs()
+    logic.positions.names, logic.positions.last = names, last
+    blob = state.dumps("CutSequencer", CutSequencer.default_parameters(), inputs, logic)
+    with pytest.raises(state.StateError, match=r"positions\.names = .*not the position inputs \('x_pos', 'z_pos'\)"):
+        state.loads(blob, CutSequencer, CutSequencer.from_parameters)
