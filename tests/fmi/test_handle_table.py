@@ -3,7 +3,8 @@
 A lookup on one thread while fmi2Instantiate on another outgrows the table reads only entries of the table it
 read: tests/native/handle_table_probe.c makes that interleaving deterministic (the other thread's change runs
 within the lookup's load of the table or of its count) and is built with AddressSanitizer, which ends the process
-at any read beyond a table.
+at any read beyond a table. With real threads, lookups racing fmi2Instantiate and fmi2FreeInstance find each live
+instance and no other.
 """
 
 from __future__ import annotations
@@ -35,3 +36,10 @@ def test_a_lookup_while_another_thread_outgrows_the_table_reads_within_it(probe,
     run = subprocess.run([str(probe), changed_before_load_of], capture_output=True, text=True, env=env, timeout=60)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout == "table of 8 outgrown during a lookup: no read beyond it\n"
+
+
+def test_lookups_racing_instantiate_and_free_on_other_threads_find_each_live_instance(probe):
+    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=0")
+    run = subprocess.run([str(probe), "threads"], capture_output=True, text=True, env=env, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout == "0 wrong lookups\n"

@@ -3,7 +3,9 @@
  * deterministic by running the other thread's change from within the load (atomic_load_explicit wrapped). Built
  * with AddressSanitizer: a read beyond a table ends the process with its report.
  *
- * usage: handle_table_probe live|n   (the load before which the table changes) */
+ * usage: handle_table_probe live|n   (the load before which the table changes)
+ *        handle_table_probe threads   (lookups on two threads while two others instantiate and free: a live handle
+ *                                      always finds its instance, a made-up one none) */
 #include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
@@ -29,9 +31,50 @@ static void probe_change(void)
     if (!fmi2_instance_add(&objects[63])) { fprintf(stderr, "no handle\n"); _exit(3); }
 }
 
+enum { KEPT = 4, CHURN = 40, ROUNDS = 300, LOOKUPS = 100000 };
+static fmi2Component kept[KEPT];
+static atomic_int churning, wrong;
+
+static void *churn(void *arg)
+{
+    fmi2Component made[CHURN];
+    for (int r = 0; r < ROUNDS; r++) {
+        for (int k = 0; k < CHURN; k++) made[k] = fmi2_instance_add(arg);
+        for (int k = 0; k < CHURN; k++)
+            if (fmi2_instance_find(made[k], 1) != arg) atomic_fetch_add(&wrong, 1);
+    }
+    atomic_fetch_sub(&churning, 1);
+    return NULL;
+}
+
+static void *look_up(void *arg)
+{
+    (void)arg;
+    for (int k = 0; k < LOOKUPS || atomic_load(&churning) > 0; k++) {
+        if (fmi2_instance_find(kept[k % KEPT], 0) != &objects[k % KEPT]) atomic_fetch_add(&wrong, 1);
+        if (fmi2_instance_find((fmi2Component)(uintptr_t)0x1234, 0)) atomic_fetch_add(&wrong, 1);
+    }
+    return NULL;
+}
+
+static int threads(void)
+{
+    for (int k = 0; k < KEPT; k++) kept[k] = fmi2_instance_add(&objects[k]);
+    atomic_store(&churning, 2);
+    pthread_t t[4];
+    pthread_create(&t[0], NULL, churn, &objects[40]);
+    pthread_create(&t[1], NULL, churn, &objects[41]);
+    pthread_create(&t[2], NULL, look_up, NULL);
+    pthread_create(&t[3], NULL, look_up, NULL);
+    for (int k = 0; k < 4; k++) pthread_join(t[k], NULL);
+    printf("%d wrong lookups\n", atomic_load(&wrong));
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) return 2;
+    if (strcmp(argv[1], "threads") == 0) return threads();
     size_t cap;
     for (int k = 0;; k++) {                      /* fill the table to its capacity: the next add outgrows it */
         pthread_mutex_lock(&fmi2_handles.lock);
