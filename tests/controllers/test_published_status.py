@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from ncfmu.controllers import CutSequencer
-from ncfmu.controllers.base import PositionGuard
+from ncfmu.controllers.base import POSITION_LIMIT, SPEED_LIMIT, PositionGuard
 from ncfmu.controllers.limiter import AreaLimiter
 from ncfmu.fmi import state
 
@@ -81,3 +83,47 @@ def test_between_steps_the_actual_positions_are_read_from_the_inputs():
     inputs = CutSequencer.default_inputs()
     seq.step(0.0, DT, inputs)
     assert seq.actual({"x_pos": 5.0, "z_pos": 6.0}) == [5.0, 6.0]
+
+
+@pytest.mark.parametrize("names, last", [(("z_pos", "x_pos"), [0.0, 10.0]), (("x_pos", "x_pos"), [10.0, 10.0])])
+def test_a_state_whose_guard_judges_other_inputs_than_the_axes_is_refused(names, last):
+    """Within a step the actual positions are those the position guard judged: a state whose guard judges the axes
+    in another order (Z read as X) or one axis twice (Z not judged at all) is refused. Restored, the swapped one
+    makes the sequencer at rest (X 10, Z 0 mm, standing at its command) see X at 0 mm: an excess-following-error
+    alarm of 10 mm at its first step."""
+    logic = sequencer_at_rest()
+    inputs = CutSequencer.default_inputs()
+    logic.positions.names, logic.positions.last = names, last
+    blob = state.dumps("CutSequencer", CutSequencer.default_parameters(), inputs, logic)
+    with pytest.raises(state.StateError, match=r"positions\.names = .*not the position inputs \('x_pos', 'z_pos'\)"):
+        state.loads(blob, CutSequencer, CutSequencer.from_parameters)
+
+
+POSITION = st.one_of(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0).map(lambda x: x * 1e4), st.integers(-2, 2),
+                     st.booleans(), st.sampled_from([math.nan, math.inf, -math.inf, 1e300]))
+
+
+@given(st.lists(st.tuples(POSITION, POSITION), min_size=1, max_size=6))
+def test_the_guard_judges_each_step_against_the_last_sane_one(steps):
+    """Judged in place, the guard says what its rules say: a position not finite or beyond any machine is absurd
+    (the positions of the last sane step kept), else a position more than SPEED_LIMIT * dt from the last sane step's
+    is a jump (the first such axis named); the sane step's positions, as floats, are the next step's last."""
+    guard = PositionGuard(("x_pos", "z_pos"))
+    last: list[float] | None = None
+    for x, z in steps:
+        said = guard.check({"x_pos": x, "z_pos": z}, DT)
+        absurd = [n for n, v in (("x_pos", x), ("z_pos", z)) if not (math.isfinite(v) and abs(v) <= POSITION_LIMIT)]
+        if absurd:
+            assert said is not None and said.startswith(f"input {absurd[0]} = {(x, z)[absurd[0] == 'z_pos']!r}: ")
+            assert guard.last == last
+            continue
+        now = [float(x), float(z)]
+        jumped = [i for i in (0, 1) if last is not None and abs(now[i] - last[i]) > SPEED_LIMIT * DT + 1e-9]
+        if jumped:
+            i = jumped[0]
+            assert said == (f"input {('x_pos', 'z_pos')[i]} jumped {last[i]!r} -> {now[i]!r} in one step of 0.001 "
+                            f"s: faster than {SPEED_LIMIT:g} mm/s, no axis moves so")
+        else:
+            assert said is None
+        assert guard.last == now and all(type(v) is float for v in guard.last)
+        last = now

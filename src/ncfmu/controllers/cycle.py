@@ -372,11 +372,14 @@ class CycleController(Controller):
         return None
 
     def check_state(self, inputs: Mapping[str, object]) -> str | None:
-        """A restored state: the in-position check judges with this controller's band and timeout and has
-        waited no longer than the timeout (then the rules of :meth:`Controller.check_state`)."""
+        """A restored state: the position guard judges the axes' position inputs, in their order (a step's
+        :meth:`actual` positions are those it judged); the in-position check judges with this controller's band
+        and timeout and has waited no longer than the timeout (then the rules of :meth:`Controller.check_state`)."""
         why = super().check_state(inputs)
         if why:
             return why
+        if self.positions.names != self._pos_inputs:
+            return f"positions.names = {self.positions.names!r}: not the position inputs {self._pos_inputs!r}"
         check = self.inpos
         if (check.band, check.timeout) != (self.inpos_band, self.inpos_timeout):
             return (f"inpos: band {check.band!r}, timeout {check.timeout!r}: not inpos_band = {self.inpos_band:g} mm, "

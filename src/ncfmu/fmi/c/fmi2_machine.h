@@ -292,7 +292,7 @@ static inline fmi2Component fmi2_instance_add(void *object)
         fmi2_table_change();
         atomic_store_explicit(&live[n].handle, h, memory_order_relaxed);
         atomic_store_explicit(&live[n].object, object, memory_order_relaxed);
-        atomic_store_explicit(&fmi2_handles.n, n + 1, memory_order_relaxed);
+        atomic_store_explicit(&fmi2_handles.n, n + 1, memory_order_release);   /* after the table: see _seen */
         fmi2_table_changed();
         fmi2_library_hold_locked();
     }
@@ -306,8 +306,10 @@ static inline int fmi2_instance_seen(fmi2Component c, void **found)
 {
     unsigned before = atomic_load_explicit(&fmi2_handles.seq, memory_order_acquire);
     if (before & 1) return 0;
+    /* the count before the table, each acquired (the count is stored with release after a grown table is): a
+     * count read is never that of a table grown after the table read, so the entries read are within it */
+    size_t n = atomic_load_explicit(&fmi2_handles.n, memory_order_acquire);
     Fmi2Entry *live = atomic_load_explicit(&fmi2_handles.live, memory_order_acquire);
-    size_t n = atomic_load_explicit(&fmi2_handles.n, memory_order_relaxed);
     void *object = NULL;
     for (size_t k = 0; k < n; k++)
         if (atomic_load_explicit(&live[k].handle, memory_order_relaxed) == (uintptr_t)c) {
@@ -339,7 +341,7 @@ static inline void *fmi2_instance_find(fmi2Component c, int remove)
                                   memory_order_relaxed);
             atomic_store_explicit(&live[k].object, atomic_load_explicit(&live[n - 1].object, memory_order_relaxed),
                                   memory_order_relaxed);
-            atomic_store_explicit(&fmi2_handles.n, n - 1, memory_order_relaxed);
+            atomic_store_explicit(&fmi2_handles.n, n - 1, memory_order_release);
             fmi2_table_changed();
         }
         break;
