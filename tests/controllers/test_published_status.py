@@ -22,6 +22,14 @@ from ncfmu.fmi import state
 DT = 1e-3
 
 
+def at_rest(cls):
+    """A fresh controller stepped three times with its default inputs: at rest, where it started."""
+    logic = cls()
+    for k in range(3):
+        logic.step(k * DT, DT, cls.default_inputs())
+    return logic
+
+
 @pytest.mark.parametrize("cls, output, value", [
     (CutSequencer, "pass_no", 7),
     (CutSequencer, "busy", True),
@@ -33,9 +41,7 @@ def test_a_state_publishing_a_status_its_registers_do_not_give_is_refused(cls, o
     """A state whose ``_outputs`` says another status than its registers is refused, though the status the registers
     give is the one a fresh controller publishes (the cache of what was written describes the fresh controller's
     dict, not the restored one, so the check publishes the restored registers in full)."""
-    logic = cls()
-    for k in range(3):                          # at rest, default inputs
-        logic.step(k * DT, DT, cls.default_inputs())
+    logic = at_rest(cls)
     assert logic.outputs()[output] != value
     blob_ok = state.dumps(cls.MODEL_NAME, cls.default_parameters(), cls.default_inputs(), logic)
     assert state.loads(blob_ok, cls, cls.from_parameters)[0] is not None
@@ -85,17 +91,20 @@ def test_between_steps_the_actual_positions_are_read_from_the_inputs():
     assert seq.actual({"x_pos": 5.0, "z_pos": 6.0}) == [5.0, 6.0]
 
 
-@pytest.mark.parametrize("names, last", [(("z_pos", "x_pos"), [0.0, 10.0]), (("x_pos", "x_pos"), [10.0, 10.0])])
-def test_a_state_whose_guard_judges_other_inputs_than_the_axes_is_refused(names, last):
+@pytest.mark.parametrize("names, last, why", [
+    (("z_pos", "x_pos"), [0.0, 10.0], r"not the position inputs \('x_pos', 'z_pos'\)"),
+    (("x_pos", "x_pos"), [10.0, 10.0], r"judges an input twice"),
+])
+def test_a_state_whose_guard_judges_other_inputs_than_the_axes_is_refused(names, last, why):
     """Within a step the actual positions are those the position guard judged: a state whose guard judges the axes
     in another order (Z read as X) or one axis twice (Z not judged at all) is refused. Restored, the swapped one
     makes the sequencer at rest (X 10, Z 0 mm, standing at its command) see X at 0 mm: an excess-following-error
     alarm of 10 mm at its first step."""
-    logic = sequencer_at_rest()
+    logic = at_rest(CutSequencer)
     inputs = CutSequencer.default_inputs()
     logic.positions.names, logic.positions.last = names, last
     blob = state.dumps("CutSequencer", CutSequencer.default_parameters(), inputs, logic)
-    with pytest.raises(state.StateError, match=r"positions\.names = .*not the position inputs \('x_pos', 'z_pos'\)"):
+    with pytest.raises(state.StateError, match=r"positions\.names = .*" + why):
         state.loads(blob, CutSequencer, CutSequencer.from_parameters)
 
 
@@ -127,3 +136,13 @@ def test_the_guard_judges_each_step_against_the_last_sane_one(steps):
             assert said is None
         assert guard.last == now and all(type(v) is float for v in guard.last)
         last = now
+
+
+def test_a_state_whose_limiter_guard_judges_one_input_twice_is_refused():
+    """The limiter's feedback guard judges ref_pos and lim_pos: a state whose guard judges ref_pos twice (lim_pos not
+    judged at all) is refused."""
+    logic = at_rest(AreaLimiter)
+    logic._feedback.names = ("ref_pos", "ref_pos")
+    blob = state.dumps("AreaLimiter", AreaLimiter.default_parameters(), AreaLimiter.default_inputs(), logic)
+    with pytest.raises(state.StateError, match=r"_feedback\.names = \('ref_pos', 'ref_pos'\): .*twice"):
+        state.loads(blob, AreaLimiter, AreaLimiter.from_parameters)

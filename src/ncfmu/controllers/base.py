@@ -167,6 +167,8 @@ class Controller:
             if isinstance(value, PositionGuard):
                 if not all(n in input_ports and input_ports[n].unit == "mm" for n in value.names):
                     return f"{name}.names = {value.names!r}: not position inputs of {type(self).__name__}"
+                if len(set(value.names)) != len(value.names):
+                    return f"{name}.names = {value.names!r}: judges an input twice (and another not at all)"
                 if value.last is not None:
                     if type(value.last) is not list or len(value.last) != len(value.names):
                         return f"{name}.last = {value.last!r}: not one position per input"
