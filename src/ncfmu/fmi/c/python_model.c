@@ -735,27 +735,29 @@ static int all_of(Model *m, const unsigned vr[], size_t n, VarCausality causalit
     return 1;
 }
 
+/* The leading references of ``vr`` that are Real, Integer or Boolean outputs, copied from the model's copy of
+ * ``out`` (taken): how many (one pass, no Python). */
+static inline size_t outputs_copied(const Model *m, const unsigned vr[], size_t n, VarType type, void *values)
+{
+    const VarInfo *vars = m->vars;
+    size_t k = 0;
+    if (type == V_REAL)
+        for (double *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_real[vr[k]];
+    else
+        for (int *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_int[vr[k]];
+    return k;
+}
+
 ModelStatus fmu_model_get(Model *m, const char *fmi_call, const unsigned vr[], size_t n, VarType type, void *values)
 {
-    if (type != V_STRING && m->out_valid) {
-        /* the master's every-step call: the outputs taken after the step, no Python (one pass: a reference that is
-         * not an output leaves it, and the call reads them all below) */
-        const VarInfo *vars = m->vars;
-        size_t k = 0;
-        if (type == V_REAL)
-            for (double *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_real[vr[k]];
-        else
-            for (int *to = values; k < n && vars[vr[k]].causality == V_OUTPUT; k++) to[k] = m->out_int[vr[k]];
-        if (k == n) return ModelOK;
-    }
+    /* the master's every-step call: the outputs taken after the step (a reference that is not an output leaves the
+     * copy, and the call reads them all below) */
+    if (type != V_STRING && m->out_valid && outputs_copied(m, vr, n, type, values) == n) return ModelOK;
     int outputs = type != V_STRING && all_of(m, vr, n, V_OUTPUT);
     PyGILState_STATE g = py.GILEnsure();
     ModelStatus st = ModelOK;
     if (outputs && take_outputs(m)) {
-        for (size_t k = 0; k < n; k++) {
-            if (type == V_REAL) ((double *)values)[k] = m->out_real[vr[k]];
-            else ((int *)values)[k] = m->out_int[vr[k]];
-        }
+        outputs_copied(m, vr, n, type, values);
     } else if (outputs) {
         /* an output that cannot be read as its type: read ``out`` itself, to say which and why */
         PyObject *out = py.GetAttr(m->slave, names[N_OUT]);
