@@ -1,4 +1,4 @@
-"""Parameter sweeps on dask.distributed, with workers that share no files with the client.
+"""Parameter sweeps on dask.distributed, with workers that need none of the client's files.
 
     from ncfmu.batch import sweep
     rows = sweep("lathe_roughing", {"seq.block[1].Xd": [0.4, 0.5, 0.6]}, out="sweep_xd", workers=2)
@@ -11,12 +11,13 @@ What goes where:
   variants) and sends back the variant's row (status, error, wall time, metrics). A worker needs ncfmu
   installed and nothing else: no path of the client's, no shared folder.
 - Memory does not grow with a variant's length, on the worker or the client: the worker's run keeps no
-  trajectory -- its rows stream into a CSV file in the worker's own temp dir
-  (``ncfmu-sweep-<uid>/rows/``) and into the report's accumulator, which computes the metrics on the fly
-  from every step. The client then fetches the file from that worker in chunks of ``FETCH_CHUNK`` bytes
-  (through the cluster's own connection: no shared folder) and the worker deletes it (a file whose client
-  went away before fetching it stays in that folder).
-- The client alone writes ``out``: ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
+  trajectory -- its rows stream into a CSV file and into the report's accumulator, which computes the metrics
+  on the fly from every step. A worker on the client's machine (a local cluster's, a serial sweep) writes the
+  file into ``out/variants/`` (``<key>-<pid>.rows``) and the client renames it to ``<key>.csv``: no copy. Any
+  other worker writes it in its own temp dir (``ncfmu-sweep-<uid>/rows/``); the client fetches it from that
+  worker in chunks of ``FETCH_CHUNK`` bytes (through the cluster's own connection: no shared folder) and the
+  worker deletes it (a file whose client went away before fetching it stays in that folder).
+- The client alone writes ``out`` (but for those rows files): ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
   per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename). A
   variant stopped by its timeout or an FMU error leaves the rows it recorded so far (a valid CSV, whole rows)
   as ``out/variants/<key>.csv.partial``, its row says how many (``rows``) and up to when (``sim_time``,
@@ -25,7 +26,7 @@ What goes where:
   metrics read), ``output_interval`` keeps every k-th step.
 - Nothing lost: a sweep into an existing ``out`` merges into its summary (rows of other variants are kept);
   a variant whose row and trajectory file (with the row count the summary says) are there is not run again;
-  leftovers of an interrupted run (``*.part``) are removed; a variant without a row is run again. Values are
+  leftovers of an interrupted run (``*.part``, a worker's ``*.rows`` and ``*.rows.partial``) are removed; a variant without a row is run again. Values are
   canonical: ``8`` and ``8.0`` are one variant, duplicates are dropped.
 - ``timeout`` (s) per variant: the worker's master stops at the deadline (checked every 64 steps), the
   variant is recorded as ``timeout`` and the worker goes on with the next one.
@@ -71,6 +72,10 @@ SUMMARY = "summary.csv"
 
 #: Bytes of a variant's trajectory file per message from a worker to the client.
 FETCH_CHUNK = 2 ** 20
+#: A running variant's rows file, ``<key>-<pid>.rows`` (``.rows.partial`` while written): in ``DIR/variants`` for
+#: a worker on the client's machine, until the client renames it to ``<key>.csv``; one left there by an
+#: interrupted sweep is removed by the next one, never taken for a result.
+ROWS_SUFFIX = ".rows"
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
@@ -94,12 +99,15 @@ def _cached_archive(digest: str, data: bytes) -> Path:
 
 
 def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_time: float | None,
-                record: Sequence[str] | None, every: int, timeout: float | None) -> dict:
+                record: Sequence[str] | None, every: int, timeout: float | None,
+                rows_folder: str | None = None) -> dict:
     """Run one variant in this process; never raises.
 
     Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": where its rows are or None}``:
-    the rows stay in a file of this process's temp dir (``{"path", "size", "complete", "worker"}``) until the
-    client fetches them (:func:`read_rows`) and removes them (:func:`remove_rows`).
+    the rows stay in a file (``{"path", "size", "complete", "worker"}``) until the client takes them. The file
+    is in ``rows_folder`` when given -- the sweep's own ``DIR/variants`` when this process runs on the client's
+    machine: the client renames it (:func:`_write_rows`) --, else in this process's temp dir, where the client
+    fetches it (:func:`read_rows`) and removes it (:func:`remove_rows`).
     """
     from .cosim.master import CHECK_INTERVAL
     from .cosim.record import CsvSink
@@ -116,8 +124,8 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         else:
             for slave in opened.slaves:
                 slave.reset()
-        folder = _worker_folder() / "rows"
-        csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}.rows")
+        folder = Path(rows_folder) if rows_folder is not None else _worker_folder() / "rows"
+        csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}{ROWS_SUFFIX}")
         # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
         # report reads) every k-th row
         keep = list(record) if record is not None else opened.report().record()
@@ -267,13 +275,22 @@ def output_names(archive: Path, system: System | None = None) -> list[str]:
 
 def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
                 read: Callable[[str, int, int], bytes]) -> None:
-    """Write a variant's rows from where the worker left them, chunk by chunk (``read(path, offset, size)``),
-    atomically: ``out/variants/<key>.csv`` for a run that completed, ``<key>.csv.partial`` for one that
-    stopped early (the other name removed, so a variant has one file)."""
+    """Put a variant's rows where they belong, atomically: ``out/variants/<key>.csv`` for a run that completed,
+    ``<key>.csv.partial`` for one that stopped early (the other name removed, so a variant has one file).
+
+    A rows file the worker wrote into ``out/variants`` itself (a worker on this machine) is renamed there, after
+    its bytes are on disk: no copy. Any other is copied from where the worker left it, chunk by chunk
+    (``read(path, offset, size)``)."""
     final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
     other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
     part = final.with_name(final.name + ".part")
     path, size = str(trajectory["path"]), int(trajectory["size"])
+    if Path(path).parent == (out / "variants").resolve():
+        with open(path, "rb") as rows:
+            os.fsync(rows.fileno())
+        os.replace(path, final)
+        other.unlink(missing_ok=True)
+        return
     with open(part, "wb") as f:
         offset = 0
         while offset < size:
@@ -426,7 +443,7 @@ def local_cluster(workers: int):
 
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
                  scheduler_file: str | None, connect_timeout: float, record_result: Callable,
-                 fixed: Mapping[str, object]) -> None:
+                 fixed: Mapping[str, object], rows_folder: str) -> None:
     from dask.distributed import Client, as_completed
     cluster = None
     if scheduler is not None or scheduler_file is not None:
@@ -436,11 +453,16 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
         client = Client(cluster)
     try:
         shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
-        futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, pure=False): (key, v)
-                   for key, v in todo}
+        # a local cluster's workers write their rows into DIR/variants, where the client renames them
+        local = {} if cluster is None else {"rows_folder": rows_folder}
+        futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, **local, pure=False):
+                   (key, v) for key, v in todo}
         for future in as_completed(futures):
             key, v = futures[future]
             answer = future.result()
+            if cluster is not None:
+                record_result(key, v, answer)      # renamed in DIR/variants: nothing to fetch or remove
+                continue
             worker = (answer["trajectory"] or {}).get("worker")
 
             def read(path: str, offset: int, size: int, worker=worker) -> bytes:
@@ -520,8 +542,10 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         return variant_key({**fixed, **variant})
 
     (out / "variants").mkdir(parents=True, exist_ok=True)
-    for leftover in [*out.glob("*.part"), *(out / "variants").glob("*.part")]:
-        leftover.unlink()                               # an interrupted write: never trusted
+    variants_folder = out / "variants"
+    for leftover in [*out.glob("*.part"), *variants_folder.glob("*.part"), *variants_folder.glob(f"*{ROWS_SUFFIX}"),
+                     *variants_folder.glob(f"*{ROWS_SUFFIX}.partial")]:
+        leftover.unlink()                               # an interrupted write or run: never trusted
     summary_path = out / SUMMARY
     rows: dict[str, dict[str, object]] = {r["key"]: dict(r) for r in _read_summary(summary_path) if r.get("key")}
     order = list(rows)
@@ -564,13 +588,14 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             on_done(rows[key])
 
     args = (stop_time, record, every, timeout)
+    rows_folder = str(variants_folder.resolve())       # where a worker on this machine writes a variant's rows
     try:
         if todo and workers == 0 and scheduler is None and scheduler_file is None:
             for key, v in todo:
-                record_result(key, v, run_variant(data, digest, {**fixed, **v}, *args))
+                record_result(key, v, run_variant(data, digest, {**fixed, **v}, *args, rows_folder=rows_folder))
         elif todo:
             _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, connect_timeout,
-                         record_result, fixed)
+                         record_result, fixed, rows_folder)
     finally:
         flush_summary(force=True)
     if bar:

@@ -30,9 +30,13 @@ def in_memory(system: str, variant: dict, stop_time: float, record: list[str] | 
 
 
 def test_a_dask_sweeps_files_and_metrics_are_the_in_memory_runs(project, tmp_path, monkeypatch):
-    """On a real 2-worker LocalCluster, fetched in many small chunks: each variant's file is byte for byte the
-    in-memory run's CSV, its metrics those of the whole trajectory, and the workers keep no rows file."""
-    monkeypatch.setattr(batch, "FETCH_CHUNK", 512)      # the client side fetches: ~30 chunks a variant
+    """On a real 2-worker LocalCluster: each variant's file is byte for byte the in-memory run's CSV, its
+    metrics those of the whole trajectory; the workers wrote the rows into DIR/variants, where the client renamed
+    them: it fetched nothing over the cluster's connection, and no rows file is left anywhere."""
+    from distributed import Client
+    fetches = []
+    run = Client.run
+    monkeypatch.setattr(Client, "run", lambda self, *a, **k: fetches.append(a) or run(self, *a, **k))
     vary = {"feed.D3": [4.0, 3.5]}
     rows = sweep("grinder_feed", vary, tmp_path, workers=2, stop_time=3.0, progress=False,
                  record=["x_axis.pos", "feed.pc", "feed.alarm"], output_interval=0.005)
@@ -43,12 +47,23 @@ def test_a_dask_sweeps_files_and_metrics_are_the_in_memory_runs(project, tmp_pat
         variant = {"feed.D3": row["feed.D3"]}
         r, expected = in_memory("grinder_feed", variant, 3.0, ["x_axis.pos", "feed.pc", "feed.alarm"], every=5)
         got = (tmp_path / "variants" / f"{row['key']}.csv").read_bytes()
-        assert len(got) > 20 * 512 and got == expected
+        assert len(got) > 10_000 and got == expected
         assert int(row["rows"]) == 601
         metrics = report_of(r).metrics(r, r.parameters)
         for name in ("sim_time", "deepest_x_mm", "cycle_time_s", "max_following_error_mm", "alarms"):
             assert written[row["key"]][name] == str(metrics[name]), name        # every step, not every 5th
-    assert not list(Path(batch._worker_folder(), "rows").glob(f"*{row['key']}*"))
+    assert not list(Path(batch._worker_folder(), "rows").glob(f"*{row['key']}*")) and fetches == []
+    assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == sorted(f"{r['key']}.csv" for r in rows)
+
+
+def test_a_serial_sweep_renames_its_rows_into_place(project, tmp_path, monkeypatch):
+    """workers=0: the rows are written into DIR/variants and renamed there, never read back and copied; the
+    file is the in-memory run's, byte for byte."""
+    monkeypatch.setattr(batch, "read_rows", lambda *a: pytest.fail(f"the rows were copied: read_rows{a}"))
+    rows = sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=1.0, progress=False)
+    _, expected = in_memory("grinder_feed", {"feed.D3": 4.0}, 1.0)
+    assert (tmp_path / "variants" / f"{rows[0]['key']}.csv").read_bytes() == expected
+    assert [p.name for p in (tmp_path / "variants").iterdir()] == [f"{rows[0]['key']}.csv"]
 
 
 def test_what_a_worker_answers_does_not_grow_with_the_variant(project, tmp_path):

@@ -15,8 +15,10 @@ from conftest import ROOT
 
 from ncfmu.batch import sweep
 from ncfmu.cli import main
-from ncfmu.cosim.result import Result
+from ncfmu.cosim.result import Result, csv_bytes
 from ncfmu.exitcodes import EXIT_NOT_FINISHED
+from ncfmu.project import simulate
+from ncfmu.systems import report_of
 
 pytestmark = pytest.mark.slow        # whole systems in closed loop: not in the fast subset
 
@@ -65,7 +67,10 @@ def dask_cluster(tmp_path):
         p.wait(timeout=30)
 
 
-def test_a_sweep_through_a_hand_started_scheduler_and_worker(project, tmp_path, dask_cluster):
+def test_a_sweep_through_a_hand_started_scheduler_and_worker(project, tmp_path, dask_cluster, monkeypatch):
+    """The worker shares no folder with the client: the rows come over the cluster's connection, in chunks."""
+    from ncfmu import batch
+    monkeypatch.setattr(batch, "FETCH_CHUNK", 4096)     # the client side fetches: ~60 chunks a variant
     scheduler_file, worker_dir = dask_cluster
     client_dir = tmp_path / "client"
     client_dir.mkdir()
@@ -82,6 +87,11 @@ def test_a_sweep_through_a_hand_started_scheduler_and_worker(project, tmp_path, 
     for r in rows:                                           # the trajectories came back, the client wrote them
         traj = Result.from_csv(out / "variants" / f"{r['key']}.csv")
         assert len(traj.time) == int(r["rows"]) == 3001 and "x_axis.pos" in traj.names
+        assert (out / "variants" / f"{r['key']}.csv").stat().st_size > 50 * 4096
+    whole = simulate("grinder_feed", stop_time=3.0, start_values={"feed.D3": 4.0})      # byte for byte
+    key = next(r["key"] for r in rows if float(r["feed.D3"]) == 4.0)
+    assert (out / "variants" / f"{key}.csv").read_bytes() == csv_bytes(whole.data[["time", *report_of(whole).record()]])
+    assert sorted(p.name for p in (out / "variants").iterdir()) == sorted(f"{r['key']}.csv" for r in rows)
     # the worker got the system by value: its own cache holds the archive, by content digest
     cached = list((worker_dir / "tmp").glob("ncfmu-sweep-*/*.ssp"))
     assert len(cached) == 1 and cached[0].read_bytes() == archive.read_bytes()
@@ -106,12 +116,17 @@ def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tm
     lines = truncated.read_text().splitlines(keepends=True)
     truncated.write_text("".join(lines[: len(lines) // 2]))                   # killed while writing (not ours)
     (tmp_path / "variants" / "abc.csv.part").write_text("time,x\n0,")           # a temp file left behind
+    # the rows of a killed local worker, complete and not: in DIR/variants, never renamed to a result
+    killed = [tmp_path / "variants" / f"{rows[3.5]['key']}-999.rows", tmp_path / "variants" / "x-999.rows.partial"]
+    for path in killed:
+        path.write_text("time,x_axis.pos\n0,0\n")
     calls = []
     again = sweep("grinder_feed", D3, tmp_path, workers=0, stop_time=2.0, progress=False, on_done=calls.append)
     assert [float(c["feed.D3"]) for c in calls] == [3.0]                        # only the damaged one re-ran
     assert [r["status"] for r in again] == ["unfinished"] * 3                  # 2 s of the cycle
     assert len(truncated.read_text().splitlines()) == int(by_d3(tmp_path)[3.0]["rows"]) + 1 == 2002
-    assert not list(tmp_path.rglob("*.part"))
+    assert not list(tmp_path.rglob("*.part")) and not any(path.exists() for path in killed)
+    assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == sorted(f"{r['key']}.csv" for r in again)
 
 
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
