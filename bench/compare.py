@@ -14,6 +14,12 @@ Printed per system: microseconds per 1 ms of simulated time on each side (= us p
 printed first: the ratio is fair on a loaded machine (both sides share the load, interleaved), the absolute
 numbers are not.
 
+``--sweep`` times ``ncfmu sweep`` instead, end to end (launch to exit, as a user runs it), on the 16 lathe_taper
+variants of ``bench/sweep_cpu.py`` (whole cycles, ``--stop-time`` default 50 s here): serially (``--workers 0``),
+on 2 workers, and as two plain processes at once (two ``--workers 0`` halves, no dask: what the machine gives two
+busy processes). Printed per kind: best wall of each side, B / A, and whether every variant's file is the same
+bytes on both sides; per side, the pair's wall over the 2-worker sweep's (1: the sweep loses nothing to dask).
+
 ``--compiled a|b|both`` installs that side with the ``compiled`` extra (mypyc; the FMUs then carry the
 controllers compiled). ``compare.py HEAD HEAD --compiled b`` runs one revision's pure build against its compiled
 one: the compiled controllers' gain alone, and whether both record the same trajectory.
@@ -22,12 +28,14 @@ one: the compiled controllers' gain alone, and whether both record the same traj
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import shutil
 import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -111,6 +119,73 @@ def run_once(src: Path, python: Path, system: str, stop_time: float) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+SWEEP_XD = "seq.block[1].Xd=0.3,0.35,0.4,0.45,0.5,0.55,0.6,0.65"
+SWEEP_KINDS = ("serial", "2 workers", "pair")
+
+
+def sweep_once(src: Path, python: Path, kind: str, stop_time: float, out: Path) -> dict:
+    """One timed ``ncfmu sweep`` of ``kind`` in a revision's venv, launch to exit: its wall and a digest of the
+    variants' files (name and bytes)."""
+    ncfmu = str(python.parent / "ncfmu")
+    archive = str(src / "ssp" / "lathe_taper.ssp")
+
+    def command(feeds: str, workers: int, folder: Path) -> list[str]:
+        return [ncfmu, "sweep", archive, "--vary", SWEEP_XD, "--vary", f"seq.block[1].feed={feeds}",
+                "--workers", str(workers), "--stop-time", repr(stop_time), "--out", str(folder)]
+    shutil.rmtree(out, ignore_errors=True)
+    if kind == "pair":
+        commands = [command("3", 0, out / "a"), command("4", 0, out / "b")]
+    else:
+        commands = [command("3,4", 2 if kind == "2 workers" else 0, out / "a")]
+    # bytecode written as a user's machine writes it (a shell may have turned it off): both sides alike
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    start = time.perf_counter()
+    procs = [subprocess.Popen(cmd, cwd=src, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for cmd in commands]
+    answers = [p.communicate() for p in procs]
+    wall = time.perf_counter() - start
+    for p, (stdout, stderr) in zip(procs, answers):
+        if p.returncode not in (0, 3, 4):          # a variant's verdict is not the bench's business
+            raise CompareError(f"{src}: {' '.join(p.args)} exited {p.returncode}:\n{stdout[-1000:]}{stderr[-1000:]}")
+    digest = hashlib.sha256()
+    files = sorted(f for folder in out.iterdir() for f in (folder / "variants").iterdir())
+    for f in sorted(files, key=lambda f: f.name):
+        digest.update(f.name.encode())
+        digest.update(f.read_bytes())
+    return {"wall": wall, "files": len(files), "digest": digest.hexdigest()}
+
+
+def compare_sweeps(sides: dict, stop_time: float, repeats: int, work: Path) -> dict:
+    """``--sweep``: every kind of SWEEP_KINDS on both sides, interleaved (A, B for each kind in each round)."""
+    rev_a, rev_b = sides
+    walls: dict = {kind: {rev_a: [], rev_b: []} for kind in SWEEP_KINDS}
+    digests: dict = {kind: {} for kind in SWEEP_KINDS}
+    for _ in range(repeats):
+        for kind in SWEEP_KINDS:
+            for rev in (rev_a, rev_b):
+                _, src, python = sides[rev]
+                once = sweep_once(src, python, kind, stop_time, work / "sweep-out")
+                walls[kind][rev].append(once["wall"])
+                digests[kind][rev] = (once["files"], once["digest"])
+    results: dict = {"kinds": {}}
+    print(f"{'sweep':<12}{'A s':>8}{'B s':>8}{'B/A':>8}  same files")
+    for kind in SWEEP_KINDS:
+        best = {rev: min(w) for rev, w in walls[kind].items()}
+        same = digests[kind][rev_a] == digests[kind][rev_b]
+        print(f"{kind:<12}{best[rev_a]:>8.2f}{best[rev_b]:>8.2f}{best[rev_b] / best[rev_a]:>8.3f}  "
+              f"{'yes' if same else 'NO'} ({digests[kind][rev_b][0]} files)")
+        results["kinds"][kind] = {"a_best_s": best[rev_a], "b_best_s": best[rev_b], "same_files": same,
+                                  "a_walls": walls[kind][rev_a], "b_walls": walls[kind][rev_b]}
+    one = {digests[kind][rev_b] for kind in SWEEP_KINDS}
+    print("every kind wrote the same files: " + ("yes" if len(one) == 1 else "NO"))
+    for side in ("a", "b"):
+        ratio = results["kinds"]["pair"][f"{side}_best_s"] / results["kinds"]["2 workers"][f"{side}_best_s"]
+        results[f"{side}_pair_over_2_workers"] = ratio
+        print(f"{side.upper()}: two plain processes' wall / the 2-worker sweep's: {ratio:.3f}")
+    results["same_files_every_kind"] = len(one) == 1
+    return results
+
+
 def side_labels(rev_a: str, rev_b: str, compiled: str | None) -> tuple[str, str]:
     """The sides' names, distinct: their revisions; for one revision, also how each side is built (its pure
     and compiled builds), and an A/A run of one build (the noise) as A and B."""
@@ -123,7 +198,7 @@ def side_labels(rev_a: str, rev_b: str, compiled: str | None) -> tuple[str, str]
 
 
 def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeats: int, work: Path,
-            compiled: str | None = None) -> dict:
+            compiled: str | None = None, sweep: bool = False) -> dict:
     constraints = REPO / ".ci" / "constraints.txt"
     labels = side_labels(rev_a, rev_b, compiled)
     sides = {}
@@ -139,6 +214,10 @@ def compare(rev_a: str, rev_b: str, systems: list[str], stop_time: float, repeat
                      "systems": {}}
     print(f"A = {rev_a} ({sides[rev_a][0][:10]}), B = {rev_b} ({sides[rev_b][0][:10]}); "
           f"{stop_time:g} s simulated, best of {repeats}, interleaved")
+    if sweep:
+        results.update(compare_sweeps(sides, stop_time, repeats, work))
+        results["load_average_after"] = os.getloadavg()[0]
+        return results
     print(f"{'system':<18}{'A us/ms':>10}{'B us/ms':>10}{'B/A':>8}  same run  loops")
     for system in systems:
         walls: dict[str, list[float]] = {rev_a: [], rev_b: []}
@@ -165,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("rev_a", help="the baseline commit (e.g. HEAD~1)")
     parser.add_argument("rev_b", help="the commit measured against it (e.g. HEAD)")
     parser.add_argument("--systems", nargs="+", default=list(DEFAULT_SYSTEMS))
-    parser.add_argument("--stop-time", type=float, default=10.0, help="simulated seconds a run (default 10)")
+    parser.add_argument("--stop-time", type=float, default=None,
+                        help="simulated seconds a run (default 10; with --sweep, a variant's limit: 50)")
     parser.add_argument("--repeats", type=int, default=3, help="runs a side and system, best kept (default 3)")
     parser.add_argument("--work", type=Path, default=Path.home() / ".cache" / "ncfmu-compare",
                         help="where the revisions' worktrees and venvs are kept")
@@ -173,12 +253,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--compiled", choices=("a", "b", "both"),
                         help="install that side (or both) with the 'compiled' extra (mypyc): the FMUs a user with it "
                              "builds; 'b' with REV_A == REV_B measures the compiled controllers alone")
+    parser.add_argument("--sweep", action="store_true",
+                        help="time `ncfmu sweep` end to end: serial, 2 workers and two plain processes")
     args = parser.parse_args(argv)
+    if args.stop_time is None:
+        args.stop_time = 50.0 if args.sweep else 10.0
     if args.repeats < 1 or not args.stop_time > 0:
         parser.error("--repeats must be >= 1 and --stop-time > 0")
     try:
         results = compare(args.rev_a, args.rev_b, args.systems, args.stop_time, args.repeats, args.work,
-                          args.compiled)
+                          args.compiled, args.sweep)
     except CompareError as exc:
         print(f"bench/compare.py: {exc}", file=sys.stderr)
         return 2
