@@ -129,6 +129,38 @@ def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tm
     assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == sorted(f"{r['key']}.csv" for r in again)
 
 
+def test_a_worker_killed_mid_variant_leaves_nothing_in_dir(project, tmp_path):
+    """A local cluster's worker SIGKILLed while it writes a variant's rows into DIR/variants: dask runs the variant
+    again on the other worker and the sweep completes -- with the killed worker's rows file gone from DIR, not
+    left there beside the results until some later sweep into DIR."""
+    import signal
+    import threading
+    killed: list[int] = []
+    finished = threading.Event()
+
+    def kill_the_first_writer() -> None:
+        while not finished.is_set() and not killed:
+            for rows in (tmp_path / "variants").glob("*.rows.partial"):
+                if rows.stat().st_size > 100_000:           # mid-variant: ~1/20 of its rows written
+                    pid = int(rows.name.split(".")[0].rsplit("-", 1)[1])
+                    os.kill(pid, signal.SIGKILL)               # a worker process of the cluster, not this one
+                    killed.append(pid)
+                    break
+            time.sleep(0.01)
+    watcher = threading.Thread(target=kill_the_first_writer, daemon=True)
+    watcher.start()
+    try:       # a feed 100x slower: the cycle never ends, the variant runs to the limit (~0.6 s of CPU)
+        rows = sweep("grinder_feed", {"feed.F1": [0.0002]}, tmp_path, workers=2, stop_time=200.0,
+                     output_interval=0.01, progress=False)
+    finally:
+        finished.set()
+        watcher.join()
+    assert len(killed) == 1
+    assert rows[0]["status"] == "unfinished" and int(rows[0]["rows"]) == 20001       # run again, to the end
+    assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == [f"{rows[0]['key']}.csv"]
+    assert len((tmp_path / "variants" / f"{rows[0]['key']}.csv").read_text().splitlines()) == 20002
+
+
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
     rows = sweep("grinder_feed", {"feed.D3": [4, 4.0, 3.5, 4, 3.50]}, tmp_path, workers=0, stop_time=1.0,
                  progress=False)
