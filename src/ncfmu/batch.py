@@ -19,7 +19,7 @@ What goes where:
   worker deletes it (a file whose client went away before fetching it stays in that folder).
 - The client alone writes ``out`` (but for those rows files): ``out/variants/<key>.csv`` (fmpy's CSV layout:
   ``time``, then one column per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary
-  file, then a rename). A
+  file, then a rename); an ``out/variants`` that takes no file is refused before any variant runs. A
   variant stopped by its timeout or an FMU error leaves the rows it recorded so far (a valid CSV, whole rows)
   as ``out/variants/<key>.csv.partial``, its row says how many (``rows``) and up to when (``sim_time``,
   with the metrics of those rows).
@@ -313,6 +313,18 @@ def _remove_rows_files(folder: Path) -> None:
         leftover.unlink(missing_ok=True)
 
 
+def _check_writable(folder: Path, out: Path) -> None:
+    """Refuse, before any variant runs, a ``folder`` (``out/variants``) that takes no new file: its variants would
+    each be recorded ``failed`` -- and a failed variant counts as done, never run again."""
+    probe = folder / f"write-check-{os.getpid()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
+    try:
+        with open(probe, "wb"):
+            pass
+        probe.unlink()
+    except OSError as err:
+        raise NcfmuError(f"--out {out}: cannot write the variants' rows in {folder}: {err.strerror or err}") from None
+
+
 class Progress:
     """A tqdm bar with done / failed / timeout and an ETA, on a terminal only."""
 
@@ -567,6 +579,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             todo.append((key, v))
         if key not in rows:
             order.append(key)
+    if todo:
+        _check_writable(variants_folder, out)
     bar = Progress(len(todo)) if progress else None
 
     # The summary is rewritten at most once a second and at the end (also when interrupted): a variant whose

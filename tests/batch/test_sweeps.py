@@ -161,6 +161,39 @@ def test_a_worker_killed_mid_variant_leaves_nothing_in_dir(project, tmp_path):
     assert len((tmp_path / "variants" / f"{rows[0]['key']}.csv").read_text().splitlines()) == 20002
 
 
+def test_a_variants_folder_that_refuses_files_stops_the_sweep_and_fails_no_variant(project, tmp_path, monkeypatch,
+                                                                                    capsys):
+    """DIR/variants not writable (another user's folder, a read-only share): one line naming the folder, exit 2,
+    before any variant runs -- not every variant recorded as ``failed`` (a failed variant counts as done: the
+    next sweep, the folder fixed, would never run it)."""
+    import builtins
+    import errno
+    out = tmp_path / "sw"
+    variants = out / "variants"
+    variants.mkdir(parents=True)
+    variants.chmod(0o555)
+    real_open = builtins.open
+
+    def refused(file, mode="r", *args, **kwargs):     # as the system refuses anyone but root (this may be root)
+        if isinstance(file, (str, os.PathLike)) and set(mode) & set("wax+") and \
+                Path(file).resolve().parent == variants.resolve():
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(file))
+        return real_open(file, mode, *args, **kwargs)
+    monkeypatch.setattr(builtins, "open", refused)
+    try:
+        status = main(["sweep", "grinder_feed", "--vary", "feed.D3=4.0", "--workers", "0", "--stop-time", "1",
+                       "--out", str(out)])
+    finally:
+        monkeypatch.undo()
+        variants.chmod(0o755)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert status == 2 and len(lines) == 1 and str(variants) in lines[0] and "Permission denied" in lines[0], lines
+    assert not (out / "summary.csv").exists() and list(variants.iterdir()) == []
+    calls = []           # the folder fixed: the variant runs
+    sweep("grinder_feed", {"feed.D3": [4.0]}, out, workers=0, stop_time=1.0, progress=False, on_done=calls.append)
+    assert [c["status"] for c in calls] == ["unfinished"] and int(calls[0]["rows"]) == 1001
+
+
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
     rows = sweep("grinder_feed", {"feed.D3": [4, 4.0, 3.5, 4, 3.50]}, tmp_path, workers=0, stop_time=1.0,
                  progress=False)
