@@ -308,9 +308,27 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
 
 
 def _remove_rows_files(folder: Path) -> None:
-    """Remove the rows files (``*.rows``, ``*.rows.partial``) in ``folder`` of workers that no longer run."""
+    """Remove the rows files (``*.rows``, ``*.rows.partial``) in ``folder`` of workers that no longer run: those
+    of another sweep's workers still running (a second sweep into the same ``out``) are theirs to rename."""
     for leftover in [*folder.glob(f"*{ROWS_SUFFIX}"), *folder.glob(f"*{ROWS_SUFFIX}.partial")]:
-        leftover.unlink(missing_ok=True)
+        if not _writer_running(leftover):
+            leftover.unlink(missing_ok=True)
+
+
+def _writer_running(rows: Path) -> bool:
+    """Whether the process that writes ``rows`` (``<key>-<pid>.rows``: a worker on this machine) is one other than
+    this one and still running. Asked of the system on POSIX only (``os.kill(pid, 0)`` would end it on Windows,
+    where a file another process has open cannot be removed anyway)."""
+    pid = rows.name.split(".", 1)[0].rpartition("-")[2]
+    if os.name != "posix" or not pid.isdigit() or int(pid) == os.getpid():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except (ProcessLookupError, OverflowError):
+        return False
+    except PermissionError:          # another user's process: running
+        pass
+    return True
 
 
 def _check_writable(folder: Path, out: Path) -> None:

@@ -117,7 +117,9 @@ def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tm
     truncated.write_text("".join(lines[: len(lines) // 2]))                   # killed while writing (not ours)
     (tmp_path / "variants" / "abc.csv.part").write_text("time,x\n0,")           # a temp file left behind
     # the rows of a killed local worker, complete and not: in DIR/variants, never renamed to a result
-    killed = [tmp_path / "variants" / f"{rows[3.5]['key']}-999.rows", tmp_path / "variants" / "x-999.rows.partial"]
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)                                                      # a process that has ended
+    killed = [tmp_path / "variants" / f"{rows[3.5]['key']}-{pid}.rows", tmp_path / "variants" / f"x-{pid}.rows.partial"]
     for path in killed:
         path.write_text("time,x_axis.pos\n0,0\n")
     calls = []
@@ -192,6 +194,32 @@ def test_a_variants_folder_that_refuses_files_stops_the_sweep_and_fails_no_varia
     calls = []           # the folder fixed: the variant runs
     sweep("grinder_feed", {"feed.D3": [4.0]}, out, workers=0, stop_time=1.0, progress=False, on_done=calls.append)
     assert [c["status"] for c in calls] == ["unfinished"] and int(calls[0]["rows"]) == 1001
+
+
+def test_a_second_sweep_into_the_same_dir_leaves_the_running_ones_rows_alone(project, tmp_path):
+    """A second sweep into a DIR while a first one runs there (README: a second sweep merges into it): its start
+    and end remove the rows files of dead workers only -- not the one the first sweep's worker is writing, whose
+    variant was recorded ``failed`` (FileNotFoundError at its rename), for good: a failed variant is done."""
+    out, variants = tmp_path / "sw", tmp_path / "sw" / "variants"
+    # the first: a feed 100x slower, the cycle never ends: ~2.5 s of CPU to its 600 s limit
+    first = subprocess.Popen([sys.executable, "-m", "ncfmu.cli", "sweep", "grinder_feed", "--vary", "feed.F1=0.0002",
+                              "--workers", "0", "--stop-time", "600", "--output-interval", "0.01", "--out", str(out)],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(variants.glob("*.rows.partial")) and first.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        second = sweep("grinder_feed", {"feed.D3": [4.0]}, out, workers=0, stop_time=1.0, progress=False)
+        running = first.poll() is None
+    finally:
+        said = first.communicate(timeout=300)[0]
+    assert running, "the first sweep ended before the second one: nothing was tested"
+    assert second[0]["status"] == "unfinished" and (variants / f"{second[0]['key']}.csv").is_file()
+    assert first.returncode == EXIT_NOT_FINISHED and "1 unfinished, 0 failed" in said, said
+    row = summary(out)[-1]                                 # the first's row, written last
+    assert row["feed.F1"] == "0.0002" and row["status"] == "unfinished" and int(row["rows"]) == 60001
+    assert len((variants / f"{row['key']}.csv").read_text().splitlines()) == 60002
+    assert not list(variants.glob("*.rows*"))
 
 
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
