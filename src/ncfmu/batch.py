@@ -17,8 +17,9 @@ What goes where:
   other worker writes it in its own temp dir (``ncfmu-sweep-<uid>/rows/``); the client fetches it from that
   worker in chunks of ``FETCH_CHUNK`` bytes (through the cluster's own connection: no shared folder) and the
   worker deletes it (a file whose client went away before fetching it stays in that folder).
-- The client alone writes ``out`` (but for those rows files): ``out/variants/<key>.csv`` (fmpy's CSV layout: ``time``, then one column
-  per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary file, then a rename). A
+- The client alone writes ``out`` (but for those rows files): ``out/variants/<key>.csv`` (fmpy's CSV layout:
+  ``time``, then one column per ``INSTANCE.VARIABLE``) and ``out/summary.csv``, each atomically (a temporary
+  file, then a rename); an ``out/variants`` that takes no file is refused before any variant runs. A
   variant stopped by its timeout or an FMU error leaves the rows it recorded so far (a valid CSV, whole rows)
   as ``out/variants/<key>.csv.partial``, its row says how many (``rows``) and up to when (``sim_time``,
   with the metrics of those rows).
@@ -26,8 +27,9 @@ What goes where:
   metrics read), ``output_interval`` keeps every k-th step.
 - Nothing lost: a sweep into an existing ``out`` merges into its summary (rows of other variants are kept);
   a variant whose row and trajectory file (with the row count the summary says) are there is not run again;
-  leftovers of an interrupted run (``*.part``, a worker's ``*.rows`` and ``*.rows.partial``) are removed; a variant without a row is run again. Values are
-  canonical: ``8`` and ``8.0`` are one variant, duplicates are dropped.
+  leftovers of an interrupted run (``*.part``, a worker's ``*.rows`` and ``*.rows.partial``) are removed, and
+  the rows file of a worker killed mid-variant when the sweep ends; a variant without a row is run again.
+  Values are canonical: ``8`` and ``8.0`` are one variant, duplicates are dropped.
 - ``timeout`` (s) per variant: the worker's master stops at the deadline (checked every 64 steps), the
   variant is recorded as ``timeout`` and the worker goes on with the next one.
 """
@@ -73,8 +75,8 @@ SUMMARY = "summary.csv"
 #: Bytes of a variant's trajectory file per message from a worker to the client.
 FETCH_CHUNK = 2 ** 20
 #: A running variant's rows file, ``<key>-<pid>.rows`` (``.rows.partial`` while written): in ``DIR/variants`` for
-#: a worker on the client's machine, until the client renames it to ``<key>.csv``; one left there by an
-#: interrupted sweep is removed by the next one, never taken for a result.
+#: a worker on the client's machine, until the client renames it to ``<key>.csv``; one left there by a worker killed
+#: mid-variant is removed when its sweep ends, one of a sweep killed itself by the next; never taken for a result.
 ROWS_SUFFIX = ".rows"
 
 # -- the worker side -------------------------------------------------------------------------------
@@ -303,6 +305,42 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
         os.fsync(f.fileno())
     part.replace(final)
     other.unlink(missing_ok=True)
+
+
+def _remove_rows_files(folder: Path) -> None:
+    """Remove the rows files (``*.rows``, ``*.rows.partial``) in ``folder`` of workers that no longer run: those
+    of another sweep's workers still running (a second sweep into the same ``out``) are theirs to rename."""
+    for leftover in [*folder.glob(f"*{ROWS_SUFFIX}"), *folder.glob(f"*{ROWS_SUFFIX}.partial")]:
+        if not _writer_running(leftover):
+            leftover.unlink(missing_ok=True)
+
+
+def _writer_running(rows: Path) -> bool:
+    """Whether the process that writes ``rows`` (``<key>-<pid>.rows``: a worker on this machine) is one other than
+    this one and still running. Asked of the system on POSIX only (``os.kill(pid, 0)`` would end it on Windows,
+    where a file another process has open cannot be removed anyway)."""
+    pid = rows.name.split(".", 1)[0].rpartition("-")[2]
+    if os.name != "posix" or not pid.isdigit() or int(pid) == os.getpid():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except (ProcessLookupError, OverflowError):
+        return False
+    except PermissionError:          # another user's process: running
+        pass
+    return True
+
+
+def _check_writable(folder: Path, out: Path) -> None:
+    """Refuse, before any variant runs, a ``folder`` (``out/variants``) that takes no new file: its variants would
+    each be recorded ``failed`` -- and a failed variant counts as done, never run again."""
+    probe = folder / f"write-check-{os.getpid()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
+    try:
+        with open(probe, "wb"):
+            pass
+        probe.unlink()
+    except OSError as err:
+        raise NcfmuError(f"--out {out}: cannot write the variants' rows in {folder}: {err.strerror or err}") from None
 
 
 class Progress:
@@ -543,9 +581,9 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
 
     (out / "variants").mkdir(parents=True, exist_ok=True)
     variants_folder = out / "variants"
-    for leftover in [*out.glob("*.part"), *variants_folder.glob("*.part"), *variants_folder.glob(f"*{ROWS_SUFFIX}"),
-                     *variants_folder.glob(f"*{ROWS_SUFFIX}.partial")]:
-        leftover.unlink()                               # an interrupted write or run: never trusted
+    for leftover in [*out.glob("*.part"), *variants_folder.glob("*.part")]:
+        leftover.unlink()                               # an interrupted write: never trusted
+    _remove_rows_files(variants_folder)                 # an interrupted sweep's workers': never taken for a result
     summary_path = out / SUMMARY
     rows: dict[str, dict[str, object]] = {r["key"]: dict(r) for r in _read_summary(summary_path) if r.get("key")}
     order = list(rows)
@@ -559,6 +597,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             todo.append((key, v))
         if key not in rows:
             order.append(key)
+    if todo:
+        _check_writable(variants_folder, out)
     bar = Progress(len(todo)) if progress else None
 
     # The summary is rewritten at most once a second and at the end (also when interrupted): a variant whose
@@ -598,6 +638,9 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
                          record_result, fixed, rows_folder)
     finally:
         flush_summary(force=True)
+        # every worker of this sweep has ended (its cluster closed): a rows file still here is the one of a worker
+        # killed mid-variant (dask ran the variant again elsewhere), or of this sweep interrupted
+        _remove_rows_files(variants_folder)
     if bar:
         bar.close()
     return [rows[key_of(v)] for v in variants]

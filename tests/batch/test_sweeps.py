@@ -117,7 +117,9 @@ def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tm
     truncated.write_text("".join(lines[: len(lines) // 2]))                   # killed while writing (not ours)
     (tmp_path / "variants" / "abc.csv.part").write_text("time,x\n0,")           # a temp file left behind
     # the rows of a killed local worker, complete and not: in DIR/variants, never renamed to a result
-    killed = [tmp_path / "variants" / f"{rows[3.5]['key']}-999.rows", tmp_path / "variants" / "x-999.rows.partial"]
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)                                                      # a process that has ended
+    killed = [tmp_path / "variants" / f"{rows[3.5]['key']}-{pid}.rows", tmp_path / "variants" / f"x-{pid}.rows.partial"]
     for path in killed:
         path.write_text("time,x_axis.pos\n0,0\n")
     calls = []
@@ -127,6 +129,97 @@ def test_an_interrupted_sweep_resumes_without_trusting_partial_files(project, tm
     assert len(truncated.read_text().splitlines()) == int(by_d3(tmp_path)[3.0]["rows"]) + 1 == 2002
     assert not list(tmp_path.rglob("*.part")) and not any(path.exists() for path in killed)
     assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == sorted(f"{r['key']}.csv" for r in again)
+
+
+def test_a_worker_killed_mid_variant_leaves_nothing_in_dir(project, tmp_path):
+    """A local cluster's worker SIGKILLed while it writes a variant's rows into DIR/variants: dask runs the variant
+    again on the other worker and the sweep completes -- with the killed worker's rows file gone from DIR, not
+    left there beside the results until some later sweep into DIR."""
+    import signal
+    import threading
+    killed: list[int] = []
+    finished = threading.Event()
+
+    def kill_the_first_writer() -> None:
+        while not finished.is_set() and not killed:
+            for rows in (tmp_path / "variants").glob("*.rows.partial"):
+                if rows.stat().st_size > 100_000:           # mid-variant: ~1/20 of its rows written
+                    pid = int(rows.name.split(".")[0].rsplit("-", 1)[1])
+                    os.kill(pid, signal.SIGKILL)               # a worker process of the cluster, not this one
+                    killed.append(pid)
+                    break
+            time.sleep(0.01)
+    watcher = threading.Thread(target=kill_the_first_writer, daemon=True)
+    watcher.start()
+    try:       # a feed 100x slower: the cycle never ends, the variant runs to the limit (~0.6 s of CPU)
+        rows = sweep("grinder_feed", {"feed.F1": [0.0002]}, tmp_path, workers=2, stop_time=200.0,
+                     output_interval=0.01, progress=False)
+    finally:
+        finished.set()
+        watcher.join()
+    assert len(killed) == 1
+    assert rows[0]["status"] == "unfinished" and int(rows[0]["rows"]) == 20001       # run again, to the end
+    assert sorted(p.name for p in (tmp_path / "variants").iterdir()) == [f"{rows[0]['key']}.csv"]
+    assert len((tmp_path / "variants" / f"{rows[0]['key']}.csv").read_text().splitlines()) == 20002
+
+
+def test_a_variants_folder_that_refuses_files_stops_the_sweep_and_fails_no_variant(project, tmp_path, monkeypatch,
+                                                                                    capsys):
+    """DIR/variants not writable (another user's folder, a read-only share): one line naming the folder, exit 2,
+    before any variant runs -- not every variant recorded as ``failed`` (a failed variant counts as done: the
+    next sweep, the folder fixed, would never run it)."""
+    import builtins
+    import errno
+    out = tmp_path / "sw"
+    variants = out / "variants"
+    variants.mkdir(parents=True)
+    variants.chmod(0o555)
+    real_open = builtins.open
+
+    def refused(file, mode="r", *args, **kwargs):     # as the system refuses anyone but root (this may be root)
+        if isinstance(file, (str, os.PathLike)) and set(mode) & set("wax+") and \
+                Path(file).resolve().parent == variants.resolve():
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(file))
+        return real_open(file, mode, *args, **kwargs)
+    monkeypatch.setattr(builtins, "open", refused)
+    try:
+        status = main(["sweep", "grinder_feed", "--vary", "feed.D3=4.0", "--workers", "0", "--stop-time", "1",
+                       "--out", str(out)])
+    finally:
+        monkeypatch.undo()
+        variants.chmod(0o755)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert status == 2 and len(lines) == 1 and str(variants) in lines[0] and "Permission denied" in lines[0], lines
+    assert not (out / "summary.csv").exists() and list(variants.iterdir()) == []
+    calls = []           # the folder fixed: the variant runs
+    sweep("grinder_feed", {"feed.D3": [4.0]}, out, workers=0, stop_time=1.0, progress=False, on_done=calls.append)
+    assert [c["status"] for c in calls] == ["unfinished"] and int(calls[0]["rows"]) == 1001
+
+
+def test_a_second_sweep_into_the_same_dir_leaves_the_running_ones_rows_alone(project, tmp_path):
+    """A second sweep into a DIR while a first one runs there (README: a second sweep merges into it): its start
+    and end remove the rows files of dead workers only -- not the one the first sweep's worker is writing, whose
+    variant was recorded ``failed`` (FileNotFoundError at its rename), for good: a failed variant is done."""
+    out, variants = tmp_path / "sw", tmp_path / "sw" / "variants"
+    # the first: a feed 100x slower, the cycle never ends: ~2.5 s of CPU to its 600 s limit
+    first = subprocess.Popen([sys.executable, "-m", "ncfmu.cli", "sweep", "grinder_feed", "--vary", "feed.F1=0.0002",
+                              "--workers", "0", "--stop-time", "600", "--output-interval", "0.01", "--out", str(out)],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(variants.glob("*.rows.partial")) and first.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        second = sweep("grinder_feed", {"feed.D3": [4.0]}, out, workers=0, stop_time=1.0, progress=False)
+        running = first.poll() is None
+    finally:
+        said = first.communicate(timeout=300)[0]
+    assert running, "the first sweep ended before the second one: nothing was tested"
+    assert second[0]["status"] == "unfinished" and (variants / f"{second[0]['key']}.csv").is_file()
+    assert first.returncode == EXIT_NOT_FINISHED and "1 unfinished, 0 failed" in said, said
+    row = summary(out)[-1]                                 # the first's row, written last
+    assert row["feed.F1"] == "0.0002" and row["status"] == "unfinished" and int(row["rows"]) == 60001
+    assert len((variants / f"{row['key']}.csv").read_text().splitlines()) == 60002
+    assert not list(variants.glob("*.rows*"))
 
 
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
