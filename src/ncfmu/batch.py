@@ -41,9 +41,11 @@ import hashlib
 import io
 import itertools
 import json
+import logging
 import math
 import multiprocessing
 import os
+import signal
 import sys
 import tempfile
 import threading
@@ -56,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .cosim.interrupts import Interrupted, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems.outcome import RAN, STATUSES
@@ -343,6 +346,15 @@ def _check_writable(folder: Path, out: Path) -> None:
         raise NcfmuError(f"--out {out}: cannot write the variants' rows in {folder}: {err.strerror or err}") from None
 
 
+class SweepStopped(Interrupted):
+    """A sweep stopped by Ctrl-C or SIGTERM (``signum``): ``done`` of its ``total`` variants have their row in
+    ``summary`` and their whole file; the same sweep again runs the rest."""
+
+    def __init__(self, signum: int, done: int, total: int, summary: Path) -> None:
+        super().__init__(signum)
+        self.done, self.total, self.summary = done, total, summary
+
+
 class Progress:
     """A tqdm bar with done / failed / timeout and an ETA, on a terminal only."""
 
@@ -459,7 +471,43 @@ def start_worker_forkserver() -> None:
     # the preload is read when the server starts; dask sets its own list on the context later, at its first
     # worker, which a running server does not read again
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(WORKER_MODULES))
-    forkserver.ensure_running()
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()
+        return
+    # Started with Ctrl-C ignored, which an exec keeps and Python then leaves so: the forkserver gives its children
+    # the disposition it started with, so the workers ignore the Ctrl-C a terminal sends to the whole process group
+    # (else each printed a KeyboardInterrupt traceback and died mid-variant); the client closes them.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+class _WorkerClosing(logging.Filter):
+    """Drops what dask logs when a worker is closed in the middle of its work, and only while it closes: a task
+    cancelled with it ("Async instruction for <Task ... execute(...)> ended with CancelledError") and a heartbeat
+    cut off by the closing of its own connections ("Failed to communicate with scheduler during heartbeat.", an
+    ERROR with three tracebacks; dask's race, seen at the end of ~1 in 25 sweeps). A sweep's LocalCluster closes
+    mid-variant when the sweep was stopped (Ctrl-C, SIGTERM), and the sweep says so itself, in one line."""
+
+    def __init__(self, worker: Any) -> None:
+        super().__init__()
+        self.worker = worker
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from distributed.core import Status
+        if self.worker.status not in (Status.closing, Status.closed):
+            return True
+        message = record.getMessage()
+        return not (message.startswith("Failed to communicate with scheduler during heartbeat")
+                    or (message.startswith("Async instruction for ") and message.endswith("with CancelledError")))
+
+
+def dask_setup(worker: Any) -> None:
+    """dask's preload hook, in each worker of a sweep's LocalCluster (``preload=["ncfmu.batch"]``) as it starts."""
+    for name in ("distributed.worker", "distributed.worker.state_machine"):
+        logging.getLogger(name).addFilter(_WorkerClosing(worker))
 
 
 def local_cluster(workers: int):
@@ -476,7 +524,8 @@ def local_cluster(workers: int):
     start_worker_forkserver()
     with dask.config.set(LOCAL_CLUSTER_CONFIG):        # read by the scheduler, the nannies and (through them) workers
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, env=dict(os.environ))
+                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, env=dict(os.environ),
+                            preload=[__name__])
 
 
 def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, scheduler: str | None,
@@ -629,18 +678,25 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
 
     args = (stop_time, record, every, timeout)
     rows_folder = str(variants_folder.resolve())       # where a worker on this machine writes a variant's rows
+    stopped: int | None = None
     try:
         if todo and workers == 0 and scheduler is None and scheduler_file is None:
             for key, v in todo:
+                raise_pending()                         # a Ctrl-C noted between two variants
                 record_result(key, v, run_variant(data, digest, {**fixed, **v}, *args, rows_folder=rows_folder))
         elif todo:
             _run_on_dask(todo, data, digest, args, workers, scheduler, scheduler_file, connect_timeout,
                          record_result, fixed, rows_folder)
+    except KeyboardInterrupt as err:
+        stopped = err.signum if isinstance(err, Interrupted) else signal.SIGINT
     finally:
         flush_summary(force=True)
         # every worker of this sweep has ended (its cluster closed): a rows file still here is the one of a worker
         # killed mid-variant (dask ran the variant again elsewhere), or of this sweep interrupted
         _remove_rows_files(variants_folder)
-    if bar:
-        bar.close()
+        if bar:
+            bar.close()
+    if stopped is not None:
+        recorded = sum(key_of(v) in rows for v in variants)
+        raise SweepStopped(stopped, recorded, len(variants), summary_path) from None
     return [rows[key_of(v)] for v in variants]

@@ -522,7 +522,10 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
 
 
 def cmd_sweep(args) -> int:
-    from .batch import STATUSES, sweep
+    import signal
+
+    from .batch import STATUSES, SweepStopped, sweep
+    from .cosim.interrupts import deferred_interrupts, raised_interrupts
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -535,10 +538,20 @@ def cmd_sweep(args) -> int:
         if name in vary or name in fixed:
             raise NcfmuError(f"--program and --vary/--set {name}=... both give {name}: give one")
         fixed[name] = text
-    rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
-                 scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root, record=args.record,
-                 output_interval=args.output_interval, timeout=args.timeout, connect_timeout=args.connect_timeout,
-                 fixed=fixed)
+    # Ctrl-C or SIGTERM: serially, between chunks of steps (the FMUs run in this process); on dask at once (this
+    # process only waits for its workers). Either way the summary is written, the cluster closed, one line said.
+    serial = args.workers == 0 and args.scheduler is None and args.scheduler_file is None
+    try:
+        with deferred_interrupts() if serial else raised_interrupts():
+            rows = sweep(args.system, vary, Path(args.out), workers=args.workers, scheduler=args.scheduler,
+                         scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root,
+                         record=args.record, output_interval=args.output_interval, timeout=args.timeout,
+                         connect_timeout=args.connect_timeout, fixed=fixed)
+    except SweepStopped as err:
+        terminated = err.signum == signal.SIGTERM
+        print(f"ncfmu sweep: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {err.done} of {err.total} "
+              f"variants done, in {err.summary}; the same command runs the rest", file=sys.stderr)
+        raise SystemExit(143 if terminated else 130) from None
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
           + f" -> {Path(args.out) / 'summary.csv'}")

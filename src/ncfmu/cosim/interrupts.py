@@ -1,4 +1,5 @@
-"""Ctrl-C and SIGTERM during a run: noted by a signal handler, raised by the master between chunks of steps."""
+"""Ctrl-C and SIGTERM during a run: noted by a signal handler, raised by the master between chunks of steps --
+or, where this process runs no FMU (a sweep's client waiting for its workers), raised at once, the first one only."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-__all__ = ["Interrupted", "deferred_interrupts", "raise_pending"]
+__all__ = ["Interrupted", "deferred_interrupts", "raise_pending", "raised_interrupts"]
 
 #: Signals noted inside :func:`deferred_interrupts`, raised by the loop between chunks of steps.
 _PENDING: list[int] = []
@@ -31,6 +32,30 @@ def deferred_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)
         return
     previous = {signum: signal.signal(signum, lambda received, frame: _PENDING.append(received))
                 for signum in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        _PENDING.clear()
+
+
+@contextmanager
+def raised_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Inside: the first Ctrl-C or SIGTERM raises :class:`Interrupted` in the main thread at once; later ones are
+    only noted, so that what the first one set off -- closing a cluster, writing a summary -- runs to its end (a
+    second Ctrl-C would leave worker processes and half a cleanup behind). For a main thread that runs no FMU's
+    code (a pythonfmu FMU would turn the exception into fmi2Fatal: there :func:`deferred_interrupts`). Only in the
+    main thread; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def first(received: int, frame: object) -> None:
+        for signum in signums:
+            signal.signal(signum, lambda later, frame: _PENDING.append(later))
+        raise Interrupted(received)
+    previous = {signum: signal.signal(signum, first) for signum in signums}
     try:
         yield
     finally:

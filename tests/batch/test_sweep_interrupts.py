@@ -1,0 +1,85 @@
+"""``ncfmu sweep`` stopped by Ctrl-C or SIGTERM: what ran is kept and said, nothing is left, the rest runs next."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil  # dask's own dependency
+import pytest
+from conftest import ROOT
+
+pytestmark = pytest.mark.slow        # dask clusters and whole systems in closed loop
+
+#: 16 lathe_taper variants of ~0.36 s of CPU each, run to the cycle's end (~47-61 s simulated)
+VARY = ["--vary", "seq.block[1].Xd=0.3,0.35,0.4,0.45,0.5,0.55,0.6,0.65", "--vary", "seq.block[1].feed=3,4"]
+
+
+def summary(out: Path) -> dict[str, dict[str, str]]:
+    with open(out / "summary.csv", newline="") as f:
+        return {r["key"]: r for r in csv.DictReader(f)}
+
+
+def running_in_group(pgid: int) -> list[str]:
+    """The processes of process group ``pgid`` still running (not an exited one its parent has yet to reap)."""
+    running = []
+    for proc in psutil.process_iter(["pid", "status", "cmdline"]):
+        try:
+            if os.getpgid(proc.pid) == pgid and proc.info["status"] != psutil.STATUS_ZOMBIE:
+                running.append(f"{proc.pid}: {' '.join(proc.info['cmdline'] or [])}")
+        except (ProcessLookupError, psutil.NoSuchProcess):
+            pass
+    return running
+
+
+def sweep_command(out: Path, workers: int) -> list[str]:
+    return [str(Path(sys.executable).with_name("ncfmu")), "sweep", "lathe_taper", *VARY, "--workers", str(workers),
+            "--out", str(out)]
+
+
+@pytest.mark.parametrize("workers, signum, to_group, status, says", [
+    (2, signal.SIGTERM, False, 143, "terminated (SIGTERM)"),     # a service manager's stop, to the sweep's pid
+    (2, signal.SIGINT, True, 130, "interrupted"),                # Ctrl-C at a terminal: the whole process group
+    (0, signal.SIGTERM, False, 143, "terminated (SIGTERM)"),
+    (0, signal.SIGINT, True, 130, "interrupted"),
+])
+def test_a_stopped_sweep_keeps_what_ran_says_so_and_the_same_command_runs_the_rest(
+        project, tmp_path, workers, signum, to_group, status, says):
+    out = tmp_path / "sw"
+    proc = subprocess.Popen(sweep_command(out, workers), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)      # its own process group, as a terminal's job
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list((out / "variants").glob("*.csv"))) < 3:
+        time.sleep(0.02)
+    if to_group:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == status, stderr
+    assert "Traceback" not in stderr and "Error" not in stderr, stderr
+    done = summary(out)
+    assert 3 <= len(done) < 16
+    last = stderr.strip().splitlines()[-1]
+    assert last == (f"ncfmu sweep: {says}: {len(done)} of 16 variants done, in {out / 'summary.csv'}; "
+                    "the same command runs the rest"), stderr
+    # every variant that finished has its row and its whole file, and nothing else is in DIR
+    for key, row in done.items():
+        assert row["status"] == "ok"
+        lines = (out / "variants" / f"{key}.csv").read_bytes().count(b"\n")
+        assert lines == int(row["rows"]) + 1
+    assert sorted(p.name for p in (out / "variants").iterdir()) == sorted(f"{k}.csv" for k in done)
+    assert sorted(p.name for p in out.iterdir()) == ["summary.csv", "variants"]
+    assert running_in_group(proc.pid) == []         # no worker, nanny or forkserver outlived the sweep
+    # the same command again: only the rest runs, and the sweep is whole
+    again = subprocess.run(sweep_command(out, workers), cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    whole = summary(out)
+    assert len(whole) == 16 and all(r["status"] == "ok" for r in whole.values())
+    assert all(whole[k] == row for k, row in done.items())               # the first run's rows, as they were
+    assert len(list((out / "variants").iterdir())) == 16
