@@ -76,6 +76,9 @@ def _output_folder(out: str) -> None:
     path = Path(out)
     if path.exists() and not path.is_dir():
         raise NcfmuError(f"--out {path}: is a file, not a folder")
+    if path.is_symlink() and not path.exists():       # mkdir would only say "File exists"
+        raise NcfmuError(f"--out {path}: a symbolic link to {os.readlink(path)}, which does not exist (make that "
+                         "folder, or give another --out)")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:

@@ -79,8 +79,11 @@ def test_a_run_too_long_to_record_is_one_line(project, tmp_path, args, says):
 def test_out_naming_a_file_or_an_impossible_folder_is_refused_before_the_run(project, tmp_path):
     existing = tmp_path / "results.csv"
     existing.write_text("keep me\n")
+    dangling = tmp_path / "latest"                    # a link to a folder since removed (or on a share not mounted)
+    dangling.symlink_to(tmp_path / "runs" / "2026-12-04")
     for out, says in ((existing, "is a file, not a folder"), (existing / "sub", "cannot make the folder"),
-                      (Path("/proc/ncfmu-no-such/out"), "cannot make the folder")):
+                      (Path("/proc/ncfmu-no-such/out"), "cannot make the folder"),
+                      (dangling, f"a symbolic link to {tmp_path / 'runs' / '2026-12-04'}, which does not exist")):
         proc = ncfmu("run", "lathe_taper", "--out", str(out))
         refused(proc, "run", f"--out {out}", says)
         assert proc.stdout == ""                      # refused before the 50 s run, not after it
