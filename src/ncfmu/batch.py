@@ -36,6 +36,7 @@ What goes where:
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
@@ -52,7 +53,7 @@ import threading
 import time
 import xml.etree.ElementTree as ET
 import zipfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -253,6 +254,34 @@ def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[st
     write_atomic(path, text.getvalue().encode())
 
 
+def _merge_summary(path: Path, rows: Mapping[str, Mapping[str, object]], order: Sequence[str],
+                   recorded: set[str], varied: list[str]) -> None:
+    """Write ``path`` with the rows of ``recorded`` (this sweep's) merged into the summary there now: every row
+    another sweep wrote there is kept, as it wrote it; ``rows`` of other keys (this sweep read them at its start)
+    are kept where the file no longer has them. Under a lock of the folder, so that two sweeps' writes never
+    interleave (where the system has ``flock``)."""
+    with _folder_locked(path.parent):
+        there = {r["key"]: r for r in _read_summary(path) if r.get("key")}
+        keys = [*there, *(k for k in order if k not in there and k in rows)]
+        _write_summary(path, [rows[k] if k in recorded or k not in there else there[k] for k in keys], varied)
+
+
+@contextlib.contextmanager
+def _folder_locked(folder: Path) -> Iterator[None]:
+    """Hold an exclusive ``flock`` of ``folder`` (a lock of the directory itself: no lock file left in it). Where
+    there is none (Windows), nothing is held."""
+    if sys.platform == "win32":
+        yield
+        return
+    import fcntl
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)                                    # the lock goes with it
+
+
 def _complete(path: Path, rows: str) -> bool:
     """The trajectory file is there with the number of rows its summary row says (header + rows lines)."""
     try:
@@ -288,7 +317,7 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
     (``read(path, offset, size)``)."""
     final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
     other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
-    part = final.with_name(final.name + ".part")
+    part = final.with_name(f"{final.name}.{os.getpid()}.part")     # as write_atomic names it
     path, size = str(trajectory["path"]), int(trajectory["size"])
     if Path(path).parent == (out / "variants").resolve():
         with open(path, "rb") as rows:
@@ -318,11 +347,24 @@ def _remove_rows_files(folder: Path) -> None:
             leftover.unlink(missing_ok=True)
 
 
-def _writer_running(rows: Path) -> bool:
-    """Whether the process that writes ``rows`` (``<key>-<pid>.rows``: a worker on this machine) is one other than
-    this one and still running. Asked of the system on POSIX only (``os.kill(pid, 0)`` would end it on Windows,
-    where a file another process has open cannot be removed anyway)."""
-    pid = rows.name.split(".", 1)[0].rpartition("-")[2]
+def _remove_temporary_files(folder: Path) -> None:
+    """Remove the temporary files (``NAME.<pid>.part``, :func:`~ncfmu.files.write_atomic`'s) in ``folder`` of
+    processes that no longer run -- an interrupted write, never trusted; another sweep's still running (into the
+    same ``out``) are its own to rename."""
+    for leftover in folder.glob("*.part"):
+        if not _writer_running(leftover):
+            leftover.unlink(missing_ok=True)
+
+
+def _writer_running(path: Path) -> bool:
+    """Whether the process that writes ``path`` -- a rows file (``<key>-<pid>.rows``: a worker on this machine) or a
+    temporary file (``NAME.<pid>.part``) -- is one other than this one and still running. Asked of the system on
+    POSIX only (``os.kill(pid, 0)`` would end it on Windows, where a file another process has open cannot be
+    removed anyway)."""
+    if path.name.endswith(".part"):
+        pid = path.name[:-len(".part")].rpartition(".")[2]
+    else:
+        pid = path.name.split(".", 1)[0].rpartition("-")[2]
     if os.name != "posix" or not pid.isdigit() or int(pid) == os.getpid():
         return False
     try:
@@ -630,8 +672,8 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
 
     (out / "variants").mkdir(parents=True, exist_ok=True)
     variants_folder = out / "variants"
-    for leftover in [*out.glob("*.part"), *variants_folder.glob("*.part")]:
-        leftover.unlink()                               # an interrupted write: never trusted
+    _remove_temporary_files(out)
+    _remove_temporary_files(variants_folder)
     _remove_rows_files(variants_folder)                 # an interrupted sweep's workers': never taken for a result
     summary_path = out / SUMMARY
     rows: dict[str, dict[str, object]] = {r["key"]: dict(r) for r in _read_summary(summary_path) if r.get("key")}
@@ -651,12 +693,15 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
     bar = Progress(len(todo)) if progress else None
 
     # The summary is rewritten at most once a second and at the end (also when interrupted): a variant whose
-    # row did not make it is simply run again next time; its trajectory file is replaced atomically.
+    # row did not make it is simply run again next time; its trajectory file is replaced atomically. Each write
+    # merges this sweep's new rows into the summary as it is then (another sweep into ``out`` may have added
+    # some since this one read it).
     last_write, dirty = [0.0], [False]
+    recorded: set[str] = set()
 
     def flush_summary(force: bool = False) -> None:
         if dirty[0] and (force or time.monotonic() - last_write[0] >= 1.0):
-            _write_summary(summary_path, [rows[k] for k in order if k in rows], varied)
+            _merge_summary(summary_path, rows, order, recorded, varied)
             last_write[0], dirty[0] = time.monotonic(), False
 
     def record_result(key: str, variant: Mapping[str, object], answer: dict,
@@ -669,6 +714,7 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
             finally:
                 remove(str(trajectory["path"]))
         rows[key] = {"key": key, **variant, **row}
+        recorded.add(key)
         dirty[0] = True
         flush_summary()
         if bar:
@@ -697,6 +743,6 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
         if bar:
             bar.close()
     if stopped is not None:
-        recorded = sum(key_of(v) in rows for v in variants)
-        raise SweepStopped(stopped, recorded, len(variants), summary_path) from None
+        left = {key for key, _ in todo} - recorded     # a row read at the start may be of a damaged file
+        raise SweepStopped(stopped, len(variants) - len(left), len(variants), summary_path) from None
     return [rows[key_of(v)] for v in variants]

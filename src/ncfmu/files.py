@@ -13,9 +13,11 @@ from .version import __version__
 
 
 def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename: a reader sees the old or the new file."""
+    """Write ``data`` to ``path`` through a temporary file and a rename: a reader sees the old or the new file.
+    The temporary file is ``NAME.<pid>.part``: two processes writing one file never write into one temporary file,
+    and a leftover says whose it was."""
     path = Path(path)
-    part = path.with_name(path.name + ".part")
+    part = path.with_name(f"{path.name}.{os.getpid()}.part")
     with open(part, "wb") as f:
         f.write(data)
         f.flush()

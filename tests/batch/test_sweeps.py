@@ -216,10 +216,35 @@ def test_a_second_sweep_into_the_same_dir_leaves_the_running_ones_rows_alone(pro
     assert running, "the first sweep ended before the second one: nothing was tested"
     assert second[0]["status"] == "unfinished" and (variants / f"{second[0]['key']}.csv").is_file()
     assert first.returncode == EXIT_NOT_FINISHED and "1 unfinished, 0 failed" in said, said
-    row = summary(out)[-1]                                 # the first's row, written last
-    assert row["feed.F1"] == "0.0002" and row["status"] == "unfinished" and int(row["rows"]) == 60001
+    rows = {r["key"]: r for r in summary(out)}
+    # both sweeps' rows: the first's last write, a second after the second's, merged into what it found
+    assert sorted(rows) == sorted([second[0]["key"], *(k for k, r in rows.items() if r["feed.F1"] == "0.0002")])
+    assert rows[second[0]["key"]]["feed.D3"] == "4.0" and rows[second[0]["key"]]["status"] == "unfinished"
+    row = next(r for r in rows.values() if r["feed.F1"] == "0.0002")
+    assert row["status"] == "unfinished" and int(row["rows"]) == 60001
     assert len((variants / f"{row['key']}.csv").read_text().splitlines()) == 60002
-    assert not list(variants.glob("*.rows*"))
+    assert not list(variants.glob("*.rows*")) and not list(out.rglob("*.part"))
+
+
+def test_a_sweeps_start_removes_only_the_temporary_files_of_processes_that_ended(project, tmp_path):
+    """A temporary file (``NAME.<pid>.part``: a summary or a fetched trajectory being written) is another
+    sweep's to rename while its process runs -- removing it made that sweep fail at its rename -- and a leftover
+    once the process ended."""
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    variants = tmp_path / "variants"
+    variants.mkdir()
+    try:
+        theirs = [tmp_path / f"summary.csv.{alive.pid}.part", variants / f"abc.csv.{alive.pid}.part"]
+        left = [tmp_path / f"summary.csv.{int(dead.stdout)}.part", variants / f"abc.csv.{int(dead.stdout)}.part",
+                variants / "abc.csv.part"]                  # a pid that ended; a name from before pids
+        for path in theirs + left:
+            path.write_text("time,x\n0,")
+        sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=0.5, progress=False)
+        assert all(path.exists() for path in theirs) and not any(path.exists() for path in left)
+    finally:
+        alive.kill()
+        alive.wait()
 
 
 def test_duplicates_and_equal_numbers_are_one_variant(project, tmp_path):
