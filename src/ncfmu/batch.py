@@ -58,7 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .cosim.interrupts import Interrupted, raise_pending
+from .cosim.interrupts import Interrupted, held_interrupts, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems.outcome import RAN, STATUSES
@@ -474,14 +474,19 @@ def start_worker_forkserver() -> None:
     if threading.current_thread() is not threading.main_thread():
         forkserver.ensure_running()
         return
-    # Started with Ctrl-C ignored, which an exec keeps and Python then leaves so: the forkserver gives its children
-    # the disposition it started with, so the workers ignore the Ctrl-C a terminal sends to the whole process group
-    # (else each printed a KeyboardInterrupt traceback and died mid-variant); the client closes them.
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Started with Ctrl-C and SIGTERM ignored, which an exec keeps and Python then leaves so: the forkserver gives its
+    # children the dispositions it started with, so the workers ignore the Ctrl-C a terminal sends to the whole
+    # process group (else each printed a KeyboardInterrupt traceback and died mid-variant) and the SIGTERM a service
+    # manager sends to all of it (else each died mid-variant, its rows file left, and dask logged the loss and
+    # restarted it); the client closes them (its nannies ask them to, then kill them), and the forkserver ends with
+    # the client.
+    ignored = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.signal(signum, signal.SIG_IGN) for signum in ignored}
     try:
         forkserver.ensure_running()
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 class _WorkerClosing(logging.Filter):
@@ -532,13 +537,16 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
                  scheduler_file: str | None, connect_timeout: float, record_result: Callable,
                  fixed: Mapping[str, object], rows_folder: str) -> None:
     from dask.distributed import Client, as_completed
-    cluster = None
-    if scheduler is not None or scheduler_file is not None:
-        client = _connect(scheduler, scheduler_file, connect_timeout)
-    else:
-        cluster = local_cluster(workers)
-        client = Client(cluster)
+    cluster = client = None
     try:
+        if scheduler is not None or scheduler_file is not None:
+            client = _connect(scheduler, scheduler_file, connect_timeout)
+        else:
+            # a cluster cut off while it starts can be closed by no one (dask's own exit hook fails on it, with a
+            # traceback, and its workers start after all): a Ctrl-C or SIGTERM waits for it, then stops the sweep
+            with held_interrupts():
+                cluster = local_cluster(workers)
+                client = Client(cluster)
         shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
         # a local cluster's workers write their rows into DIR/variants, where the client renames them
         local = {} if cluster is None else {"rows_folder": rows_folder}
@@ -561,7 +569,8 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
                 client.run(remove_rows, path, workers=[worker])
             record_result(key, v, answer, read, remove)
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
 
