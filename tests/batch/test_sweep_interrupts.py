@@ -14,6 +14,8 @@ import psutil  # dask's own dependency
 import pytest
 from conftest import ROOT
 
+from ncfmu.cli import main
+
 pytestmark = pytest.mark.slow        # dask clusters and whole systems in closed loop
 
 #: 16 lathe_taper variants of ~0.36 s of CPU each, run to the cycle's end (~47-61 s simulated)
@@ -114,3 +116,23 @@ def test_a_sweep_stopped_while_its_cluster_starts_says_one_line_and_leaves_nothi
                                    "the same command runs the rest"], stderr
     assert list((out / "variants").iterdir()) == []
     assert running_in_group(proc.pid) == []
+
+
+def test_a_sweep_stopped_while_its_system_is_built_says_one_line(project, tmp_path, monkeypatch, capsys):
+    """A SIGTERM while the system's archive is built or read (its FMUs compiled: minutes, when stale) ends the
+    sweep as any other: one line, exit 143, not an Interrupted traceback and exit 1."""
+    from ncfmu import project as project_module
+    built = project_module.system_archive
+
+    def building(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return built(*args, **kwargs)
+    monkeypatch.setattr(project_module, "system_archive", building)
+    scheduler_file = tmp_path / "scheduler.json"        # never reached: no cluster is started here
+    scheduler_file.write_text('{"address": "tcp://127.0.0.1:9"}')
+    with pytest.raises(SystemExit) as ended:
+        main(["sweep", "lathe_taper", *VARY, "--scheduler-file", str(scheduler_file), "--out", str(tmp_path / "sw")])
+    assert ended.value.code == 143
+    assert capsys.readouterr().err.splitlines() == [
+        "ncfmu sweep: terminated (SIGTERM) before any variant ran; the same command runs them"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL             # the handler of before, back
