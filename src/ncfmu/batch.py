@@ -672,14 +672,17 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
                       read: Callable[[str, int, int], bytes] = read_rows,
                       remove: Callable[[str], None] = remove_rows) -> None:
         row, trajectory = answer["row"], answer["trajectory"]
-        if trajectory is not None:
-            try:
-                _write_rows(out, key, trajectory, read)
-            finally:
-                remove(str(trajectory["path"]))
-        rows[key] = {"key": key, **variant, **row}
-        dirty[0] = True
-        flush_summary()
+        # a Ctrl-C waits for the variant's record (a remote one's fetch: a second and more for a long one): cut
+        # off, it left a .part in DIR/variants, a file without its row, or the rows file on the worker for good
+        with held_interrupts():
+            if trajectory is not None:
+                try:
+                    _write_rows(out, key, trajectory, read)
+                finally:
+                    remove(str(trajectory["path"]))
+            rows[key] = {"key": key, **variant, **row}
+            dirty[0] = True
+            flush_summary()
         if bar:
             bar.update(row["status"])
         if on_done:

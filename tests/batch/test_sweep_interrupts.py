@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -136,3 +137,37 @@ def test_a_sweep_stopped_while_its_system_is_built_says_one_line(project, tmp_pa
     assert capsys.readouterr().err.splitlines() == [
         "ncfmu sweep: terminated (SIGTERM) before any variant ran; the same command runs them"]
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL             # the handler of before, back
+
+
+def test_a_sweep_stopped_while_it_fetches_a_variants_rows_keeps_that_variant_whole(project, tmp_path, monkeypatch):
+    """The client of a remote cluster fetches each variant's rows in chunks (a second and more for a long one):
+    a Ctrl-C then waits for the variant to be recorded -- its file whole, its row written, the worker's copy
+    removed -- instead of leaving a .csv.part in DIR/variants (or, cut off in the removal, the worker's copy)."""
+    from dask.distributed import LocalCluster
+
+    from ncfmu import batch
+    from ncfmu.batch import SweepStopped, sweep
+    from ncfmu.cosim.interrupts import raised_interrupts
+    monkeypatch.setattr(batch, "FETCH_CHUNK", 4096)     # ~60 chunks a variant
+    fetched = batch.read_rows
+
+    def interrupted_fetch(path: str, offset: int, size: int) -> bytes:
+        if offset == 4096:                                # the second chunk: mid-fetch
+            os.kill(os.getpid(), signal.SIGINT)
+        return fetched(path, offset, size)
+    monkeypatch.setattr(batch, "read_rows", interrupted_fetch)
+    (tmp_path / "worker").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "worker"))   # the worker's rows, where this test sees
+    out = tmp_path / "sw"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as cluster:
+        with pytest.raises(SweepStopped) as stopped, raised_interrupts():
+            sweep("grinder_feed", {"feed.D3": [4.0, 3.0]}, out, scheduler=cluster.scheduler_address, stop_time=3.0,
+                  progress=False)
+    assert (stopped.value.done, stopped.value.total) == (1, 2)
+    (row,) = summary(out).values()
+    assert row["status"] == "unfinished" and int(row["rows"]) == 3001     # 3 s of the 32.5 s cycle, every 1 ms
+    assert (out / "variants" / f"{row['key']}.csv").read_bytes().count(b"\n") == 3001 + 1
+    assert sorted(p.name for p in (out / "variants").iterdir()) == [f"{row['key']}.csv"]
+    assert list((tmp_path / "worker").rglob("*.ssp"))                # the worker's folder is the one looked in
+    assert not list((tmp_path / "worker").rglob(f"{row['key']}-*{batch.ROWS_SUFFIX}*"))      # its copy removed
