@@ -547,7 +547,8 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
             with held_interrupts():
                 cluster = local_cluster(workers)
                 client = Client(cluster)
-        shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
+        with held_interrupts():         # cut off, dask's scheduler logged the half-made copies (an ERROR, a WARNING)
+            shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
         # a local cluster's workers write their rows into DIR/variants, where the client renames them
         local = {} if cluster is None else {"rows_folder": rows_folder}
         futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, **local, pure=False):
