@@ -50,6 +50,7 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
@@ -84,6 +85,11 @@ ROWS_SUFFIX = ".rows"
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
+#: Per remote worker process: the rows files each sweep (by its id) has yet to fetch, and the sweeps stopped --
+#: whose variants still running finish after their client left: their rows are removed, never fetched.
+_UNFETCHED: dict[str, set[str]] = {}
+_STOPPED: set[str] = set()
+_UNFETCHED_LOCK = threading.Lock()
 
 
 def _worker_folder() -> Path:
@@ -105,7 +111,7 @@ def _cached_archive(digest: str, data: bytes) -> Path:
 
 def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_time: float | None,
                 record: Sequence[str] | None, every: int, timeout: float | None,
-                rows_folder: str | None = None) -> dict:
+                rows_folder: str | None = None, sweep_id: str | None = None) -> dict:
     """Run one variant in this process; never raises.
 
     Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": where its rows are or None}``:
@@ -164,6 +170,13 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         row.update(rows=csv.rows, **metrics.metrics())
     elif csv is not None and csv.final_path is not None:
         csv.final_path.unlink(missing_ok=True)              # a header without rows: nothing to fetch
+    if trajectory is not None and sweep_id is not None:
+        rows_file = str(trajectory["path"])
+        with _UNFETCHED_LOCK:
+            if sweep_id in _STOPPED:
+                Path(rows_file).unlink(missing_ok=True)
+            else:
+                _UNFETCHED.setdefault(sweep_id, set()).add(rows_file)
     row["wall_time"] = round(time.perf_counter() - t0, 4)
     return {"row": row, "trajectory": trajectory}
 
@@ -186,6 +199,19 @@ def read_rows(path: str, offset: int, size: int) -> bytes:
 
 def remove_rows(path: str) -> None:
     Path(path).unlink(missing_ok=True)
+    with _UNFETCHED_LOCK:
+        for paths in _UNFETCHED.values():
+            paths.discard(path)
+
+
+def stop_sweep_rows(sweep_id: str) -> None:
+    """Remove the rows files of the stopped sweep ``sweep_id`` no one will fetch (run on each remote worker by its
+    client as it stops), and those of its variants that finish later."""
+    with _UNFETCHED_LOCK:
+        _STOPPED.add(sweep_id)
+        paths = _UNFETCHED.pop(sweep_id, set())
+    for path in paths:
+        Path(path).unlink(missing_ok=True)
 
 
 def _discard(digest: str) -> None:
@@ -538,6 +564,7 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
                  fixed: Mapping[str, object], rows_folder: str) -> None:
     from dask.distributed import Client, as_completed
     cluster = client = None
+    sweep_id = uuid.uuid4().hex
     try:
         if scheduler is not None or scheduler_file is not None:
             client = _connect(scheduler, scheduler_file, connect_timeout)
@@ -549,8 +576,9 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
                 client = Client(cluster)
         with held_interrupts():         # cut off, dask's scheduler logged the half-made copies (an ERROR, a WARNING)
             shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
-        # a local cluster's workers write their rows into DIR/variants, where the client renames them
-        local = {} if cluster is None else {"rows_folder": rows_folder}
+        # a local cluster's workers write their rows into DIR/variants, where the client renames them; a remote
+        # one's, in its own folder, known by this sweep's id
+        local = {"sweep_id": sweep_id} if cluster is None else {"rows_folder": rows_folder}
         futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, **local, pure=False):
                    (key, v) for key, v in todo}
         for future in as_completed(futures):
@@ -569,6 +597,13 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
             def remove(path: str, worker=worker) -> None:
                 client.run(remove_rows, path, workers=[worker])
             record_result(key, v, answer, read, remove)
+    except KeyboardInterrupt:
+        if client is not None and cluster is None:
+            try:        # the variants running go on to their end on the remote workers: their rows, removed
+                client.run(stop_sweep_rows, sweep_id)
+            except Exception:
+                pass    # a worker gone: its files went with it, or its temp dir keeps them
+        raise
     finally:
         if client is not None:
             client.close()
