@@ -51,6 +51,7 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -59,7 +60,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .cosim.interrupts import Interrupted, raise_pending
+from .cosim.interrupts import Interrupted, held_interrupts, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
 from .files import write_atomic
 from .systems.outcome import RAN, STATUSES
@@ -85,6 +86,11 @@ ROWS_SUFFIX = ".rows"
 
 # -- the worker side -------------------------------------------------------------------------------
 _OPEN: dict[str, OpenSystem] = {}      # per worker process: archive digest -> OpenSystem, FMUs instantiated once
+#: Per remote worker process: the rows files each sweep (by its id) has yet to fetch, and the sweeps stopped --
+#: whose variants still running finish after their client left: their rows are removed, never fetched.
+_UNFETCHED: dict[str, set[str]] = {}
+_STOPPED: set[str] = set()
+_UNFETCHED_LOCK = threading.Lock()
 
 
 def _worker_folder() -> Path:
@@ -106,7 +112,7 @@ def _cached_archive(digest: str, data: bytes) -> Path:
 
 def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_time: float | None,
                 record: Sequence[str] | None, every: int, timeout: float | None,
-                rows_folder: str | None = None) -> dict:
+                rows_folder: str | None = None, sweep_id: str | None = None) -> dict:
     """Run one variant in this process; never raises.
 
     Returns ``{"row": {status, error, wall_time, rows, metrics...}, "trajectory": where its rows are or None}``:
@@ -165,6 +171,13 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
         row.update(rows=csv.rows, **metrics.metrics())
     elif csv is not None and csv.final_path is not None:
         csv.final_path.unlink(missing_ok=True)              # a header without rows: nothing to fetch
+    if trajectory is not None and sweep_id is not None:
+        rows_file = str(trajectory["path"])
+        with _UNFETCHED_LOCK:
+            if sweep_id in _STOPPED:
+                Path(rows_file).unlink(missing_ok=True)
+            else:
+                _UNFETCHED.setdefault(sweep_id, set()).add(rows_file)
     row["wall_time"] = round(time.perf_counter() - t0, 4)
     return {"row": row, "trajectory": trajectory}
 
@@ -187,6 +200,19 @@ def read_rows(path: str, offset: int, size: int) -> bytes:
 
 def remove_rows(path: str) -> None:
     Path(path).unlink(missing_ok=True)
+    with _UNFETCHED_LOCK:
+        for paths in _UNFETCHED.values():
+            paths.discard(path)
+
+
+def stop_sweep_rows(sweep_id: str) -> None:
+    """Remove the rows files of the stopped sweep ``sweep_id`` no one will fetch (run on each remote worker by its
+    client as it stops), and those of its variants that finish later."""
+    with _UNFETCHED_LOCK:
+        _STOPPED.add(sweep_id)
+        paths = _UNFETCHED.pop(sweep_id, set())
+    for path in paths:
+        Path(path).unlink(missing_ok=True)
 
 
 def _discard(digest: str) -> None:
@@ -262,7 +288,10 @@ def _merge_summary(path: Path, rows: Mapping[str, Mapping[str, object]], order: 
     interleave (where the system has ``flock``)."""
     with _folder_locked(path.parent):
         there = {r["key"]: r for r in _read_summary(path) if r.get("key")}
-        keys = [*there, *(k for k in order if k not in there and k in rows)]
+        # in this sweep's order (the file's at its start, then its variants'), then what another sweep added
+        keys = [k for k in order if k in rows or k in there]
+        ours = set(keys)
+        keys += [k for k in there if k not in ours]
         _write_summary(path, [rows[k] if k in recorded or k not in there else there[k] for k in keys], varied)
 
 
@@ -516,14 +545,19 @@ def start_worker_forkserver() -> None:
     if threading.current_thread() is not threading.main_thread():
         forkserver.ensure_running()
         return
-    # Started with Ctrl-C ignored, which an exec keeps and Python then leaves so: the forkserver gives its children
-    # the disposition it started with, so the workers ignore the Ctrl-C a terminal sends to the whole process group
-    # (else each printed a KeyboardInterrupt traceback and died mid-variant); the client closes them.
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Started with Ctrl-C and SIGTERM ignored, which an exec keeps and Python then leaves so: the forkserver gives its
+    # children the dispositions it started with, so the workers ignore the Ctrl-C a terminal sends to the whole
+    # process group (else each printed a KeyboardInterrupt traceback and died mid-variant) and the SIGTERM a service
+    # manager sends to all of it (else each died mid-variant, its rows file left, and dask logged the loss and
+    # restarted it); the client closes them (its nannies ask them to, then kill them), and the forkserver ends with
+    # the client.
+    ignored = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.signal(signum, signal.SIG_IGN) for signum in ignored}
     try:
         forkserver.ensure_running()
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 class _WorkerClosing(logging.Filter):
@@ -574,16 +608,22 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
                  scheduler_file: str | None, connect_timeout: float, record_result: Callable,
                  fixed: Mapping[str, object], rows_folder: str) -> None:
     from dask.distributed import Client, as_completed
-    cluster = None
-    if scheduler is not None or scheduler_file is not None:
-        client = _connect(scheduler, scheduler_file, connect_timeout)
-    else:
-        cluster = local_cluster(workers)
-        client = Client(cluster)
+    cluster = client = None
+    sweep_id = uuid.uuid4().hex
     try:
-        shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
-        # a local cluster's workers write their rows into DIR/variants, where the client renames them
-        local = {} if cluster is None else {"rows_folder": rows_folder}
+        if scheduler is not None or scheduler_file is not None:
+            client = _connect(scheduler, scheduler_file, connect_timeout)
+        else:
+            # a cluster cut off while it starts can be closed by no one (dask's own exit hook fails on it, with a
+            # traceback, and its workers start after all): a Ctrl-C or SIGTERM waits for it, then stops the sweep
+            with held_interrupts():
+                cluster = local_cluster(workers)
+                client = Client(cluster)
+        with held_interrupts():         # cut off, dask's scheduler logged the half-made copies (an ERROR, a WARNING)
+            shipped = client.scatter(data, broadcast=True, hash=False)     # once to every worker
+        # a local cluster's workers write their rows into DIR/variants, where the client renames them; a remote
+        # one's, in its own folder, known by this sweep's id
+        local = {"sweep_id": sweep_id} if cluster is None else {"rows_folder": rows_folder}
         futures = {client.submit(run_variant, shipped, digest, {**fixed, **v}, *args, **local, pure=False):
                    (key, v) for key, v in todo}
         for future in as_completed(futures):
@@ -602,8 +642,16 @@ def _run_on_dask(todo, data: bytes, digest: str, args: tuple, workers: int, sche
             def remove(path: str, worker=worker) -> None:
                 client.run(remove_rows, path, workers=[worker])
             record_result(key, v, answer, read, remove)
+    except KeyboardInterrupt:
+        if client is not None and cluster is None:
+            try:        # the variants running go on to their end on the remote workers: their rows, removed
+                client.run(stop_sweep_rows, sweep_id)
+            except Exception:
+                pass    # a worker gone: its files went with it, or its temp dir keeps them
+        raise
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
 
@@ -708,15 +756,18 @@ def sweep(system: str, vary: Mapping[str, Sequence[object]], out: Path, workers:
                       read: Callable[[str, int, int], bytes] = read_rows,
                       remove: Callable[[str], None] = remove_rows) -> None:
         row, trajectory = answer["row"], answer["trajectory"]
-        if trajectory is not None:
-            try:
-                _write_rows(out, key, trajectory, read)
-            finally:
-                remove(str(trajectory["path"]))
-        rows[key] = {"key": key, **variant, **row}
-        recorded.add(key)
-        dirty[0] = True
-        flush_summary()
+        # a Ctrl-C waits for the variant's record (a remote one's fetch: a second and more for a long one): cut
+        # off, it left a .part in DIR/variants, a file without its row, or the rows file on the worker for good
+        with held_interrupts():
+            if trajectory is not None:
+                try:
+                    _write_rows(out, key, trajectory, read)
+                finally:
+                    remove(str(trajectory["path"]))
+            rows[key] = {"key": key, **variant, **row}
+            recorded.add(key)
+            dirty[0] = True
+            flush_summary()
         if bar:
             bar.update(row["status"])
         if on_done:

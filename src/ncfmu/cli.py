@@ -528,7 +528,7 @@ def cmd_sweep(args) -> int:
     import signal
 
     from .batch import STATUSES, SweepStopped, sweep
-    from .cosim.interrupts import deferred_interrupts, raised_interrupts
+    from .cosim.interrupts import Interrupted, deferred_interrupts, raised_interrupts
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -550,10 +550,14 @@ def cmd_sweep(args) -> int:
                          scheduler_file=args.scheduler_file, stop_time=args.stop_time, root=args.root,
                          record=args.record, output_interval=args.output_interval, timeout=args.timeout,
                          connect_timeout=args.connect_timeout, fixed=fixed)
-    except SweepStopped as err:
+    except Interrupted as err:
         terminated = err.signum == signal.SIGTERM
-        print(f"ncfmu sweep: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {err.done} of {err.total} "
-              f"variants done, in {err.summary}; the same command runs the rest", file=sys.stderr)
+        how = "terminated (SIGTERM)" if terminated else "interrupted"
+        if isinstance(err, SweepStopped):
+            print(f"ncfmu sweep: {how}: {err.done} of {err.total} variants done, in {err.summary}; the same "
+                  "command runs the rest", file=sys.stderr)
+        else:                       # while the system was built or read: before any variant ran
+            print(f"ncfmu sweep: {how} before any variant ran; the same command runs them", file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())

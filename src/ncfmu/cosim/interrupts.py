@@ -8,7 +8,7 @@ import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-__all__ = ["Interrupted", "deferred_interrupts", "raise_pending", "raised_interrupts"]
+__all__ = ["Interrupted", "deferred_interrupts", "held_interrupts", "raise_pending", "raised_interrupts"]
 
 #: Signals noted inside :func:`deferred_interrupts`, raised by the loop between chunks of steps.
 _PENDING: list[int] = []
@@ -62,6 +62,25 @@ def raised_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) 
         for signum, handler in previous.items():
             signal.signal(signum, handler)
         _PENDING.clear()
+
+
+@contextmanager
+def held_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Inside: a Ctrl-C or SIGTERM waits for the block's end, then is delivered as it would have been (to the
+    handler of before: :func:`raised_interrupts`', Python's KeyboardInterrupt). For a step that, cut off, leaves
+    what nothing can clean up (a dask cluster half started). Only in the main thread; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {signum: signal.signal(signum, lambda received, frame: held.append(received)) for signum in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if held:
+            signal.raise_signal(held[0])
 
 
 def raise_pending() -> None:
