@@ -6,6 +6,7 @@ import argparse
 import itertools
 import math
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -307,7 +308,6 @@ def _run_streamed(args, start_values: dict[str, object]):
     :class:`~ncfmu.cosim.record.DecimatingSink`, bounded whatever the run's length). Prints the summary; returns
     the result, where its CSV is, the system run (its .ssp read once), the summary and the rows to plot (or None)."""
     import math
-    import signal
 
     from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
@@ -525,8 +525,6 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
 
 
 def cmd_sweep(args) -> int:
-    import signal
-
     from .batch import STATUSES, SweepStopped, sweep
     from .cosim.interrupts import Interrupted, deferred_interrupts, raised_interrupts
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
@@ -553,9 +551,12 @@ def cmd_sweep(args) -> int:
     except Interrupted as err:
         terminated = err.signum == signal.SIGTERM
         how = "terminated (SIGTERM)" if terminated else "interrupted"
-        if isinstance(err, SweepStopped):
+        if isinstance(err, SweepStopped) and err.summary.is_file():
             print(f"ncfmu sweep: {how}: {err.done} of {err.total} variants done, in {err.summary}; the same "
                   "command runs the rest", file=sys.stderr)
+        elif isinstance(err, SweepStopped):     # nothing written yet: no summary to name
+            print(f"ncfmu sweep: {how}: {err.done} of {err.total} variants done; the same command runs them",
+                  file=sys.stderr)
         else:                       # while the system was built or read: before any variant ran
             print(f"ncfmu sweep: {how} before any variant ran; the same command runs them", file=sys.stderr)
         raise SystemExit(143 if terminated else 130) from None
@@ -961,6 +962,11 @@ def main(argv: list[str] | None = None) -> int:
             _output_folder(args.out)
         _build_kind(args)
         return args.func(args)
+    except KeyboardInterrupt as err:  # before a command's own handling began (imports, its options, a build)
+        from .cosim.interrupts import Interrupted
+        terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
+        print(f"ncfmu {args.command}: {'terminated (SIGTERM)' if terminated else 'interrupted'}", file=sys.stderr)
+        return 143 if terminated else 130
     except FmuCrashed as err:        # a foreign FMU's process died (a branch run, an instantiation): not finished
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
         return EXIT_NOT_FINISHED
