@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import hashlib
 import io
 import itertools
@@ -298,14 +299,20 @@ def _merge_summary(path: Path, rows: Mapping[str, Mapping[str, object]], order: 
 @contextlib.contextmanager
 def _folder_locked(folder: Path) -> Iterator[None]:
     """Hold an exclusive ``flock`` of ``folder`` (a lock of the directory itself: no lock file left in it). Where
-    there is none (Windows), nothing is held."""
+    there is none (Windows; a filesystem that refuses it, as some NFS mounts do with ENOLCK), nothing is held: the
+    lock only keeps two sweeps' writes into one folder from interleaving -- a sweep alone there must not fail for
+    it (a lost row is run again by the next sweep)."""
     if sys.platform == "win32":
         yield
         return
     import fcntl
     fd = os.open(folder, os.O_RDONLY)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as err:
+            if err.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+                raise
         yield
     finally:
         os.close(fd)                                    # the lock goes with it

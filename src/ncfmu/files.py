@@ -18,11 +18,15 @@ def write_atomic(path: Path, data: bytes) -> None:
     and a leftover says whose it was."""
     path = Path(path)
     part = path.with_name(f"{path.name}.{os.getpid()}.part")
-    with open(part, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    part.replace(path)
+    try:
+        with open(part, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        part.replace(path)
+    except BaseException:
+        part.unlink(missing_ok=True)       # named by this process: no later write would ever replace it
+        raise
 
 
 def write_if_changed(path: Path, data: bytes) -> bool:

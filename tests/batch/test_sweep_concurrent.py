@@ -1,0 +1,55 @@
+"""Sweeps into one DIR at once: the summary's merge where the folder cannot be locked, temporary files left by a
+failed write (plain Python: no system runs)."""
+
+from __future__ import annotations
+
+import csv
+import errno
+import fcntl
+import os
+from pathlib import Path
+
+import pytest
+
+from ncfmu import files
+from ncfmu.batch import _merge_summary
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("code", [errno.ENOLCK, errno.EOPNOTSUPP])
+def test_a_summary_is_merged_where_the_folder_cannot_be_locked(tmp_path, monkeypatch, code):
+    """The lock only keeps two sweeps' writes from interleaving: on a filesystem without ``flock`` (some NFS
+    mounts: ENOLCK) a sweep still writes its summary, merged into the rows another sweep wrote there."""
+    summary = tmp_path / "summary.csv"
+    summary.write_text("key,feed.D3,status,error,rows\nb,4.2,ok,,1001\n")
+
+    def no_lock(fd: int, operation: int) -> None:
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(fcntl, "flock", no_lock)
+    ours = {"a": {"key": "a", "feed.D3": 4.0, "status": "ok", "error": "", "rows": 1001}}
+    _merge_summary(summary, ours, ["a"], {"a"}, ["feed.D3"])
+    assert [(r["key"], r["feed.D3"], r["rows"]) for r in _rows(summary)] == [("a", "4.0", "1001"),
+                                                                            ("b", "4.2", "1001")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.csv"]
+
+
+def test_a_failed_atomic_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    """A write that fails (a full disk) leaves the old file as it was and no ``NAME.<pid>.part``: with the pid in
+    the name, each failed process would leave one more, for good, where no sweep's start looks (OUT of
+    ``ncfmu run``, the pack's folder)."""
+    target = tmp_path / "result.csv"
+    target.write_bytes(b"old\n")
+
+    def full(fd: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(files.os, "fsync", full)
+    with pytest.raises(OSError, match="No space left"):
+        files.write_atomic(target, b"new\n")
+    assert target.read_bytes() == b"old\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.csv"]
