@@ -263,7 +263,7 @@ def product(vary: Mapping[str, Sequence[object]]) -> list[dict[str, object]]:
 def _read_summary(path: Path) -> list[dict[str, str]]:
     if not path.is_file():
         return []
-    with open(path, newline="") as f:
+    with open(path, newline="", encoding="utf-8-sig") as f:    # saved by a spreadsheet: a BOM before "key"
         return list(csv.DictReader(f))
 
 
@@ -311,7 +311,8 @@ def _folder_locked(folder: Path) -> Iterator[None]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)
         except OSError as err:
-            if err.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+            # NFS emulates it with a byte-range lock, which a folder opened to read cannot take: EBADF
+            if err.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL, errno.EBADF):
                 raise
         yield
     finally:

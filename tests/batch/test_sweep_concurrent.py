@@ -20,10 +20,11 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-@pytest.mark.parametrize("code", [errno.ENOLCK, errno.EOPNOTSUPP])
+@pytest.mark.parametrize("code", [errno.ENOLCK, errno.EBADF])
 def test_a_summary_is_merged_where_the_folder_cannot_be_locked(tmp_path, monkeypatch, code):
     """The lock only keeps two sweeps' writes from interleaving: on a filesystem without ``flock`` (some NFS
-    mounts: ENOLCK) a sweep still writes its summary, merged into the rows another sweep wrote there."""
+    mounts: ENOLCK; EBADF where NFS emulates it with a byte-range lock) a sweep still writes its summary, merged
+    into the rows another sweep wrote there: it failed with one line, for good, after its first variant ran."""
     summary = tmp_path / "summary.csv"
     summary.write_text("key,feed.D3,status,error,rows\nb,4.2,ok,,1001\n")
 
@@ -53,3 +54,15 @@ def test_a_failed_atomic_write_leaves_no_temporary_file(tmp_path, monkeypatch):
         files.write_atomic(target, b"new\n")
     assert target.read_bytes() == b"old\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.csv"]
+
+
+def test_a_summary_saved_with_a_byte_order_mark_keeps_its_rows(tmp_path):
+    """A summary saved by a spreadsheet ("CSV UTF-8": a BOM before ``key``) while sweeps run: its rows are the
+    rows another sweep wrote -- read as rows without a key, the merge dropped every one of them (and a sweep's
+    start ran their variants again)."""
+    summary = tmp_path / "summary.csv"
+    summary.write_bytes(b"\xef\xbb\xbfkey,feed.D3,status,error,rows\r\nb,4.2,ok,,1001\r\n")
+    ours = {"a": {"key": "a", "feed.D3": 4.0, "status": "ok", "error": "", "rows": 1001}}
+    _merge_summary(summary, ours, ["a"], {"a"}, ["feed.D3"])
+    assert [(r["key"], r["feed.D3"], r["rows"]) for r in _rows(summary)] == [("a", "4.0", "1001"),
+                                                                            ("b", "4.2", "1001")]
