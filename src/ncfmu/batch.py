@@ -362,17 +362,22 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
         os.replace(path, final)
         other.unlink(missing_ok=True)
         return
-    with open(part, "wb") as f:
-        offset = 0
-        while offset < size:
-            chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
-            if not chunk:
-                raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
-            f.write(chunk)
-            offset += len(chunk)
-        f.flush()
-        os.fsync(f.fileno())
-    part.replace(final)
+    try:
+        with open(part, "wb") as f:
+            offset = 0
+            while offset < size:
+                chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
+                if not chunk:
+                    raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
+                f.write(chunk)
+                offset += len(chunk)
+            f.flush()
+            os.fsync(f.fileno())
+        part.replace(final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)            # else left until a later sweep's start
+        raise
     other.unlink(missing_ok=True)
 
 

@@ -6,6 +6,7 @@ A run builds what is missing and nothing else, so it must not touch a file whose
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -25,7 +26,8 @@ def write_atomic(path: Path, data: bytes) -> None:
             os.fsync(f.fileno())
         part.replace(path)
     except BaseException:
-        part.unlink(missing_ok=True)       # named by this process: no later write would ever replace it
+        with contextlib.suppress(OSError):      # the error to tell is the write's
+            part.unlink(missing_ok=True)        # named by this process: no later write would ever replace it
         raise
 
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from ncfmu import files
-from ncfmu.batch import _merge_summary
+from ncfmu.batch import _merge_summary, _write_rows
+from ncfmu.errors import NcfmuError
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -66,3 +67,17 @@ def test_a_summary_saved_with_a_byte_order_mark_keeps_its_rows(tmp_path):
     _merge_summary(summary, ours, ["a"], {"a"}, ["feed.D3"])
     assert [(r["key"], r["feed.D3"], r["rows"]) for r in _rows(summary)] == [("a", "4.0", "1001"),
                                                                             ("b", "4.2", "1001")]
+
+
+def test_a_fetch_that_breaks_off_leaves_no_temporary_file(tmp_path):
+    """A remote worker's rows that end early (the worker lost mid-fetch): the sweep says so, and leaves no
+    ``<key>.csv.<pid>.part`` in DIR/variants -- with the pid in the name, only a later sweep's start removed it."""
+    (tmp_path / "variants").mkdir()
+    trajectory = {"path": "/elsewhere/abc-1.rows", "size": 100, "complete": True}
+
+    def read(path: str, offset: int, size: int) -> bytes:
+        return b"time,x\n0,1\n" if offset == 0 else b""
+
+    with pytest.raises(NcfmuError, match="the rows of variant abc ended at byte 11 of 100 on the worker"):
+        _write_rows(tmp_path, "abc", trajectory, read)
+    assert list((tmp_path / "variants").iterdir()) == []
