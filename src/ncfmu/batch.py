@@ -63,7 +63,7 @@ import numpy as np
 
 from .cosim.interrupts import Interrupted, held_interrupts, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
-from .files import write_atomic
+from .files import machine_id, write_atomic, writer_id
 from .systems.outcome import RAN, STATUSES
 
 if TYPE_CHECKING:
@@ -105,7 +105,7 @@ def _cached_archive(digest: str, data: bytes) -> Path:
     """The archive in this process's own cache (written once per content digest, atomically)."""
     path = _worker_folder() / f"{digest}.ssp"
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
-        part = path.with_suffix(f".{os.getpid()}.part")
+        part = path.with_suffix(f".{writer_id()}.part")
         part.write_bytes(data)
         part.replace(path)
     return path
@@ -138,7 +138,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
             for slave in opened.slaves:
                 slave.reset()
         folder = Path(rows_folder) if rows_folder is not None else _worker_folder() / "rows"
-        csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}{ROWS_SUFFIX}")
+        csv = CsvSink(folder / f"{variant_key(variant)}-{writer_id()}{ROWS_SUFFIX}")
         # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
         # report reads) every k-th row
         keep = list(record) if record is not None else opened.report().record()
@@ -354,7 +354,7 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
     (``read(path, offset, size)``)."""
     final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
     other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
-    part = final.with_name(f"{final.name}.{os.getpid()}.part")     # as write_atomic names it
+    part = final.with_name(f"{final.name}.{writer_id()}.part")     # as write_atomic names it
     path, size = str(trajectory["path"]), int(trajectory["size"])
     if Path(path).parent == (out / "variants").resolve():
         with open(path, "rb") as rows:
@@ -399,14 +399,19 @@ def _remove_temporary_files(folder: Path) -> None:
 
 
 def _writer_running(path: Path) -> bool:
-    """Whether the process that writes ``path`` -- a rows file (``<key>-<pid>.rows``: a worker on this machine) or a
-    temporary file (``NAME.<pid>.part``) -- is one other than this one and still running. Asked of the system on
-    POSIX only (``os.kill(pid, 0)`` would end it on Windows, where a file another process has open cannot be
-    removed anyway)."""
+    """Whether the process that writes ``path`` -- a rows file (``<key>-<writer>.rows``: a worker on this machine)
+    or a temporary file (``NAME.<writer>.part``), ``<writer>`` :func:`~ncfmu.files.writer_id`'s ``<pid>@<machine>``
+    -- is one other than this one and still running. A process of another machine (a host sharing ``out`` over
+    NFS, another container) counts as running: its pid means nothing here -- taken for a dead one's, its rows were
+    removed while it wrote them. Asked of the system on POSIX only (``os.kill(pid, 0)`` would end it on Windows,
+    where a file another process has open cannot be removed anyway)."""
     if path.name.endswith(".part"):
-        pid = path.name[:-len(".part")].rpartition(".")[2]
+        writer = path.name[:-len(".part")].rpartition(".")[2]
     else:
-        pid = path.name.split(".", 1)[0].rpartition("-")[2]
+        writer = path.name.split(".", 1)[0].rpartition("-")[2]
+    pid, _, machine = writer.partition("@")
+    if machine and machine != machine_id():
+        return os.name == "posix"
     if os.name != "posix" or not pid.isdigit() or int(pid) == os.getpid():
         return False
     try:
@@ -421,7 +426,7 @@ def _writer_running(path: Path) -> bool:
 def _check_writable(folder: Path, out: Path) -> None:
     """Refuse, before any variant runs, a ``folder`` (``out/variants``) that takes no new file: its variants would
     each be recorded ``failed`` -- and a failed variant counts as done, never run again."""
-    probe = folder / f"write-check-{os.getpid()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
+    probe = folder / f"write-check-{writer_id()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
     try:
         with open(probe, "wb"):
             pass

@@ -7,13 +7,16 @@ import csv
 import errno
 import fcntl
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from ncfmu import files
-from ncfmu.batch import _merge_summary, _write_rows
+from ncfmu.batch import _merge_summary, _remove_rows_files, _remove_temporary_files, _write_rows
 from ncfmu.errors import NcfmuError
+from ncfmu.files import machine_id
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -81,3 +84,31 @@ def test_a_fetch_that_breaks_off_leaves_no_temporary_file(tmp_path):
     with pytest.raises(NcfmuError, match="the rows of variant abc ended at byte 11 of 100 on the worker"):
         _write_rows(tmp_path, "abc", trajectory, read)
     assert list((tmp_path / "variants").iterdir()) == []
+
+
+def test_a_sweeps_start_leaves_another_machines_files_alone(tmp_path):
+    """A sweep on another host sharing DIR (NFS) or in another container: its pids mean nothing here -- taken for
+    ended processes', its running variant's rows were removed (that variant recorded ``failed``, for good) and its
+    summary's temporary file too. Its files name their machine and are left to it; this machine's of an ended
+    process are removed as before."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)
+    variants = tmp_path / "variants"
+    variants.mkdir()
+    other = "0badcafe" if machine_id() != "0badcafe" else "0badcaff"
+    theirs = [variants / f"539bf8893b-{pid}@{other}.rows.partial", tmp_path / f"summary.csv.{pid}@{other}.part"]
+    ours = [variants / f"539bf8893b-{pid}@{machine_id()}.rows.partial",
+            tmp_path / f"summary.csv.{pid}@{machine_id()}.part"]
+    for path in [*theirs, *ours]:
+        path.write_text("time,x\n0,")
+    _remove_rows_files(variants)
+    _remove_temporary_files(tmp_path)
+    assert [path.exists() for path in theirs] == [True, True] and [path.exists() for path in ours] == [False, False]
+
+
+def test_a_temporary_file_names_its_process_and_machine(tmp_path, monkeypatch):
+    """What the file names carry is what a sweep's start reads back: ``<pid>@<machine>``."""
+    seen = []
+    monkeypatch.setattr(files.Path, "replace", lambda part, target: seen.append(part.name))
+    files.write_atomic(tmp_path / "summary.csv", b"key\n")
+    assert seen == [f"summary.csv.{os.getpid()}@{machine_id()}.part"]
