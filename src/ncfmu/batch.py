@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import hashlib
 import io
 import itertools
@@ -62,7 +63,7 @@ import numpy as np
 
 from .cosim.interrupts import Interrupted, held_interrupts, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
-from .files import write_atomic
+from .files import machine_id, write_atomic, writer_id
 from .systems.outcome import RAN, STATUSES
 
 if TYPE_CHECKING:
@@ -104,7 +105,7 @@ def _cached_archive(digest: str, data: bytes) -> Path:
     """The archive in this process's own cache (written once per content digest, atomically)."""
     path = _worker_folder() / f"{digest}.ssp"
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
-        part = path.with_suffix(f".{os.getpid()}.part")
+        part = path.with_suffix(f".{writer_id()}.part")
         part.write_bytes(data)
         part.replace(path)
     return path
@@ -137,7 +138,7 @@ def run_variant(ssp: bytes, digest: str, variant: Mapping[str, object], stop_tim
             for slave in opened.slaves:
                 slave.reset()
         folder = Path(rows_folder) if rows_folder is not None else _worker_folder() / "rows"
-        csv = CsvSink(folder / f"{variant_key(variant)}-{os.getpid()}{ROWS_SUFFIX}")
+        csv = CsvSink(folder / f"{variant_key(variant)}-{writer_id()}{ROWS_SUFFIX}")
         # the metrics read every step of what the report needs; the file gets the kept columns (default: what the
         # report reads) every k-th row
         keep = list(record) if record is not None else opened.report().record()
@@ -262,7 +263,7 @@ def product(vary: Mapping[str, Sequence[object]]) -> list[dict[str, object]]:
 def _read_summary(path: Path) -> list[dict[str, str]]:
     if not path.is_file():
         return []
-    with open(path, newline="") as f:
+    with open(path, newline="", encoding="utf-8-sig") as f:    # saved by a spreadsheet: a BOM before "key"
         return list(csv.DictReader(f))
 
 
@@ -298,14 +299,21 @@ def _merge_summary(path: Path, rows: Mapping[str, Mapping[str, object]], order: 
 @contextlib.contextmanager
 def _folder_locked(folder: Path) -> Iterator[None]:
     """Hold an exclusive ``flock`` of ``folder`` (a lock of the directory itself: no lock file left in it). Where
-    there is none (Windows), nothing is held."""
+    there is none (Windows; a filesystem that refuses it, as some NFS mounts do with ENOLCK), nothing is held: the
+    lock only keeps two sweeps' writes into one folder from interleaving -- a sweep alone there must not fail for
+    it (a lost row is run again by the next sweep)."""
     if sys.platform == "win32":
         yield
         return
     import fcntl
     fd = os.open(folder, os.O_RDONLY)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as err:
+            # NFS emulates it with a byte-range lock, which a folder opened to read cannot take: EBADF
+            if err.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL, errno.EBADF):
+                raise
         yield
     finally:
         os.close(fd)                                    # the lock goes with it
@@ -346,7 +354,7 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
     (``read(path, offset, size)``)."""
     final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
     other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
-    part = final.with_name(f"{final.name}.{os.getpid()}.part")     # as write_atomic names it
+    part = final.with_name(f"{final.name}.{writer_id()}.part")     # as write_atomic names it
     path, size = str(trajectory["path"]), int(trajectory["size"])
     if Path(path).parent == (out / "variants").resolve():
         with open(path, "rb") as rows:
@@ -354,17 +362,22 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
         os.replace(path, final)
         other.unlink(missing_ok=True)
         return
-    with open(part, "wb") as f:
-        offset = 0
-        while offset < size:
-            chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
-            if not chunk:
-                raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
-            f.write(chunk)
-            offset += len(chunk)
-        f.flush()
-        os.fsync(f.fileno())
-    part.replace(final)
+    try:
+        with open(part, "wb") as f:
+            offset = 0
+            while offset < size:
+                chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
+                if not chunk:
+                    raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
+                f.write(chunk)
+                offset += len(chunk)
+            f.flush()
+            os.fsync(f.fileno())
+        part.replace(final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)            # else left until a later sweep's start
+        raise
     other.unlink(missing_ok=True)
 
 
@@ -386,14 +399,19 @@ def _remove_temporary_files(folder: Path) -> None:
 
 
 def _writer_running(path: Path) -> bool:
-    """Whether the process that writes ``path`` -- a rows file (``<key>-<pid>.rows``: a worker on this machine) or a
-    temporary file (``NAME.<pid>.part``) -- is one other than this one and still running. Asked of the system on
-    POSIX only (``os.kill(pid, 0)`` would end it on Windows, where a file another process has open cannot be
-    removed anyway)."""
+    """Whether the process that writes ``path`` -- a rows file (``<key>-<writer>.rows``: a worker on this machine)
+    or a temporary file (``NAME.<writer>.part``), ``<writer>`` :func:`~ncfmu.files.writer_id`'s ``<pid>@<machine>``
+    -- is one other than this one and still running. A process of another machine (a host sharing ``out`` over
+    NFS, another container) counts as running: its pid means nothing here -- taken for a dead one's, its rows were
+    removed while it wrote them. Asked of the system on POSIX only (``os.kill(pid, 0)`` would end it on Windows,
+    where a file another process has open cannot be removed anyway)."""
     if path.name.endswith(".part"):
-        pid = path.name[:-len(".part")].rpartition(".")[2]
+        writer = path.name[:-len(".part")].rpartition(".")[2]
     else:
-        pid = path.name.split(".", 1)[0].rpartition("-")[2]
+        writer = path.name.split(".", 1)[0].rpartition("-")[2]
+    pid, _, machine = writer.partition("@")
+    if machine and machine != machine_id():
+        return os.name == "posix"
     if os.name != "posix" or not pid.isdigit() or int(pid) == os.getpid():
         return False
     try:
@@ -408,7 +426,7 @@ def _writer_running(path: Path) -> bool:
 def _check_writable(folder: Path, out: Path) -> None:
     """Refuse, before any variant runs, a ``folder`` (``out/variants``) that takes no new file: its variants would
     each be recorded ``failed`` -- and a failed variant counts as done, never run again."""
-    probe = folder / f"write-check-{os.getpid()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
+    probe = folder / f"write-check-{writer_id()}{ROWS_SUFFIX}.partial"      # if left, removed as a rows file is
     try:
         with open(probe, "wb"):
             pass

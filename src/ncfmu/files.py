@@ -6,23 +6,50 @@ A run builds what is missing and nothing else, so it must not touch a file whose
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
 import os
+import socket
 from pathlib import Path
 
 from .version import __version__
 
 
+@functools.cache
+def machine_id() -> str:
+    """8 hex digits naming this machine and its process-id namespace (a container has its own): a pid names a
+    process only there -- on another host sharing a folder (NFS) or in another container, it is another's, or
+    none."""
+    try:
+        namespace = str(os.stat("/proc/self/ns/pid").st_ino)
+    except OSError:
+        namespace = ""
+    return hashlib.sha256(f"{socket.gethostname()}/{namespace}".encode()).hexdigest()[:8]
+
+
+def writer_id() -> str:
+    """``<pid>@<machine>``: which process writes a temporary file, in its name (``NAME.<writer_id>.part``, a
+    sweep's ``<key>-<writer_id>.rows``), so that another process tells a leftover from a file being written."""
+    return f"{os.getpid()}@{machine_id()}"
+
+
 def write_atomic(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename: a reader sees the old or the new file.
-    The temporary file is ``NAME.<pid>.part``: two processes writing one file never write into one temporary file,
-    and a leftover says whose it was."""
+    The temporary file is ``NAME.<pid>@<machine>.part`` (:func:`writer_id`): two processes writing one file never
+    write into one temporary file, and a leftover says whose it was."""
     path = Path(path)
-    part = path.with_name(f"{path.name}.{os.getpid()}.part")
-    with open(part, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    part.replace(path)
+    part = path.with_name(f"{path.name}.{writer_id()}.part")
+    try:
+        with open(part, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        part.replace(path)
+    except BaseException:
+        with contextlib.suppress(OSError):      # the error to tell is the write's
+            part.unlink(missing_ok=True)        # named by this process: no later write would ever replace it
+        raise
 
 
 def write_if_changed(path: Path, data: bytes) -> bool:

@@ -144,7 +144,7 @@ def test_a_worker_killed_mid_variant_leaves_nothing_in_dir(project, tmp_path):
         while not finished.is_set() and not killed:
             for rows in (tmp_path / "variants").glob("*.rows.partial"):
                 if rows.stat().st_size > 100_000:           # mid-variant: ~1/20 of its rows written
-                    pid = int(rows.name.split(".")[0].rsplit("-", 1)[1])
+                    pid = int(rows.name.split(".")[0].rsplit("-", 1)[1].partition("@")[0])   # <key>-<pid>@<machine>
                     os.kill(pid, signal.SIGKILL)               # a worker process of the cluster, not this one
                     killed.append(pid)
                     break
