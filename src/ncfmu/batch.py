@@ -13,8 +13,8 @@ What goes where:
 - Memory does not grow with a variant's length, on the worker or the client: the worker's run keeps no
   trajectory -- its rows stream into a CSV file and into the report's accumulator, which computes the metrics
   on the fly from every step. A worker on the client's machine (a local cluster's, a serial sweep) writes the
-  file into ``out/variants/`` (``<key>-<pid>.rows``) and the client renames it to ``<key>.csv``: no copy. Any
-  other worker writes it in its own temp dir (``ncfmu-sweep-<uid>/rows/``); the client fetches it from that
+  file into ``out/variants/`` (``<key>-<pid>@<machine>.rows``) and the client renames it to ``<key>.csv``: no
+  copy. Any other worker writes it in its own temp dir (``ncfmu-sweep-<uid>/rows/``); the client fetches it from that
   worker in chunks of ``FETCH_CHUNK`` bytes (through the cluster's own connection: no shared folder) and the
   worker deletes it (a file whose client went away before fetching it stays in that folder).
 - The client alone writes ``out`` (but for those rows files): ``out/variants/<key>.csv`` (fmpy's CSV layout:
@@ -80,7 +80,8 @@ SUMMARY = "summary.csv"
 
 #: Bytes of a variant's trajectory file per message from a worker to the client.
 FETCH_CHUNK = 2 ** 20
-#: A running variant's rows file, ``<key>-<pid>.rows`` (``.rows.partial`` while written): in ``DIR/variants`` for
+#: A running variant's rows file, ``<key>-<pid>@<machine>.rows`` (``.rows.partial`` while written,
+#: :func:`~ncfmu.files.writer_id`): in ``DIR/variants`` for
 #: a worker on the client's machine, until the client renames it to ``<key>.csv``; one left there by a worker killed
 #: mid-variant is removed when its sweep ends, one of a sweep killed itself by the next; never taken for a result.
 ROWS_SUFFIX = ".rows"
