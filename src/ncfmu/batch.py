@@ -265,7 +265,16 @@ def _read_summary(path: Path) -> list[dict[str, str]]:
     if not path.is_file():
         return []
     with open(path, newline="", encoding="utf-8-sig") as f:    # saved by a spreadsheet: a BOM before "key"
-        return list(csv.DictReader(f))
+        reader = csv.DictReader(f)
+        rows = []
+        for row in reader:
+            if None in row:            # csv's key for the fields past the header's: a row edited by hand
+                fields = len(reader.fieldnames or []) + len(row[None])
+                raise NcfmuError(f"{path}: line {reader.line_num} has {fields} fields, its header "
+                                 f"{len(reader.fieldnames or [])}: edited by hand? fix or remove the line (a "
+                                 "variant without its row is run again)")
+            rows.append(row)
+        return rows
 
 
 def _write_summary(path: Path, rows: list[Mapping[str, object]], varied: list[str]) -> None:

@@ -112,3 +112,15 @@ def test_a_temporary_file_names_its_process_and_machine(tmp_path, monkeypatch):
     monkeypatch.setattr(files.Path, "replace", lambda part, target: seen.append(part.name))
     files.write_atomic(tmp_path / "summary.csv", b"key\n")
     assert seen == [f"summary.csv.{os.getpid()}@{machine_id()}.part"]
+
+
+def test_a_summary_row_with_more_fields_than_its_header_is_refused_naming_the_line(tmp_path):
+    """A row edited by hand with a field too many (a comma in an error text, a column pasted): refused before any
+    variant runs, naming the file and the line -- it was written back under a column with an empty name."""
+    from ncfmu.batch import sweep
+    summary = tmp_path / "summary.csv"
+    edited = "key,feed.D3,status,error,rows\nb,4.2,ok,,1001\nc,4.4,ok,a, b,1001\n"
+    summary.write_text(edited)
+    with pytest.raises(NcfmuError, match=rf"{summary}: line 3 has 6 fields, its header 5: .*fix or remove the line"):
+        sweep("grinder_feed", {"feed.D3": [4.0]}, tmp_path, workers=0, stop_time=0.01, progress=False)
+    assert summary.read_text() == edited and not list(tmp_path.rglob("*.csv.*")) and not list(tmp_path.glob("v*/*"))
