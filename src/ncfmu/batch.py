@@ -61,9 +61,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .cosim.interrupts import Interrupted, held_interrupts, raise_pending
+from .cosim.interrupts import Interrupted, handled_signals, held_interrupts, raise_pending
 from .errors import NcfmuError, SimulationTimeout, SystemDefinitionError
-from .files import machine_id, write_atomic, writer_id
+from .files import atomic_file, machine_id, write_atomic, writer_id
 from .systems.outcome import RAN, STATUSES
 
 if TYPE_CHECKING:
@@ -106,9 +106,7 @@ def _cached_archive(digest: str, data: bytes) -> Path:
     """The archive in this process's own cache (written once per content digest, atomically)."""
     path = _worker_folder() / f"{digest}.ssp"
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
-        part = path.with_suffix(f".{writer_id()}.part")
-        part.write_bytes(data)
-        part.replace(path)
+        write_atomic(path, data)
     return path
 
 
@@ -364,7 +362,6 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
     (``read(path, offset, size)``)."""
     final = out / "variants" / (f"{key}.csv" if trajectory["complete"] else f"{key}.csv.partial")
     other = out / "variants" / (f"{key}.csv.partial" if trajectory["complete"] else f"{key}.csv")
-    part = final.with_name(f"{final.name}.{writer_id()}.part")     # as write_atomic names it
     path, size = str(trajectory["path"]), int(trajectory["size"])
     if Path(path).parent == (out / "variants").resolve():
         with open(path, "rb") as rows:
@@ -372,22 +369,14 @@ def _write_rows(out: Path, key: str, trajectory: Mapping[str, Any],
         os.replace(path, final)
         other.unlink(missing_ok=True)
         return
-    try:
-        with open(part, "wb") as f:
-            offset = 0
-            while offset < size:
-                chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
-                if not chunk:
-                    raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
-                f.write(chunk)
-                offset += len(chunk)
-            f.flush()
-            os.fsync(f.fileno())
-        part.replace(final)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            part.unlink(missing_ok=True)            # else left until a later sweep's start
-        raise
+    with atomic_file(final) as f:
+        offset = 0
+        while offset < size:
+            chunk = read(path, offset, min(FETCH_CHUNK, size - offset))
+            if not chunk:
+                raise NcfmuError(f"the rows of variant {key} ended at byte {offset} of {size} on the worker")
+            f.write(chunk)
+            offset += len(chunk)
     other.unlink(missing_ok=True)
 
 
@@ -570,22 +559,14 @@ def start_worker_forkserver() -> None:
     # the preload is read when the server starts; dask sets its own list on the context later, at its first
     # worker, which a running server does not read again
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(WORKER_MODULES))
-    if threading.current_thread() is not threading.main_thread():
-        forkserver.ensure_running()
-        return
     # Started with Ctrl-C and SIGTERM ignored, which an exec keeps and Python then leaves so: the forkserver gives its
     # children the dispositions it started with, so the workers ignore the Ctrl-C a terminal sends to the whole
     # process group (else each printed a KeyboardInterrupt traceback and died mid-variant) and the SIGTERM a service
     # manager sends to all of it (else each died mid-variant, its rows file left, and dask logged the loss and
     # restarted it); the client closes them (its nannies ask them to, then kill them), and the forkserver ends with
-    # the client.
-    ignored = (signal.SIGINT, signal.SIGTERM)
-    previous = {signum: signal.signal(signum, signal.SIG_IGN) for signum in ignored}
-    try:
+    # the client. (Outside the main thread, where no handler can be set, it starts as it would.)
+    with handled_signals((signal.SIGINT, signal.SIGTERM), signal.SIG_IGN):
         forkserver.ensure_running()
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 class _WorkerClosing(logging.Filter):

@@ -6,7 +6,6 @@ import argparse
 import itertools
 import math
 import os
-import signal
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -309,7 +308,8 @@ def _run_streamed(args, start_values: dict[str, object]):
     the result, where its CSV is, the system run (its .ssp read once), the summary and the rows to plot (or None)."""
     import math
 
-    from .cosim.master import CHECK_INTERVAL, InputTable, Interrupted, deferred_interrupts, steps_per_row
+    from .cosim.interrupts import stopped_by
+    from .cosim.master import CHECK_INTERVAL, InputTable, deferred_interrupts, steps_per_row
     from .cosim.record import CsvSink, DecimatingSink, RecordWriteError
     from .project import OpenSystem, ScaledSink, recording, system_archive
     from .systems.outcome import RUN_LIMIT, default_stop_time, halted, watched
@@ -366,10 +366,10 @@ def _run_streamed(args, start_values: dict[str, object]):
                 if not result.ended_by and to_done:
                     result.ended_by = f"the --stop-time limit {stop:g} s reached"
     except KeyboardInterrupt as err:
-        terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
+        stopped, status = stopped_by(err)
         where = _where_stopped(csv_sink) if csv_sink is not None else "no rows recorded"
-        print(f"ncfmu run: {'terminated (SIGTERM)' if terminated else 'interrupted'}: {where}", file=sys.stderr)
-        raise SystemExit(143 if terminated else 130) from None
+        print(f"ncfmu run: {stopped}: {where}", file=sys.stderr)
+        raise SystemExit(status) from None
     except RecordWriteError as err:       # the disk full: whole rows kept, said as for Ctrl-C
         if csv_sink is None or csv_sink.final_path is None:
             raise
@@ -526,7 +526,7 @@ def _parse_vary(items: list[str]) -> dict[str, list[object]]:
 
 def cmd_sweep(args) -> int:
     from .batch import STATUSES, SweepStopped, sweep
-    from .cosim.interrupts import Interrupted, deferred_interrupts, raised_interrupts
+    from .cosim.interrupts import Interrupted, deferred_interrupts, raised_interrupts, stopped_by
     for name, value in (("--timeout", args.timeout), ("--output-interval", args.output_interval),
                         ("--stop-time", args.stop_time)):
         if value is not None and not (value > 0 and value < float("inf")):
@@ -549,8 +549,7 @@ def cmd_sweep(args) -> int:
                          record=args.record, output_interval=args.output_interval, timeout=args.timeout,
                          connect_timeout=args.connect_timeout, fixed=fixed)
     except Interrupted as err:
-        terminated = err.signum == signal.SIGTERM
-        how = "terminated (SIGTERM)" if terminated else "interrupted"
+        how, status = stopped_by(err)
         if isinstance(err, SweepStopped) and err.summary.is_file():
             print(f"ncfmu sweep: {how}: {err.done} of {err.total} variants done, in {err.summary}; the same "
                   "command runs the rest", file=sys.stderr)
@@ -559,7 +558,7 @@ def cmd_sweep(args) -> int:
                   file=sys.stderr)
         else:                       # while the system was built or read: before any variant ran
             print(f"ncfmu sweep: {how} before any variant ran; the same command runs them", file=sys.stderr)
-        raise SystemExit(143 if terminated else 130) from None
+        raise SystemExit(status) from None
     counts = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     print(f"{args.system}: {len(rows)} variants, " + ", ".join(f"{n} {s}" for s, n in counts.items())
           + f" -> {Path(args.out) / 'summary.csv'}")
@@ -963,10 +962,10 @@ def main(argv: list[str] | None = None) -> int:
         _build_kind(args)
         return args.func(args)
     except KeyboardInterrupt as err:  # before a command's own handling began (imports, its options, a build)
-        from .cosim.interrupts import Interrupted
-        terminated = isinstance(err, Interrupted) and err.signum == signal.SIGTERM
-        print(f"ncfmu {args.command}: {'terminated (SIGTERM)' if terminated else 'interrupted'}", file=sys.stderr)
-        return 143 if terminated else 130
+        from .cosim.interrupts import stopped_by
+        how, status = stopped_by(err)
+        print(f"ncfmu {args.command}: {how}", file=sys.stderr)
+        return status
     except FmuCrashed as err:        # a foreign FMU's process died (a branch run, an instantiation): not finished
         print(f"ncfmu {args.command}: {err}", file=sys.stderr)
         return EXIT_NOT_FINISHED

@@ -11,7 +11,9 @@ import functools
 import hashlib
 import os
 import socket
+from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 from .version import __version__
 
@@ -34,15 +36,16 @@ def writer_id() -> str:
     return f"{os.getpid()}@{machine_id()}"
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename: a reader sees the old or the new file.
-    The temporary file is ``NAME.<pid>@<machine>.part`` (:func:`writer_id`): two processes writing one file never
-    write into one temporary file, and a leftover says whose it was."""
+@contextlib.contextmanager
+def atomic_file(path: Path) -> Iterator[BinaryIO]:
+    """A file to write ``path``'s bytes into, renamed to ``path`` once they are on disk (a reader sees the old or
+    the new file). The temporary file is ``NAME.<pid>@<machine>.part`` (:func:`writer_id`): two processes writing
+    one file never write into one temporary file, and a leftover says whose it was; an error removes it."""
     path = Path(path)
     part = path.with_name(f"{path.name}.{writer_id()}.part")
     try:
         with open(part, "wb") as f:
-            f.write(data)
+            yield f
             f.flush()
             os.fsync(f.fileno())
         part.replace(path)
@@ -50,6 +53,12 @@ def write_atomic(path: Path, data: bytes) -> None:
         with contextlib.suppress(OSError):      # the error to tell is the write's
             part.unlink(missing_ok=True)        # named by this process: no later write would ever replace it
         raise
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through :func:`atomic_file`."""
+    with atomic_file(path) as f:
+        f.write(data)
 
 
 def write_if_changed(path: Path, data: bytes) -> bool:

@@ -46,6 +46,21 @@ def running_in_group(pgid: int, settle: float = 5.0) -> list[str]:
         time.sleep(0.05)
 
 
+def start_sweep(out: Path, workers: int) -> subprocess.Popen:
+    """``ncfmu sweep`` of VARY into ``out``, in a process group of its own, as a terminal's job."""
+    return subprocess.Popen(sweep_command(out, workers), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+
+
+def stop(proc: subprocess.Popen, signum: int, to_group: bool, timeout: float) -> str:
+    """Send ``signum`` to the sweep (or its whole process group); its stderr once it ended."""
+    if to_group:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
+    return proc.communicate(timeout=timeout)[1]
+
+
 def sweep_command(out: Path, workers: int) -> list[str]:
     return [str(Path(sys.executable).with_name("ncfmu")), "sweep", "lathe_taper", *VARY, "--workers", str(workers),
             "--out", str(out)]
@@ -61,16 +76,11 @@ def sweep_command(out: Path, workers: int) -> list[str]:
 def test_a_stopped_sweep_keeps_what_ran_says_so_and_the_same_command_runs_the_rest(
         project, tmp_path, workers, signum, to_group, status, says):
     out = tmp_path / "sw"
-    proc = subprocess.Popen(sweep_command(out, workers), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)      # its own process group, as a terminal's job
+    proc = start_sweep(out, workers)
     deadline = time.time() + 120
     while time.time() < deadline and len(list((out / "variants").glob("*.csv"))) < 3:
         time.sleep(0.02)
-    if to_group:
-        os.killpg(proc.pid, signum)
-    else:
-        proc.send_signal(signum)
-    stdout, stderr = proc.communicate(timeout=120)
+    stderr = stop(proc, signum, to_group, timeout=120)
     assert proc.returncode == status, stderr
     done = summary(out)
     assert 3 <= len(done) < 16
@@ -99,8 +109,7 @@ def test_a_sweep_stopped_while_its_cluster_starts_says_one_line_and_leaves_nothi
     """The signal while dask starts the workers (the forkserver has forked one): the cluster, half made, is
     closed all the same -- else dask's exit hook failed on it, a traceback, and each worker starting one more."""
     out = tmp_path / "sw"
-    proc = subprocess.Popen(sweep_command(out, 2), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = start_sweep(out, 2)
     sweeper = psutil.Process(proc.pid)
     deadline = time.time() + 60
 
@@ -112,11 +121,7 @@ def test_a_sweep_stopped_while_its_cluster_starts_says_one_line_and_leaves_nothi
     while time.time() < deadline and not forking():
         time.sleep(0.005)
     assert not list((out / "variants").glob("*.csv")), "a variant finished before the cluster started"
-    if to_group:
-        os.killpg(proc.pid, signum)
-    else:
-        proc.send_signal(signum)
-    stdout, stderr = proc.communicate(timeout=60)
+    stderr = stop(proc, signum, to_group, timeout=60)
     assert proc.returncode == status, stderr
     says = "terminated (SIGTERM)" if signum == signal.SIGTERM else "interrupted"
     assert stderr.splitlines() == [f"ncfmu sweep: {says}: 0 of 16 variants done; the same command runs them"], stderr

@@ -7,8 +7,10 @@ import signal
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from typing import Any
 
-__all__ = ["Interrupted", "deferred_interrupts", "held_interrupts", "raise_pending", "raised_interrupts"]
+__all__ = ["Interrupted", "deferred_interrupts", "handled_signals", "held_interrupts", "raise_pending",
+           "raised_interrupts", "stopped_by"]
 
 #: Signals noted inside :func:`deferred_interrupts`, raised by the loop between chunks of steps.
 _PENDING: list[int] = []
@@ -23,21 +25,35 @@ class Interrupted(KeyboardInterrupt):
 
 
 @contextmanager
+def handled_signals(signums: Sequence[int], handler: Any) -> Iterator[bool]:
+    """Inside: ``handler`` (a function, or ``signal.SIG_IGN``) for each of ``signums``, the handlers of before
+    restored after. Only the main thread can set them: elsewhere nothing changes. Yields whether they were set."""
+    if threading.current_thread() is not threading.main_thread():
+        yield False
+        return
+    previous = {signum: signal.signal(signum, handler) for signum in signums}
+    try:
+        yield True
+    finally:
+        for signum, before in previous.items():
+            signal.signal(signum, before)
+
+
+def _note(received: int, frame: object) -> None:
+    _PENDING.append(received)
+
+
+@contextmanager
 def deferred_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
     """Inside: Ctrl-C and SIGTERM are noted and raised as :class:`Interrupted` by the master between chunks of
     steps, never inside an FMU's own Python code (a pythonfmu FMU runs in this interpreter and turns an
     exception raised in its step into fmi2Fatal). Only in the main thread; elsewhere nothing changes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {signum: signal.signal(signum, lambda received, frame: _PENDING.append(received))
-                for signum in signums}
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        _PENDING.clear()
+    with handled_signals(signums, _note) as handled:
+        try:
+            yield
+        finally:
+            if handled:
+                _PENDING.clear()
 
 
 @contextmanager
@@ -47,21 +63,12 @@ def raised_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) 
     second Ctrl-C would leave worker processes and half a cleanup behind). For a main thread that runs no FMU's
     code (a pythonfmu FMU would turn the exception into fmi2Fatal: there :func:`deferred_interrupts`). Only in the
     main thread; elsewhere nothing changes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
     def first(received: int, frame: object) -> None:
         for signum in signums:
-            signal.signal(signum, lambda later, frame: _PENDING.append(later))
+            signal.signal(signum, _note)
         raise Interrupted(received)
-    previous = {signum: signal.signal(signum, first) for signum in signums}
-    try:
+    with deferred_interrupts(signums), handled_signals(signums, first):     # later ones: the outer's noting
         yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        _PENDING.clear()
 
 
 @contextmanager
@@ -69,18 +76,21 @@ def held_interrupts(signums: Sequence[int] = (signal.SIGINT, signal.SIGTERM)) ->
     """Inside: a Ctrl-C or SIGTERM waits for the block's end, then is delivered as it would have been (to the
     handler of before: :func:`raised_interrupts`', Python's KeyboardInterrupt). For a step that, cut off, leaves
     what nothing can clean up (a dask cluster half started). Only in the main thread; elsewhere nothing changes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
     held: list[int] = []
-    previous = {signum: signal.signal(signum, lambda received, frame: held.append(received)) for signum in signums}
     try:
-        yield
+        with handled_signals(signums, lambda received, frame: held.append(received)):
+            yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
         if held:
             signal.raise_signal(held[0])
+
+
+def stopped_by(err: BaseException) -> tuple[str, int]:
+    """How a command says it was stopped by ``err`` (a KeyboardInterrupt, or :class:`Interrupted` for a signal)
+    and its exit status: ``terminated (SIGTERM)``, 143; else ``interrupted``, 130 (128 + the signal's number)."""
+    if isinstance(err, Interrupted) and err.signum == signal.SIGTERM:
+        return "terminated (SIGTERM)", 143
+    return "interrupted", 130
 
 
 def raise_pending() -> None:
